@@ -1,0 +1,31 @@
+//! # cosserat
+//!
+//! Nonlinear dynamics of geometrically exact (Cosserat) rods, discretized with two-node
+//! elements that interpolate the director fields directly, integrated in time with the
+//! energy–momentum (EM) and energy-dissipative momentum-conserving (EDMC-1, EDMC-2) schemes
+//! of Armero & Romero.
+//!
+//! Data flows one way:
+//!
+//! ```text
+//! scene (TOML) ──► model ──► integrator (Newton on R^{6N}) ──► observers ──► outputs
+//!   scene::          model::    integrator::  element::          observe::     output::
+//! ```
+//!
+//! * [`scene`] parses and validates a scene file into a [`model::Model`] and
+//!   [`integrator::params::IntegratorParams`]; it knows no physics.
+//! * [`element`] is the only physics: strains, stresses, dissipation scalars, element
+//!   residual and tangent at one element.
+//! * [`integrator`] assembles element contributions, runs Newton ([`linsolve`] solves),
+//!   applies the staggered or monolithic dissipation strategy and accepts or rejects steps.
+//! * [`observe`] computes energies, momenta and accelerations from a state.
+//! * [`output`] writes `history.csv`, `summary.json` and the PNG charts.
+
+pub mod element;
+pub mod integrator;
+pub mod linsolve;
+pub mod math;
+pub mod model;
+pub mod observe;
+pub mod output;
+pub mod scene;

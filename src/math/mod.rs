@@ -1,0 +1,1 @@
+//! Small fixed-size algebra.

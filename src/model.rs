@@ -1,0 +1,199 @@
+//! The frozen problem a scene describes: mesh, section properties, supports, loads and
+//! initial state. Built once by [`crate::scene`]; the integrator only reads it.
+//!
+//! Conventions (DESIGN §1–2): every node `A` carries a position and a rotation `Λ^A`
+//! (identity in the reference configuration). Every element end `(e, l)` carries its own
+//! reference triad `Λ_o^{(e)l}`, so the directors of that end are `d_i = Λ^A Λ_o^{(e)l} e_i`.
+//! Two elements that meet at an angle (a rigid corner) share the node but keep their own
+//! triads.
+
+use nalgebra::{Matrix2, Matrix3, Vector3};
+
+/// 3-vector of `f64`.
+pub type Vec3 = Vector3<f64>;
+/// 3×3 matrix of `f64`.
+pub type Mat3 = Matrix3<f64>;
+
+/// Per-element constants of the continuum model, already multiplied out
+/// (stiffnesses, inertias per unit reference length).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ElementProps {
+    /// Reference length `h` of the element (the one-point quadrature weight).
+    pub h: f64,
+    /// Mass per unit length `Aρ`.
+    pub a_rho: f64,
+    /// Euler dyadic `Iρ^{αβ} = ρ ∫ ξ^α ξ^β dA` (α, β ∈ {1, 2}).
+    pub i_rho: Matrix2<f64>,
+    /// Diagonal of `C_Γ = diag(G A1, G A2, E A)`.
+    pub c_gamma: Vec3,
+    /// `C_Ω = [[E I11, E I12, 0], [E I12, E I22, 0], [0, 0, G J]]`.
+    pub c_omega: Mat3,
+}
+
+/// One two-node element.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Element {
+    /// Global node indices of the two ends (`l = 0, 1`).
+    pub nodes: [usize; 2],
+    /// Reference triad `Λ_o^{(e)l}` of each end (columns `d1°, d2°, d3°`).
+    pub ref_triad: [Mat3; 2],
+    /// Material and section constants.
+    pub props: ElementProps,
+    /// Index of the rod this element belongs to.
+    pub rod: usize,
+}
+
+/// What is held fixed at a node.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Support {
+    /// Translation fixed (pin or clamp): the three `u` unknowns are removed.
+    pub translation: bool,
+    /// Rotation fixed (clamp): the three `θ` unknowns are removed.
+    pub rotation: bool,
+}
+
+/// A piecewise-linear scalar table `f(t)`; constant before the first and after the last
+/// entry. Equal consecutive times express a jump (the later value holds from that time on).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimeTable {
+    /// Strictly non-decreasing times.
+    pub times: Vec<f64>,
+    /// Values at `times`.
+    pub values: Vec<f64>,
+}
+
+impl TimeTable {
+    /// A table that is `1` for all time.
+    pub fn constant_one() -> Self {
+        Self {
+            times: vec![0.0],
+            values: vec![1.0],
+        }
+    }
+
+    /// Evaluates the table at `t` (right-continuous at jumps).
+    pub fn eval(&self, t: f64) -> f64 {
+        let n = self.times.len();
+        if n == 0 {
+            return 0.0;
+        }
+        if t < self.times[0] {
+            return self.values[0];
+        }
+        // Last index k with times[k] <= t.
+        let k = self.times.partition_point(|&x| x <= t) - 1;
+        if k + 1 >= n {
+            return self.values[n - 1];
+        }
+        let (t0, t1) = (self.times[k], self.times[k + 1]);
+        let (f0, f1) = (self.values[k], self.values[k + 1]);
+        if t1 <= t0 {
+            return f1;
+        }
+        f0 + (f1 - f0) * (t - t0) / (t1 - t0)
+    }
+}
+
+/// A nodal force and/or moment scaled by a time table: `F(t) = f(t)·force`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodalLoad {
+    /// Node it acts on.
+    pub node: usize,
+    /// Force vector at factor 1.
+    pub force: Vec3,
+    /// Moment vector at factor 1.
+    pub moment: Vec3,
+    /// Time factor.
+    pub table: TimeTable,
+}
+
+/// A rod as the scene declared it (for reports and output grouping).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RodInfo {
+    /// Name from the scene.
+    pub name: String,
+    /// Elements of this rod, in order along the rod.
+    pub elements: std::ops::Range<usize>,
+}
+
+/// The whole discretized problem.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model {
+    /// Reference node positions.
+    pub nodes: Vec<Vec3>,
+    /// Elements.
+    pub elements: Vec<Element>,
+    /// Supports, one per node.
+    pub supports: Vec<Support>,
+    /// Point mass at each node (0 where none).
+    pub point_mass: Vec<f64>,
+    /// Nodal loads.
+    pub loads: Vec<NodalLoad>,
+    /// Gravity acceleration (acts on rods and point masses).
+    pub gravity: Vec3,
+    /// Initial translational velocity of each node.
+    pub velocity0: Vec<Vec3>,
+    /// Initial angular velocity of each node (directors start with `ω × d`).
+    pub omega0: Vec<Vec3>,
+    /// Rods in scene order.
+    pub rods: Vec<RodInfo>,
+}
+
+impl Model {
+    /// Number of nodes.
+    pub fn n_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// True when nothing holds or pushes the model: no supports, no loads, no gravity.
+    /// Momenta are then conserved by every scheme.
+    pub fn is_free_flight(&self) -> bool {
+        self.supports
+            .iter()
+            .all(|s| !s.translation && !s.rotation)
+            && self.loads.is_empty()
+            && self.gravity == Vec3::zeros()
+    }
+
+    /// External force and moment at node level at time `t` (nodal loads and gravity on the
+    /// consistent mass of the elements and on point masses).
+    pub fn external_loads(&self, t: f64, force: &mut [Vec3], moment: &mut [Vec3]) {
+        force.iter_mut().for_each(|f| *f = Vec3::zeros());
+        moment.iter_mut().for_each(|m| *m = Vec3::zeros());
+        if self.gravity != Vec3::zeros() {
+            for e in &self.elements {
+                // ∫ N_l Aρ g dS = Aρ h / 2 g on each end.
+                let w = 0.5 * e.props.a_rho * e.props.h;
+                for &a in &e.nodes {
+                    force[a] += self.gravity * w;
+                }
+            }
+            for (a, &m) in self.point_mass.iter().enumerate() {
+                force[a] += self.gravity * m;
+            }
+        }
+        for load in &self.loads {
+            let s = load.table.eval(t);
+            force[load.node] += load.force * s;
+            moment[load.node] += load.moment * s;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_interpolates_and_jumps() {
+        let t = TimeTable {
+            times: vec![0.0, 1000.0, 1000.0],
+            values: vec![0.0, 2500.0, 0.0],
+        };
+        assert_eq!(t.eval(-1.0), 0.0);
+        assert!((t.eval(500.0) - 1250.0).abs() < 1e-12);
+        assert_eq!(t.eval(1000.0), 0.0);
+        assert_eq!(t.eval(999.999_999), 2500.0 * 0.999_999_999);
+        assert_eq!(t.eval(2000.0), 0.0);
+    }
+}

@@ -1,0 +1,3 @@
+//! Observers: pure functions of (model, state) and the records they produce.
+
+pub mod record;
