@@ -1,1 +1,601 @@
-//! Element kernel.
+//! The element kernel: the only physics of the crate (its WGSL twin will be
+//! `shaders/element.wgsl`).
+//!
+//! One call evaluates, for one two-node element and given nodal increments
+//! `(u^l, θ^l, g^l)` of its two ends, the element residual (18 rows: per end `R_u`, `R_θ`,
+//! then per end `R_g`) and optionally its consistent tangent (18×18), following DESIGN §3–4:
+//!
+//! * kinematics: `r_{n+1} = r_n + u`, `d_{n+1} = cay(θ) d_n`,
+//!   `v_{n+1} = 2u/Δt − v_n − 2g`, director velocities
+//!   `v_{α,n+1} = 2(d_{α,n+1} − d_{α,n})/Δt − v_{α,n} − 2κ_l w_α`;
+//! * stresses from the **mean of the strains** plus the dissipative parts;
+//! * generalized forces on the eight vector fields projected onto `(u, θ)` with the
+//!   mid-point directors (`δd = δθ × d_{n+½}`).
+//!
+//! The dissipation enters only through four frozen scalars ([`FrozenScalars`]); the
+//! monolithic strategy re-evaluates them from the iterate and adds their linearization
+//! ([`monolithic_correction`]).
+
+pub mod dissipation;
+pub mod strain;
+
+use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
+
+use crate::integrator::params::Scheme;
+use crate::math::{cay, hat, inv_i_minus_half_hat};
+use crate::model::{ElementProps, Mat3, Vec3};
+use dissipation::{local_scalars, LocalInputs, LocalScalars};
+use strain::{raw_strains, strain_gradient, stress_hessian, Config, A0, B0, NFIELDS, R0, R1};
+
+/// Unknowns of one element: per end `u` (3), `θ` (3); then per end `g` (3).
+pub const NDOF: usize = 18;
+/// Element residual vector.
+pub type ElemVec = SVector<f64, NDOF>;
+/// Element tangent matrix.
+pub type ElemMat = SMatrix<f64, NDOF, NDOF>;
+
+/// Local row/column of `u^l` component 0.
+#[inline]
+pub const fn u_idx(l: usize) -> usize {
+    6 * l
+}
+/// Local row/column of `θ^l` component 0.
+#[inline]
+pub const fn th_idx(l: usize) -> usize {
+    6 * l + 3
+}
+/// Local row/column of `g^l` component 0.
+#[inline]
+pub const fn g_idx(l: usize) -> usize {
+    12 + 3 * l
+}
+
+/// The consistent-mass pattern `[[2, 1], [1, 2]] / 6` of a two-node element.
+const M2: [[f64; 2]; 2] = [[2.0 / 6.0, 1.0 / 6.0], [1.0 / 6.0, 2.0 / 6.0]];
+
+/// Constant data of one element in a run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ElementData {
+    /// Material and section constants.
+    pub props: ElementProps,
+    /// Raw strains `(Γ°, Ω°)` of the reference configuration.
+    pub eps0: Vector6<f64>,
+    /// Whether the rotation of each end node is free (not clamped).
+    pub rot_free: [bool; 2],
+}
+
+impl ElementData {
+    /// Director-dissipation mass factors `κ_l` (DESIGN §4): `g_α^l = κ_l w_α` keeps
+    /// `M_e g = ∫ N_l w` on the free ends: 1 on both ends when both are free, 1.5 on the
+    /// free end of an element whose other end is clamped, 0 on a clamped end.
+    pub fn kappa(&self) -> [f64; 2] {
+        match self.rot_free {
+            [true, true] => [1.0, 1.0],
+            [true, false] => [1.5, 0.0],
+            [false, true] => [0.0, 1.5],
+            [false, false] => [0.0, 0.0],
+        }
+    }
+}
+
+/// State of one element at time level `n`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ElementState {
+    /// Configuration (end positions and triads).
+    pub cfg: Config,
+    /// Translational velocities of the end nodes.
+    pub v: [Vec3; 2],
+    /// Director velocities `v_α^{(e)l}` (index `[l][α]`, α = 0, 1).
+    pub vd: [[Vec3; 2]; 2],
+}
+
+/// Increments of the two end nodes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Increment {
+    /// `u^l = r^l_{n+1} − r^l_n`.
+    pub u: [Vec3; 2],
+    /// Spatial Cayley increments `θ^l`.
+    pub theta: [Vec3; 2],
+    /// Dissipative velocity corrections `g^l` (zero unless translational dissipation).
+    pub g: [Vec3; 2],
+}
+
+impl Increment {
+    /// Reads the increment from an element-local vector.
+    pub fn from_local(x: &ElemVec) -> Self {
+        let v = |i: usize| Vec3::new(x[i], x[i + 1], x[i + 2]);
+        Self {
+            u: [v(u_idx(0)), v(u_idx(1))],
+            theta: [v(th_idx(0)), v(th_idx(1))],
+            g: [v(g_idx(0)), v(g_idx(1))],
+        }
+    }
+
+    /// Writes the increment into an element-local vector.
+    pub fn to_local(&self) -> ElemVec {
+        let mut x = ElemVec::zeros();
+        for l in 0..2 {
+            x.fixed_rows_mut::<3>(u_idx(l)).copy_from(&self.u[l]);
+            x.fixed_rows_mut::<3>(th_idx(l)).copy_from(&self.theta[l]);
+            x.fixed_rows_mut::<3>(g_idx(l)).copy_from(&self.g[l]);
+        }
+        x
+    }
+}
+
+/// The frozen dissipation scalars of one element: `β_Γ, β_Ω` and the velocity factors
+/// `c_v, c_ν` (`v_diss = c_v (v^h_n + v^h_{n+1})`, `w = c_ν (v^h_{α,n} + v^h_{α,n+1})`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrozenScalars {
+    /// `β_Γ`.
+    pub beta_gamma: f64,
+    /// `β_Ω`.
+    pub beta_omega: f64,
+    /// `c_v`.
+    pub c_v: f64,
+    /// `c_ν`.
+    pub c_nu: f64,
+}
+
+/// Everything the kinematic update gives for an increment and frozen scalars.
+#[derive(Clone, Copy, Debug)]
+pub struct Kinematics {
+    /// Configuration at `n+1`.
+    pub cfg1: Config,
+    /// Mid-point configuration `Φ_{n+½}`.
+    pub mid: Config,
+    /// `(I − ½θ̂^l)⁻¹` per end.
+    pub amat: [Mat3; 2],
+    /// Raw strains at `n` and `n+1`.
+    pub eps_n: Vector6<f64>,
+    /// Raw strains at `n+1`.
+    pub eps1: Vector6<f64>,
+    /// Translational end velocities at `n+1`.
+    pub v1: [Vec3; 2],
+    /// Director end velocities at `n+1` (`[l][α]`).
+    pub vd1: [[Vec3; 2]; 2],
+    /// Director dissipative velocity `w_α` at the quadrature point.
+    pub w: [Vec3; 2],
+    /// Local dissipation inputs (speeds and strain-increment energies).
+    pub inputs: LocalInputs,
+}
+
+/// Per-step constants shared by all elements.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepConsts {
+    /// Time step.
+    pub dt: f64,
+    /// Scheme and its constants.
+    pub scheme: Scheme,
+}
+
+fn director_speed(vh: &[Vec3; 2], i_rho: &Matrix2<f64>, a_rho: f64) -> f64 {
+    let mut s = 0.0;
+    for a in 0..2 {
+        for b in 0..2 {
+            s += i_rho[(a, b)] * vh[a].dot(&vh[b]);
+        }
+    }
+    (s.max(0.0) / a_rho).sqrt()
+}
+
+/// `(Γ, Ω)` as one 6-vector.
+pub fn strains6(cfg: &Config, h: f64) -> Vector6<f64> {
+    let (g, o) = raw_strains(cfg, h);
+    Vector6::new(g.x, g.y, g.z, o.x, o.y, o.z)
+}
+
+/// Stiffness-weighted square `x·C x` of the Γ part (0) and Ω part (1) of a strain vector.
+fn strain_energies(de: &Vector6<f64>, p: &ElementProps) -> (f64, f64) {
+    let dg = de.fixed_rows::<3>(0).into_owned();
+    let dom = de.fixed_rows::<3>(3).into_owned();
+    (
+        dg.dot(&p.c_gamma.component_mul(&dg)),
+        dom.dot(&(p.c_omega * dom)),
+    )
+}
+
+/// Kinematic update of one element for an increment, with the director-dissipation
+/// factor `c_ν` given (it enters the director velocities at `n+1`).
+pub fn kinematics(
+    data: &ElementData,
+    st: &ElementState,
+    eps_n: &Vector6<f64>,
+    inc: &Increment,
+    c_nu: f64,
+    dt: f64,
+) -> Kinematics {
+    let p = &data.props;
+    let rot = [cay(&inc.theta[0]), cay(&inc.theta[1])];
+    let cfg1 = Config {
+        r: [st.cfg.r[0] + inc.u[0], st.cfg.r[1] + inc.u[1]],
+        d: [rot[0] * st.cfg.d[0], rot[1] * st.cfg.d[1]],
+    };
+    let mid = st.cfg.mean(&cfg1);
+    let eps1 = strains6(&cfg1, p.h);
+    let v1 = [
+        2.0 * inc.u[0] / dt - st.v[0] - 2.0 * inc.g[0],
+        2.0 * inc.u[1] / dt - st.v[1] - 2.0 * inc.g[1],
+    ];
+    let kappa = data.kappa();
+    let ksum = kappa[0] + kappa[1];
+    // v^h_{α,n} + v^h_{α,n+1} = Y_α/(1 + K c_ν), Y_α = Σ_l (d^l_{α,n+1} − d^l_{α,n})/Δt.
+    let mut w = [Vec3::zeros(); 2];
+    let mut vd1 = [[Vec3::zeros(); 2]; 2];
+    for a in 0..2 {
+        let dd = [
+            cfg1.d[0].column(a) - st.cfg.d[0].column(a),
+            cfg1.d[1].column(a) - st.cfg.d[1].column(a),
+        ];
+        let y = (dd[0] + dd[1]) / dt;
+        w[a] = y * (c_nu / (1.0 + ksum * c_nu));
+        for l in 0..2 {
+            vd1[l][a] = 2.0 * dd[l] / dt - st.vd[l][a] - 2.0 * kappa[l] * w[a];
+        }
+    }
+    let vh_n = 0.5 * (st.v[0] + st.v[1]);
+    let vh_1 = 0.5 * (v1[0] + v1[1]);
+    let vdh_n = [0.5 * (st.vd[0][0] + st.vd[1][0]), 0.5 * (st.vd[0][1] + st.vd[1][1])];
+    let vdh_1 = [0.5 * (vd1[0][0] + vd1[1][0]), 0.5 * (vd1[0][1] + vd1[1][1])];
+    let (x_gamma, x_omega) = strain_energies(&(eps1 - eps_n), p);
+    let inputs = LocalInputs {
+        v_n: vh_n.norm(),
+        v_n1: vh_1.norm(),
+        nu_n: director_speed(&vdh_n, &p.i_rho, p.a_rho),
+        nu_n1: director_speed(&vdh_1, &p.i_rho, p.a_rho),
+        x_gamma,
+        x_omega,
+    };
+    Kinematics {
+        cfg1,
+        mid,
+        amat: [
+            inv_i_minus_half_hat(&inc.theta[0]),
+            inv_i_minus_half_hat(&inc.theta[1]),
+        ],
+        eps_n: *eps_n,
+        eps1,
+        v1,
+        vd1,
+        w,
+        inputs,
+    }
+}
+
+/// Evaluates the scheme's local law at the state an increment produces and returns the
+/// scalars consistent with it (what the staggered loop converges to and what the
+/// monolithic Newton uses). The director factor `c_ν` enters the director speeds it is
+/// computed from; that scalar fixed point is solved here (a contraction for any sensible
+/// Δt: `c_ν` is `O(χ)`, `O(α Δt/h)`).
+pub fn consistent_scalars(
+    data: &ElementData,
+    st: &ElementState,
+    eps_n: &Vector6<f64>,
+    inc: &Increment,
+    k: &StepConsts,
+) -> (FrozenScalars, LocalScalars, Kinematics) {
+    let p = &data.props;
+    let dt_h = k.dt / p.h;
+    let mut c_nu = 0.0;
+    let mut kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
+    let mut loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
+    if k.scheme.director_dissipation() {
+        for _ in 0..200 {
+            let next = loc.c_nu(&kin.inputs);
+            let done = (next - c_nu).abs() <= 1e-15 * (1.0 + c_nu.abs());
+            c_nu = next;
+            kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
+            loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
+            if done {
+                break;
+            }
+        }
+    }
+    let frozen = FrozenScalars {
+        beta_gamma: loc.beta_gamma,
+        beta_omega: loc.beta_omega,
+        c_v: loc.c_v(&kin.inputs),
+        c_nu,
+    };
+    (frozen, loc, kin)
+}
+
+/// Generalized stresses `S* = (N*, M*)`: mean of the strains plus the dissipative parts.
+pub fn stresses(data: &ElementData, kin: &Kinematics, s: &FrozenScalars) -> Vector6<f64> {
+    let p = &data.props;
+    let mean = 0.5 * (kin.eps_n + kin.eps1) - data.eps0;
+    let de = kin.eps1 - kin.eps_n;
+    let g = mean.fixed_rows::<3>(0) + 0.5 * s.beta_gamma * de.fixed_rows::<3>(0);
+    let o = mean.fixed_rows::<3>(3) + 0.5 * s.beta_omega * de.fixed_rows::<3>(3);
+    let n = p.c_gamma.component_mul(&g.into_owned());
+    let m = p.c_omega * o;
+    Vector6::new(n.x, n.y, n.z, m.x, m.y, m.z)
+}
+
+/// Output of [`residual_tangent`].
+#[derive(Clone, Debug)]
+pub struct ElementEval {
+    /// Element residual.
+    pub r: ElemVec,
+    /// Absolute size of the largest force term entering each residual row (for the
+    /// relative Newton tolerance).
+    pub scale: ElemVec,
+    /// Element tangent (zero when not requested).
+    pub k: ElemMat,
+}
+
+/// Element residual (and tangent if `want_tangent`) for frozen dissipation scalars.
+/// `trans_diss` switches the `g` rows on.
+pub fn residual_tangent(
+    data: &ElementData,
+    st: &ElementState,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+    trans_diss: bool,
+    want_tangent: bool,
+) -> ElementEval {
+    let p = &data.props;
+    let (h, dt) = (p.h, k.dt);
+    let sstar = stresses(data, kin, s);
+    let b_mid = strain_gradient(&kin.mid, h);
+
+    // Generalized forces on the eight fields: stress part h B_{n+½}ᵀ S*, then inertia.
+    let mut f = [Vec3::zeros(); NFIELDS];
+    for (row, &sk) in b_mid.iter().zip(sstar.iter()) {
+        for q in 0..NFIELDS {
+            f[q] += row[q] * (h * sk);
+        }
+    }
+    let mut scale = ElemVec::zeros();
+    let stress_scale = [f[R0].amax(), f[R1].amax()];
+    let mut inertia_r = [Vec3::zeros(); 2];
+    for l in 0..2 {
+        for m in 0..2 {
+            let c = p.a_rho * h * M2[l][m] / dt;
+            inertia_r[l] += c * (kin.v1[m] - st.v[m]);
+        }
+    }
+    let mut fd_scale = [0.0f64; 2];
+    for l in 0..2 {
+        let base = if l == 0 { A0 } else { B0 };
+        for a in 0..2 {
+            let mut fi = Vec3::zeros();
+            for m in 0..2 {
+                for b in 0..2 {
+                    fi += (h * M2[l][m] * p.i_rho[(a, b)] / dt) * (kin.vd1[m][b] - st.vd[m][b]);
+                }
+            }
+            fd_scale[l] = fd_scale[l].max(fi.amax()).max(f[base + a].amax());
+            f[base + a] += fi;
+        }
+        fd_scale[l] = fd_scale[l].max(f[base + 2].amax());
+    }
+
+    let mut r = ElemVec::zeros();
+    let dmid = [kin.mid.d[0], kin.mid.d[1]];
+    for l in 0..2 {
+        let fr = f[if l == 0 { R0 } else { R1 }] + inertia_r[l];
+        r.fixed_rows_mut::<3>(u_idx(l)).copy_from(&fr);
+        let base = if l == 0 { A0 } else { B0 };
+        let mut rt = Vec3::zeros();
+        for i in 0..3 {
+            rt += dmid[l].column(i).cross(&f[base + i]);
+        }
+        r.fixed_rows_mut::<3>(th_idx(l)).copy_from(&rt);
+        let su = stress_scale[l].max(inertia_r[l].amax());
+        let dnorm = dmid[l].column(0).norm().max(dmid[l].column(1).norm()).max(dmid[l].column(2).norm());
+        for c in 0..3 {
+            scale[u_idx(l) + c] = su;
+            scale[th_idx(l) + c] = fd_scale[l] * dnorm;
+        }
+    }
+    let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
+    if trans_diss {
+        let b = 0.5 * h * p.a_rho * s.c_v * vsum;
+        for l in 0..2 {
+            let mut mg = Vec3::zeros();
+            for m in 0..2 {
+                mg += p.a_rho * h * M2[l][m] * kin_g(st, kin, m, dt);
+            }
+            r.fixed_rows_mut::<3>(g_idx(l)).copy_from(&(mg - b));
+            for c in 0..3 {
+                scale[g_idx(l) + c] = mg.amax().max(b.amax());
+            }
+        }
+    }
+
+    let mut kt = ElemMat::zeros();
+    if want_tangent {
+        tangent(data, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut kt);
+    }
+    ElementEval { r, scale, k: kt }
+}
+
+/// The `g` an element end carries, recovered from `v_{n+1} = 2u/Δt − v_n − 2g`
+/// (kinematics stores `v_{n+1}`; the increment is not kept).
+#[inline]
+fn kin_g(st: &ElementState, kin: &Kinematics, m: usize, dt: f64) -> Vec3 {
+    // g = u/Δt − ½(v_n + v_{n+1}) and u = r_{n+1} − r_n.
+    (kin.cfg1.r[m] - st.cfg.r[m]) / dt - 0.5 * (st.v[m] + kin.v1[m])
+}
+
+/// Block of the tangent a field maps to: (row/col start of its unknown, is director).
+#[inline]
+fn field_block(p: usize) -> (usize, Option<(usize, usize)>) {
+    match p {
+        R0 => (u_idx(0), None),
+        R1 => (u_idx(1), None),
+        2..=4 => (th_idx(0), Some((0, p - A0))),
+        _ => (th_idx(1), Some((1, p - B0))),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn tangent(
+    data: &ElementData,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+    trans_diss: bool,
+    sstar: &Vector6<f64>,
+    b_mid: &strain::StrainGradient,
+    f: &[Vec3; NFIELDS],
+    kt: &mut ElemMat,
+) {
+    let p = &data.props;
+    let (h, dt) = (p.h, k.dt);
+    let b1 = strain_gradient(&kin.cfg1, h);
+    let dmid = [kin.mid.d[0], kin.mid.d[1]];
+
+    // Test-side map T (δΦ = T δq) and trial-side map J (dΦ_{n+1} = J dq) per field:
+    // positions: T = J = I; directors: T = −\hat{d_½}, J = A_l (−\hat{d_½}).
+    let tmat: [Mat3; NFIELDS] = std::array::from_fn(|q| match field_block(q).1 {
+        None => Mat3::identity(),
+        Some((l, i)) => -hat(&dmid[l].column(i).into_owned()),
+    });
+    let jmat: [Mat3; NFIELDS] = std::array::from_fn(|q| match field_block(q).1 {
+        None => Mat3::identity(),
+        Some((l, _)) => kin.amat[l] * tmat[q],
+    });
+
+    // Reduced strain gradients B̃ = B T (mid) and B J (n+1), 6 rows × 12 columns.
+    let mut bt_mid = SMatrix::<f64, 6, 12>::zeros();
+    let mut bt_1 = SMatrix::<f64, 6, 12>::zeros();
+    for kk in 0..6 {
+        for q in 0..NFIELDS {
+            let (c0, _) = field_block(q);
+            let a = tmat[q].transpose() * b_mid[kk][q];
+            let b = jmat[q].transpose() * b1[kk][q];
+            for c in 0..3 {
+                bt_mid[(kk, c0 + c)] += a[c];
+                bt_1[(kk, c0 + c)] += b[c];
+            }
+        }
+    }
+    // Material part: h B̃_½ᵀ (∂S*/∂ε_{n+1}) B̃_{n+1}, ∂S*/∂ε_{n+1} = ½(1+β) C.
+    let mut dmat = nalgebra::Matrix6::<f64>::zeros();
+    for i in 0..3 {
+        dmat[(i, i)] = 0.5 * (1.0 + s.beta_gamma) * p.c_gamma[i];
+    }
+    dmat.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(0.5 * (1.0 + s.beta_omega) * p.c_omega));
+    let km = h * bt_mid.transpose() * dmat * bt_1;
+    kt.fixed_view_mut::<12, 12>(0, 0).copy_from(&km);
+
+    // Scalar field couplings G_s ⊗ I₃: geometric stiffness ½ h H(S*) and inertia.
+    let mut gs = stress_hessian(sstar, h) * (0.5 * h);
+    let two_dt2 = 2.0 / (dt * dt);
+    for l in 0..2 {
+        for m in 0..2 {
+            gs[(l, m)] += two_dt2 * p.a_rho * h * M2[l][m];
+        }
+    }
+    let kappa = data.kappa();
+    let ksum = kappa[0] + kappa[1];
+    // dw_α/dd^q_{α,n+1} = c_ν/(Δt(1+K c_ν)) on rotation-free ends.
+    let dw = s.c_nu / (dt * (1.0 + ksum * s.c_nu));
+    for l in 0..2 {
+        for m in 0..2 {
+            for a in 0..2 {
+                for b in 0..2 {
+                    let mass = h * M2[l][m] * p.i_rho[(a, b)] / dt;
+                    let (pl, qm) = (field_of(l, a), field_of(m, b));
+                    gs[(pl, qm)] += mass * 2.0 / dt;
+                    for qq in 0..2 {
+                        if data.rot_free[qq] {
+                            gs[(pl, field_of(qq, b))] -= mass * 2.0 * kappa[m] * dw;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for pf in 0..NFIELDS {
+        let (r0, _) = field_block(pf);
+        for qf in 0..NFIELDS {
+            let gpq = gs[(pf, qf)];
+            if gpq == 0.0 {
+                continue;
+            }
+            let (c0, _) = field_block(qf);
+            let blk = (tmat[pf].transpose() * jmat[qf]) * gpq;
+            let mut view = kt.fixed_view_mut::<3, 3>(r0, c0);
+            view += blk;
+        }
+    }
+    // Projection term: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.
+    for l in 0..2 {
+        let base = if l == 0 { A0 } else { B0 };
+        let mut blk = Mat3::zeros();
+        for i in 0..3 {
+            blk += hat(&f[base + i]) * kin.amat[l] * hat(&dmid[l].column(i).into_owned());
+        }
+        let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), th_idx(l));
+        view += 0.5 * blk;
+    }
+
+    if trans_diss {
+        let i3 = Mat3::identity();
+        let cv = 0.5 * h * p.a_rho * s.c_v;
+        for l in 0..2 {
+            for m in 0..2 {
+                let mm = p.a_rho * h * M2[l][m];
+                let mut v = kt.fixed_view_mut::<3, 3>(u_idx(l), g_idx(m));
+                v += i3 * (-2.0 * mm / dt);
+                let mut v = kt.fixed_view_mut::<3, 3>(g_idx(l), u_idx(m));
+                v += i3 * (-cv / dt);
+                let mut v = kt.fixed_view_mut::<3, 3>(g_idx(l), g_idx(m));
+                v += i3 * (mm + cv);
+            }
+        }
+    }
+}
+
+/// Field index of director `a` of end `l`.
+#[inline]
+fn field_of(l: usize, a: usize) -> usize {
+    if l == 0 {
+        A0 + a
+    } else {
+        B0 + a
+    }
+}
+
+/// Monolithic strategy: the change of the element residual caused by the dependence of
+/// the dissipation scalars on the increment, `(∂R/∂s)(∂s/∂q)`, added to a frozen-scalar
+/// tangent. Computed by central differences of the scalars alone (the scalars are smooth
+/// functions of the iterate away from `v_n + v_{n+1} = 0`; their law is a small local
+/// solve whose derivative by hand would duplicate it). `active` marks the element-local
+/// unknowns that exist.
+pub fn monolithic_correction(
+    data: &ElementData,
+    st: &ElementState,
+    eps_n: &Vector6<f64>,
+    inc: &Increment,
+    k: &StepConsts,
+    trans_diss: bool,
+    active: &[bool; NDOF],
+    kt: &mut ElemMat,
+) {
+    let x0 = inc.to_local();
+    for j in 0..NDOF {
+        if !active[j] {
+            continue;
+        }
+        let hstep = 1e-7 * (1.0 + x0[j].abs());
+        let mut col = ElemVec::zeros();
+        for (sign, w) in [(1.0, 0.5 / hstep), (-1.0, -0.5 / hstep)] {
+            let mut x = x0;
+            x[j] += sign * hstep;
+            let incj = Increment::from_local(&x);
+            let (sj, _, _) = consistent_scalars(data, st, eps_n, &incj, k);
+            // R(q; s(q ± h e_j)) − R(q; s(q)) isolates the scalar dependence.
+            let kin_s = kinematics(data, st, eps_n, inc, sj.c_nu, k.dt);
+            let rj = residual_tangent(data, st, &kin_s, &sj, k, trans_diss, false).r;
+            col += rj * w;
+        }
+        let mut c = kt.column_mut(j);
+        c += col;
+    }
+}

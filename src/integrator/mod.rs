@@ -1,3 +1,11 @@
-//! Time integration: one step is a Newton solve on the nodal increments.
+//! Time integration: one step is a Newton solve on the nodal increments
+//! (DESIGN §3), with the dissipation treated by the staggered or monolithic strategy
+//! (DESIGN §4).
 
+pub mod dofs;
 pub mod params;
+pub mod state;
+pub mod system;
+
+pub use params::{IntegratorParams, Scheme, Strategy};
+pub use system::{Simulation, StepFailure, StepReport};

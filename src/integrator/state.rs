@@ -1,0 +1,89 @@
+//! The state of a run at one time level.
+
+use nalgebra::Vector6;
+
+use crate::element::strain::Config;
+use crate::element::{strains6, ElementData, ElementState};
+use crate::model::{Mat3, Model, Vec3};
+
+/// Nodal positions/velocities and per-element-end director triads/velocities at `t`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    /// Time.
+    pub t: f64,
+    /// Node positions.
+    pub r: Vec<Vec3>,
+    /// Node velocities.
+    pub v: Vec<Vec3>,
+    /// Director triads per element end (`[e][l]`, columns `d_1, d_2, d_3`).
+    pub d: Vec<[Mat3; 2]>,
+    /// Director velocities per element end (`[e][l][α]`, α = 0, 1).
+    pub vd: Vec<[[Vec3; 2]; 2]>,
+    /// Raw strains `(Γ, Ω)` per element (cached: every step needs `ε_n`).
+    pub eps: Vec<Vector6<f64>>,
+}
+
+impl State {
+    /// The initial state of a model: reference configuration, given nodal velocities and
+    /// director velocities `ω × d` from the nodal angular velocities.
+    pub fn initial(model: &Model, data: &[ElementData]) -> Self {
+        let d: Vec<[Mat3; 2]> = model.elements.iter().map(|e| e.ref_triad).collect();
+        let vd = model
+            .elements
+            .iter()
+            .zip(&d)
+            .map(|(e, tri)| {
+                std::array::from_fn(|l| {
+                    let w = model.omega0[e.nodes[l]];
+                    std::array::from_fn(|a| w.cross(&tri[l].column(a).into_owned()))
+                })
+            })
+            .collect();
+        let mut s = Self {
+            t: 0.0,
+            r: model.nodes.clone(),
+            v: model.velocity0.clone(),
+            d,
+            vd,
+            eps: Vec::new(),
+        };
+        s.eps = (0..model.elements.len())
+            .map(|e| strains6(&s.config(model, e), data[e].props.h))
+            .collect();
+        // Supported nodes do not move.
+        for (a, sup) in model.supports.iter().enumerate() {
+            if sup.translation {
+                s.v[a] = Vec3::zeros();
+            }
+        }
+        for (e, el) in model.elements.iter().enumerate() {
+            for l in 0..2 {
+                if model.supports[el.nodes[l]].rotation {
+                    s.vd[e][l] = [Vec3::zeros(); 2];
+                }
+            }
+        }
+        s
+    }
+
+    /// Configuration of element `e`.
+    #[inline]
+    pub fn config(&self, model: &Model, e: usize) -> Config {
+        let n = model.elements[e].nodes;
+        Config {
+            r: [self.r[n[0]], self.r[n[1]]],
+            d: self.d[e],
+        }
+    }
+
+    /// Element-local view of the state.
+    #[inline]
+    pub fn element(&self, model: &Model, e: usize) -> ElementState {
+        let n = model.elements[e].nodes;
+        ElementState {
+            cfg: self.config(model, e),
+            v: [self.v[n[0]], self.v[n[1]]],
+            vd: self.vd[e],
+        }
+    }
+}

@@ -1,0 +1,611 @@
+//! One time step: assemble element residuals/tangents, Newton on the nodal increments,
+//! the staggered or monolithic treatment of the dissipation, and the acceptance checks
+//! (a step whose energy grows or whose dissipation identity misses its tolerance is a
+//! failed step, never an accepted one).
+
+
+use crate::element::strain::Config;
+use crate::element::{
+    consistent_scalars, g_idx, kinematics, monolithic_correction, residual_tangent, strains6,
+    th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
+};
+use crate::integrator::dofs::{DofMap, NONE};
+use crate::integrator::params::{IntegratorParams, Strategy};
+use crate::integrator::state::State;
+use crate::linsolve::SparseSolver;
+use crate::model::{Model, Vec3};
+use crate::observe::{acceleration_norms, invariants, Invariants};
+
+/// Why a step could not be accepted.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepFailure {
+    /// Human-readable reason.
+    pub reason: String,
+    /// Residual norms (relative to the force scale) of the Newton iterations of the last
+    /// attempt.
+    pub residuals: Vec<f64>,
+}
+
+/// What an accepted step reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Newton iterations (all outer rounds and predictor retries).
+    pub newton_iters: usize,
+    /// Outer rounds (staggered), 1 otherwise.
+    pub outer_iters: usize,
+    /// Final relative residual.
+    pub residual: f64,
+    /// Dissipation predicted by DESIGN §4 at the accepted state.
+    pub dissipation: f64,
+    /// Work of the external loads over the step.
+    pub external_work: f64,
+    /// Acceleration norms over the step.
+    pub acc_trans: f64,
+    /// Director acceleration norm.
+    pub acc_rot: f64,
+}
+
+/// How the dissipation scalars are treated in one Newton solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    /// Scalars held at `self.frozen`.
+    Frozen,
+    /// Scalars re-evaluated from the iterate and linearized (monolithic).
+    Consistent,
+}
+
+/// A simulation: the model, its element constants, the unknown numbering, the linear
+/// solver (symbolic analysis done once) and the current state.
+pub struct Simulation {
+    model: Model,
+    params: IntegratorParams,
+    data: Vec<ElementData>,
+    dofs: DofMap,
+    solver: SparseSolver,
+    /// Per element: solver slot of each element-local (i, j) pair, [`NONE`] if inactive.
+    slots: Vec<Vec<usize>>,
+    /// Per node: slots of the diagonal entries of the (u,u), (u,g), (g,u), (g,g) blocks.
+    node_slots: Vec<[[usize; 3]; 4]>,
+    state: State,
+    inv: Invariants,
+    trans_diss: bool,
+    /// Previous step's unknowns (the Newton predictor).
+    prev: Vec<f64>,
+    /// Frozen dissipation scalars per element (staggered strategy).
+    frozen: Vec<FrozenScalars>,
+    force: Vec<Vec3>,
+    moment: Vec<Vec3>,
+}
+
+impl Simulation {
+    /// Sets up a simulation of `model` with `params` (the linear solver's symbolic
+    /// analysis is done here, once).
+    pub fn new(model: Model, params: IntegratorParams) -> Result<Self, crate::linsolve::LinsolveError> {
+        let data: Vec<ElementData> = model
+            .elements
+            .iter()
+            .map(|e| {
+                let cfg = Config {
+                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
+                    d: e.ref_triad,
+                };
+                ElementData {
+                    props: e.props.clone(),
+                    eps0: strains6(&cfg, e.props.h),
+                    rot_free: [
+                        !model.supports[e.nodes[0]].rotation,
+                        !model.supports[e.nodes[1]].rotation,
+                    ],
+                }
+            })
+            .collect();
+        let trans_diss = params.scheme.translational_dissipation();
+        let dofs = DofMap::new(&model, trans_diss);
+        let mut pattern = dofs.pattern();
+        for i in 0..dofs.n {
+            pattern.push((i, i));
+        }
+        let solver = SparseSolver::new(dofs.n, &pattern)?;
+        let slots = dofs
+            .elements
+            .iter()
+            .map(|m| {
+                let mut s = vec![NONE; NDOF * NDOF];
+                for i in 0..NDOF {
+                    for j in 0..NDOF {
+                        if m[i] != NONE && m[j] != NONE {
+                            s[i * NDOF + j] = solver.slot(m[i], m[j]);
+                        }
+                    }
+                }
+                s
+            })
+            .collect();
+        let node_slots = dofs
+            .nodes
+            .iter()
+            .map(|nd| {
+                let slot = |a: usize, b: usize, c: usize| {
+                    if a == NONE || b == NONE {
+                        NONE
+                    } else {
+                        solver.slot(a + c, b + c)
+                    }
+                };
+                [
+                    std::array::from_fn(|c| slot(nd.u, nd.u, c)),
+                    std::array::from_fn(|c| slot(nd.u, nd.g, c)),
+                    std::array::from_fn(|c| slot(nd.g, nd.u, c)),
+                    std::array::from_fn(|c| slot(nd.g, nd.g, c)),
+                ]
+            })
+            .collect();
+        let state = State::initial(&model, &data);
+        let inv = invariants(&model, &data, &state);
+        let nn = model.n_nodes();
+        Ok(Self {
+            frozen: vec![FrozenScalars::default(); model.elements.len()],
+            prev: vec![0.0; dofs.n],
+            force: vec![Vec3::zeros(); nn],
+            moment: vec![Vec3::zeros(); nn],
+            model,
+            params,
+            data,
+            dofs,
+            solver,
+            slots,
+            node_slots,
+            state,
+            inv,
+            trans_diss,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+    /// Element constants (reference strains, section constants).
+    pub fn element_data(&self) -> &[ElementData] {
+        &self.data
+    }
+    /// Integrator parameters.
+    pub fn params(&self) -> &IntegratorParams {
+        &self.params
+    }
+    /// Current state.
+    pub fn state(&self) -> &State {
+        &self.state
+    }
+    /// Energies and momenta of the current state.
+    pub fn invariants(&self) -> Invariants {
+        self.inv
+    }
+    /// Number of Newton unknowns.
+    pub fn n_dofs(&self) -> usize {
+        self.dofs.n
+    }
+
+    /// Replaces the current state (e.g. to start from a prescribed motion in tests).
+    pub fn set_state(&mut self, state: State) {
+        self.inv = invariants(&self.model, &self.data, &state);
+        self.state = state;
+        self.prev.iter_mut().for_each(|x| *x = 0.0);
+        self.frozen.iter_mut().for_each(|s| *s = FrozenScalars::default());
+    }
+
+    fn gather(&self, e: usize, q: &[f64]) -> Increment {
+        let m = &self.dofs.elements[e];
+        let mut x = crate::element::ElemVec::zeros();
+        for i in 0..NDOF {
+            if m[i] != NONE {
+                x[i] = q[m[i]];
+            }
+        }
+        Increment::from_local(&x)
+    }
+
+    fn consts(&self) -> StepConsts {
+        StepConsts {
+            dt: self.params.dt,
+            scheme: self.params.scheme,
+        }
+    }
+
+    /// Assembles residual `r`, the row scales and (if `tangent`) the matrix values.
+    /// Returns the relative residual `max_i |R_i| / scale(kind of i)`.
+    fn assemble(&mut self, q: &[f64], mode: Mode, tangent: bool, r: &mut [f64]) -> f64 {
+        let k = self.consts();
+        let dt = k.dt;
+        r.iter_mut().for_each(|x| *x = 0.0);
+        let mut scale = [0.0f64; 3]; // u, θ, g rows
+        if tangent {
+            self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
+        }
+        for e in 0..self.model.elements.len() {
+            let inc = self.gather(e, q);
+            let st = self.state.element(&self.model, e);
+            let eps_n = self.state.eps[e];
+            let data = &self.data[e];
+            let (s, kin) = match mode {
+                Mode::Frozen => {
+                    let s = self.frozen[e];
+                    (s, kinematics(data, &st, &eps_n, &inc, s.c_nu, dt))
+                }
+                Mode::Consistent => {
+                    let (s, _, kin) = consistent_scalars(data, &st, &eps_n, &inc, &k);
+                    (s, kin)
+                }
+            };
+            let mut ev = residual_tangent(data, &st, &kin, &s, &k, self.trans_diss, tangent);
+            let map = &self.dofs.elements[e];
+            if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() {
+                let active: [bool; NDOF] = std::array::from_fn(|i| map[i] != NONE);
+                monolithic_correction(data, &st, &eps_n, &inc, &k, self.trans_diss, &active, &mut ev.k);
+            }
+            for i in 0..NDOF {
+                if map[i] == NONE {
+                    continue;
+                }
+                r[map[i]] += ev.r[i];
+                let kind = kind_of_local(i);
+                scale[kind] = scale[kind].max(ev.scale[i]);
+                if tangent {
+                    let vals = self.solver.values_mut();
+                    let srow = &self.slots[e][i * NDOF..(i + 1) * NDOF];
+                    for j in 0..NDOF {
+                        if srow[j] != NONE {
+                            vals[srow[j]] += ev.k[(i, j)];
+                        }
+                    }
+                }
+            }
+        }
+        // Nodal terms: point masses and external loads.
+        for (a, nd) in self.dofs.nodes.iter().enumerate() {
+            let m = self.model.point_mass[a];
+            if nd.u != NONE {
+                let u = Vec3::new(q[nd.u], q[nd.u + 1], q[nd.u + 2]);
+                let g = if nd.g != NONE {
+                    Vec3::new(q[nd.g], q[nd.g + 1], q[nd.g + 2])
+                } else {
+                    Vec3::zeros()
+                };
+                let inertia = m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt;
+                for c in 0..3 {
+                    r[nd.u + c] += inertia[c] - self.force[a][c];
+                }
+                scale[0] = scale[0].max(inertia.amax()).max(self.force[a].amax());
+                if nd.g != NONE {
+                    for c in 0..3 {
+                        r[nd.g + c] += m * g[c];
+                    }
+                    scale[2] = scale[2].max((m * g).amax());
+                }
+                if tangent && m != 0.0 {
+                    let s = self.node_slots[a];
+                    let vals = self.solver.values_mut();
+                    for c in 0..3 {
+                        vals[s[0][c]] += 2.0 * m / (dt * dt);
+                        if s[1][c] != NONE {
+                            vals[s[1][c]] += -2.0 * m / dt;
+                            vals[s[3][c]] += m;
+                        }
+                    }
+                }
+            }
+            if nd.th != NONE {
+                for c in 0..3 {
+                    r[nd.th + c] -= self.moment[a][c];
+                }
+                scale[1] = scale[1].max(self.moment[a].amax());
+            }
+        }
+        let kinds = self.row_kinds();
+        let mut worst: f64 = 0.0;
+        for (i, &ri) in r.iter().enumerate() {
+            let s = scale[kinds[i]].max(1e-300);
+            let rel = ri.abs() / s;
+            if !rel.is_finite() {
+                return f64::INFINITY;
+            }
+            worst = worst.max(rel);
+        }
+        worst
+    }
+
+    fn row_kinds(&self) -> Vec<usize> {
+        let mut k = vec![0; self.dofs.n];
+        for nd in &self.dofs.nodes {
+            for (base, kind) in [(nd.u, 0), (nd.th, 1), (nd.g, 2)] {
+                if base != NONE {
+                    k[base..base + 3].iter_mut().for_each(|x| *x = kind);
+                }
+            }
+        }
+        k
+    }
+
+    /// Newton from `q` (overwritten with the solution). Returns iterations and the
+    /// relative residual history.
+    fn newton(&mut self, q: &mut [f64], mode: Mode) -> Result<(usize, Vec<f64>), StepFailure> {
+        let n = self.dofs.n;
+        let mut r = vec![0.0; n];
+        let mut history = Vec::new();
+        let tol = self.params.newton_tol;
+        for it in 0..=self.params.max_iter {
+            let res = self.assemble(q, mode, true, &mut r);
+            history.push(res);
+            if !res.is_finite() {
+                return Err(StepFailure {
+                    reason: "non-finite residual (Newton diverged)".into(),
+                    residuals: history,
+                });
+            }
+            let stalled = it >= 3 && res <= 10.0 * tol && res >= 0.5 * history[it - 1];
+            if res <= tol || stalled {
+                return Ok((it, history));
+            }
+            if it == self.params.max_iter {
+                break;
+            }
+            r.iter_mut().for_each(|x| *x = -*x);
+            if let Err(e) = self.solver.factor_solve(&mut r) {
+                return Err(StepFailure {
+                    reason: format!("linear solve failed: {e}"),
+                    residuals: history,
+                });
+            }
+            for (qi, di) in q.iter_mut().zip(&r) {
+                *qi += di;
+            }
+        }
+        Err(StepFailure {
+            reason: format!(
+                "Newton did not converge in {} iterations (relative residual {:.3e} > {:.1e})",
+                self.params.max_iter,
+                history.last().copied().unwrap_or(f64::NAN),
+                tol
+            ),
+            residuals: history,
+        })
+    }
+
+    /// The state an increment produces (with the frozen scalars of `mode`), the
+    /// predicted dissipation at it, and the consistent scalars.
+    fn advance(&self, q: &[f64], mode: Mode) -> (State, f64, Vec<FrozenScalars>) {
+        let k = self.consts();
+        let dt = k.dt;
+        let mut next = self.state.clone();
+        next.t = self.state.t + dt;
+        let mut diss = 0.0;
+        let mut consistent = Vec::with_capacity(self.model.elements.len());
+        let mut node_done = vec![false; self.model.n_nodes()];
+        for e in 0..self.model.elements.len() {
+            let inc = self.gather(e, q);
+            let st = self.state.element(&self.model, e);
+            let eps_n = self.state.eps[e];
+            let data = &self.data[e];
+            let (sc, loc, kin_c) = consistent_scalars(data, &st, &eps_n, &inc, &k);
+            diss += data.props.h * loc.dissipation_density(&kin_c.inputs, data.props.a_rho);
+            consistent.push(sc);
+            let kin = match mode {
+                Mode::Consistent => kin_c,
+                Mode::Frozen => kinematics(data, &st, &eps_n, &inc, self.frozen[e].c_nu, dt),
+            };
+            next.d[e] = kin.cfg1.d;
+            next.vd[e] = kin.vd1;
+            next.eps[e] = kin.eps1;
+            for l in 0..2 {
+                let a = self.model.elements[e].nodes[l];
+                if !node_done[a] {
+                    node_done[a] = true;
+                    next.r[a] = kin.cfg1.r[l];
+                    next.v[a] = kin.v1[l];
+                }
+            }
+        }
+        (next, diss, consistent)
+    }
+
+    fn external_work(&self, q: &[f64]) -> f64 {
+        let mut w = 0.0;
+        for (a, nd) in self.dofs.nodes.iter().enumerate() {
+            for c in 0..3 {
+                if nd.u != NONE {
+                    w += self.force[a][c] * q[nd.u + c];
+                }
+                if nd.th != NONE {
+                    w += self.moment[a][c] * q[nd.th + c];
+                }
+            }
+        }
+        w
+    }
+
+    /// Checks energy and the dissipation identity of a converged increment; on success
+    /// returns the new state, its invariants, D and W.
+    fn check(&self, q: &[f64], mode: Mode) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), String> {
+        let (next, diss, consistent) = self.advance(q, mode);
+        let inv = invariants(&self.model, &self.data, &next);
+        let w = self.external_work(q);
+        let (h0, h1) = (self.inv.total(), inv.total());
+        let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
+        let growth = h1 - h0 - w;
+        if growth > self.params.energy_tol * href {
+            return Err(format!(
+                "energy grew by {growth:.3e} beyond the external work ({:.3e} relative)",
+                growth / href
+            ));
+        }
+        if self.params.scheme.is_dissipative() {
+            let miss = (h0 - h1 + w - diss).abs();
+            if miss > self.params.outer_tol * href {
+                return Err(format!(
+                    "dissipation identity missed: H_n − H_n+1 + W − D = {:.3e} ({:.3e} relative)",
+                    h0 - h1 + w - diss,
+                    miss / href
+                ));
+            }
+        }
+        Ok((next, inv, diss, w, consistent))
+    }
+
+    /// Advances one step of Δt. On failure the state is left at the last accepted step.
+    pub fn step(&mut self) -> Result<StepReport, StepFailure> {
+        let dt = self.params.dt;
+        let t_mid = self.state.t + 0.5 * dt;
+        let (mut force, mut moment) = (std::mem::take(&mut self.force), std::mem::take(&mut self.moment));
+        self.model.external_loads(t_mid, &mut force, &mut moment);
+        self.force = force;
+        self.moment = moment;
+
+        let mut predictors = vec![self.prev.clone()];
+        if self.prev.iter().any(|&x| x != 0.0) {
+            predictors.push(vec![0.0; self.dofs.n]);
+        }
+        let mut total_iters = 0;
+        let mut last = StepFailure {
+            reason: "no attempt".into(),
+            residuals: vec![],
+        };
+        let dissipative = self.params.scheme.is_dissipative();
+        for pred in predictors {
+            let mut q = pred;
+            let attempt = if !dissipative {
+                self.frozen.iter_mut().for_each(|s| *s = FrozenScalars::default());
+                self.solve_once(&mut q, Mode::Frozen, &mut total_iters)
+            } else {
+                match self.params.strategy {
+                    Strategy::Monolithic => self.solve_once(&mut q, Mode::Consistent, &mut total_iters),
+                    Strategy::Staggered => self.solve_staggered(&mut q, &mut total_iters),
+                }
+            };
+            match attempt {
+                Ok((next, inv, diss, w, outer, res, consistent)) => {
+                    let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
+                    self.state = next;
+                    self.inv = inv;
+                    self.prev = q;
+                    self.frozen = consistent;
+                    return Ok(StepReport {
+                        newton_iters: total_iters,
+                        outer_iters: outer,
+                        residual: res,
+                        dissipation: diss,
+                        external_work: w,
+                        acc_trans: at,
+                        acc_rot: ar,
+                    });
+                }
+                Err(f) => last = f,
+            }
+        }
+        Err(last)
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn solve_once(
+        &mut self,
+        q: &mut [f64],
+        mode: Mode,
+        iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
+        let (it, hist) = self.newton(q, mode)?;
+        *iters += it;
+        let res = *hist.last().unwrap_or(&0.0);
+        match self.check(q, mode) {
+            Ok((s, inv, d, w, c)) => Ok((s, inv, d, w, 1, res, c)),
+            Err(reason) => Err(StepFailure {
+                reason,
+                residuals: hist,
+            }),
+        }
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn solve_staggered(
+        &mut self,
+        q: &mut [f64],
+        iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
+        // Start from the scalars consistent with the predictor.
+        let (_, _, c0) = self.advance(q, Mode::Consistent);
+        self.frozen = c0;
+        let mut last_reason = String::new();
+        let mut hist_all = Vec::new();
+        for outer in 1..=self.params.max_outer {
+            let (it, hist) = self.newton(q, Mode::Frozen)?;
+            *iters += it;
+            let res = *hist.last().unwrap_or(&0.0);
+            hist_all.extend(hist);
+            match self.check(q, Mode::Frozen) {
+                Ok((s, inv, d, w, c)) => return Ok((s, inv, d, w, outer, res, c)),
+                Err(reason) => {
+                    last_reason = reason;
+                    let (_, _, c) = self.advance(q, Mode::Frozen);
+                    self.frozen = c;
+                }
+            }
+        }
+        Err(StepFailure {
+            reason: format!(
+                "staggered loop hit its cap of {} outer rounds: {last_reason}",
+                self.params.max_outer
+            ),
+            residuals: hist_all,
+        })
+    }
+
+    /// Position and triad updates of a global increment applied to the current state
+    /// (for tests of the tangent).
+    pub fn residual_at(&mut self, q: &[f64], consistent: bool) -> Vec<f64> {
+        let mut r = vec![0.0; self.dofs.n];
+        let t_mid = self.state.t + 0.5 * self.params.dt;
+        let (mut f, mut m) = (std::mem::take(&mut self.force), std::mem::take(&mut self.moment));
+        self.model.external_loads(t_mid, &mut f, &mut m);
+        self.force = f;
+        self.moment = m;
+        let mode = if consistent { Mode::Consistent } else { Mode::Frozen };
+        self.assemble(q, mode, true, &mut r);
+        r
+    }
+
+    /// Dense copy of the assembled tangent at `q` (tests only; small models).
+    pub fn dense_tangent_at(&mut self, q: &[f64], consistent: bool) -> Vec<Vec<f64>> {
+        let _ = self.residual_at(q, consistent);
+        let n = self.dofs.n;
+        let mut dense = vec![vec![0.0; n]; n];
+        for e in 0..self.model.elements.len() {
+            let map = &self.dofs.elements[e];
+            for i in 0..NDOF {
+                for j in 0..NDOF {
+                    if map[i] != NONE && map[j] != NONE {
+                        let v = self.solver.values()[self.slots[e][i * NDOF + j]];
+                        dense[map[i]][map[j]] = v;
+                    }
+                }
+            }
+        }
+        dense
+    }
+
+    /// Sets the frozen dissipation scalars of every element (tests of the staggered
+    /// tangent).
+    pub fn set_frozen(&mut self, s: FrozenScalars) {
+        self.frozen.iter_mut().for_each(|x| *x = s);
+    }
+}
+
+/// Kind of an element-local row: 0 = u, 1 = θ, 2 = g.
+#[inline]
+fn kind_of_local(i: usize) -> usize {
+    if i >= g_idx(0) {
+        2
+    } else if (i >= th_idx(0) && i < u_idx(1)) || i >= th_idx(1) {
+        1
+    } else {
+        0
+    }
+}
+

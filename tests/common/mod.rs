@@ -1,0 +1,100 @@
+//! Programmatic models for the physics tests (independent of the scene parser).
+#![allow(dead_code)]
+
+use cosserat::model::{ElementProps, Element, Mat3, Model, RodInfo, Support, Vec3};
+use nalgebra::{Matrix2, Matrix3};
+
+/// Section/material constants for tests: E, ν, ρ, A, I (I11 = I22), J.
+pub fn props(e: f64, nu: f64, rho: f64, a: f64, i: f64, j: f64, h: f64) -> ElementProps {
+    let g = e / (2.0 * (1.0 + nu));
+    ElementProps {
+        h,
+        a_rho: rho * a,
+        i_rho: Matrix2::new(rho * i, 0.0, 0.0, rho * i),
+        c_gamma: Vec3::new(g * a, g * a, e * a),
+        c_omega: Matrix3::new(e * i, 0.0, 0.0, 0.0, e * i, 0.0, 0.0, 0.0, g * j),
+    }
+}
+
+/// Triad with d3 along `t`, d1 from `d1` projected.
+pub fn triad(t: Vec3, d1: Vec3) -> Mat3 {
+    let d3 = t.normalize();
+    let d1 = (d1 - d3 * d3.dot(&d1)).normalize();
+    let d2 = d3.cross(&d1);
+    Mat3::from_columns(&[d1, d2, d3])
+}
+
+/// A model from polylines (each (points, elements per segment, d1)), merging
+/// coincident nodes; material (E, ν, ρ, A, I, J).
+pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f64, f64)) -> Model {
+    let mut nodes: Vec<Vec3> = Vec::new();
+    let find = |x: Vec3, nodes: &mut Vec<Vec3>| -> usize {
+        if let Some(k) = nodes.iter().position(|y| (y - x).norm() < 1e-9) {
+            k
+        } else {
+            nodes.push(x);
+            nodes.len() - 1
+        }
+    };
+    let mut elements = Vec::new();
+    let mut infos = Vec::new();
+    for (ri, (pts, ne, d1)) in rods.iter().enumerate() {
+        let start = elements.len();
+        for s in 0..pts.len() - 1 {
+            let (p0, p1) = (pts[s], pts[s + 1]);
+            let tri = triad(p1 - p0, *d1);
+            for k in 0..*ne {
+                let xa = p0 + (p1 - p0) * (k as f64 / *ne as f64);
+                let xb = p0 + (p1 - p0) * ((k + 1) as f64 / *ne as f64);
+                let a = find(xa, &mut nodes);
+                let b = find(xb, &mut nodes);
+                let h = (xb - xa).norm();
+                let (e, nu, rho, area, i, j) = mat;
+                elements.push(Element {
+                    nodes: [a, b],
+                    ref_triad: [tri, tri],
+                    props: props(e, nu, rho, area, i, j, h),
+                    rod: ri,
+                });
+            }
+        }
+        infos.push(RodInfo { name: format!("rod{ri}"), elements: start..elements.len() });
+    }
+    let n = nodes.len();
+    Model {
+        nodes,
+        elements,
+        supports: vec![Support::default(); n],
+        point_mass: vec![0.0; n],
+        loads: vec![],
+        gravity: Vec3::zeros(),
+        velocity0: vec![Vec3::zeros(); n],
+        omega0: vec![Vec3::zeros(); n],
+        rods: infos,
+    }
+}
+
+/// The paper's free-flying frame (DESIGN §6.1, staircase reconstruction).
+pub fn frame() -> Model {
+    let l = 10.0;
+    let (a, b, c, d) = (
+        Vec3::zeros(),
+        Vec3::new(l, 0.0, 0.0),
+        Vec3::new(l, l, 0.0),
+        Vec3::new(l, l, l),
+    );
+    let mut m = polylines(
+        &[
+            (vec![a, b], 5, Vec3::new(0.0, 1.0, 0.0)),
+            (vec![b, c], 5, Vec3::new(0.0, 0.0, 1.0)),
+            (vec![c, d], 5, Vec3::new(1.0, 0.0, 0.0)),
+        ],
+        (5e5, 0.3, 500.0, 0.005, 2e-5, 4e-5),
+    );
+    let idx = |m: &Model, x: Vec3| m.nodes.iter().position(|y| (y - x).norm() < 1e-9).unwrap();
+    let (ia, ib, ic) = (idx(&m, a), idx(&m, b), idx(&m, c));
+    m.velocity0[ia] = Vec3::new(0.0, 0.0, -1.0);
+    m.velocity0[ib] = Vec3::new(0.0, 0.0, 2.0);
+    m.velocity0[ic] = Vec3::new(0.0, -1.0, 0.0);
+    m
+}
