@@ -5,6 +5,7 @@
 pub mod dofs;
 pub mod params;
 pub mod state;
+pub mod run;
 pub mod system;
 
 pub use params::{IntegratorParams, Scheme, Strategy};

@@ -1,0 +1,141 @@
+//! The time loop: step until `t_end` or the first step that cannot be accepted, hand
+//! every accepted level to an observer, and report how the run ended. A failed step is a
+//! *result* (status `failed`, reason, residual history), not an error.
+
+use std::time::Instant;
+
+use crate::integrator::system::Simulation;
+use crate::observe::record::{RunStatus, StepRecord};
+use crate::observe::Invariants;
+
+/// How a run ended and what it measured along the way.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunOutcome {
+    /// Completed or failed.
+    pub status: RunStatus,
+    /// Time of the last accepted step.
+    pub t_reached: f64,
+    /// Accepted steps.
+    pub steps: usize,
+    /// Failure reason.
+    pub reason: Option<String>,
+    /// Relative residual history of the failing step.
+    pub failed_step_residuals: Vec<f64>,
+    /// Total Newton iterations.
+    pub newton_iters_total: usize,
+    /// Largest per-step change of L relative to the momentum scale.
+    pub max_rel_dl: f64,
+    /// Largest per-step change of J relative to the angular momentum scale.
+    pub max_rel_dj: f64,
+    /// Initial H.
+    pub energy_initial: f64,
+    /// Final H.
+    pub energy_final: f64,
+    /// Wall time of the loop.
+    pub wall_s: f64,
+}
+
+/// The record of the current level of `sim`.
+pub fn record_of(sim: &Simulation, step: usize, rep: Option<&crate::integrator::StepReport>) -> StepRecord {
+    let inv = sim.invariants();
+    let rep = rep.copied().unwrap_or_default();
+    StepRecord {
+        step,
+        t: sim.state().t,
+        kinetic: inv.kinetic,
+        potential: inv.potential,
+        total: inv.total(),
+        l: inv.l,
+        j: inv.j,
+        dissipation: rep.dissipation,
+        external_work: rep.external_work,
+        acc_trans: rep.acc_trans,
+        acc_rot: rep.acc_rot,
+        newton_iters: rep.newton_iters,
+        outer_iters: rep.outer_iters,
+        residual: rep.residual,
+    }
+}
+
+/// Scales against which momentum drifts are measured: `|L|` or, if the body is nearly
+/// at rest in the mean, `sqrt(2 K m)`; `J` likewise times the model's size.
+fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
+    let m = sim.model();
+    let mass: f64 = m.elements.iter().map(|e| e.props.a_rho * e.props.h).sum::<f64>()
+        + m.point_mass.iter().sum::<f64>();
+    let (lo, hi) = m.nodes.iter().fold(
+        (crate::model::Vec3::repeat(f64::INFINITY), crate::model::Vec3::repeat(f64::NEG_INFINITY)),
+        |(lo, hi), x| (lo.inf(x), hi.sup(x)),
+    );
+    let size = (hi - lo).norm().max(1e-300);
+    let p = (2.0 * inv.kinetic.max(0.0) * mass).sqrt();
+    (inv.l.norm().max(p).max(1e-300), inv.j.norm().max(p * size).max(1e-300))
+}
+
+/// Runs `sim` to its end time. `observer` sees row 0 and every accepted step (its
+/// error aborts the run, e.g. a full disk); `every` thins what it sees (the last accepted
+/// step is always shown).
+pub fn run<E>(
+    sim: &mut Simulation,
+    every: usize,
+    mut observer: impl FnMut(&StepRecord, &Simulation) -> Result<(), E>,
+) -> Result<RunOutcome, E> {
+    let start = Instant::now();
+    let n_steps = sim.params().n_steps();
+    let inv0 = sim.invariants();
+    let (l_ref, j_ref) = momentum_scales(sim, &inv0);
+    observer(&record_of(sim, 0, None), sim)?;
+    let mut out = RunOutcome {
+        status: RunStatus::Completed,
+        t_reached: sim.state().t,
+        steps: 0,
+        reason: None,
+        failed_step_residuals: vec![],
+        newton_iters_total: 0,
+        max_rel_dl: 0.0,
+        max_rel_dj: 0.0,
+        energy_initial: inv0.total(),
+        energy_final: inv0.total(),
+        wall_s: 0.0,
+    };
+    let mut prev = inv0;
+    let every = every.max(1);
+    let mut unshown: Option<(usize, crate::integrator::StepReport)> = None;
+    for step in 1..=n_steps {
+        match sim.step() {
+            Ok(rep) => {
+                let inv = sim.invariants();
+                out.max_rel_dl = out.max_rel_dl.max((inv.l - prev.l).norm() / l_ref);
+                out.max_rel_dj = out.max_rel_dj.max((inv.j - prev.j).norm() / j_ref);
+                out.newton_iters_total += rep.newton_iters;
+                out.steps = step;
+                out.t_reached = sim.state().t;
+                out.energy_final = inv.total();
+                prev = inv;
+                if step % every == 0 || step == n_steps {
+                    observer(&record_of(sim, step, Some(&rep)), sim)?;
+                    unshown = None;
+                } else {
+                    unshown = Some((step, rep));
+                }
+            }
+            Err(f) => {
+                // Keep the last accepted level in the output even when thinning.
+                if let Some((k, rep)) = unshown.take() {
+                    observer(&record_of(sim, k, Some(&rep)), sim)?;
+                }
+                out.status = RunStatus::Failed;
+                out.reason = Some(format!(
+                    "step {step} (t = {:.6} → {:.6}) failed: {}",
+                    sim.state().t,
+                    sim.state().t + sim.params().dt,
+                    f.reason
+                ));
+                out.failed_step_residuals = f.residuals;
+                break;
+            }
+        }
+    }
+    out.wall_s = start.elapsed().as_secs_f64();
+    Ok(out)
+}
