@@ -366,7 +366,8 @@ pub fn residual_tangent(
                     fi += (h * M2[l][m] * p.i_rho[(a, b)] / dt) * (kin.vd1[m][b] - st.vd[m][b]);
                 }
             }
-            fd_scale[l] = fd_scale[l].max(fi.amax()).max(f[base + a].amax());
+            let rate = h * p.i_rho.amax() * (st.vd[l][a].amax() + kin.vd1[l][a].amax()) / dt;
+            fd_scale[l] = fd_scale[l].max(fi.amax()).max(f[base + a].amax()).max(rate);
             f[base + a] += fi;
         }
         fd_scale[l] = fd_scale[l].max(f[base + 2].amax());
@@ -383,7 +384,10 @@ pub fn residual_tangent(
             rt += dmid[l].column(i).cross(&f[base + i]);
         }
         r.fixed_rows_mut::<3>(th_idx(l)).copy_from(&rt);
-        let su = stress_scale[l].max(inertia_r[l].amax());
+        // Round-off floor: the inertia term is a difference of terms of size
+        // Aρ h |v|/Δt, which dominate it when Δt is small.
+        let momentum_rate = p.a_rho * h * (st.v[l].amax() + kin.v1[l].amax()) / dt;
+        let su = stress_scale[l].max(inertia_r[l].amax()).max(momentum_rate);
         let dnorm = dmid[l].column(0).norm().max(dmid[l].column(1).norm()).max(dmid[l].column(2).norm());
         for c in 0..3 {
             scale[u_idx(l) + c] = su;
@@ -399,8 +403,11 @@ pub fn residual_tangent(
                 mg += p.a_rho * h * M2[l][m] * kin_g(st, kin, m, dt);
             }
             r.fixed_rows_mut::<3>(g_idx(l)).copy_from(&(mg - b));
+            // The g rows balance momenta: measure them against the element's momentum,
+            // not against g itself (which vanishes where nothing dissipates).
+            let momentum = 0.5 * p.a_rho * h * st.v[l].amax().max(kin.v1[l].amax());
             for c in 0..3 {
-                scale[g_idx(l) + c] = mg.amax().max(b.amax());
+                scale[g_idx(l) + c] = mg.amax().max(b.amax()).max(momentum);
             }
         }
     }
