@@ -1,30 +1,815 @@
-//! TEMPORARY dense stand-in (replaced by the faer sparse solver).
-#![allow(missing_docs)]
+//! Sparse linear solves for the Newton method.
+//!
+//! [`SparseSolver`] holds a square, real, unsymmetric matrix with a *fixed* sparsity pattern
+//! (the Newton tangent), analyses that pattern once in [`SparseSolver::new`], and then, every
+//! Newton iteration, refactorizes the new values and solves one right-hand side in
+//! [`SparseSolver::factor_solve`].
+//!
+//! # Backends (chosen once, by dimension)
+//!
+//! * `n <= DENSE_MAX_DIM` ([`DENSE_MAX_DIM`] = 64): the values are scattered into a reused
+//!   dense column-major buffer and factorized with faer's dense LU with partial pivoting
+//!   (`faer::linalg::lu::partial_pivoting::factor::lu_in_place`). For tiny systems this beats
+//!   any sparse code (no index chasing, no symbolic overhead).
+//! * otherwise: faer's sparse LU with partial pivoting, symbolic analysis (COLAMD column
+//!   ordering, elimination tree, supernode partition) computed once in `new` with
+//!   `faer::sparse::linalg::lu::factorize_symbolic_lu`, forced to the **supernodal** variant;
+//!   the numeric factorization `SymbolicLu::factorize_numeric_lu` reuses the
+//!   `NumericLu` storage and one `MemBuffer` scratch across calls.
+//!
+//! Measured on the project's 2-core machine (`--release`, best of 3×(200…5000) calls while
+//! other builds were running, 6×6 block-tridiagonal patterns, random unsymmetric values with
+//! and without a dominant diagonal; factorization + solve only):
+//!
+//! | n      | dense LU      | simplicial (COLAMD / AMD) | supernodal   |
+//! |--------|---------------|---------------------------|--------------|
+//! | 48     | 6.5–7.4 µs    | 14–23 / 9.5–17 µs          | 9.5–12 µs    |
+//! | 72     | 14–16 µs      | 20–36 / 14–26 µs           | 14–17 µs     |
+//! | 96     | 24–27 µs      | 27–47 / 19–37 µs           | 19–24 µs     |
+//! | 306    | 330–370 µs    | 78–148 / 63–124 µs         | 60–85 µs     |
+//! | 6000   | —             | 1.6–2.9 / 1.3–2.6 ms       | 1.2–1.7 ms   |
+//! | 60000  | —             | 16–31 / 20–34 ms           | 21–31 ms     |
+//!
+//! The lower figure of each range is the diagonally dominant case (pivots stay on the
+//! diagonal), the upper one the non-dominant case (row interchanges create fill). The
+//! simplicial variant (which faer's automatic heuristic selects for these patterns) suffers
+//! most from pivoting fill, so the supernodal variant is forced. Dense and supernodal cross
+//! over around n ≈ 72; 64 is used as the threshold.
+//!
+//! With the checks below, `factor_solve` as shipped measured 64–66 µs (dominant) and 90 µs
+//! (non-dominant) at n = 306, 1.34 ms and 1.9 ms at n = 6000; the checks cost ≈ 6 %
+//! (4 µs at n = 306, 77 µs at n = 6000).
+//!
+//! # Failure detection
+//!
+//! `factor_solve` never returns NaNs: it rejects (with [`LinsolveError::Singular`])
+//! non-finite matrix or right-hand-side entries, a structurally singular pivot sequence
+//! reported by faer, a numerically zero pivot (dense backend), a non-finite solution, a solve
+//! whose normwise backward error exceeds [`MAX_BACKWARD_ERROR`], and a solve whose condition
+//! number lower bound `‖A‖₁‖x‖₁/‖b‖₁` exceeds [`MAX_COND_LOWER_BOUND`]. On error the
+//! right-hand side is left unchanged.
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::lu::partial_pivoting::{factor as dense_factor, solve as dense_solve};
+use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuSymbolicParams, NumericLu, SymbolicLu};
+use faer::sparse::linalg::{LuError, SupernodalThreshold};
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+use faer::{Conj, Mat, MatMut, Par};
+
+/// Largest dimension factorized with the dense LU backend (see the module documentation for
+/// the measurements behind it).
+pub const DENSE_MAX_DIM: usize = 64;
+
+/// Largest accepted normwise backward error `‖b − A x‖₁ / (‖A‖₁‖x‖₁ + ‖b‖₁)`.
+///
+/// (1-norms because the column sums of a compressed-column matrix are contiguous; any
+/// operator norm gives a valid backward error and condition bound.)
+///
+/// LU with partial pivoting is backward stable: the error is `O(w·ε·ρ)` with `w` the
+/// number of entries per row of the factors and `ρ` the pivot growth, i.e. ≈ 1e-15 here. A
+/// value of 1e-10 (≈ 5e5 ε) therefore only trips on catastrophic pivot growth.
+pub const MAX_BACKWARD_ERROR: f64 = 1e-10;
+
+/// Largest accepted lower bound `‖A‖₁‖x‖₁/‖b‖₁ ≤ κ₁(A)` of the condition number.
+///
+/// At κ·ε ≈ 1 the solution has no correct digit. A singular matrix whose zero pivot is
+/// polluted by round-off typically shows κ ≳ 1/(10 ε) ≈ 4.5e14, so the bound is set a
+/// little below that, at 1e14 (κ·ε ≈ 0.02). Genuine rod tangents (stiffness ratios
+/// EA·L²/EI of up to 1e10 or so) stay well below it.
+pub const MAX_COND_LOWER_BOUND: f64 = 1e14;
+
+/// Errors of the linear solver.
 #[derive(Debug, thiserror::Error)]
 pub enum LinsolveError {
+    /// The matrix (or its factorization, or the solution) is singular, ill-conditioned or
+    /// non-finite.
     #[error("singular or ill-conditioned tangent: {0}")]
     Singular(String),
+    /// The sparsity pattern given to [`SparseSolver::new`] is unusable.
     #[error("invalid sparsity pattern: {0}")]
     Pattern(String),
 }
-pub struct SparseSolver { n: usize, entries: Vec<(usize, usize)>, vals: Vec<f64> }
-impl SparseSolver {
-    pub fn new(n: usize, entries: &[(usize, usize)]) -> Result<Self, LinsolveError> {
-        let mut e = entries.to_vec(); e.sort(); e.dedup();
-        let m = e.len();
-        Ok(Self { n, entries: e, vals: vec![0.0; m] })
+
+/// Index type of the compressed-column pattern.
+type Ix = usize;
+
+/// Factorization backend; see the module documentation.
+enum Backend {
+    /// Dense LU with partial pivoting for small systems.
+    Dense {
+        /// Dense copy of the matrix, overwritten by its LU factors.
+        lu: Mat<f64>,
+        /// Row permutation (forward).
+        perm: Vec<Ix>,
+        /// Row permutation (inverse).
+        perm_inv: Vec<Ix>,
+    },
+    /// faer's sparse supernodal LU with partial pivoting.
+    Sparse {
+        /// Symbolic analysis, computed once.
+        symbolic: SymbolicLu<Ix>,
+        /// Numeric factors; storage reused across refactorizations (boxed: the struct is
+        /// large and the dense variant small).
+        numeric: Box<NumericLu<Ix, f64>>,
+    },
+}
+
+/// Sparse LU solver for a fixed sparsity pattern, refactorized with new values on every call
+/// of [`factor_solve`](Self::factor_solve).
+pub struct SparseSolver {
+    /// Pattern (compressed sparse column, sorted, no duplicates) and values.
+    a: SparseColMat<Ix, f64>,
+    /// Numeric backend.
+    backend: Backend,
+    /// Scratch for factorization and solve, allocated once.
+    mem: MemBuffer,
+    /// Copy of the right-hand side (restored into `rhs` on error).
+    b: Vec<f64>,
+    /// Residual `b − A x`.
+    r: Vec<f64>,
+}
+
+impl std::fmt::Debug for SparseSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SparseSolver")
+            .field("dim", &self.dim())
+            .field("nnz", &self.nnz())
+            .field(
+                "backend",
+                &match self.backend {
+                    Backend::Dense { .. } => "dense",
+                    Backend::Sparse { .. } => "sparse-supernodal",
+                },
+            )
+            .finish()
     }
-    pub fn dim(&self) -> usize { self.n }
-    pub fn slot(&self, row: usize, col: usize) -> usize { self.entries.binary_search(&(row, col)).unwrap() }
-    pub fn values_mut(&mut self) -> &mut [f64] { &mut self.vals }
-    pub fn values(&self) -> &[f64] { &self.vals }
+}
+
+impl SparseSolver {
+    /// Analyses the sparsity pattern of an `n × n` matrix.
+    ///
+    /// `entries`: (row, col) pairs of the pattern in any order, duplicates allowed (merged).
+    /// Fails with [`LinsolveError::Pattern`] if an index is out of range or a row or column
+    /// is empty (the matrix would be structurally singular).
+    pub fn new(n: usize, entries: &[(usize, usize)]) -> Result<Self, LinsolveError> {
+        Self::with_backend(n, entries, n <= DENSE_MAX_DIM)
+    }
+
+    /// [`new`](Self::new) with an explicit backend choice (tests compare both).
+    fn with_backend(
+        n: usize,
+        entries: &[(usize, usize)],
+        dense: bool,
+    ) -> Result<Self, LinsolveError> {
+        if let Some(&(r, c)) = entries.iter().find(|&&(r, c)| r >= n || c >= n) {
+            return Err(LinsolveError::Pattern(format!(
+                "entry ({r}, {c}) out of range for dimension {n}"
+            )));
+        }
+        // Sort by (col, row) and merge duplicates.
+        let mut cr: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (c, r)).collect();
+        cr.sort_unstable();
+        cr.dedup();
+
+        let mut col_ptr: Vec<Ix> = vec![0; n + 1];
+        let mut row_idx: Vec<Ix> = Vec::with_capacity(cr.len());
+        let mut row_seen = vec![false; n];
+        for &(c, r) in &cr {
+            col_ptr[c + 1] += 1;
+            row_idx.push(r);
+            row_seen[r] = true;
+        }
+        if let Some(j) = (0..n).find(|&j| col_ptr[j + 1] == 0) {
+            return Err(LinsolveError::Pattern(format!("column {j} is empty")));
+        }
+        if let Some(i) = row_seen.iter().position(|&seen| !seen) {
+            return Err(LinsolveError::Pattern(format!("row {i} is empty")));
+        }
+        for j in 0..n {
+            col_ptr[j + 1] += col_ptr[j];
+        }
+        let nnz = row_idx.len();
+        let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        let a = SparseColMat::new(pattern, vec![0.0; nnz]);
+
+        let par = Par::Seq;
+        let (backend, req) = if dense {
+            let req = StackReq::any_of(&[
+                dense_factor::lu_in_place_scratch::<Ix, f64>(n, n, par, Default::default()),
+                dense_solve::solve_in_place_scratch::<Ix, f64>(n, 1, par),
+            ]);
+            let backend = Backend::Dense {
+                lu: Mat::zeros(n, n),
+                perm: vec![0; n],
+                perm_inv: vec![0; n],
+            };
+            (backend, req)
+        } else {
+            let params = LuSymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            };
+            let symbolic = factorize_symbolic_lu(a.symbolic(), params).map_err(|e| {
+                LinsolveError::Pattern(format!("symbolic LU analysis failed: {e:?}"))
+            })?;
+            let req = StackReq::any_of(&[
+                symbolic.factorize_numeric_lu_scratch::<f64>(par, Default::default()),
+                symbolic.solve_in_place_scratch::<f64>(1, par),
+            ]);
+            let backend = Backend::Sparse {
+                symbolic,
+                numeric: Box::new(NumericLu::new()),
+            };
+            (backend, req)
+        };
+        let mem = MemBuffer::try_new(req).map_err(|_| {
+            LinsolveError::Pattern(format!("cannot allocate LU scratch for n = {n}"))
+        })?;
+        Ok(Self {
+            a,
+            backend,
+            mem,
+            b: vec![0.0; n],
+            r: vec![0.0; n],
+        })
+    }
+
+    /// Dimension `n` of the matrix.
+    pub fn dim(&self) -> usize {
+        self.a.nrows()
+    }
+
+    /// Number of distinct entries of the pattern.
+    pub fn nnz(&self) -> usize {
+        self.a.val().len()
+    }
+
+    /// Index into [`values_mut`](Self::values_mut) of entry `(row, col)`.
+    ///
+    /// # Panics
+    /// If `(row, col)` is not in the pattern.
+    pub fn slot(&self, row: usize, col: usize) -> usize {
+        let pattern = self.a.symbolic();
+        assert!(
+            col < self.dim(),
+            "linsolve: column {col} out of range (n = {})",
+            self.dim()
+        );
+        let (start, end) = (pattern.col_ptr()[col], pattern.col_ptr()[col + 1]);
+        match pattern.row_idx()[start..end].binary_search(&row) {
+            Ok(k) => start + k,
+            Err(_) => panic!("linsolve: entry ({row}, {col}) is not in the sparsity pattern"),
+        }
+    }
+
+    /// Values in pattern order (compressed sparse column), writable.
+    pub fn values_mut(&mut self) -> &mut [f64] {
+        self.a.val_mut()
+    }
+
+    /// Values in pattern order (compressed sparse column).
+    pub fn values(&self) -> &[f64] {
+        self.a.val()
+    }
+
+    /// Numeric LU of the current values (reusing the symbolic analysis of `new`) and solve
+    /// of `A x = b` in place (`rhs`: b on entry, x on successful return; unchanged on error).
+    ///
+    /// # Panics
+    /// If `rhs.len() != self.dim()`.
     pub fn factor_solve(&mut self, rhs: &mut [f64]) -> Result<(), LinsolveError> {
-        let n = self.n;
-        let mut a = nalgebra::DMatrix::<f64>::zeros(n, n);
-        for (k, &(i, j)) in self.entries.iter().enumerate() { a[(i, j)] += self.vals[k]; }
-        let b = nalgebra::DVector::from_column_slice(rhs);
-        let x = a.lu().solve(&b).ok_or_else(|| LinsolveError::Singular("lu".into()))?;
-        rhs.copy_from_slice(x.as_slice());
-        Ok(())
+        let n = self.dim();
+        assert_eq!(
+            rhs.len(),
+            n,
+            "linsolve: right-hand side has the wrong length"
+        );
+        if n == 0 {
+            return Ok(());
+        }
+        let a = self.a.as_ref();
+        let col_ptr = a.symbolic().col_ptr();
+        let row_idx = a.symbolic().row_idx();
+        let vals = a.val();
+
+        // ‖A‖₁ (largest column sum of |a_ij|; contiguous in CSC storage, unlike ‖A‖∞). A
+        // column sum is finite iff its entries are (barring overflow), so this is also the
+        // finiteness test of the matrix.
+        let mut norm_a = 0.0f64;
+        let mut finite = true;
+        for j in 0..n {
+            let sum: f64 = vals[col_ptr[j]..col_ptr[j + 1]]
+                .iter()
+                .map(|v| v.abs())
+                .sum();
+            finite &= sum.is_finite();
+            norm_a = norm_a.max(sum);
+        }
+        if !finite {
+            return Err(LinsolveError::Singular(
+                match vals.iter().position(|v| !v.is_finite()) {
+                    Some(p) => format!(
+                        "non-finite matrix entry {} at ({}, {})",
+                        vals[p],
+                        row_idx[p],
+                        col_ptr.partition_point(|&c| c <= p) - 1
+                    ),
+                    None => "matrix norm overflows".to_string(),
+                },
+            ));
+        }
+        if let Some(i) = rhs.iter().position(|v| !v.is_finite()) {
+            return Err(LinsolveError::Singular(format!(
+                "non-finite right-hand side entry {} at {i}",
+                rhs[i]
+            )));
+        }
+        let norm_b = norm_1(rhs);
+        self.b.copy_from_slice(rhs);
+
+        let par = Par::Seq;
+        let stack = MemStack::new(&mut self.mem);
+        match &mut self.backend {
+            Backend::Dense { lu, perm, perm_inv } => {
+                lu.fill(0.0);
+                for j in 0..n {
+                    for p in col_ptr[j]..col_ptr[j + 1] {
+                        lu[(row_idx[p], j)] = vals[p];
+                    }
+                }
+                let (_, row_perm) = dense_factor::lu_in_place(
+                    lu.as_mut(),
+                    perm,
+                    perm_inv,
+                    par,
+                    stack,
+                    Default::default(),
+                );
+                // A zero pivot makes the later ones inf/NaN, hence the finiteness test.
+                let (mut pmin, mut pmax, mut pivots_finite) = (f64::INFINITY, 0.0f64, true);
+                for k in 0..n {
+                    let d = lu[(k, k)].abs();
+                    pivots_finite &= d.is_finite();
+                    pmin = pmin.min(d);
+                    pmax = pmax.max(d);
+                }
+                if !pivots_finite || pmin <= f64::EPSILON * pmax {
+                    return Err(LinsolveError::Singular(format!(
+                        "numerically zero pivot in dense LU (min |u_kk| = {pmin:e}, \
+                         max |u_kk| = {pmax:e})"
+                    )));
+                }
+                dense_solve::solve_in_place_with_conj(
+                    lu.as_ref(),
+                    lu.as_ref(),
+                    row_perm,
+                    Conj::No,
+                    MatMut::from_column_major_slice_mut(rhs, n, 1),
+                    par,
+                    stack,
+                );
+            }
+            Backend::Sparse { symbolic, numeric } => {
+                let lu = symbolic
+                    .factorize_numeric_lu(numeric, a, par, stack, Default::default())
+                    .map_err(|e| match e {
+                        LuError::SymbolicSingular { index } => LinsolveError::Singular(format!(
+                            "no nonzero pivot available at elimination step {index}"
+                        )),
+                        LuError::Generic(e) => {
+                            LinsolveError::Singular(format!("sparse LU failed: {e:?}"))
+                        }
+                    })?;
+                lu.solve_in_place_with_conj(
+                    Conj::No,
+                    MatMut::from_column_major_slice_mut(rhs, n, 1),
+                    par,
+                    stack,
+                );
+            }
+        }
+
+        // Checks on the solution; on failure, restore the right-hand side.
+        let verdict = check_solution(
+            col_ptr,
+            row_idx,
+            vals,
+            &self.b,
+            rhs,
+            &mut self.r,
+            norm_a,
+            norm_b,
+        );
+        if verdict.is_err() {
+            rhs.copy_from_slice(&self.b);
+        }
+        verdict
+    }
+}
+
+/// `‖v‖₁ = Σ |v_i|` (NaN if any `v_i` is NaN).
+fn norm_1(v: &[f64]) -> f64 {
+    v.iter().map(|x| x.abs()).sum()
+}
+
+/// Checks finiteness, backward error and the condition lower bound of the solution `x` of
+/// `A x = b` (A in compressed sparse column form, `norm_a = ‖A‖₁`, `norm_b = ‖b‖₁`). `r` is
+/// workspace for the residual.
+#[allow(clippy::too_many_arguments)]
+fn check_solution(
+    col_ptr: &[Ix],
+    row_idx: &[Ix],
+    vals: &[f64],
+    b: &[f64],
+    x: &[f64],
+    r: &mut [f64],
+    norm_a: f64,
+    norm_b: f64,
+) -> Result<(), LinsolveError> {
+    if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+        return Err(LinsolveError::Singular(format!(
+            "non-finite solution component {} at {i}",
+            x[i]
+        )));
+    }
+    r.copy_from_slice(b);
+    for (j, &xj) in x.iter().enumerate() {
+        let range = col_ptr[j]..col_ptr[j + 1];
+        for (&i, &v) in row_idx[range.clone()].iter().zip(&vals[range]) {
+            r[i] -= v * xj;
+        }
+    }
+    let norm_r = norm_1(r);
+    let norm_x = norm_1(x);
+    let scale = norm_a * norm_x + norm_b;
+    // The residual is NaN if A x overflowed (inf − inf).
+    if norm_r.is_nan() || norm_r > MAX_BACKWARD_ERROR * scale {
+        return Err(LinsolveError::Singular(format!(
+            "backward error {:e} of the LU solve exceeds {MAX_BACKWARD_ERROR:e}",
+            norm_r / scale
+        )));
+    }
+    if norm_b > 0.0 && norm_a * norm_x > MAX_COND_LOWER_BOUND * norm_b {
+        return Err(LinsolveError::Singular(format!(
+            "condition number at least {:e} (‖A‖₁‖x‖₁/‖b‖₁), above {MAX_COND_LOWER_BOUND:e}",
+            norm_a * norm_x / norm_b
+        )));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Tolerance on the normwise backward error `‖A x − b‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞)`.
+    ///
+    /// LU with partial pivoting gives `(A + ΔA) x = b` with `|ΔA| ≤ γ_w |L||U|`,
+    /// `γ_w = w ε / (1 − w ε)`, `w` the largest number of entries in a row of L or column
+    /// of U (Higham, Accuracy and Stability, Thm. 9.3), so the backward error is at most
+    /// about `w ε ‖|L||U|‖/‖A‖ ≈ w ε ρ`. For 6×6 block-tridiagonal matrices, with fill from
+    /// pivoting, `w ≤ 3·12 = 36` on the sparse path; the dense path is only used up to
+    /// n = 306 in these tests but its per-entry error is also driven by the accumulated
+    /// length of the dot products (≤ 306). With ε = 2.2e-16 and a pivot growth ρ ≤ 10,
+    /// `306 · 2.2e-16 · 10 ≈ 7e-13 < 1e-12`. (Observed: 3e-17 … 2e-16 on these matrices.)
+    const TEST_BACKWARD_TOL: f64 = 1e-12;
+
+    /// xorshift64* generator, uniform in [-1, 1).
+    struct Rng(u64);
+    impl Rng {
+        fn new(seed: u64) -> Self {
+            Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+        }
+        fn uniform(&mut self) -> f64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            let u = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
+            (u >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        }
+    }
+
+    /// Pattern of a block-tridiagonal matrix of `nb` blocks of size `bs`, row-major order.
+    fn block_tridiag_pattern(nb: usize, bs: usize) -> Vec<(usize, usize)> {
+        let mut e = Vec::new();
+        for bi in 0..nb {
+            for bj in bi.saturating_sub(1)..(bi + 2).min(nb) {
+                for i in 0..bs {
+                    for j in 0..bs {
+                        e.push((bi * bs + i, bj * bs + j));
+                    }
+                }
+            }
+        }
+        e
+    }
+
+    /// Fills random unsymmetric values into the pattern `entries` (accumulating, as the
+    /// assembly does); `diag_shift` is added to every diagonal entry (0 = not dominant).
+    fn fill_random(
+        s: &mut SparseSolver,
+        entries: &[(usize, usize)],
+        rng: &mut Rng,
+        diag_shift: f64,
+    ) {
+        let slots: Vec<usize> = entries.iter().map(|&(r, c)| s.slot(r, c)).collect();
+        let v = s.values_mut();
+        v.fill(0.0);
+        for (&(r, c), &k) in entries.iter().zip(&slots) {
+            v[k] += rng.uniform() + if r == c { diag_shift } else { 0.0 };
+        }
+    }
+
+    /// `A x` for the solver's current values.
+    fn matvec(s: &SparseSolver, x: &[f64]) -> Vec<f64> {
+        let pattern = s.a.symbolic();
+        let mut y = vec![0.0; s.dim()];
+        for (j, &xj) in x.iter().enumerate() {
+            for p in pattern.col_ptr()[j]..pattern.col_ptr()[j + 1] {
+                y[pattern.row_idx()[p]] += s.values()[p] * xj;
+            }
+        }
+        y
+    }
+
+    /// `max_i |v_i|`.
+    fn inf_norm(v: &[f64]) -> f64 {
+        v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+    }
+
+    /// `‖A‖∞` for the solver's current values.
+    fn norm_a(s: &SparseSolver) -> f64 {
+        let pattern = s.a.symbolic();
+        let mut rows = vec![0.0; s.dim()];
+        for (p, &i) in pattern.row_idx().iter().enumerate() {
+            rows[i] += s.values()[p].abs();
+        }
+        inf_norm(&rows)
+    }
+
+    /// Normwise backward error of `x` as a solution of `A x = b`.
+    fn backward_error(s: &SparseSolver, x: &[f64], b: &[f64]) -> f64 {
+        let ax = matvec(s, x);
+        let r: Vec<f64> = ax.iter().zip(b).map(|(p, q)| p - q).collect();
+        inf_norm(&r) / (norm_a(s) * inf_norm(x) + inf_norm(b))
+    }
+
+    fn random_vec(n: usize, rng: &mut Rng) -> Vec<f64> {
+        (0..n).map(|_| rng.uniform()).collect()
+    }
+
+    #[test]
+    fn solves_random_block_tridiagonal_both_backends() {
+        let mut rng = Rng::new(1);
+        for &nb in &[1usize, 10, 51, 500] {
+            let n = 6 * nb;
+            let entries = block_tridiag_pattern(nb, 6);
+            for dense in [true, false] {
+                if dense && n > 306 {
+                    continue; // O(n^3): pointless for large n
+                }
+                let mut s = SparseSolver::with_backend(n, &entries, dense).unwrap();
+                assert_eq!(s.dim(), n);
+                assert_eq!(s.nnz(), entries.len());
+                for shift in [8.0, 0.0] {
+                    fill_random(&mut s, &entries, &mut rng, shift);
+                    let b = random_vec(n, &mut rng);
+                    let mut x = b.clone();
+                    s.factor_solve(&mut x).unwrap_or_else(|e| {
+                        panic!("n = {n}, dense = {dense}, shift = {shift}: {e}")
+                    });
+                    let eta = backward_error(&s, &x, &b);
+                    assert!(
+                        eta <= TEST_BACKWARD_TOL,
+                        "n = {n}, dense = {dense}, shift = {shift}: backward error {eta:e}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn recovers_known_solution_of_dominant_system() {
+        // Diagonally dominant (shift 40 > 18 off-diagonal entries of size ≤ 1 per row):
+        // κ∞ ≤ 40+18 / (40−18) ≈ 2.6, so the forward error is ≲ κ · backward error.
+        let mut rng = Rng::new(2);
+        for &nb in &[1usize, 51] {
+            let n = 6 * nb;
+            let entries = block_tridiag_pattern(nb, 6);
+            let mut s = SparseSolver::new(n, &entries).unwrap();
+            fill_random(&mut s, &entries, &mut rng, 40.0);
+            let x_true = random_vec(n, &mut rng);
+            let mut x = matvec(&s, &x_true);
+            s.factor_solve(&mut x).unwrap();
+            let err = x
+                .iter()
+                .zip(&x_true)
+                .map(|(p, q)| (p - q).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                err <= 3.0 * TEST_BACKWARD_TOL,
+                "n = {n}: forward error {err:e}"
+            );
+        }
+    }
+
+    #[test]
+    fn duplicates_are_merged() {
+        // 1-D Laplacian-like tridiagonal pattern given in scrambled order with repeats.
+        let n: usize = 100;
+        let mut entries = Vec::new();
+        for i in 0..n {
+            for j in i.saturating_sub(1)..(i + 2).min(n) {
+                entries.push((i, j));
+            }
+        }
+        let unique = entries.len();
+        let mut scrambled: Vec<(usize, usize)> = entries.iter().rev().copied().collect();
+        scrambled.extend(entries.iter().step_by(3).copied());
+        scrambled.extend(entries.iter().step_by(7).copied());
+        let mut s = SparseSolver::new(n, &scrambled).unwrap();
+        assert_eq!(s.nnz(), unique);
+        // Every slot distinct and in range.
+        let mut slots: Vec<usize> = entries.iter().map(|&(r, c)| s.slot(r, c)).collect();
+        slots.sort_unstable();
+        slots.dedup();
+        assert_eq!(slots.len(), unique);
+        assert!(slots.iter().all(|&k| k < unique));
+        // Assemble A = tridiag(-1, 3, -1) through the repeated entries (each occurrence
+        // adds its share), solve with x_true = 1..n.
+        let mut count = vec![0usize; unique];
+        for &(r, c) in &scrambled {
+            count[s.slot(r, c)] += 1;
+        }
+        s.values_mut().fill(0.0);
+        for &(r, c) in &scrambled {
+            let k = s.slot(r, c);
+            let target = if r == c { 3.0 } else { -1.0 };
+            s.values_mut()[k] += target / count[k] as f64;
+        }
+        let x_true: Vec<f64> = (1..=n).map(|i| i as f64).collect();
+        let mut x = matvec(&s, &x_true);
+        s.factor_solve(&mut x).unwrap();
+        for (p, q) in x.iter().zip(&x_true) {
+            assert!((p - q).abs() <= 1e-12 * n as f64, "{p} vs {q}");
+        }
+    }
+
+    #[test]
+    fn refactorization_with_new_values_on_same_pattern() {
+        let mut rng = Rng::new(3);
+        for &nb in &[10usize, 51] {
+            let n = 6 * nb;
+            let entries = block_tridiag_pattern(nb, 6);
+            let mut s = SparseSolver::new(n, &entries).unwrap();
+            for iter in 0..4 {
+                // Alternate dominant / non-dominant values so the pivot sequence changes.
+                let shift = if iter % 2 == 0 { 8.0 } else { 0.0 };
+                fill_random(&mut s, &entries, &mut rng, shift);
+                let b = random_vec(n, &mut rng);
+                let mut x = b.clone();
+                s.factor_solve(&mut x).unwrap();
+                assert!(backward_error(&s, &x, &b) <= TEST_BACKWARD_TOL);
+                // A fresh solver on the same values gives the same answer.
+                let mut fresh = SparseSolver::new(n, &entries).unwrap();
+                fresh.values_mut().copy_from_slice(s.values());
+                let mut y = b.clone();
+                fresh.factor_solve(&mut y).unwrap();
+                assert_eq!(x, y, "n = {n}, iteration {iter}");
+            }
+        }
+    }
+
+    #[test]
+    fn zero_row_is_singular_and_rhs_is_kept() {
+        let mut rng = Rng::new(4);
+        for &nb in &[1usize, 10, 51] {
+            let n = 6 * nb;
+            let entries = block_tridiag_pattern(nb, 6);
+            for dense in [true, false] {
+                let mut s = SparseSolver::with_backend(n, &entries, dense).unwrap();
+                fill_random(&mut s, &entries, &mut rng, 2.0);
+                let zero_row = n / 2 + 1;
+                for &(r, c) in &entries {
+                    if r == zero_row {
+                        let k = s.slot(r, c);
+                        s.values_mut()[k] = 0.0;
+                    }
+                }
+                let b = random_vec(n, &mut rng);
+                let mut x = b.clone();
+                let res = s.factor_solve(&mut x);
+                assert!(
+                    matches!(res, Err(LinsolveError::Singular(_))),
+                    "n = {n}, dense = {dense}: {res:?}"
+                );
+                assert_eq!(x, b);
+                // The solver recovers once the values are fixed.
+                fill_random(&mut s, &entries, &mut rng, 8.0);
+                s.factor_solve(&mut x).unwrap();
+                assert!(backward_error(&s, &x, &b) <= TEST_BACKWARD_TOL);
+            }
+        }
+    }
+
+    #[test]
+    fn dependent_rows_are_singular() {
+        // Row 7 := row 8 (same block row, same pattern): rank deficient, but the zero pivot
+        // is only zero up to round-off, so this exercises the condition-bound check.
+        let mut rng = Rng::new(5);
+        for &nb in &[10usize, 51] {
+            let n = 6 * nb;
+            let entries = block_tridiag_pattern(nb, 6);
+            for dense in [true, false] {
+                let mut s = SparseSolver::with_backend(n, &entries, dense).unwrap();
+                fill_random(&mut s, &entries, &mut rng, 0.0);
+                for c in 0..n {
+                    if entries.contains(&(8, c)) {
+                        let v = s.values()[s.slot(8, c)] * 3.0;
+                        let k = s.slot(7, c);
+                        s.values_mut()[k] = v;
+                    }
+                }
+                let mut x = random_vec(n, &mut rng);
+                let res = s.factor_solve(&mut x);
+                assert!(
+                    matches!(res, Err(LinsolveError::Singular(_))),
+                    "n = {n}, dense = {dense}: {res:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn structurally_singular_pattern_is_an_error_not_a_panic() {
+        // Tridiagonal, except that columns 0 and 1 only touch row 0 and row 1 only touches
+        // column 2: no empty row or column, but structural rank n − 1.
+        let n: usize = 100;
+        let mut entries = vec![(0, 0), (0, 1), (1, 2)];
+        for i in 2..n {
+            for j in i.saturating_sub(1).max(2)..(i + 2).min(n) {
+                entries.push((i, j));
+            }
+        }
+        let mut rng = Rng::new(8);
+        for dense in [true, false] {
+            match SparseSolver::with_backend(n, &entries, dense) {
+                Err(e) => assert!(matches!(e, LinsolveError::Pattern(_))),
+                Ok(mut s) => {
+                    fill_random(&mut s, &entries, &mut rng, 4.0);
+                    let mut x = random_vec(n, &mut rng);
+                    let res = s.factor_solve(&mut x);
+                    assert!(matches!(res, Err(LinsolveError::Singular(_))), "{res:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn non_finite_input_is_rejected() {
+        let n = 12;
+        let entries = block_tridiag_pattern(2, 6);
+        let mut s = SparseSolver::new(n, &entries).unwrap();
+        let mut rng = Rng::new(6);
+        fill_random(&mut s, &entries, &mut rng, 8.0);
+        let k = s.slot(3, 9);
+        s.values_mut()[k] = f64::NAN;
+        let mut x = vec![1.0; n];
+        let err = s.factor_solve(&mut x).unwrap_err();
+        assert!(err.to_string().contains("(3, 9)"), "{err}");
+        s.values_mut()[k] = 0.5;
+        x[4] = f64::INFINITY;
+        assert!(matches!(
+            s.factor_solve(&mut x),
+            Err(LinsolveError::Singular(_))
+        ));
+    }
+
+    #[test]
+    fn invalid_patterns_are_rejected() {
+        assert!(matches!(
+            SparseSolver::new(3, &[(0, 0), (1, 1), (2, 3)]),
+            Err(LinsolveError::Pattern(_))
+        ));
+        // Row 2 empty.
+        assert!(matches!(
+            SparseSolver::new(3, &[(0, 0), (1, 1), (0, 2), (1, 2)]),
+            Err(LinsolveError::Pattern(_))
+        ));
+        // Column 1 empty.
+        assert!(matches!(
+            SparseSolver::new(3, &[(0, 0), (1, 0), (2, 2), (1, 2)]),
+            Err(LinsolveError::Pattern(_))
+        ));
+        // Empty system is fine.
+        let mut s = SparseSolver::new(0, &[]).unwrap();
+        s.factor_solve(&mut []).unwrap();
+    }
+
+    #[test]
+    #[should_panic(expected = "not in the sparsity pattern")]
+    fn slot_panics_outside_pattern() {
+        let s = SparseSolver::new(2, &[(0, 0), (1, 1)]).unwrap();
+        let _ = s.slot(0, 1);
     }
 }

@@ -1,1 +1,412 @@
-//! Scene files.
+//! Scene files: a TOML description of rods, materials, sections, supports, loads, initial
+//! velocities and integrator settings, parsed and validated into a [`Model`] and
+//! [`IntegratorParams`]. This module knows no physics; it only builds and checks data.
+//!
+//! The format is documented key by key in `docs/scenes.md`. Parsing happens in three
+//! stages:
+//!
+//! 1. toml parses the text into its spanned document tree (syntax errors stop here, with
+//!    `line:column`);
+//! 2. serde structs with `deny_unknown_fields` (`raw.rs`) reject unknown keys and wrong
+//!    types — the error's byte span is mapped back to the key path;
+//! 3. a validation pass (`build.rs`) checks every value and builds the model; each error
+//!    names the key path and, through the document tree, its `line:column`.
+//!
+//! Every error reads `FILE[:LINE:COL]: KEY: REASON`, e.g.
+//! `scenes/bad.toml:12:7: integrator.dt: must be > 0 (got -0.1)`.
+
+mod build;
+mod raw;
+mod span;
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
+use crate::model::{Model, Vec3};
+
+/// A loaded and validated scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Scene name (`name` key, else the file stem).
+    pub name: String,
+    /// Where it came from: the path as given, or `builtin:NAME`.
+    pub source: String,
+    /// Optional free text (`description` key; empty when absent).
+    pub description: String,
+    /// The discretized problem.
+    pub model: Model,
+    /// Time integration parameters.
+    pub params: IntegratorParams,
+    /// Record every `output_every`-th step (≥ 1, default 1).
+    pub output_every: usize,
+}
+
+/// A scene shipped inside the binary.
+#[derive(Clone, Copy, Debug)]
+pub struct BuiltinScene {
+    /// Name accepted by [`load_scene`].
+    pub name: &'static str,
+    /// One-line description.
+    pub description: &'static str,
+    /// The scene file's text.
+    pub toml: &'static str,
+}
+
+static BUILTINS: &[BuiltinScene] = &[BuiltinScene {
+    name: "frame",
+    description: "free-flying frame of three rods at two right angles (paper §5.1, DESIGN §6.1)",
+    toml: include_str!("../../scenes/frame.toml"),
+}];
+
+/// Everything that can go wrong loading a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The scene file could not be read.
+    #[error("cannot read {path}: {error}")]
+    Io {
+        /// The path as given.
+        path: String,
+        /// The underlying error.
+        #[source]
+        error: std::io::Error,
+    },
+    /// The spec is neither an existing file nor a built-in scene name.
+    #[error(
+        "unknown scene `{name}`: no such file and no built-in scene of that name (built-in scenes: {})",
+        .available.join(", ")
+    )]
+    UnknownBuiltin {
+        /// The spec as given.
+        name: String,
+        /// Names of the built-in scenes.
+        available: Vec<String>,
+    },
+    /// The text is not valid TOML.
+    #[error("{}: {reason}", located(.file, *.location))]
+    Syntax {
+        /// Path of the file (or `builtin:NAME`).
+        file: String,
+        /// 1-based line and column, when toml gives a span.
+        location: Option<(usize, usize)>,
+        /// toml's message.
+        reason: String,
+    },
+    /// A key is unknown, has the wrong type, is missing, or has an invalid value.
+    #[error("{}: {key}: {reason}", located(.file, *.location))]
+    Invalid {
+        /// Path of the file (or `builtin:NAME`).
+        file: String,
+        /// 1-based line and column of the key's value (or of its nearest enclosing table).
+        location: Option<(usize, usize)>,
+        /// Key path, e.g. `rod[1].points` or `integrator.dt` (`(top level)` for the root).
+        key: String,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+fn located(file: &str, location: Option<(usize, usize)>) -> String {
+    match location {
+        Some((l, c)) => format!("{file}:{l}:{c}"),
+        None => file.to_string(),
+    }
+}
+
+impl SceneError {
+    /// The key path the error is about, when it is about one.
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            SceneError::Invalid { key, .. } => Some(key),
+            _ => None,
+        }
+    }
+
+    /// 1-based `(line, column)` of the error, when known.
+    pub fn location(&self) -> Option<(usize, usize)> {
+        match self {
+            SceneError::Syntax { location, .. } | SceneError::Invalid { location, .. } => *location,
+            _ => None,
+        }
+    }
+}
+
+/// The scenes shipped with the crate.
+pub fn builtin_scenes() -> &'static [BuiltinScene] {
+    BUILTINS
+}
+
+/// Loads a scene from a file path or a built-in name. A path that exists wins over a
+/// built-in of the same name.
+pub fn load_scene(spec: &str) -> Result<Scene, SceneError> {
+    let path = Path::new(spec);
+    if path.exists() {
+        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
+            path: spec.to_string(),
+            error,
+        })?;
+        return parse_scene(&text, spec);
+    }
+    if let Some(b) = BUILTINS.iter().find(|b| b.name == spec) {
+        return parse_scene(b.toml, &format!("builtin:{}", b.name));
+    }
+    let looks_like_path =
+        spec.contains('/') || spec.contains(std::path::MAIN_SEPARATOR) || spec.ends_with(".toml");
+    if looks_like_path {
+        // Let the OS say why (normally "No such file or directory").
+        let error = std::fs::read_to_string(path)
+            .err()
+            .unwrap_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"));
+        return Err(SceneError::Io {
+            path: spec.to_string(),
+            error,
+        });
+    }
+    Err(SceneError::UnknownBuiltin {
+        name: spec.to_string(),
+        available: BUILTINS.iter().map(|b| b.name.to_string()).collect(),
+    })
+}
+
+/// Parses and validates scene text. `source` names it in errors and in [`Scene::source`]
+/// (a path, or `builtin:NAME`); its file stem is the default scene name.
+pub fn parse_scene(text: &str, source: &str) -> Result<Scene, SceneError> {
+    let root = toml::de::DeTable::parse(text).map_err(|e| SceneError::Syntax {
+        file: source.to_string(),
+        location: e.span().map(|s| span::line_col(text, s.start)),
+        reason: e.message().trim().to_string(),
+    })?;
+    let doc = span::Doc::new(text, root);
+    let raw = raw::RawScene::deserialize(toml::de::Deserializer::from(doc.root().clone()))
+        .map_err(|e| {
+            let (key, location) = match e.span() {
+                Some(s) => (doc.path_at(s.start), Some(doc.line_col(s.start))),
+                None => (span::KeyPath::root(), None),
+            };
+            SceneError::Invalid {
+                file: source.to_string(),
+                location,
+                key: key_name(&key),
+                reason: e.message().trim().to_string(),
+            }
+        })?;
+    build::build(raw, &doc, source)
+}
+
+pub(crate) fn key_name(path: &span::KeyPath) -> String {
+    if path.is_root() {
+        "(top level)".to_string()
+    } else {
+        path.to_string()
+    }
+}
+
+fn fmt_vec(v: &Vec3) -> String {
+    format!("({}, {}, {})", v.x, v.y, v.z)
+}
+
+/// At most this many lines per list in [`Scene::describe`].
+const LIST_MAX: usize = 12;
+
+impl Scene {
+    /// A multi-line human summary (what `cosserat check` prints): rods, mesh size and
+    /// degrees of freedom, supports, point masses, loads, gravity, initial velocities and
+    /// integrator parameters.
+    pub fn describe(&self) -> String {
+        let m = &self.model;
+        let mut s = String::new();
+        let _ = writeln!(s, "scene {} ({})", self.name, self.source);
+        if !self.description.is_empty() {
+            let _ = writeln!(s, "  {}", self.description.trim());
+        }
+
+        let rod_mass: f64 = m.elements.iter().map(|e| e.props.a_rho * e.props.h).sum();
+        let point_mass: f64 = m.point_mass.iter().sum();
+        let _ = writeln!(s, "rods: {}", m.rods.len());
+        for r in &m.rods {
+            let els = &m.elements[r.elements.clone()];
+            let length: f64 = els.iter().map(|e| e.props.h).sum();
+            let mut nodes: Vec<usize> = els.iter().flat_map(|e| e.nodes).collect();
+            nodes.sort_unstable();
+            nodes.dedup();
+            let _ = writeln!(
+                s,
+                "  {}: {} elements, {} nodes, length {}",
+                r.name,
+                els.len(),
+                nodes.len(),
+                fmt_num(length)
+            );
+        }
+        let removed: usize = m
+            .supports
+            .iter()
+            .map(|sp| 3 * sp.translation as usize + 3 * sp.rotation as usize)
+            .sum();
+        let _ = writeln!(s, "nodes: {}", m.n_nodes());
+        let _ = writeln!(s, "elements: {}", m.elements.len());
+        let _ = writeln!(
+            s,
+            "DOFs: {} (6 per node = {}, {} removed by supports)",
+            6 * m.n_nodes() - removed,
+            6 * m.n_nodes(),
+            removed
+        );
+        let _ = writeln!(
+            s,
+            "mass: {} (rods {}, point masses {})",
+            fmt_num(rod_mass + point_mass),
+            fmt_num(rod_mass),
+            fmt_num(point_mass)
+        );
+
+        let supports: Vec<(usize, &str)> = m
+            .supports
+            .iter()
+            .enumerate()
+            .filter_map(|(a, sp)| match (sp.translation, sp.rotation) {
+                (true, true) => Some((a, "clamp")),
+                (true, false) => Some((a, "pin")),
+                (false, true) => Some((a, "rotation fixed")),
+                (false, false) => None,
+            })
+            .collect();
+        let n_clamp = supports.iter().filter(|x| x.1 == "clamp").count();
+        let n_pin = supports.iter().filter(|x| x.1 == "pin").count();
+        let _ = writeln!(s, "supports: {n_clamp} clamps, {n_pin} pins");
+        list(&mut s, supports.iter(), |(a, kind)| {
+            format!("{kind} at node {a} {}", fmt_vec(&m.nodes[*a]))
+        });
+
+        let masses: Vec<(usize, f64)> = m
+            .point_mass
+            .iter()
+            .enumerate()
+            .filter(|(_, &x)| x != 0.0)
+            .map(|(a, &x)| (a, x))
+            .collect();
+        let _ = writeln!(s, "point masses: {}", masses.len());
+        list(&mut s, masses.iter(), |(a, x)| {
+            format!("{} at node {a} {}", fmt_num(*x), fmt_vec(&m.nodes[*a]))
+        });
+
+        let _ = writeln!(s, "loads: {}", m.loads.len());
+        list(&mut s, m.loads.iter(), |l| {
+            let table = if l.table == crate::model::TimeTable::constant_one() {
+                "constant factor 1".to_string()
+            } else {
+                let pts: Vec<String> = l
+                    .table
+                    .times
+                    .iter()
+                    .zip(&l.table.values)
+                    .map(|(t, f)| format!("({}, {})", fmt_num(*t), fmt_num(*f)))
+                    .collect();
+                format!("factor table (t, f): {}", pts.join(" "))
+            };
+            format!(
+                "node {} {}: force {}, moment {}, {}",
+                l.node,
+                fmt_vec(&m.nodes[l.node]),
+                fmt_vec(&l.force),
+                fmt_vec(&l.moment),
+                table
+            )
+        });
+
+        if m.gravity == Vec3::zeros() {
+            let _ = writeln!(s, "gravity: none");
+        } else {
+            let _ = writeln!(s, "gravity: {}", fmt_vec(&m.gravity));
+        }
+
+        let moving: Vec<usize> = (0..m.n_nodes())
+            .filter(|&a| m.velocity0[a] != Vec3::zeros() || m.omega0[a] != Vec3::zeros())
+            .collect();
+        let _ = writeln!(
+            s,
+            "initial velocities: {} of {} nodes moving",
+            moving.len(),
+            m.n_nodes()
+        );
+        list(&mut s, moving.iter(), |&&a| {
+            format!(
+                "node {a} {}: v {}, omega {}",
+                fmt_vec(&m.nodes[a]),
+                fmt_vec(&m.velocity0[a]),
+                fmt_vec(&m.omega0[a])
+            )
+        });
+        if m.is_free_flight() {
+            let _ = writeln!(s, "free flight: momenta are conserved");
+        }
+
+        let p = &self.params;
+        let scheme = match p.scheme {
+            Scheme::Em => "em".to_string(),
+            Scheme::Edmc1 {
+                chi_gamma,
+                chi_omega,
+                chi_v,
+                chi_nu,
+            } => format!(
+                "edmc1 (chi_gamma {chi_gamma}, chi_omega {chi_omega}, chi_v {chi_v}, chi_nu {chi_nu})"
+            ),
+            Scheme::Edmc2 {
+                alpha_gv,
+                alpha_gn,
+                alpha_ov,
+                alpha_on,
+            } => format!(
+                "edmc2 (alpha_gv {alpha_gv}, alpha_gn {alpha_gn}, alpha_ov {alpha_ov}, alpha_on {alpha_on})"
+            ),
+        };
+        let strategy = match p.strategy {
+            Strategy::Monolithic => "monolithic",
+            Strategy::Staggered => "staggered",
+        };
+        let _ = writeln!(s, "integrator: {scheme}");
+        let _ = writeln!(
+            s,
+            "  dt {}, t_end {} ({} steps), output every {} step(s)",
+            p.dt,
+            p.t_end,
+            p.n_steps(),
+            self.output_every
+        );
+        let _ = writeln!(
+            s,
+            "  strategy {strategy}, newton_tol {:e}, max_iter {}, outer_tol {:e}, max_outer {}, energy_tol {:e}",
+            p.newton_tol, p.max_iter, p.outer_tol, p.max_outer, p.energy_tol
+        );
+        s
+    }
+}
+
+/// Seven significant digits, printed shortest; scientific notation outside [1e-4, 1e9)
+/// (`10.000000000000002` → `10`, `3.2e-12` stays short).
+pub(crate) fn fmt_num(x: f64) -> String {
+    let r: f64 = format!("{x:.6e}").parse().unwrap_or(x);
+    if r == 0.0 {
+        "0".to_string()
+    } else if !r.is_finite() || (1e-4..1e9).contains(&r.abs()) {
+        format!("{r}")
+    } else {
+        format!("{r:e}")
+    }
+}
+
+fn list<T>(s: &mut String, items: impl ExactSizeIterator<Item = T>, f: impl Fn(&T) -> String) {
+    let n = items.len();
+    for item in items.take(LIST_MAX) {
+        let _ = writeln!(s, "  {}", f(&item));
+    }
+    if n > LIST_MAX {
+        let _ = writeln!(s, "  … and {} more", n - LIST_MAX);
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,973 @@
+//! Validation pass: checks every value of a [`RawScene`] and builds the [`Model`] and
+//! [`IntegratorParams`]. Every error names its key path; the document tree gives it a
+//! `line:column`.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Display;
+
+use nalgebra::Matrix2;
+
+use super::raw::{
+    RawInitialVelocity, RawIntegrator, RawLoad, RawMaterial, RawRod, RawScene, RawSection,
+};
+use super::span::{Doc, KeyPath};
+use super::{fmt_num, key_name, Scene, SceneError};
+use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
+use crate::model::{
+    Element, ElementProps, Mat3, Model, NodalLoad, RodInfo, Support, TimeTable, Vec3,
+};
+
+type Result<T> = std::result::Result<T, SceneError>;
+
+/// Relative tolerance (× model size) for merging nodes and matching `at` points.
+const MERGE_TOL: f64 = 1e-9;
+/// Below this `|sin|` of the angle between `d1` and a segment, `d1` counts as parallel.
+const PARALLEL_TOL: f64 = 1e-6;
+/// Cap on elements per segment (guards against a typo allocating the machine away).
+const MAX_ELEMENTS: i64 = 1_000_000;
+
+/// Error factory: knows the file name and the document for spans.
+struct Ctx<'a, 'i> {
+    file: &'a str,
+    doc: &'a Doc<'i>,
+}
+
+fn fmt_v(v: &Vec3) -> String {
+    format!("({}, {}, {})", v.x, v.y, v.z)
+}
+
+impl Ctx<'_, '_> {
+    fn err(&self, path: &KeyPath, reason: impl Display) -> SceneError {
+        SceneError::Invalid {
+            file: self.file.to_string(),
+            location: self.doc.span_of(path).map(|s| self.doc.line_col(s.start)),
+            key: key_name(path),
+            reason: reason.to_string(),
+        }
+    }
+
+    fn required<T>(&self, path: &KeyPath, v: Option<T>) -> Result<T> {
+        v.ok_or_else(|| self.err(path, "required key missing"))
+    }
+
+    fn finite(&self, path: &KeyPath, x: f64) -> Result<f64> {
+        if x.is_finite() {
+            Ok(x)
+        } else {
+            Err(self.err(path, format!("must be finite (got {x})")))
+        }
+    }
+
+    fn positive(&self, path: &KeyPath, x: f64) -> Result<f64> {
+        let x = self.finite(path, x)?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err(self.err(path, format!("must be > 0 (got {x})")))
+        }
+    }
+
+    fn non_negative(&self, path: &KeyPath, x: f64) -> Result<f64> {
+        let x = self.finite(path, x)?;
+        if x >= 0.0 {
+            Ok(x)
+        } else {
+            Err(self.err(path, format!("must be >= 0 (got {x})")))
+        }
+    }
+
+    fn req_positive(&self, path: &KeyPath, v: Option<f64>) -> Result<f64> {
+        let x = self.required(path, v)?;
+        self.positive(path, x)
+    }
+
+    fn opt_non_negative(&self, path: &KeyPath, v: Option<f64>) -> Result<f64> {
+        v.map_or(Ok(0.0), |x| self.non_negative(path, x))
+    }
+
+    fn vec3(&self, path: &KeyPath, v: &[f64]) -> Result<Vec3> {
+        if v.len() != 3 {
+            return Err(self.err(
+                path,
+                format!("expected 3 numbers [x, y, z] (got {})", v.len()),
+            ));
+        }
+        for (i, &x) in v.iter().enumerate() {
+            self.finite(&path.idx(i), x)?;
+        }
+        Ok(Vec3::new(v[0], v[1], v[2]))
+    }
+
+    fn opt_vec3(&self, path: &KeyPath, v: &Option<Vec<f64>>) -> Result<Option<Vec3>> {
+        v.as_deref().map(|v| self.vec3(path, v)).transpose()
+    }
+
+    fn count(&self, path: &KeyPath, v: Option<i64>, default: usize) -> Result<usize> {
+        match v {
+            None => Ok(default),
+            Some(n) if n >= 1 => usize::try_from(n).map_err(|_| self.err(path, "too large")),
+            Some(n) => Err(self.err(path, format!("must be >= 1 (got {n})"))),
+        }
+    }
+}
+
+/// A validated material.
+struct Material {
+    e: f64,
+    g: f64,
+    density: f64,
+}
+
+/// A validated section.
+struct Section {
+    a: f64,
+    i11: f64,
+    i22: f64,
+    i12: f64,
+    j: f64,
+    a1: f64,
+    a2: f64,
+    rho_inertia: Matrix2<f64>,
+}
+
+fn material(cx: &Ctx, path: &KeyPath, m: &RawMaterial) -> Result<Material> {
+    let e = cx.req_positive(&path.key("E"), m.e)?;
+    let density = cx.req_positive(&path.key("density"), m.density)?;
+    let g = match (m.nu, m.g) {
+        (Some(_), Some(_)) => {
+            return Err(cx.err(&path.key("G"), "give exactly one of `nu` and `G`, not both"))
+        }
+        (None, None) => {
+            return Err(cx.err(
+                &path.key("nu"),
+                "required key missing (give Poisson's ratio `nu` or shear modulus `G`)",
+            ))
+        }
+        (Some(nu), None) => {
+            let p = path.key("nu");
+            let nu = cx.finite(&p, nu)?;
+            if !(nu > -1.0 && nu <= 0.5) {
+                return Err(cx.err(&p, format!("must be in (-1, 0.5] (got {nu})")));
+            }
+            e / (2.0 * (1.0 + nu))
+        }
+        (None, Some(g)) => cx.positive(&path.key("G"), g)?,
+    };
+    Ok(Material { e, g, density })
+}
+
+fn section(cx: &Ctx, path: &KeyPath, s: &RawSection) -> Result<Section> {
+    let a = cx.req_positive(&path.key("A"), s.a)?;
+    let i11 = cx.req_positive(&path.key("I11"), s.i11)?;
+    let i22 = cx.req_positive(&path.key("I22"), s.i22)?;
+    let i12 = match s.i12 {
+        Some(x) => cx.finite(&path.key("I12"), x)?,
+        None => 0.0,
+    };
+    if i11 * i22 - i12 * i12 <= 0.0 {
+        return Err(cx.err(
+            &path.key("I12"),
+            format!(
+                "I11*I22 - I12^2 must be > 0 (got {})",
+                i11 * i22 - i12 * i12
+            ),
+        ));
+    }
+    let j = cx.req_positive(&path.key("J"), s.j)?;
+    let (a1, a2) = match (s.shear_factor, s.a1, s.a2) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+            return Err(cx.err(
+                &path.key("shear_factor"),
+                "give either `shear_factor` or `A1` and `A2`, not both",
+            ))
+        }
+        (Some(k), None, None) => {
+            let k = cx.positive(&path.key("shear_factor"), k)?;
+            (k * a, k * a)
+        }
+        (None, None, None) => (a, a),
+        (None, Some(a1), Some(a2)) => (
+            cx.positive(&path.key("A1"), a1)?,
+            cx.positive(&path.key("A2"), a2)?,
+        ),
+        (None, Some(_), None) => {
+            return Err(cx.err(&path.key("A2"), "required key missing (A1 is given)"))
+        }
+        (None, None, Some(_)) => {
+            return Err(cx.err(&path.key("A1"), "required key missing (A2 is given)"))
+        }
+    };
+    let rho_inertia = match &s.rho_inertia {
+        None => Matrix2::new(i22, -i12, -i12, i11),
+        Some(rows) => {
+            let p = path.key("rho_inertia");
+            if rows.len() != 2 || rows.iter().any(|r| r.len() != 2) {
+                return Err(cx.err(&p, "expected a 2x2 array [[a11, a12], [a21, a22]]"));
+            }
+            for (i, r) in rows.iter().enumerate() {
+                for (k, &x) in r.iter().enumerate() {
+                    cx.finite(&p.idx(i).idx(k), x)?;
+                }
+            }
+            let m = Matrix2::new(rows[0][0], rows[0][1], rows[1][0], rows[1][1]);
+            let scale = m.abs().max();
+            if (m[(0, 1)] - m[(1, 0)]).abs() > 1e-12 * scale {
+                return Err(cx.err(
+                    &p,
+                    format!(
+                        "must be symmetric (got a12 = {}, a21 = {})",
+                        m[(0, 1)],
+                        m[(1, 0)]
+                    ),
+                ));
+            }
+            let sym = Matrix2::new(m[(0, 0)], m[(0, 1)], m[(0, 1)], m[(1, 1)]);
+            if !(sym[(0, 0)] > 0.0 && sym.determinant() > 0.0) {
+                return Err(cx.err(&p, "must be positive definite"));
+            }
+            sym
+        }
+    };
+    Ok(Section {
+        a,
+        i11,
+        i22,
+        i12,
+        j,
+        a1,
+        a2,
+        rho_inertia,
+    })
+}
+
+/// A rod's checked geometry before meshing.
+struct RodPlan {
+    name: String,
+    points: Vec<Vec3>,
+    counts: Vec<usize>,
+    d1: Option<Vec3>,
+    props_key: (String, String),
+    path: KeyPath,
+}
+
+fn elements_list(cx: &Ctx, path: &KeyPath, v: &toml::Value, n_seg: usize) -> Result<Vec<usize>> {
+    let one = |p: &KeyPath, v: &toml::Value| -> Result<usize> {
+        match v {
+            toml::Value::Integer(n) if (1..=MAX_ELEMENTS).contains(n) => Ok(*n as usize),
+            toml::Value::Integer(n) if *n > MAX_ELEMENTS => Err(cx.err(
+                p,
+                format!("must be <= {MAX_ELEMENTS} per segment (got {n})"),
+            )),
+            toml::Value::Integer(n) => Err(cx.err(p, format!("must be >= 1 (got {n})"))),
+            other => Err(cx.err(
+                p,
+                format!("expected a positive integer (got {})", other.type_str()),
+            )),
+        }
+    };
+    match v {
+        toml::Value::Array(items) => {
+            if items.len() != n_seg {
+                return Err(cx.err(
+                    path,
+                    format!(
+                        "expected one count per segment: {n_seg} (got {})",
+                        items.len()
+                    ),
+                ));
+            }
+            items
+                .iter()
+                .enumerate()
+                .map(|(i, x)| one(&path.idx(i), x))
+                .collect()
+        }
+        other => Ok(vec![one(path, other)?; n_seg]),
+    }
+}
+
+fn plan_rod(
+    cx: &Ctx,
+    path: &KeyPath,
+    index: usize,
+    r: &RawRod,
+    materials: &BTreeMap<String, Material>,
+    sections: &BTreeMap<String, Section>,
+) -> Result<RodPlan> {
+    let name = r.name.clone().unwrap_or_else(|| format!("rod{index}"));
+    let known = |names: Vec<&String>| {
+        if names.is_empty() {
+            "none defined".to_string()
+        } else {
+            names
+                .iter()
+                .map(|s| format!("`{s}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    };
+    let mat = cx.required(&path.key("material"), r.material.clone())?;
+    if !materials.contains_key(&mat) {
+        return Err(cx.err(
+            &path.key("material"),
+            format!(
+                "unknown material `{mat}` (known: {})",
+                known(materials.keys().collect())
+            ),
+        ));
+    }
+    let sec = cx.required(&path.key("section"), r.section.clone())?;
+    if !sections.contains_key(&sec) {
+        return Err(cx.err(
+            &path.key("section"),
+            format!(
+                "unknown section `{sec}` (known: {})",
+                known(sections.keys().collect())
+            ),
+        ));
+    }
+    let pp = path.key("points");
+    let raw_points = cx.required(&pp, r.points.as_ref())?;
+    if raw_points.len() < 2 {
+        return Err(cx.err(
+            &pp,
+            format!("a rod needs at least 2 points (got {})", raw_points.len()),
+        ));
+    }
+    let points = raw_points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| cx.vec3(&pp.idx(i), p))
+        .collect::<Result<Vec<_>>>()?;
+    let ep = path.key("elements");
+    let counts = elements_list(
+        cx,
+        &ep,
+        cx.required(&ep, r.elements.as_ref())?,
+        points.len() - 1,
+    )?;
+    let d1 = cx.opt_vec3(&path.key("d1"), &r.d1)?;
+    Ok(RodPlan {
+        name,
+        points,
+        counts,
+        d1,
+        props_key: (mat, sec),
+        path: path.clone(),
+    })
+}
+
+/// Nodes with merging of coincident points through a uniform grid of cell size `tol`.
+struct NodeSet {
+    nodes: Vec<Vec3>,
+    grid: HashMap<[i64; 3], Vec<usize>>,
+    origin: Vec3,
+    tol: f64,
+}
+
+impl NodeSet {
+    fn new(origin: Vec3, tol: f64) -> Self {
+        Self {
+            nodes: Vec::new(),
+            grid: HashMap::new(),
+            origin,
+            tol,
+        }
+    }
+
+    fn cell(&self, p: &Vec3) -> [i64; 3] {
+        let q = (p - self.origin) / self.tol;
+        // `as` saturates far away points; they then simply match nothing.
+        [q.x.floor() as i64, q.y.floor() as i64, q.z.floor() as i64]
+    }
+
+    /// The nearest node within `tol` of `p`.
+    fn find(&self, p: &Vec3) -> Option<usize> {
+        let c = self.cell(p);
+        let mut best: Option<(usize, f64)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let key = [
+                        c[0].saturating_add(dx),
+                        c[1].saturating_add(dy),
+                        c[2].saturating_add(dz),
+                    ];
+                    for &a in self.grid.get(&key).into_iter().flatten() {
+                        let d = (self.nodes[a] - p).norm();
+                        if d <= self.tol && best.is_none_or(|b| d < b.1) {
+                            best = Some((a, d));
+                        }
+                    }
+                }
+            }
+        }
+        best.map(|b| b.0)
+    }
+
+    fn get_or_insert(&mut self, p: Vec3) -> usize {
+        if let Some(a) = self.find(&p) {
+            return a;
+        }
+        let a = self.nodes.len();
+        self.nodes.push(p);
+        let c = self.cell(&p);
+        self.grid.entry(c).or_default().push(a);
+        a
+    }
+
+    /// The nearest node to `p` and its distance (linear scan; for error messages).
+    fn nearest(&self, p: &Vec3) -> Option<(usize, f64)> {
+        self.nodes
+            .iter()
+            .enumerate()
+            .map(|(a, q)| (a, (q - p).norm()))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+    }
+}
+
+fn node_at(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, at: &Option<Vec<f64>>) -> Result<usize> {
+    let p = cx.required(path, cx.opt_vec3(path, at)?)?;
+    if let Some(a) = nodes.find(&p) {
+        return Ok(a);
+    }
+    let near = match nodes.nearest(&p) {
+        Some((a, d)) => format!(
+            " (nearest node {a} at {}, distance {})",
+            fmt_v(&nodes.nodes[a]),
+            fmt_num(d)
+        ),
+        None => String::new(),
+    };
+    Err(cx.err(path, format!("{} is not a node{near}", fmt_v(&p))))
+}
+
+/// The default `d1` of a rod: of e3, e1, e2 (in that order of preference) the one whose
+/// smallest angle to the rod's segments is largest.
+fn default_d1(tangents: &[Vec3]) -> (Vec3, f64) {
+    let mut best = (Vec3::z(), -1.0);
+    for cand in [Vec3::z(), Vec3::x(), Vec3::y()] {
+        let worst = tangents
+            .iter()
+            .map(|t| cand.cross(t).norm())
+            .fold(f64::INFINITY, f64::min);
+        if worst > best.1 {
+            best = (cand, worst);
+        }
+    }
+    best
+}
+
+fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalLoad> {
+    let node = node_at(cx, nodes, &path.key("at"), &l.at)?;
+    let force = cx.opt_vec3(&path.key("force"), &l.force)?;
+    let moment = cx.opt_vec3(&path.key("moment"), &l.moment)?;
+    if force.is_none() && moment.is_none() {
+        return Err(cx.err(
+            &path.key("force"),
+            "required key missing (give `force`, `moment` or both)",
+        ));
+    }
+    let table = match (&l.time, &l.factor) {
+        (None, None) => TimeTable::constant_one(),
+        (Some(_), None) => {
+            return Err(cx.err(
+                &path.key("factor"),
+                "required key missing (`time` is given)",
+            ))
+        }
+        (None, Some(_)) => {
+            return Err(cx.err(
+                &path.key("time"),
+                "required key missing (`factor` is given)",
+            ))
+        }
+        (Some(times), Some(values)) => {
+            let (tp, fp) = (path.key("time"), path.key("factor"));
+            if times.is_empty() {
+                return Err(cx.err(&tp, "must have at least one entry"));
+            }
+            if times.len() != values.len() {
+                return Err(cx.err(
+                    &fp,
+                    format!(
+                        "must have the same length as `time` ({}) (got {})",
+                        times.len(),
+                        values.len()
+                    ),
+                ));
+            }
+            for (i, &t) in times.iter().enumerate() {
+                cx.finite(&tp.idx(i), t)?;
+                if i > 0 && t < times[i - 1] {
+                    return Err(cx.err(
+                        &tp.idx(i),
+                        format!(
+                            "times must be non-decreasing (got {t} after {})",
+                            times[i - 1]
+                        ),
+                    ));
+                }
+            }
+            for (i, &f) in values.iter().enumerate() {
+                cx.finite(&fp.idx(i), f)?;
+            }
+            TimeTable {
+                times: times.clone(),
+                values: values.clone(),
+            }
+        }
+    };
+    Ok(NodalLoad {
+        node,
+        force: force.unwrap_or_else(Vec3::zeros),
+        moment: moment.unwrap_or_else(Vec3::zeros),
+        table,
+    })
+}
+
+fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorParams, usize)> {
+    let k = |name: &str| ip.key(name);
+    let scheme_name = cx.required(&k("scheme"), r.scheme.as_deref())?;
+    let all_params: [(&str, Option<f64>, &str); 9] = [
+        ("alpha", r.alpha, "edmc2"),
+        ("alpha_gv", r.alpha_gv, "edmc2"),
+        ("alpha_gn", r.alpha_gn, "edmc2"),
+        ("alpha_ov", r.alpha_ov, "edmc2"),
+        ("alpha_on", r.alpha_on, "edmc2"),
+        ("chi_gamma", r.chi_gamma, "edmc1"),
+        ("chi_omega", r.chi_omega, "edmc1"),
+        ("chi_v", r.chi_v, "edmc1"),
+        ("chi_nu", r.chi_nu, "edmc1"),
+    ];
+    if !matches!(scheme_name, "em" | "edmc1" | "edmc2") {
+        return Err(cx.err(
+            &k("scheme"),
+            format!("unknown scheme `{scheme_name}` (expected \"em\", \"edmc1\" or \"edmc2\")"),
+        ));
+    }
+    for (name, value, owner) in all_params {
+        if value.is_some() && owner != scheme_name {
+            return Err(cx.err(
+                &k(name),
+                format!("not a parameter of scheme {scheme_name} (it belongs to {owner})"),
+            ));
+        }
+    }
+    let scheme = match scheme_name {
+        "em" => Scheme::Em,
+        "edmc1" => Scheme::Edmc1 {
+            chi_gamma: cx.opt_non_negative(&k("chi_gamma"), r.chi_gamma)?,
+            chi_omega: cx.opt_non_negative(&k("chi_omega"), r.chi_omega)?,
+            chi_v: cx.opt_non_negative(&k("chi_v"), r.chi_v)?,
+            chi_nu: cx.opt_non_negative(&k("chi_nu"), r.chi_nu)?,
+        },
+        _ => {
+            if r.alpha.is_some() && r.alpha_gv.is_some() {
+                return Err(cx.err(
+                    &k("alpha_gv"),
+                    "give `alpha` (shorthand for alpha_gv) or `alpha_gv`, not both",
+                ));
+            }
+            let alpha_gv = match r.alpha {
+                Some(a) => cx.non_negative(&k("alpha"), a)?,
+                None => cx.opt_non_negative(&k("alpha_gv"), r.alpha_gv)?,
+            };
+            Scheme::Edmc2 {
+                alpha_gv,
+                alpha_gn: cx.opt_non_negative(&k("alpha_gn"), r.alpha_gn)?,
+                alpha_ov: cx.opt_non_negative(&k("alpha_ov"), r.alpha_ov)?,
+                alpha_on: cx.opt_non_negative(&k("alpha_on"), r.alpha_on)?,
+            }
+        }
+    };
+    let dt = cx.req_positive(&k("dt"), r.dt)?;
+    let t_end = cx.req_positive(&k("t_end"), r.t_end)?;
+    let mut p = IntegratorParams::new(scheme, dt, t_end);
+    if let Some(s) = r.strategy.as_deref() {
+        p.strategy = match s {
+            "monolithic" => Strategy::Monolithic,
+            "staggered" => Strategy::Staggered,
+            other => {
+                return Err(cx.err(
+                    &k("strategy"),
+                    format!(
+                        "unknown strategy `{other}` (expected \"monolithic\" or \"staggered\")"
+                    ),
+                ))
+            }
+        };
+    }
+    if let Some(x) = r.newton_tol {
+        p.newton_tol = cx.positive(&k("newton_tol"), x)?;
+    }
+    if let Some(x) = r.outer_tol {
+        p.outer_tol = cx.positive(&k("outer_tol"), x)?;
+    }
+    if let Some(x) = r.energy_tol {
+        p.energy_tol = cx.positive(&k("energy_tol"), x)?;
+    }
+    p.max_iter = cx.count(&k("max_iter"), r.max_iter, p.max_iter)?;
+    p.max_outer = cx.count(&k("max_outer"), r.max_outer, p.max_outer)?;
+    let output_every = cx.count(&k("output_every"), r.output_every, 1)?;
+    Ok((p, output_every))
+}
+
+/// Checks a rod's segments (length, `d1` transverse) and returns each segment's
+/// reference triad `[d1°, d2°, d3°]`.
+fn rod_triads(cx: &Ctx, plan: &RodPlan, tol: f64) -> Result<Vec<Mat3>> {
+    let pp = plan.path.key("points");
+    let mut tangents = Vec::with_capacity(plan.points.len() - 1);
+    for (s, w) in plan.points.windows(2).enumerate() {
+        let len = (w[1] - w[0]).norm();
+        if len <= tol {
+            return Err(cx.err(
+                &pp.idx(s + 1),
+                format!(
+                    "zero-length segment: point {} {} repeats point {} {}",
+                    s + 1,
+                    fmt_v(&w[1]),
+                    s,
+                    fmt_v(&w[0])
+                ),
+            ));
+        }
+        let h = len / plan.counts[s] as f64;
+        if h <= tol {
+            let ep = plan.path.key("elements");
+            return Err(cx.err(
+                &ep,
+                format!(
+                    "elements of length {h:e} on segment {s} are below the merge tolerance {tol:e}"
+                ),
+            ));
+        }
+        tangents.push((w[1] - w[0]) / len);
+    }
+    let d1 = match plan.d1 {
+        Some(d1) => {
+            let n = d1.norm();
+            if n <= 0.0 {
+                return Err(cx.err(&plan.path.key("d1"), "must not be the zero vector"));
+            }
+            for (s, t) in tangents.iter().enumerate() {
+                if d1.cross(t).norm() / n < PARALLEL_TOL {
+                    return Err(cx.err(
+                        &plan.path.key("d1"),
+                        format!(
+                            "{} is parallel to segment {s} (direction {}); d1 must be transverse to every segment",
+                            fmt_v(&d1),
+                            fmt_v(t)
+                        ),
+                    ));
+                }
+            }
+            d1 / n
+        }
+        None => {
+            let (d1, worst) = default_d1(&tangents);
+            if worst < PARALLEL_TOL {
+                return Err(cx.err(
+                    &plan.path.key("d1"),
+                    "required key missing: no coordinate axis is transverse to every segment; give d1",
+                ));
+            }
+            d1
+        }
+    };
+    Ok(tangents
+        .iter()
+        .map(|d3| {
+            let d1 = (d1 - d3 * d1.dot(d3)).normalize();
+            let d2 = d3.cross(&d1);
+            Mat3::from_columns(&[d1, d2, *d3])
+        })
+        .collect())
+}
+
+/// The continuum constants of an element of length `h`.
+fn element_props(mat: &Material, sec: &Section, h: f64) -> ElementProps {
+    let (e, g) = (mat.e, mat.g);
+    ElementProps {
+        h,
+        a_rho: mat.density * sec.a,
+        i_rho: sec.rho_inertia * mat.density,
+        c_gamma: Vec3::new(g * sec.a1, g * sec.a2, e * sec.a),
+        c_omega: Mat3::new(
+            e * sec.i11,
+            e * sec.i12,
+            0.0,
+            e * sec.i12,
+            e * sec.i22,
+            0.0,
+            0.0,
+            0.0,
+            g * sec.j,
+        ),
+    }
+}
+
+/// Meshes every rod: subdivides segments, merges coincident nodes, builds elements.
+fn mesh(
+    cx: &Ctx,
+    plans: &[RodPlan],
+    triads: &[Vec<Mat3>],
+    materials: &BTreeMap<String, Material>,
+    sections: &BTreeMap<String, Section>,
+    nodes: &mut NodeSet,
+) -> Result<(Vec<Element>, Vec<RodInfo>)> {
+    let mut elements = Vec::new();
+    let mut rods = Vec::with_capacity(plans.len());
+    for (ri, plan) in plans.iter().enumerate() {
+        let mat = &materials[&plan.props_key.0];
+        let sec = &sections[&plan.props_key.1];
+        let first = elements.len();
+        for (s, w) in plan.points.windows(2).enumerate() {
+            let n = plan.counts[s];
+            let h = (w[1] - w[0]).norm() / n as f64;
+            let props = element_props(mat, sec, h);
+            let triad = triads[ri][s];
+            let point = |j: usize| {
+                if j == n {
+                    w[1]
+                } else {
+                    w[0] + (w[1] - w[0]) * (j as f64 / n as f64)
+                }
+            };
+            let mut a = nodes.get_or_insert(point(0));
+            for j in 1..=n {
+                let b = nodes.get_or_insert(point(j));
+                if a == b {
+                    return Err(cx.err(
+                        &plan.path.key("points"),
+                        format!("element {} of segment {s} collapses onto one node", j - 1),
+                    ));
+                }
+                elements.push(Element {
+                    nodes: [a, b],
+                    ref_triad: [triad, triad],
+                    props: props.clone(),
+                    rod: ri,
+                });
+                a = b;
+            }
+        }
+        rods.push(RodInfo {
+            name: plan.name.clone(),
+            elements: first..elements.len(),
+        });
+    }
+    Ok((elements, rods))
+}
+
+/// Initial nodal velocities and angular velocities from the `[[initial_velocity]]` entries.
+fn initial_velocities(
+    cx: &Ctx,
+    entries: &[RawInitialVelocity],
+    nodes: &NodeSet,
+    supports: &[Support],
+) -> Result<(Vec<Vec3>, Vec<Vec3>)> {
+    let root = KeyPath::root();
+    let n = nodes.nodes.len();
+    let mut velocity0 = vec![Vec3::zeros(); n];
+    let mut omega0 = vec![Vec3::zeros(); n];
+    for (i, iv) in entries.iter().enumerate() {
+        let path = root.key("initial_velocity").idx(i);
+        let v = cx
+            .opt_vec3(&path.key("v"), &iv.v)?
+            .unwrap_or_else(Vec3::zeros);
+        let w = cx
+            .opt_vec3(&path.key("omega"), &iv.omega)?
+            .unwrap_or_else(Vec3::zeros);
+        let center = cx.opt_vec3(&path.key("center"), &iv.center)?;
+        match (iv.all, &iv.at) {
+            (Some(true), Some(_)) => {
+                return Err(cx.err(
+                    &path.key("all"),
+                    "give either `at` or `all = true`, not both",
+                ))
+            }
+            (Some(true), None) => {
+                let c = center.unwrap_or_else(Vec3::zeros);
+                for a in 0..n {
+                    let va = v + w.cross(&(nodes.nodes[a] - c));
+                    check_supported(cx, &path.key("all"), a, nodes, supports[a], &va, &w)?;
+                    velocity0[a] += va;
+                    omega0[a] += w;
+                }
+            }
+            (_, at) => {
+                if center.is_some() {
+                    return Err(cx.err(&path.key("center"), "only allowed with `all = true`"));
+                }
+                if at.is_none() {
+                    return Err(cx.err(
+                        &path.key("at"),
+                        "required key missing (or give `all = true`)",
+                    ));
+                }
+                let a = node_at(cx, nodes, &path.key("at"), at)?;
+                check_supported(cx, &path.key("at"), a, nodes, supports[a], &v, &w)?;
+                velocity0[a] += v;
+                omega0[a] += w;
+            }
+        }
+    }
+
+    Ok((velocity0, omega0))
+}
+
+/// A supported node cannot start moving in the directions its support fixes.
+fn check_supported(
+    cx: &Ctx,
+    path: &KeyPath,
+    a: usize,
+    nodes: &NodeSet,
+    support: Support,
+    v: &Vec3,
+    omega: &Vec3,
+) -> Result<()> {
+    let what = if support.translation && *v != Vec3::zeros() {
+        Some(("translation", "v", v))
+    } else if support.rotation && *omega != Vec3::zeros() {
+        Some(("rotation", "omega", omega))
+    } else {
+        None
+    };
+    match what {
+        Some((dof, key, value)) => Err(cx.err(
+            path,
+            format!(
+                "node {a} at {} has its {dof} fixed by a support but would get {key} = {}",
+                fmt_v(&nodes.nodes[a]),
+                fmt_v(value)
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Validates `raw` and builds the scene.
+pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
+    let cx = Ctx { file, doc };
+    let root = KeyPath::root();
+
+    let name = match &raw.name {
+        Some(n) if n.trim().is_empty() => {
+            return Err(cx.err(&root.key("name"), "must not be empty"))
+        }
+        Some(n) => n.clone(),
+        None => {
+            let stem = file.strip_prefix("builtin:").unwrap_or(file);
+            std::path::Path::new(stem)
+                .file_stem()
+                .map_or_else(|| stem.to_string(), |s| s.to_string_lossy().into_owned())
+        }
+    };
+    let gravity = cx
+        .opt_vec3(&root.key("gravity"), &raw.gravity)?
+        .unwrap_or_else(Vec3::zeros);
+
+    let mut materials = BTreeMap::new();
+    for (n, m) in &raw.material {
+        materials.insert(n.clone(), material(&cx, &root.key("material").key(n), m)?);
+    }
+    let mut sections = BTreeMap::new();
+    for (n, s) in &raw.section {
+        sections.insert(n.clone(), section(&cx, &root.key("section").key(n), s)?);
+    }
+
+    // Integrator first: a missing table is a whole-file problem worth reporting early.
+    let ip = root.key("integrator");
+    let raw_int = raw.integrator.as_ref().ok_or_else(|| {
+        cx.err(
+            &ip,
+            "required table [integrator] missing (scheme, dt, t_end)",
+        )
+    })?;
+    let (params, output_every) = integrator(&cx, &ip, raw_int)?;
+
+    if raw.rod.is_empty() {
+        return Err(cx.err(&root.key("rod"), "no rods: give at least one [[rod]]"));
+    }
+    let mut plans = Vec::with_capacity(raw.rod.len());
+    let mut names: HashMap<String, usize> = HashMap::new();
+    for (i, r) in raw.rod.iter().enumerate() {
+        let path = root.key("rod").idx(i);
+        let plan = plan_rod(&cx, &path, i, r, &materials, &sections)?;
+        if let Some(&j) = names.get(&plan.name) {
+            return Err(cx.err(
+                &path.key("name"),
+                format!("duplicate rod name `{}` (also rod[{j}])", plan.name),
+            ));
+        }
+        names.insert(plan.name.clone(), i);
+        plans.push(plan);
+    }
+
+    // Model size and merge tolerance from the bounding box of all rod points.
+    let mut lo = Vec3::repeat(f64::INFINITY);
+    let mut hi = Vec3::repeat(f64::NEG_INFINITY);
+    for p in plans.iter().flat_map(|r| &r.points) {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let size = (hi - lo).norm();
+    let tol = MERGE_TOL * size;
+
+    let triads = plans
+        .iter()
+        .map(|plan| rod_triads(&cx, plan, tol))
+        .collect::<Result<Vec<_>>>()?;
+
+    let mut nodes = NodeSet::new(lo, tol.max(f64::MIN_POSITIVE));
+    let (elements, rods) = mesh(&cx, &plans, &triads, &materials, &sections, &mut nodes)?;
+    let n = nodes.nodes.len();
+
+    let mut supports = vec![Support::default(); n];
+    for (i, c) in raw.clamp.iter().enumerate() {
+        let a = node_at(&cx, &nodes, &root.key("clamp").idx(i).key("at"), &c.at)?;
+        supports[a].translation = true;
+        supports[a].rotation = true;
+    }
+    for (i, c) in raw.pin.iter().enumerate() {
+        let a = node_at(&cx, &nodes, &root.key("pin").idx(i).key("at"), &c.at)?;
+        supports[a].translation = true;
+    }
+
+    let mut point_mass = vec![0.0; n];
+    for (i, pm) in raw.point_mass.iter().enumerate() {
+        let path = root.key("point_mass").idx(i);
+        let a = node_at(&cx, &nodes, &path.key("at"), &pm.at)?;
+        point_mass[a] += cx.req_positive(&path.key("mass"), pm.mass)?;
+    }
+
+    let loads = raw
+        .load
+        .iter()
+        .enumerate()
+        .map(|(i, l)| load(&cx, &nodes, &root.key("load").idx(i), l))
+        .collect::<Result<Vec<_>>>()?;
+
+    let (velocity0, omega0) = initial_velocities(&cx, &raw.initial_velocity, &nodes, &supports)?;
+
+    let model = Model {
+        nodes: nodes.nodes,
+        elements,
+        supports,
+        point_mass,
+        loads,
+        gravity,
+        velocity0,
+        omega0,
+        rods,
+    };
+    Ok(Scene {
+        name,
+        source: file.to_string(),
+        description: raw.description.unwrap_or_default(),
+        model,
+        params,
+        output_every,
+    })
+}

@@ -1,0 +1,142 @@
+//! The scene file exactly as written: serde structs that reject unknown keys and wrong
+//! types, nothing more. Every value the scene must check (ranges, finiteness, required
+//! keys) is an `Option` here so that [`super::build`] can name the key when it is missing.
+
+use std::collections::BTreeMap;
+
+use serde::Deserialize;
+
+/// The whole file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawScene {
+    pub name: Option<String>,
+    pub description: Option<String>,
+    pub gravity: Option<Vec<f64>>,
+    #[serde(default)]
+    pub material: BTreeMap<String, RawMaterial>,
+    #[serde(default)]
+    pub section: BTreeMap<String, RawSection>,
+    #[serde(default)]
+    pub rod: Vec<RawRod>,
+    #[serde(default)]
+    pub clamp: Vec<RawSupport>,
+    #[serde(default)]
+    pub pin: Vec<RawSupport>,
+    #[serde(default)]
+    pub point_mass: Vec<RawPointMass>,
+    #[serde(default)]
+    pub load: Vec<RawLoad>,
+    #[serde(default)]
+    pub initial_velocity: Vec<RawInitialVelocity>,
+    pub integrator: Option<RawIntegrator>,
+}
+
+/// `[material.NAME]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMaterial {
+    #[serde(rename = "E")]
+    pub e: Option<f64>,
+    pub nu: Option<f64>,
+    #[serde(rename = "G")]
+    pub g: Option<f64>,
+    pub density: Option<f64>,
+}
+
+/// `[section.NAME]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSection {
+    #[serde(rename = "A")]
+    pub a: Option<f64>,
+    #[serde(rename = "I11")]
+    pub i11: Option<f64>,
+    #[serde(rename = "I22")]
+    pub i22: Option<f64>,
+    #[serde(rename = "I12")]
+    pub i12: Option<f64>,
+    #[serde(rename = "J")]
+    pub j: Option<f64>,
+    pub shear_factor: Option<f64>,
+    #[serde(rename = "A1")]
+    pub a1: Option<f64>,
+    #[serde(rename = "A2")]
+    pub a2: Option<f64>,
+    pub rho_inertia: Option<Vec<Vec<f64>>>,
+}
+
+/// `[[rod]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawRod {
+    pub name: Option<String>,
+    pub material: Option<String>,
+    pub section: Option<String>,
+    pub points: Option<Vec<Vec<f64>>>,
+    /// An integer or an array of integers; checked by hand for a clearer message.
+    pub elements: Option<toml::Value>,
+    pub d1: Option<Vec<f64>>,
+}
+
+/// `[[clamp]]` and `[[pin]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSupport {
+    pub at: Option<Vec<f64>>,
+}
+
+/// `[[point_mass]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawPointMass {
+    pub at: Option<Vec<f64>>,
+    pub mass: Option<f64>,
+}
+
+/// `[[load]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawLoad {
+    pub at: Option<Vec<f64>>,
+    pub force: Option<Vec<f64>>,
+    pub moment: Option<Vec<f64>>,
+    pub time: Option<Vec<f64>>,
+    pub factor: Option<Vec<f64>>,
+}
+
+/// `[[initial_velocity]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawInitialVelocity {
+    pub at: Option<Vec<f64>>,
+    pub all: Option<bool>,
+    pub center: Option<Vec<f64>>,
+    pub v: Option<Vec<f64>>,
+    pub omega: Option<Vec<f64>>,
+}
+
+/// `[integrator]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawIntegrator {
+    pub scheme: Option<String>,
+    pub dt: Option<f64>,
+    pub t_end: Option<f64>,
+    pub alpha: Option<f64>,
+    pub alpha_gv: Option<f64>,
+    pub alpha_gn: Option<f64>,
+    pub alpha_ov: Option<f64>,
+    pub alpha_on: Option<f64>,
+    pub chi_gamma: Option<f64>,
+    pub chi_omega: Option<f64>,
+    pub chi_v: Option<f64>,
+    pub chi_nu: Option<f64>,
+    pub strategy: Option<String>,
+    pub newton_tol: Option<f64>,
+    pub max_iter: Option<i64>,
+    pub outer_tol: Option<f64>,
+    pub max_outer: Option<i64>,
+    pub energy_tol: Option<f64>,
+    pub output_every: Option<i64>,
+}

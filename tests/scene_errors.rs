@@ -1,0 +1,427 @@
+//! Contract: every malformed scene is rejected with an error whose text names the file, the
+//! key path, the reason and (where the key exists in the file) its `line:column`.
+
+use cosserat::scene::{builtin_scenes, load_scene, parse_scene, SceneError};
+
+/// A valid scene; each test breaks one thing in it.
+const GOOD: &str = r#"name = "t"
+gravity = [0, 0, -9.81]
+
+[material.soft]
+E = 5e5
+nu = 0.3
+density = 500
+
+[section.thin]
+A = 0.005
+I11 = 2e-5
+I22 = 2e-5
+J = 4e-5
+
+[[rod]]
+name = "a"
+material = "soft"
+section = "thin"
+points = [[0, 0, 0], [10, 0, 0]]
+elements = 5
+d1 = [0, 1, 0]
+
+[[rod]]
+name = "b"
+material = "soft"
+section = "thin"
+points = [[10, 0, 0], [10, 10, 0]]
+elements = 4
+
+[[clamp]]
+at = [0, 0, 0]
+
+[[load]]
+at = [10, 10, 0]
+force = [0, 0, -1]
+time = [0, 1, 1]
+factor = [0, 2, 0]
+
+[integrator]
+scheme = "edmc2"
+alpha = 0.5
+dt = 0.2
+t_end = 10.0
+"#;
+
+const FILE: &str = "scenes/bad.toml";
+
+/// `GOOD` with the first occurrence of `from` replaced by `to` (which must exist).
+fn edit(from: &str, to: &str) -> String {
+    assert!(GOOD.contains(from), "test bug: {from:?} not in GOOD");
+    GOOD.replacen(from, to, 1)
+}
+
+/// 1-based line and column of the first occurrence of `needle` in `text`; when `needle`
+/// contains a `^`, of the character after it (the `^` itself is not searched for).
+fn loc(text: &str, needle: &str) -> (usize, usize) {
+    let (search, shift) = match needle.find('^') {
+        Some(i) => (needle.replacen('^', "", 1), i),
+        None => (needle.to_string(), 0),
+    };
+    let at = text.find(&search).expect("needle in text") + shift;
+    let before = &text[..at];
+    let line = before.matches('\n').count() + 1;
+    let col = at - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+    (line, col)
+}
+
+/// Parses `text`, expects an error, checks it names the file, `key` and `reason`, and
+/// returns the message.
+fn fails(text: &str, key: &str, reason: &str) -> String {
+    let err = parse_scene(text, FILE).expect_err("scene should be rejected");
+    let msg = err.to_string();
+    assert!(msg.starts_with(FILE), "no file name in: {msg}");
+    assert!(
+        msg.contains(&format!(": {key}: ")),
+        "no key `{key}` in: {msg}"
+    );
+    assert!(msg.contains(reason), "no reason {reason:?} in: {msg}");
+    assert_eq!(err.key(), Some(key), "{msg}");
+    msg
+}
+
+/// Like [`fails`], and the error points at the first occurrence of `at` in `text`.
+fn fails_at(text: &str, key: &str, reason: &str, at: &str) -> String {
+    let msg = fails(text, key, reason);
+    let (l, c) = loc(text, at);
+    assert!(
+        msg.starts_with(&format!("{FILE}:{l}:{c}: ")),
+        "expected {FILE}:{l}:{c} in: {msg}"
+    );
+    msg
+}
+
+#[test]
+fn the_template_is_valid() {
+    let s = parse_scene(GOOD, FILE).unwrap();
+    assert_eq!(s.model.elements.len(), 9);
+    assert_eq!(s.model.n_nodes(), 10);
+}
+
+#[test]
+fn unknown_top_level_key() {
+    let t = edit("gravity = ", "gravty = ");
+    fails_at(&t, "gravty", "unknown field `gravty`", "gravty");
+}
+
+#[test]
+fn unknown_key_in_rod() {
+    let t = edit("elements = 4\n", "elements = 4\ncolor = \"red\"\n");
+    fails_at(&t, "rod[1].color", "unknown field `color`", "color");
+}
+
+#[test]
+fn wrong_type_string_for_e() {
+    let t = edit("E = 5e5", "E = \"stiff\"");
+    fails_at(&t, "material.soft.E", "invalid type: string", "\"stiff\"");
+}
+
+#[test]
+fn missing_integrator() {
+    let t = GOOD[..GOOD.find("[integrator]").unwrap()].to_string();
+    fails(&t, "integrator", "required table [integrator] missing");
+}
+
+#[test]
+fn missing_rods() {
+    let start = GOOD.find("[[rod]]").unwrap();
+    let end = GOOD.find("[integrator]").unwrap();
+    let t = format!("{}{}", &GOOD[..start], &GOOD[end..]);
+    fails(&t, "rod", "no rods");
+}
+
+#[test]
+fn negative_young_modulus() {
+    let t = edit("E = 5e5", "E = -5e5");
+    fails_at(&t, "material.soft.E", "must be > 0 (got -500000)", "-5e5");
+}
+
+#[test]
+fn zero_time_step() {
+    let t = edit("dt = 0.2", "dt = 0.0");
+    fails_at(&t, "integrator.dt", "must be > 0 (got 0)", "dt = ^0.0");
+}
+
+#[test]
+fn negative_time_step() {
+    let t = edit("dt = 0.2", "dt = -0.1");
+    let msg = fails_at(&t, "integrator.dt", "must be > 0 (got -0.1)", "-0.1");
+    // The documented example form.
+    let (l, c) = loc(&t, "-0.1");
+    assert_eq!(
+        msg,
+        format!("{FILE}:{l}:{c}: integrator.dt: must be > 0 (got -0.1)")
+    );
+}
+
+#[test]
+fn nan_in_load_factor_table() {
+    let t = edit("factor = [0, 2, 0]", "factor = [0, nan, 0]");
+    fails_at(&t, "load[0].factor[1]", "must be finite (got NaN)", "nan");
+}
+
+#[test]
+fn inf_in_points() {
+    let t = edit("[10, 10, 0]]", "[10, inf, 0]]");
+    fails_at(&t, "rod[1].points[1][1]", "must be finite (got inf)", "inf");
+}
+
+#[test]
+fn zero_length_rod() {
+    let t = edit("[[10, 0, 0], [10, 10, 0]]", "[[10, 0, 0], [10, 0, 0]]");
+    fails_at(
+        &t,
+        "rod[1].points[1]",
+        "zero-length segment",
+        "[[10, 0, 0], ^[10, 0, 0]]",
+    );
+}
+
+#[test]
+fn rod_with_one_point() {
+    let t = edit("[[10, 0, 0], [10, 10, 0]]", "[[10, 0, 0]]");
+    fails_at(
+        &t,
+        "rod[1].points",
+        "at least 2 points (got 1)",
+        "[[10, 0, 0]]",
+    );
+}
+
+#[test]
+fn clamp_point_not_a_node() {
+    let t = edit("at = [0, 0, 0]", "at = [1, 2, 3]");
+    let msg = fails_at(&t, "clamp[0].at", "(1, 2, 3) is not a node", "[1, 2, 3]");
+    assert!(
+        msg.contains("nearest node 0 at (0, 0, 0), distance"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn unknown_material_name() {
+    let t = edit(
+        "material = \"soft\"\nsection = \"thin\"\npoints = [[10",
+        "material = \"hard\"\nsection = \"thin\"\npoints = [[10",
+    );
+    fails_at(
+        &t,
+        "rod[1].material",
+        "unknown material `hard` (known: `soft`)",
+        "\"hard\"",
+    );
+}
+
+#[test]
+fn time_factor_length_mismatch() {
+    let t = edit("factor = [0, 2, 0]", "factor = [0, 2]");
+    fails_at(
+        &t,
+        "load[0].factor",
+        "same length as `time` (3) (got 2)",
+        "[0, 2]",
+    );
+}
+
+#[test]
+fn decreasing_times() {
+    let t = edit("time = [0, 1, 1]", "time = [0, 1, 0.5]");
+    fails_at(
+        &t,
+        "load[0].time[2]",
+        "non-decreasing (got 0.5 after 1)",
+        "0.5]",
+    );
+}
+
+#[test]
+fn poisson_ratio_out_of_range() {
+    let t = edit("nu = 0.3", "nu = 0.7");
+    fails_at(
+        &t,
+        "material.soft.nu",
+        "must be in (-1, 0.5] (got 0.7)",
+        "0.7",
+    );
+}
+
+#[test]
+fn nu_and_g_both_given() {
+    let t = edit("nu = 0.3", "nu = 0.3\nG = 2e5");
+    fails_at(&t, "material.soft.G", "exactly one of `nu` and `G`", "2e5");
+}
+
+#[test]
+fn edmc1_key_with_edmc2() {
+    let t = edit("alpha = 0.5", "alpha = 0.5\nchi_v = 0.1");
+    fails_at(
+        &t,
+        "integrator.chi_v",
+        "not a parameter of scheme edmc2 (it belongs to edmc1)",
+        "0.1",
+    );
+}
+
+#[test]
+fn alpha_and_alpha_gv_both() {
+    let t = edit("alpha = 0.5", "alpha = 0.5\nalpha_gv = 0.5");
+    fails(&t, "integrator.alpha_gv", "not both");
+}
+
+#[test]
+fn unknown_scheme() {
+    let t = edit("scheme = \"edmc2\"", "scheme = \"rk4\"");
+    fails_at(&t, "integrator.scheme", "unknown scheme `rk4`", "\"rk4\"");
+}
+
+#[test]
+fn zero_elements() {
+    let t = edit("elements = 4", "elements = 0");
+    fails_at(
+        &t,
+        "rod[1].elements",
+        "must be >= 1 (got 0)",
+        "elements = ^0",
+    );
+}
+
+#[test]
+fn element_list_of_wrong_length() {
+    let t = edit("elements = 4", "elements = [2, 2]");
+    fails_at(
+        &t,
+        "rod[1].elements",
+        "one count per segment: 1 (got 2)",
+        "[2, 2]",
+    );
+}
+
+#[test]
+fn d1_parallel_to_a_segment() {
+    let t = edit("d1 = [0, 1, 0]", "d1 = [2, 0, 0]");
+    fails_at(&t, "rod[0].d1", "parallel to segment 0", "[2, 0, 0]");
+}
+
+#[test]
+fn duplicate_rod_names() {
+    let t = edit("name = \"b\"", "name = \"a\"");
+    fails(&t, "rod[1].name", "duplicate rod name `a`");
+}
+
+#[test]
+fn missing_required_key_points_at_its_table() {
+    let t = edit("dt = 0.2\n", "");
+    let msg = fails(&t, "integrator.dt", "required key missing");
+    let (l, _) = loc(&t, "[integrator]");
+    assert!(msg.starts_with(&format!("{FILE}:{l}:")), "{msg}");
+}
+
+#[test]
+fn initial_velocity_at_a_clamped_node() {
+    let t = format!("{GOOD}\n[[initial_velocity]]\nat = [0, 0, 0]\nv = [1, 0, 0]\n");
+    fails_at(
+        &t,
+        "initial_velocity[0].at",
+        "node 0 at (0, 0, 0) has its translation fixed by a support",
+        "at = ^[0, 0, 0]\nv",
+    );
+}
+
+#[test]
+fn vector_of_wrong_length() {
+    let t = edit("force = [0, 0, -1]", "force = [0, -1]");
+    fails_at(&t, "load[0].force", "expected 3 numbers", "[0, -1]");
+}
+
+#[test]
+fn negative_integer_count() {
+    let t = edit("t_end = 10.0", "t_end = 10.0\nmax_iter = -3");
+    fails_at(&t, "integrator.max_iter", "must be >= 1 (got -3)", "-3");
+}
+
+#[test]
+fn toml_syntax_error_has_line_and_column() {
+    let t = edit("J = 4e-5", "J = 4e-5 5");
+    let err = parse_scene(&t, FILE).unwrap_err();
+    assert!(matches!(err, SceneError::Syntax { .. }), "{err:?}");
+    let (l, _) = loc(&t, "J = 4e-5 5");
+    let msg = err.to_string();
+    assert!(msg.starts_with(&format!("{FILE}:{l}:")), "{msg}");
+}
+
+#[test]
+fn builtin_frame_loads_and_unknown_name_lists_builtins() {
+    let s = load_scene("frame").unwrap();
+    assert_eq!(s.source, "builtin:frame");
+    assert_eq!(s.model.elements.len(), 15);
+    let err = load_scene("nope").unwrap_err();
+    assert!(matches!(err, SceneError::UnknownBuiltin { .. }), "{err:?}");
+    let msg = err.to_string();
+    assert!(msg.contains("nope") && msg.contains("frame"), "{msg}");
+}
+
+#[test]
+fn missing_file_is_an_io_error() {
+    let err = load_scene("no/such/dir/scene.toml").unwrap_err();
+    assert!(matches!(err, SceneError::Io { .. }), "{err:?}");
+    assert!(
+        err.to_string()
+            .starts_with("cannot read no/such/dir/scene.toml: "),
+        "{err}"
+    );
+}
+
+#[test]
+fn files_load_by_path_and_name_defaults_to_stem() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("my_frame.toml");
+    std::fs::write(&path, GOOD.replacen("name = \"t\"\n", "", 1)).unwrap();
+    let s = load_scene(path.to_str().unwrap()).unwrap();
+    assert_eq!(s.name, "my_frame");
+    assert_eq!(s.source, path.to_str().unwrap());
+    // Errors from a file name that file.
+    std::fs::write(&path, edit("dt = 0.2", "dt = -1")).unwrap();
+    let msg = load_scene(path.to_str().unwrap()).unwrap_err().to_string();
+    assert!(msg.starts_with(path.to_str().unwrap()), "{msg}");
+}
+
+#[test]
+fn every_builtin_scene_parses() {
+    assert!(builtin_scenes().iter().any(|b| b.name == "frame"));
+    for b in builtin_scenes() {
+        let s = parse_scene(b.toml, &format!("builtin:{}", b.name))
+            .unwrap_or_else(|e| panic!("{}: {e}", b.name));
+        assert!(!s.model.elements.is_empty());
+        assert!(!b.description.is_empty());
+    }
+}
+
+#[test]
+fn shipped_scene_files_parse() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            load_scene(path.to_str().unwrap()).unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+}
+
+#[test]
+fn complete_example_in_docs_matches_builtin_frame() {
+    let doc = include_str!("../docs/scenes.md");
+    let start = doc.find("## A complete example").expect("section in docs");
+    let block = &doc[start..];
+    let open = block.find("```toml\n").unwrap() + "```toml\n".len();
+    let close = open + block[open..].find("```").unwrap();
+    let from_docs = parse_scene(&block[open..close], "docs/scenes.md").unwrap();
+    let builtin = load_scene("frame").unwrap();
+    assert_eq!(from_docs.model, builtin.model);
+    assert_eq!(from_docs.params, builtin.params);
+}
