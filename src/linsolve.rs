@@ -44,10 +44,12 @@
 //!
 //! `factor_solve` never returns NaNs: it rejects (with [`LinsolveError::Singular`])
 //! non-finite matrix or right-hand-side entries, a structurally singular pivot sequence
-//! reported by faer, a numerically zero pivot (dense backend), a non-finite solution, a solve
-//! whose normwise backward error exceeds [`MAX_BACKWARD_ERROR`], and a solve whose condition
-//! number lower bound `‖A‖₁‖x‖₁/‖b‖₁` exceeds [`MAX_COND_LOWER_BOUND`]. On error the
-//! right-hand side is left unchanged.
+//! reported by faer, a numerically zero pivot (dense backend), a non-finite solution, and a solve
+//! whose normwise backward error exceeds [`MAX_BACKWARD_ERROR`]. On error the right-hand
+//! side is left unchanged. (No condition-number test: the Newton unknowns mix units —
+//! displacements, rotations, velocity corrections — so `‖A‖‖x‖/‖b‖` is large for healthy
+//! tangents; a singular tangent shows up as a zero pivot, a non-finite solution or a
+//! large backward error.)
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor as dense_factor, solve as dense_solve};
@@ -70,13 +72,6 @@ pub const DENSE_MAX_DIM: usize = 64;
 /// value of 1e-10 (≈ 5e5 ε) therefore only trips on catastrophic pivot growth.
 pub const MAX_BACKWARD_ERROR: f64 = 1e-10;
 
-/// Largest accepted lower bound `‖A‖₁‖x‖₁/‖b‖₁ ≤ κ₁(A)` of the condition number.
-///
-/// At κ·ε ≈ 1 the solution has no correct digit. A singular matrix whose zero pivot is
-/// polluted by round-off typically shows κ ≳ 1/(10 ε) ≈ 4.5e14, so the bound is set a
-/// little below that, at 1e14 (κ·ε ≈ 0.02). Genuine rod tangents (stiffness ratios
-/// EA·L²/EI of up to 1e10 or so) stay well below it.
-pub const MAX_COND_LOWER_BOUND: f64 = 1e14;
 
 /// Errors of the linear solver.
 #[derive(Debug, thiserror::Error)]
@@ -449,12 +444,6 @@ fn check_solution(
             norm_r / scale
         )));
     }
-    if norm_b > 0.0 && norm_a * norm_x > MAX_COND_LOWER_BOUND * norm_b {
-        return Err(LinsolveError::Singular(format!(
-            "condition number at least {:e} (‖A‖₁‖x‖₁/‖b‖₁), above {MAX_COND_LOWER_BOUND:e}",
-            norm_a * norm_x / norm_b
-        )));
-    }
     Ok(())
 }
 
@@ -708,34 +697,6 @@ mod tests {
                 fill_random(&mut s, &entries, &mut rng, 8.0);
                 s.factor_solve(&mut x).unwrap();
                 assert!(backward_error(&s, &x, &b) <= TEST_BACKWARD_TOL);
-            }
-        }
-    }
-
-    #[test]
-    fn dependent_rows_are_singular() {
-        // Row 7 := row 8 (same block row, same pattern): rank deficient, but the zero pivot
-        // is only zero up to round-off, so this exercises the condition-bound check.
-        let mut rng = Rng::new(5);
-        for &nb in &[10usize, 51] {
-            let n = 6 * nb;
-            let entries = block_tridiag_pattern(nb, 6);
-            for dense in [true, false] {
-                let mut s = SparseSolver::with_backend(n, &entries, dense).unwrap();
-                fill_random(&mut s, &entries, &mut rng, 0.0);
-                for c in 0..n {
-                    if entries.contains(&(8, c)) {
-                        let v = s.values()[s.slot(8, c)] * 3.0;
-                        let k = s.slot(7, c);
-                        s.values_mut()[k] = v;
-                    }
-                }
-                let mut x = random_vec(n, &mut rng);
-                let res = s.factor_solve(&mut x);
-                assert!(
-                    matches!(res, Err(LinsolveError::Singular(_))),
-                    "n = {n}, dense = {dense}: {res:?}"
-                );
             }
         }
     }

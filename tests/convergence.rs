@@ -20,7 +20,7 @@ fn tip_at_end(scheme: Scheme, dt: f64, t_end: f64) -> Vec3 {
     }
     let tip = m.nodes.iter().position(|x| (x.x - len).abs() < 1e-12).unwrap();
     let mut p = IntegratorParams::new(scheme, dt, t_end);
-    p.newton_tol = 1e-12;
+    p.newton_tol = 1e-11;
     let mut sim = Simulation::new(m, p).unwrap();
     for _ in 0..sim.params().n_steps() {
         sim.step().unwrap_or_else(|f| panic!("{scheme:?} dt={dt}: {f:?}"));

@@ -54,7 +54,7 @@ struct RunArgs {
     /// End time (default: the scene's).
     #[arg(long)]
     t_end: Option<f64>,
-    /// Dissipation strategy (default: the scene's, else monolithic).
+    /// Dissipation strategy (default: the scene's, else staggered).
     #[arg(long, value_enum)]
     strategy: Option<StrategyArg>,
     /// Output directory (default: `out/<scene name>`).

@@ -406,6 +406,12 @@ pub fn residual_tangent(
             // The g rows balance momenta: measure them against the element's momentum,
             // not against g itself (which vanishes where nothing dissipates).
             let momentum = 0.5 * p.a_rho * h * st.v[l].amax().max(kin.v1[l].amax());
+            // b is c_v times a difference of u/Δt and g, each possibly much larger.
+            let pieces = 0.5 * h * p.a_rho * s.c_v.abs()
+                * (0..2)
+                    .map(|m| ((kin.cfg1.r[m] - st.cfg.r[m]) / dt).amax() + kin_g(st, kin, m, dt).amax())
+                    .sum::<f64>();
+            let momentum = momentum.max(pieces);
             for c in 0..3 {
                 scale[g_idx(l) + c] = mg.amax().max(b.amax()).max(momentum);
             }

@@ -113,7 +113,9 @@ pub struct IntegratorParams {
     pub newton_tol: f64,
     /// Newton iteration cap per solve. Default 25.
     pub max_iter: usize,
-    /// Dissipative solution strategy. Default [`Strategy::Monolithic`].
+    /// Dissipative solution strategy. Default [`Strategy::Staggered`]: on the frame it
+    /// converged in every case the monolithic Newton did, went further where both failed
+    /// (Δt = 0.5) and took about half the wall time (README, "Dissipation strategies").
     pub strategy: Strategy,
     /// Staggered loop: relative tolerance on the dissipation identity (and on the change
     /// of the frozen scalars). Default `1e-10`.
@@ -134,7 +136,7 @@ impl IntegratorParams {
             t_end,
             newton_tol: 1e-11,
             max_iter: 25,
-            strategy: Strategy::Monolithic,
+            strategy: Strategy::Staggered,
             outer_tol: 1e-10,
             max_outer: 30,
             energy_tol: 1e-9,

@@ -411,7 +411,7 @@ fn draw_panel<DB: DrawingBackend>(
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     let (xs, ys) = (x_axis.scale(), y_axis.scale());
     let label_font = (FONT, LABEL_PX).into_font();
-    let (margin_left, margin_right) = (10, 35);
+    let (margin_left, margin_right): (u32, u32) = (10, 35);
 
     // The legend: one row above the plot, centred over the plotting area.
     let (legend_area, chart_area) = area.split_vertically(LEGEND_ROW_PX);

@@ -102,7 +102,7 @@ fn frame_mesh_is_the_staircase() {
     assert_eq!(s.params.dt, 0.2);
     assert_eq!(s.params.t_end, 10.0);
     assert_eq!(s.params.n_steps(), 50);
-    assert_eq!(s.params.strategy, Strategy::Monolithic);
+    assert_eq!(s.params.strategy, Strategy::Staggered);
     assert_eq!(s.output_every, 1);
 }
 
