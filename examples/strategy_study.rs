@@ -10,7 +10,12 @@ fn main() {
     for alpha in [0.5, 1.0, 2.0, 5.0] {
         for dt in [0.05, 0.2, 0.5] {
             for strategy in [Strategy::Staggered, Strategy::Monolithic] {
-                let s = Scheme::Edmc2 { alpha_gv: alpha, alpha_gn: 0.0, alpha_ov: 0.0, alpha_on: 0.0 };
+                let s = Scheme::Edmc2 {
+                    alpha_gv: alpha,
+                    alpha_gn: 0.0,
+                    alpha_ov: 0.0,
+                    alpha_on: 0.0,
+                };
                 let mut p = IntegratorParams::new(s, dt, 10.0);
                 p.strategy = strategy;
                 let mut sim = Simulation::new(scene.model.clone(), p).unwrap();
@@ -19,11 +24,21 @@ fn main() {
                 let (mut done, mut iters, mut reason) = (0, 0, String::new());
                 for _ in 0..n {
                     match sim.step() {
-                        Ok(r) => { done += 1; iters += r.newton_iters; }
-                        Err(f) => { reason = f.reason; break; }
+                        Ok(r) => {
+                            done += 1;
+                            iters += r.newton_iters;
+                        }
+                        Err(f) => {
+                            reason = f.reason;
+                            break;
+                        }
                     }
                 }
-                println!("{alpha},{dt},{strategy:?},{done},{n},{iters},{:.3},\"{}\"", t0.elapsed().as_secs_f64(), reason.replace('"', "'"));
+                println!(
+                    "{alpha},{dt},{strategy:?},{done},{n},{iters},{:.3},\"{}\"",
+                    t0.elapsed().as_secs_f64(),
+                    reason.replace('"', "'")
+                );
             }
         }
     }

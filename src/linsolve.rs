@@ -72,7 +72,6 @@ pub const DENSE_MAX_DIM: usize = 64;
 /// value of 1e-10 (≈ 5e5 ε) therefore only trips on catastrophic pivot growth.
 pub const MAX_BACKWARD_ERROR: f64 = 1e-10;
 
-
 /// Errors of the linear solver.
 #[derive(Debug, thiserror::Error)]
 pub enum LinsolveError {

@@ -148,9 +148,7 @@ impl Model {
     /// True when nothing holds or pushes the model: no supports, no loads, no gravity.
     /// Momenta are then conserved by every scheme.
     pub fn is_free_flight(&self) -> bool {
-        self.supports
-            .iter()
-            .all(|s| !s.translation && !s.rotation)
+        self.supports.iter().all(|s| !s.translation && !s.rotation)
             && self.loads.is_empty()
             && self.gravity == Vec3::zeros()
     }

@@ -21,16 +21,34 @@ struct Level {
     j: Vec3,
 }
 
-fn run(model: cosserat::model::Model, scheme: Scheme, strategy: Strategy, dt: f64, steps: usize) -> Vec<Level> {
+fn run(
+    model: cosserat::model::Model,
+    scheme: Scheme,
+    strategy: Strategy,
+    dt: f64,
+    steps: usize,
+) -> Vec<Level> {
     let mut p = IntegratorParams::new(scheme, dt, dt * steps as f64);
     p.strategy = strategy;
     let mut sim = Simulation::new(model, p).unwrap();
     let inv = sim.invariants();
-    let mut out = vec![Level { h: inv.total(), d: 0.0, l: inv.l, j: inv.j }];
+    let mut out = vec![Level {
+        h: inv.total(),
+        d: 0.0,
+        l: inv.l,
+        j: inv.j,
+    }];
     for _ in 0..steps {
-        let rep = sim.step().unwrap_or_else(|f| panic!("{scheme:?} {strategy:?}: {f:?}"));
+        let rep = sim
+            .step()
+            .unwrap_or_else(|f| panic!("{scheme:?} {strategy:?}: {f:?}"));
         let inv = sim.invariants();
-        out.push(Level { h: inv.total(), d: rep.dissipation, l: inv.l, j: inv.j });
+        out.push(Level {
+            h: inv.total(),
+            d: rep.dissipation,
+            l: inv.l,
+            j: inv.j,
+        });
     }
     out
 }
@@ -56,7 +74,10 @@ fn check_invariants(levels: &[Level], dissipative: bool, label: &str) {
         if dissipative {
             assert!(b.h <= a.h, "{label} step {n}: energy grew {:e}", b.h - a.h);
             let miss = (a.h - b.h - b.d).abs() / h0;
-            assert!(miss <= DISSIPATION_RTOL, "{label} step {n}: identity miss {miss:e}");
+            assert!(
+                miss <= DISSIPATION_RTOL,
+                "{label} step {n}: identity miss {miss:e}"
+            );
         } else {
             let dh = (b.h - a.h).abs() / a.h;
             assert!(dh <= EM_ENERGY_RTOL, "{label} step {n}: dH {dh:e}");
@@ -66,7 +87,8 @@ fn check_invariants(levels: &[Level], dissipative: bool, label: &str) {
 
 #[test]
 fn frame_initial_values_match_reference() {
-    let sim = Simulation::new(common::frame(), IntegratorParams::new(Scheme::Em, 0.2, 1.0)).unwrap();
+    let sim =
+        Simulation::new(common::frame(), IntegratorParams::new(Scheme::Em, 0.2, 1.0)).unwrap();
     let inv = sim.invariants();
     // Reference values of an independent implementation (DESIGN §6).
     assert!((inv.total() - 9.166_666_666_666_666).abs() < 1e-12);
@@ -84,27 +106,48 @@ fn em_conserves_energy_and_momenta() {
 
 #[test]
 fn edmc2_frame_matches_reference_and_dissipates_monotonically() {
-    let s = Scheme::Edmc2 { alpha_gv: 0.5, alpha_gn: 0.0, alpha_ov: 0.0, alpha_on: 0.0 };
+    let s = Scheme::Edmc2 {
+        alpha_gv: 0.5,
+        alpha_gn: 0.0,
+        alpha_ov: 0.0,
+        alpha_on: 0.0,
+    };
     for strategy in [Strategy::Monolithic, Strategy::Staggered] {
         let lv = run(common::frame(), s, strategy, 0.2, 50);
         check_invariants(&lv, true, &format!("edmc2 {strategy:?}"));
         // Independent implementation: H(t=10) = 9.15148.
         let hend = lv.last().unwrap().h;
-        assert!((hend - 9.15148).abs() < 5e-6, "{strategy:?}: H(10) = {hend}");
+        assert!(
+            (hend - 9.15148).abs() < 5e-6,
+            "{strategy:?}: H(10) = {hend}"
+        );
     }
 }
 
 #[test]
 fn edmc2_all_four_alphas_conserve_momenta_and_dissipate() {
-    let s = Scheme::Edmc2 { alpha_gv: 0.5, alpha_gn: 0.3, alpha_ov: 0.2, alpha_on: 0.4 };
+    let s = Scheme::Edmc2 {
+        alpha_gv: 0.5,
+        alpha_gn: 0.3,
+        alpha_ov: 0.2,
+        alpha_on: 0.4,
+    };
     let lv = run(spinning_frame(), s, Strategy::Monolithic, 0.2, 30);
     check_invariants(&lv, true, "edmc2 coupled monolithic");
-    assert!(lv[0].h - lv.last().unwrap().h > 1e-6, "coupled EDMC-2 must dissipate");
+    assert!(
+        lv[0].h - lv.last().unwrap().h > 1e-6,
+        "coupled EDMC-2 must dissipate"
+    );
 }
 
 #[test]
 fn edmc1_conserves_momenta_and_dissipates() {
-    let s = Scheme::Edmc1 { chi_gamma: 0.1, chi_omega: 0.1, chi_v: 0.2, chi_nu: 0.2 };
+    let s = Scheme::Edmc1 {
+        chi_gamma: 0.1,
+        chi_omega: 0.1,
+        chi_v: 0.2,
+        chi_nu: 0.2,
+    };
     for strategy in [Strategy::Monolithic, Strategy::Staggered] {
         let lv = run(spinning_frame(), s, strategy, 0.2, 30);
         check_invariants(&lv, true, &format!("edmc1 {strategy:?}"));
@@ -115,7 +158,12 @@ fn edmc1_conserves_momenta_and_dissipates() {
 #[test]
 fn momenta_are_independent_of_dt_and_alpha() {
     for (dt, alpha) in [(0.2, 2.0), (0.01, 0.5), (0.1, 5.0)] {
-        let s = Scheme::Edmc2 { alpha_gv: alpha, alpha_gn: 0.0, alpha_ov: 0.0, alpha_on: 0.0 };
+        let s = Scheme::Edmc2 {
+            alpha_gv: alpha,
+            alpha_gn: 0.0,
+            alpha_ov: 0.0,
+            alpha_on: 0.0,
+        };
         for strategy in [Strategy::Monolithic, Strategy::Staggered] {
             let lv = run(common::frame(), s, strategy, dt, 10);
             check_invariants(&lv, true, &format!("dt={dt} alpha={alpha} {strategy:?}"));
@@ -128,13 +176,22 @@ fn momenta_are_independent_of_dt_and_alpha() {
 #[test]
 fn relative_equilibrium_dissipates_nothing() {
     let mut m = common::polylines(
-        &[(vec![Vec3::zeros(), Vec3::new(2.0, 0.0, 0.0)], 6, Vec3::new(0.0, 1.0, 0.0))],
+        &[(
+            vec![Vec3::zeros(), Vec3::new(2.0, 0.0, 0.0)],
+            6,
+            Vec3::new(0.0, 1.0, 0.0),
+        )],
         (1e4, 0.3, 100.0, 0.01, 1e-5, 2e-5),
     );
     for w in m.omega0.iter_mut() {
         *w = Vec3::new(3.0, 0.0, 0.0);
     }
-    let s = Scheme::Edmc2 { alpha_gv: 1.0, alpha_gn: 1.0, alpha_ov: 1.0, alpha_on: 1.0 };
+    let s = Scheme::Edmc2 {
+        alpha_gv: 1.0,
+        alpha_gn: 1.0,
+        alpha_ov: 1.0,
+        alpha_on: 1.0,
+    };
     let lv = run(m, s, Strategy::Monolithic, 0.05, 40);
     let h0 = lv[0].h;
     assert!(h0 > 0.0);

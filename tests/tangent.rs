@@ -21,9 +21,15 @@ fn model(supported: bool) -> cosserat::model::Model {
         *w = Vec3::new(0.1 * a as f64, -0.05, 0.02 * (a % 3) as f64);
     }
     if supported {
-        m.supports[0] = Support { translation: true, rotation: true };
+        m.supports[0] = Support {
+            translation: true,
+            rotation: true,
+        };
         let last = m.n_nodes() - 1;
-        m.supports[last] = Support { translation: true, rotation: false };
+        m.supports[last] = Support {
+            translation: true,
+            rotation: false,
+        };
         m.velocity0[0] = Vec3::zeros();
         m.point_mass[5] = 2.0;
     }
@@ -74,8 +80,18 @@ fn em_tangent_matches_finite_differences() {
 
 #[test]
 fn frozen_scalar_tangent_matches_finite_differences() {
-    let scheme = Scheme::Edmc2 { alpha_gv: 0.5, alpha_gn: 0.2, alpha_ov: 0.1, alpha_on: 0.3 };
-    let s = FrozenScalars { beta_gamma: 0.3, beta_omega: 0.2, c_v: 0.15, c_nu: 0.25 };
+    let scheme = Scheme::Edmc2 {
+        alpha_gv: 0.5,
+        alpha_gn: 0.2,
+        alpha_ov: 0.1,
+        alpha_on: 0.3,
+    };
+    let s = FrozenScalars {
+        beta_gamma: 0.3,
+        beta_omega: 0.2,
+        c_v: 0.15,
+        c_nu: 0.25,
+    };
     for supported in [false, true] {
         let e = tangent_error(scheme, supported, Some(s));
         assert!(e < TANGENT_RTOL, "supported={supported}: {e:e}");
@@ -85,9 +101,24 @@ fn frozen_scalar_tangent_matches_finite_differences() {
 #[test]
 fn monolithic_tangent_matches_finite_differences() {
     let schemes = [
-        Scheme::Edmc2 { alpha_gv: 0.5, alpha_gn: 0.0, alpha_ov: 0.0, alpha_on: 0.0 },
-        Scheme::Edmc2 { alpha_gv: 0.5, alpha_gn: 0.2, alpha_ov: 0.1, alpha_on: 0.3 },
-        Scheme::Edmc1 { chi_gamma: 0.1, chi_omega: 0.2, chi_v: 0.3, chi_nu: 0.1 },
+        Scheme::Edmc2 {
+            alpha_gv: 0.5,
+            alpha_gn: 0.0,
+            alpha_ov: 0.0,
+            alpha_on: 0.0,
+        },
+        Scheme::Edmc2 {
+            alpha_gv: 0.5,
+            alpha_gn: 0.2,
+            alpha_ov: 0.1,
+            alpha_on: 0.3,
+        },
+        Scheme::Edmc1 {
+            chi_gamma: 0.1,
+            chi_omega: 0.2,
+            chi_v: 0.3,
+            chi_nu: 0.1,
+        },
     ];
     for scheme in schemes {
         for supported in [false, true] {

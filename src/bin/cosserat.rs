@@ -148,7 +148,10 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
         }
         match &mut p.scheme {
             Scheme::Edmc2 { alpha_gv, .. } => *alpha_gv = alpha,
-            other => bail!("--alpha sets the EDMC-2 parameter α_Γv, but the scheme is {}", other.name()),
+            other => bail!(
+                "--alpha sets the EDMC-2 parameter α_Γv, but the scheme is {}",
+                other.name()
+            ),
         }
     }
     if let Some(dt) = a.dt {
@@ -175,10 +178,15 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
 fn run_command(a: RunArgs) -> Result<ExitCode> {
     let scene = load_scene(&a.scene)?;
     let params = resolve_params(&scene, &a)?;
-    let out = a.out.clone().unwrap_or_else(|| Path::new("out").join(&scene.name));
-    std::fs::create_dir_all(&out).with_context(|| format!("cannot create output directory {}", out.display()))?;
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("out").join(&scene.name));
+    std::fs::create_dir_all(&out)
+        .with_context(|| format!("cannot create output directory {}", out.display()))?;
     let every = a.every.unwrap_or(scene.output_every).max(1);
-    let mut sim = Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
+    let mut sim =
+        Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
     let outcome = simulate(&mut sim, &out, every, &scene.name)?;
     let summary = summarize(&scene, &sim, &outcome);
     write_summary(&out.join("summary.json"), &summary)?;
@@ -192,12 +200,16 @@ fn simulate(sim: &mut Simulation, out: &Path, every: usize, label: &str) -> Resu
     let mut history = HistoryWriter::create(&out.join("history.csv"))?;
     let mut records: Vec<StepRecord> = Vec::new();
     let progress = Progress::new(sim.params().n_steps() as u64, label);
-    let outcome = run(sim, every, |rec: &StepRecord, _sim: &Simulation| -> Result<()> {
-        history.push(rec)?;
-        progress.step(rec.t, rec.newton_iters);
-        records.push(rec.clone());
-        Ok(())
-    })?;
+    let outcome = run(
+        sim,
+        every,
+        |rec: &StepRecord, _sim: &Simulation| -> Result<()> {
+            history.push(rec)?;
+            progress.step(rec.t, rec.newton_iters);
+            records.push(rec.clone());
+            Ok(())
+        },
+    )?;
     progress.finish();
     let title = format!("{label}: {}", sim.params().scheme.name());
     plot_energy(&out.join("energy.png"), &records, &title)?;

@@ -72,7 +72,12 @@ fn ratio(num: f64, den: f64) -> f64 {
 }
 
 /// Evaluates the local law of `scheme` at one quadrature point. `dt_over_h = Δt/h`.
-pub fn local_scalars(scheme: &Scheme, inp: &LocalInputs, a_rho: f64, dt_over_h: f64) -> LocalScalars {
+pub fn local_scalars(
+    scheme: &Scheme,
+    inp: &LocalInputs,
+    a_rho: f64,
+    dt_over_h: f64,
+) -> LocalScalars {
     match *scheme {
         Scheme::Em => LocalScalars::default(),
         Scheme::Edmc1 {

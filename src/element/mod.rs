@@ -235,7 +235,10 @@ pub fn kinematics(
     }
     let vh_n = 0.5 * (st.v[0] + st.v[1]);
     let vh_1 = 0.5 * (v1[0] + v1[1]);
-    let vdh_n = [0.5 * (st.vd[0][0] + st.vd[1][0]), 0.5 * (st.vd[0][1] + st.vd[1][1])];
+    let vdh_n = [
+        0.5 * (st.vd[0][0] + st.vd[1][0]),
+        0.5 * (st.vd[0][1] + st.vd[1][1]),
+    ];
     let vdh_1 = [0.5 * (vd1[0][0] + vd1[1][0]), 0.5 * (vd1[0][1] + vd1[1][1])];
     let (x_gamma, x_omega) = strain_energies(&(eps1 - eps_n), p);
     let inputs = LocalInputs {
@@ -388,7 +391,11 @@ pub fn residual_tangent(
         // Aρ h |v|/Δt, which dominate it when Δt is small.
         let momentum_rate = p.a_rho * h * (st.v[l].amax() + kin.v1[l].amax()) / dt;
         let su = stress_scale[l].max(inertia_r[l].amax()).max(momentum_rate);
-        let dnorm = dmid[l].column(0).norm().max(dmid[l].column(1).norm()).max(dmid[l].column(2).norm());
+        let dnorm = dmid[l]
+            .column(0)
+            .norm()
+            .max(dmid[l].column(1).norm())
+            .max(dmid[l].column(2).norm());
         for c in 0..3 {
             scale[u_idx(l) + c] = su;
             scale[th_idx(l) + c] = fd_scale[l] * dnorm;
@@ -407,9 +414,14 @@ pub fn residual_tangent(
             // not against g itself (which vanishes where nothing dissipates).
             let momentum = 0.5 * p.a_rho * h * st.v[l].amax().max(kin.v1[l].amax());
             // b is c_v times a difference of u/Δt and g, each possibly much larger.
-            let pieces = 0.5 * h * p.a_rho * s.c_v.abs()
+            let pieces = 0.5
+                * h
+                * p.a_rho
+                * s.c_v.abs()
                 * (0..2)
-                    .map(|m| ((kin.cfg1.r[m] - st.cfg.r[m]) / dt).amax() + kin_g(st, kin, m, dt).amax())
+                    .map(|m| {
+                        ((kin.cfg1.r[m] - st.cfg.r[m]) / dt).amax() + kin_g(st, kin, m, dt).amax()
+                    })
                     .sum::<f64>();
             let momentum = momentum.max(pieces);
             for c in 0..3 {
@@ -581,6 +593,7 @@ fn field_of(l: usize, a: usize) -> usize {
 /// functions of the iterate away from `v_n + v_{n+1} = 0`; their law is a small local
 /// solve whose derivative by hand would duplicate it). `active` marks the element-local
 /// unknowns that exist.
+#[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     data: &ElementData,
     st: &ElementState,

@@ -182,7 +182,10 @@ mod tests {
             )
         };
         Config {
-            r: [Vec3::new(0.1, 0.2 * seed, -0.3), Vec3::new(1.1, 0.4, 0.2 * seed)],
+            r: [
+                Vec3::new(0.1, 0.2 * seed, -0.3),
+                Vec3::new(1.1, 0.4, 0.2 * seed),
+            ],
             d: [m(seed), m(seed + 0.7)],
         }
     }

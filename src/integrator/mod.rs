@@ -4,8 +4,8 @@
 
 pub mod dofs;
 pub mod params;
-pub mod state;
 pub mod run;
+pub mod state;
 pub mod system;
 
 pub use params::{IntegratorParams, Scheme, Strategy};

@@ -36,7 +36,11 @@ pub struct RunOutcome {
 }
 
 /// The record of the current level of `sim`.
-pub fn record_of(sim: &Simulation, step: usize, rep: Option<&crate::integrator::StepReport>) -> StepRecord {
+pub fn record_of(
+    sim: &Simulation,
+    step: usize,
+    rep: Option<&crate::integrator::StepReport>,
+) -> StepRecord {
     let inv = sim.invariants();
     let rep = rep.copied().unwrap_or_default();
     StepRecord {
@@ -61,15 +65,25 @@ pub fn record_of(sim: &Simulation, step: usize, rep: Option<&crate::integrator::
 /// at rest in the mean, `sqrt(2 K m)`; `J` likewise times the model's size.
 fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
     let m = sim.model();
-    let mass: f64 = m.elements.iter().map(|e| e.props.a_rho * e.props.h).sum::<f64>()
+    let mass: f64 = m
+        .elements
+        .iter()
+        .map(|e| e.props.a_rho * e.props.h)
+        .sum::<f64>()
         + m.point_mass.iter().sum::<f64>();
     let (lo, hi) = m.nodes.iter().fold(
-        (crate::model::Vec3::repeat(f64::INFINITY), crate::model::Vec3::repeat(f64::NEG_INFINITY)),
+        (
+            crate::model::Vec3::repeat(f64::INFINITY),
+            crate::model::Vec3::repeat(f64::NEG_INFINITY),
+        ),
         |(lo, hi), x| (lo.inf(x), hi.sup(x)),
     );
     let size = (hi - lo).norm().max(1e-300);
     let p = (2.0 * inv.kinetic.max(0.0) * mass).sqrt();
-    (inv.l.norm().max(p).max(1e-300), inv.j.norm().max(p * size).max(1e-300))
+    (
+        inv.l.norm().max(p).max(1e-300),
+        inv.j.norm().max(p * size).max(1e-300),
+    )
 }
 
 /// Runs `sim` to its end time. `observer` sees row 0 and every accepted step (its

@@ -3,7 +3,6 @@
 //! (a step whose energy grows or whose dissipation identity misses its tolerance is a
 //! failed step, never an accepted one).
 
-
 use crate::element::strain::Config;
 use crate::element::{
     consistent_scalars, g_idx, kinematics, monolithic_correction, residual_tangent, strains6,
@@ -80,7 +79,10 @@ pub struct Simulation {
 impl Simulation {
     /// Sets up a simulation of `model` with `params` (the linear solver's symbolic
     /// analysis is done here, once).
-    pub fn new(model: Model, params: IntegratorParams) -> Result<Self, crate::linsolve::LinsolveError> {
+    pub fn new(
+        model: Model,
+        params: IntegratorParams,
+    ) -> Result<Self, crate::linsolve::LinsolveError> {
         let data: Vec<ElementData> = model
             .elements
             .iter()
@@ -191,7 +193,9 @@ impl Simulation {
         self.inv = invariants(&self.model, &self.data, &state);
         self.state = state;
         self.prev.iter_mut().for_each(|x| *x = 0.0);
-        self.frozen.iter_mut().for_each(|s| *s = FrozenScalars::default());
+        self.frozen
+            .iter_mut()
+            .for_each(|s| *s = FrozenScalars::default());
     }
 
     fn gather(&self, e: usize, q: &[f64]) -> Increment {
@@ -241,7 +245,16 @@ impl Simulation {
             let map = &self.dofs.elements[e];
             if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() {
                 let active: [bool; NDOF] = std::array::from_fn(|i| map[i] != NONE);
-                monolithic_correction(data, &st, &eps_n, &inc, &k, self.trans_diss, &active, &mut ev.k);
+                monolithic_correction(
+                    data,
+                    &st,
+                    &eps_n,
+                    &inc,
+                    &k,
+                    self.trans_diss,
+                    &active,
+                    &mut ev.k,
+                );
             }
             for i in 0..NDOF {
                 if map[i] == NONE {
@@ -425,7 +438,11 @@ impl Simulation {
 
     /// Checks energy and the dissipation identity of a converged increment; on success
     /// returns the new state, its invariants, D and W.
-    fn check(&self, q: &[f64], mode: Mode) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), String> {
+    fn check(
+        &self,
+        q: &[f64],
+        mode: Mode,
+    ) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), String> {
         let (next, diss, consistent) = self.advance(q, mode);
         let inv = invariants(&self.model, &self.data, &next);
         let w = self.external_work(q);
@@ -455,7 +472,10 @@ impl Simulation {
     pub fn step(&mut self) -> Result<StepReport, StepFailure> {
         let dt = self.params.dt;
         let t_mid = self.state.t + 0.5 * dt;
-        let (mut force, mut moment) = (std::mem::take(&mut self.force), std::mem::take(&mut self.moment));
+        let (mut force, mut moment) = (
+            std::mem::take(&mut self.force),
+            std::mem::take(&mut self.moment),
+        );
         self.model.external_loads(t_mid, &mut force, &mut moment);
         self.force = force;
         self.moment = moment;
@@ -473,11 +493,15 @@ impl Simulation {
         for pred in predictors {
             let mut q = pred;
             let attempt = if !dissipative {
-                self.frozen.iter_mut().for_each(|s| *s = FrozenScalars::default());
+                self.frozen
+                    .iter_mut()
+                    .for_each(|s| *s = FrozenScalars::default());
                 self.solve_once(&mut q, Mode::Frozen, &mut total_iters)
             } else {
                 match self.params.strategy {
-                    Strategy::Monolithic => self.solve_once(&mut q, Mode::Consistent, &mut total_iters),
+                    Strategy::Monolithic => {
+                        self.solve_once(&mut q, Mode::Consistent, &mut total_iters)
+                    }
                     Strategy::Staggered => self.solve_staggered(&mut q, &mut total_iters),
                 }
             };
@@ -562,11 +586,18 @@ impl Simulation {
     pub fn residual_at(&mut self, q: &[f64], consistent: bool) -> Vec<f64> {
         let mut r = vec![0.0; self.dofs.n];
         let t_mid = self.state.t + 0.5 * self.params.dt;
-        let (mut f, mut m) = (std::mem::take(&mut self.force), std::mem::take(&mut self.moment));
+        let (mut f, mut m) = (
+            std::mem::take(&mut self.force),
+            std::mem::take(&mut self.moment),
+        );
         self.model.external_loads(t_mid, &mut f, &mut m);
         self.force = f;
         self.moment = m;
-        let mode = if consistent { Mode::Consistent } else { Mode::Frozen };
+        let mode = if consistent {
+            Mode::Consistent
+        } else {
+            Mode::Frozen
+        };
         self.assemble(q, mode, true, &mut r);
         r
     }
@@ -608,4 +639,3 @@ fn kind_of_local(i: usize) -> usize {
         0
     }
 }
-

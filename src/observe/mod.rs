@@ -60,7 +60,8 @@ pub fn invariants(model: &Model, data: &[ElementData], state: &State) -> Invaria
             de.fixed_rows::<3>(0).into_owned(),
             de.fixed_rows::<3>(3).into_owned(),
         );
-        out.potential += 0.5 * p.h * (g.dot(&p.c_gamma.component_mul(&g)) + o.dot(&(p.c_omega * o)));
+        out.potential +=
+            0.5 * p.h * (g.dot(&p.c_gamma.component_mul(&g)) + o.dot(&(p.c_omega * o)));
     }
     for (a, &m) in model.point_mass.iter().enumerate() {
         if m != 0.0 {
@@ -74,7 +75,12 @@ pub fn invariants(model: &Model, data: &[ElementData], state: &State) -> Invaria
 
 /// L2 norms over the rods of the translational and director accelerations
 /// `(v_{n+1} − v_n)/Δt` between two states (two-point rule).
-pub fn acceleration_norms(model: &Model, data: &[ElementData], s0: &State, s1: &State) -> (f64, f64) {
+pub fn acceleration_norms(
+    model: &Model,
+    data: &[ElementData],
+    s0: &State,
+    s1: &State,
+) -> (f64, f64) {
     let dt = s1.t - s0.t;
     if dt <= 0.0 {
         return (0.0, 0.0);

@@ -55,11 +55,19 @@ pub struct BuiltinScene {
     pub toml: &'static str,
 }
 
-static BUILTINS: &[BuiltinScene] = &[BuiltinScene {
-    name: "frame",
-    description: "free-flying frame of three rods at two right angles (paper §5.1, DESIGN §6.1)",
-    toml: include_str!("../../scenes/frame.toml"),
-}];
+static BUILTINS: &[BuiltinScene] = &[
+    BuiltinScene {
+        name: "frame",
+        description:
+            "free-flying frame of three rods at two right angles (paper §5.1, DESIGN §6.1)",
+        toml: include_str!("../../scenes/frame.toml"),
+    },
+    BuiltinScene {
+        name: "cantilever",
+        description: "clamped 50-element 3D cantilever, tip kicked obliquely (speed benchmark)",
+        toml: include_str!("../../scenes/cantilever.toml"),
+    },
+];
 
 /// Everything that can go wrong loading a scene.
 #[derive(Debug, thiserror::Error)]

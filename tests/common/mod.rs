@@ -1,7 +1,7 @@
 //! Programmatic models for the physics tests (independent of the scene parser).
 #![allow(dead_code)]
 
-use cosserat::model::{ElementProps, Element, Mat3, Model, RodInfo, Support, Vec3};
+use cosserat::model::{Element, ElementProps, Mat3, Model, RodInfo, Support, Vec3};
 use nalgebra::{Matrix2, Matrix3};
 
 /// Section/material constants for tests: E, ν, ρ, A, I (I11 = I22), J.
@@ -58,7 +58,10 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
                 });
             }
         }
-        infos.push(RodInfo { name: format!("rod{ri}"), elements: start..elements.len() });
+        infos.push(RodInfo {
+            name: format!("rod{ri}"),
+            elements: start..elements.len(),
+        });
     }
     let n = nodes.len();
     Model {

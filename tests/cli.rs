@@ -1,0 +1,141 @@
+//! End-to-end command line: `run` writes history.csv (documented columns), summary.json,
+//! energy.png and momenta.png; a Newton failure is a result (status `failed`, reason,
+//! residual history, every accepted row kept, exit code 0); bad input exits with code 2
+//! and an error naming the file, key and reason.
+use std::path::Path;
+use std::process::Command;
+
+fn cosserat() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_cosserat"))
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn run_writes_the_four_files_with_documented_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("frame");
+    let st = cosserat()
+        .args([
+            "run", "frame", "--scheme", "edmc2", "--alpha", "0.5", "--t-end", "2", "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&st.stdout);
+    assert!(stdout.contains("completed"), "{stdout}");
+    for f in ["history.csv", "summary.json", "energy.png", "momenta.png"] {
+        let len = std::fs::metadata(out.join(f)).unwrap().len();
+        assert!(len > 100, "{f} is {len} bytes");
+    }
+    let csv = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    for col in [
+        "step",
+        "t",
+        "kinetic",
+        "potential",
+        "total",
+        "Lx",
+        "Ly",
+        "Lz",
+        "Jx",
+        "Jy",
+        "Jz",
+        "dissipation",
+        "acc_trans",
+        "acc_rot",
+        "newton_iters",
+        "residual",
+    ] {
+        assert!(header.contains(&col), "missing column {col}");
+    }
+    assert_eq!(csv.lines().count(), 1 + 11, "header + rows 0..=10");
+    let s = summary(&out);
+    assert_eq!(s["status"], "completed");
+    assert!(s["reason"].is_null());
+    assert_eq!(s["steps"], 10);
+    assert_eq!(s["scheme"], "edmc2");
+    assert_eq!(s["params"]["scheme"]["alpha_gv"], 0.5);
+    assert!((s["t_reached"].as_f64().unwrap() - 2.0).abs() < 1e-9);
+    assert!(s["wall_s"].as_f64().unwrap() >= 0.0);
+}
+
+#[test]
+fn newton_failure_is_a_result_with_outputs_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = cosserat::scene::builtin_scenes()[0]
+        .toml
+        .replace("t_end = 10.0", "t_end = 10.0\nmax_iter = 1");
+    let scene = dir.path().join("stiff.toml");
+    std::fs::write(&scene, text).unwrap();
+    let out = dir.path().join("o");
+    let st = cosserat()
+        .arg("run")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "a failed step is a result, not a crash"
+    );
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed");
+    let reason = s["reason"].as_str().unwrap();
+    assert!(reason.contains("Newton did not converge"), "{reason}");
+    assert!(!s["failed_step_residuals"].as_array().unwrap().is_empty());
+    // Row 0 (and any accepted step) is still in the history, and the charts exist.
+    let csv = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    assert!(csv.lines().count() >= 2);
+    assert!(out.join("energy.png").exists() && out.join("momenta.png").exists());
+}
+
+#[test]
+fn bad_scene_exits_2_naming_file_key_and_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = cosserat::scene::builtin_scenes()[0]
+        .toml
+        .replace("dt = 0.2", "dt = -0.2");
+    let scene = dir.path().join("bad.toml");
+    std::fs::write(&scene, text).unwrap();
+    for sub in ["run", "check"] {
+        let st = cosserat().arg(sub).arg(&scene).output().unwrap();
+        assert_eq!(st.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&st.stderr);
+        assert!(
+            err.contains("bad.toml") && err.contains("integrator.dt") && err.contains("> 0"),
+            "{err}"
+        );
+    }
+    let st = cosserat()
+        .args(["run", "frame", "--dt", "0"])
+        .output()
+        .unwrap();
+    assert_eq!(st.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("--dt"));
+    let st = cosserat().args(["run", "no-such-scene"]).output().unwrap();
+    assert_eq!(st.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("frame"));
+}
+
+#[test]
+fn check_and_scenes_describe_the_builtin_frame() {
+    let st = cosserat().args(["check", "frame"]).output().unwrap();
+    assert!(st.status.success());
+    let text = String::from_utf8_lossy(&st.stdout);
+    assert!(
+        text.contains("nodes: 16") && text.contains("elements: 15"),
+        "{text}"
+    );
+    let st = cosserat().arg("scenes").output().unwrap();
+    assert!(String::from_utf8_lossy(&st.stdout).contains("frame"));
+}
