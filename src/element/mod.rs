@@ -50,8 +50,9 @@ pub const fn g_idx(l: usize) -> usize {
     12 + 3 * l
 }
 
-/// The consistent-mass pattern `[[2, 1], [1, 2]] / 6` of a two-node element.
-const M2: [[f64; 2]; 2] = [[2.0 / 6.0, 1.0 / 6.0], [1.0 / 6.0, 2.0 / 6.0]];
+/// The consistent-mass pattern `[[2, 1], [1, 2]] / 6` of a two-node element (the
+/// two-point rule for inertia, `K`, `L`, `J`; shared with the observers).
+pub const M2: [[f64; 2]; 2] = [[2.0 / 6.0, 1.0 / 6.0], [1.0 / 6.0, 2.0 / 6.0]];
 
 /// Constant data of one element in a run.
 #[derive(Clone, Debug, PartialEq)]

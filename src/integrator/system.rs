@@ -65,6 +65,8 @@ pub struct Simulation {
     slots: Vec<Vec<usize>>,
     /// Per node: slots of the diagonal entries of the (u,u), (u,g), (g,u), (g,g) blocks.
     node_slots: Vec<[[usize; 3]; 4]>,
+    /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
+    row_kinds: Vec<usize>,
     state: State,
     inv: Invariants,
     trans_diss: bool,
@@ -146,6 +148,7 @@ impl Simulation {
         let inv = invariants(&model, &data, &state);
         let nn = model.n_nodes();
         Ok(Self {
+            row_kinds: Self::row_kinds(&dofs),
             frozen: vec![FrozenScalars::default(); model.elements.len()],
             prev: vec![0.0; dofs.n],
             force: vec![Vec3::zeros(); nn],
@@ -314,10 +317,9 @@ impl Simulation {
                 scale[1] = scale[1].max(self.moment[a].amax());
             }
         }
-        let kinds = self.row_kinds();
         let mut worst: f64 = 0.0;
         for (i, &ri) in r.iter().enumerate() {
-            let s = scale[kinds[i]].max(1e-300);
+            let s = scale[self.row_kinds[i]].max(1e-300);
             let rel = ri.abs() / s;
             if !rel.is_finite() {
                 return f64::INFINITY;
@@ -327,9 +329,9 @@ impl Simulation {
         worst
     }
 
-    fn row_kinds(&self) -> Vec<usize> {
-        let mut k = vec![0; self.dofs.n];
-        for nd in &self.dofs.nodes {
+    fn row_kinds(dofs: &DofMap) -> Vec<usize> {
+        let mut k = vec![0; dofs.n];
+        for nd in &dofs.nodes {
             for (base, kind) in [(nd.u, 0), (nd.th, 1), (nd.g, 2)] {
                 if base != NONE {
                     k[base..base + 3].iter_mut().for_each(|x| *x = kind);

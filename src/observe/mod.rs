@@ -6,11 +6,9 @@
 
 pub mod record;
 
-use crate::element::ElementData;
+use crate::element::{ElementData, M2};
 use crate::integrator::state::State;
 use crate::model::{Model, Vec3};
-
-const M2: [[f64; 2]; 2] = [[2.0 / 6.0, 1.0 / 6.0], [1.0 / 6.0, 2.0 / 6.0]];
 
 /// Energies and momenta of one state.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
