@@ -107,6 +107,69 @@ pub struct NodalLoad {
     pub table: TimeTable,
 }
 
+/// The coordinate plane a planar scene lives in, named by the axis normal to it.
+///
+/// A planar model keeps only the unknowns the plane can excite: the two in-plane
+/// translations and the rotation about the normal (DESIGN §6: the arch and the
+/// mechanism). The other three per node are removed from the Newton system, which is
+/// exact (not an approximation) as long as the data are planar; the scene checks that.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Plane {
+    /// Index (0, 1, 2) of the coordinate axis normal to the plane.
+    pub normal: usize,
+}
+
+impl Plane {
+    /// Scene name of the plane (`"e2e3"` for normal `e1`, …).
+    pub fn name(&self) -> &'static str {
+        ["e2e3", "e1e3", "e1e2"][self.normal]
+    }
+
+    /// Whether translation component `c` is a planar unknown (in-plane).
+    pub fn keeps_translation(&self, c: usize) -> bool {
+        c != self.normal
+    }
+
+    /// Whether rotation component `c` is a planar unknown (about the normal).
+    pub fn keeps_rotation(&self, c: usize) -> bool {
+        c == self.normal
+    }
+}
+
+/// A rigid link: a massless inextensible bar from a fixed pivot to a node, enforced by an
+/// augmented Lagrangian on the Green strain `g = ½(|x − p|² − ℓ²)/ℓ²` (DESIGN §6).
+///
+/// The energy `λg + ½κg²` is quadratic in `x`, so its mid-point force
+/// `(λ + κ(g_n + g_{n+1})/2) (x_{n+½} − p)/ℓ²` does exactly the work `Δ(λg + ½κg²)` and
+/// the energy–momentum property survives the constraint.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Link {
+    /// Node the bar holds.
+    pub node: usize,
+    /// Fixed pivot.
+    pub pivot: Vec3,
+    /// Bar length `ℓ` (the reference distance from pivot to node).
+    pub length: f64,
+    /// Penalty `κ` of the augmented Lagrangian.
+    pub penalty: f64,
+    /// Tolerance on `|g|` a step must reach before it is accepted.
+    pub tol: f64,
+}
+
+impl Link {
+    /// Green strain `g` of the bar with the node at `x`.
+    pub fn strain(&self, x: &Vec3) -> f64 {
+        let l2 = self.length * self.length;
+        0.5 * ((x - self.pivot).norm_squared() - l2) / l2
+    }
+
+    /// Stored energy `λg + ½κg²` with the node at `x`.
+    pub fn energy(&self, lambda: f64, x: &Vec3) -> f64 {
+        let g = self.strain(x);
+        lambda * g + 0.5 * self.penalty * g * g
+    }
+}
+
 /// A rod as the scene declared it (for reports and output grouping).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RodInfo {
@@ -137,6 +200,10 @@ pub struct Model {
     pub omega0: Vec<Vec3>,
     /// Rods in scene order.
     pub rods: Vec<RodInfo>,
+    /// Rigid links (augmented Lagrangian bars to fixed pivots).
+    pub links: Vec<Link>,
+    /// The plane of a planar model (`None`: full 3D).
+    pub planar: Option<Plane>,
 }
 
 impl Model {
@@ -149,6 +216,7 @@ impl Model {
     /// Momenta are then conserved by every scheme.
     pub fn is_free_flight(&self) -> bool {
         self.supports.iter().all(|s| !s.translation && !s.rotation)
+            && self.links.is_empty()
             && self.loads.is_empty()
             && self.gravity == Vec3::zeros()
     }

@@ -1,6 +1,7 @@
 //! Numbering of the Newton unknowns: per node `u` (3, unless the translation is
 //! supported), `θ` (3, unless clamped), `g` (3, only with translational dissipation and a
-//! free translation). Removed unknowns are zero.
+//! free translation). A planar model also drops the out-of-plane translation (and its
+//! `g`) and the two rotations about in-plane axes. Removed unknowns are zero.
 
 use crate::element::{g_idx, th_idx, u_idx, NDOF};
 use crate::model::Model;
@@ -8,15 +9,15 @@ use crate::model::Model;
 /// Marks an element-local unknown that does not exist.
 pub const NONE: usize = usize::MAX;
 
-/// Global index of the first component of each block of a node.
+/// Global index of each component of each block of a node ([`NONE`] where removed).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NodeDofs {
-    /// Start of `u`, or [`NONE`].
-    pub u: usize,
-    /// Start of `θ`, or [`NONE`].
-    pub th: usize,
-    /// Start of `g`, or [`NONE`].
-    pub g: usize,
+    /// Components of `u`.
+    pub u: [usize; 3],
+    /// Components of `θ`.
+    pub th: [usize; 3],
+    /// Components of `g`.
+    pub g: [usize; 3],
 }
 
 /// The unknown numbering of a model.
@@ -36,19 +37,22 @@ impl DofMap {
         let mut n = 0;
         let mut take = |free: bool| {
             if free {
-                n += 3;
-                n - 3
+                n += 1;
+                n - 1
             } else {
                 NONE
             }
         };
+        let plane = model.planar;
+        let in_plane = |c: usize| plane.is_none_or(|p| p.keeps_translation(c));
+        let about_normal = |c: usize| plane.is_none_or(|p| p.keeps_rotation(c));
         let nodes: Vec<NodeDofs> = model
             .supports
             .iter()
             .map(|s| NodeDofs {
-                u: take(!s.translation),
-                th: take(!s.rotation),
-                g: take(with_g && !s.translation),
+                u: std::array::from_fn(|c| take(!s.translation && in_plane(c))),
+                th: std::array::from_fn(|c| take(!s.rotation && about_normal(c))),
+                g: std::array::from_fn(|c| take(with_g && !s.translation && in_plane(c))),
             })
             .collect();
         let elements = model
@@ -59,10 +63,9 @@ impl DofMap {
                 for l in 0..2 {
                     let nd = nodes[e.nodes[l]];
                     for c in 0..3 {
-                        let add = |base: usize| if base == NONE { NONE } else { base + c };
-                        m[u_idx(l) + c] = add(nd.u);
-                        m[th_idx(l) + c] = add(nd.th);
-                        m[g_idx(l) + c] = add(nd.g);
+                        m[u_idx(l) + c] = nd.u[c];
+                        m[th_idx(l) + c] = nd.th[c];
+                        m[g_idx(l) + c] = nd.g[c];
                     }
                 }
                 m

@@ -3,6 +3,7 @@
 //! (DESIGN §4).
 
 pub mod dofs;
+mod links;
 pub mod params;
 pub mod run;
 pub mod state;

@@ -125,6 +125,9 @@ pub struct IntegratorParams {
     /// A step whose energy grows by more than `energy_tol · H_ref` (beyond the external
     /// work) is rejected as failed. Default `1e-9`.
     pub energy_tol: f64,
+    /// Rigid links: cap on augmented-Lagrangian rounds (solve, then `λ ← λ + κ g/2`)
+    /// per step before the step fails. Default 50.
+    pub max_link_rounds: usize,
 }
 
 impl IntegratorParams {
@@ -140,6 +143,7 @@ impl IntegratorParams {
             outer_tol: 1e-10,
             max_outer: 30,
             energy_tol: 1e-9,
+            max_link_rounds: 50,
         }
     }
 

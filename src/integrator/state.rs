@@ -21,6 +21,8 @@ pub struct State {
     pub vd: Vec<[[Vec3; 2]; 2]>,
     /// Raw strains `(Γ, Ω)` per element (cached: every step needs `ε_n`).
     pub eps: Vec<Vector6<f64>>,
+    /// Augmented-Lagrangian multiplier `λ` of each rigid link (the bar force factor).
+    pub lambda: Vec<f64>,
 }
 
 impl State {
@@ -46,6 +48,7 @@ impl State {
             d,
             vd,
             eps: Vec::new(),
+            lambda: vec![0.0; model.links.len()],
         };
         s.eps = (0..model.elements.len())
             .map(|e| strains6(&s.config(model, e), data[e].props.h))

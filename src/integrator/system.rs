@@ -9,6 +9,7 @@ use crate::element::{
     th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
+use crate::integrator::links;
 use crate::integrator::params::{IntegratorParams, Strategy};
 use crate::integrator::state::State;
 use crate::linsolve::SparseSolver;
@@ -42,6 +43,10 @@ pub struct StepReport {
     pub acc_trans: f64,
     /// Director acceleration norm.
     pub acc_rot: f64,
+    /// Largest `|g|` of the rigid links at the accepted state (0 without links).
+    pub max_link_g: f64,
+    /// Augmented-Lagrangian rounds the step took (1 without links).
+    pub link_rounds: usize,
 }
 
 /// How the dissipation scalars are treated in one Newton solve.
@@ -65,6 +70,8 @@ pub struct Simulation {
     slots: Vec<Vec<usize>>,
     /// Per node: slots of the diagonal entries of the (u,u), (u,g), (g,u), (g,g) blocks.
     node_slots: Vec<[[usize; 3]; 4]>,
+    /// Per rigid link: slots of its node's (u, u) block.
+    link_slots: Vec<[[usize; 3]; 3]>,
     /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
     row_kinds: Vec<usize>,
     state: State,
@@ -109,6 +116,14 @@ impl Simulation {
         for i in 0..dofs.n {
             pattern.push((i, i));
         }
+        let link_dofs: Vec<[usize; 3]> = model.links.iter().map(|l| dofs.nodes[l.node].u).collect();
+        for ix in &link_dofs {
+            for &i in ix.iter().filter(|&&i| i != NONE) {
+                for &j in ix.iter().filter(|&&j| j != NONE) {
+                    pattern.push((i, j));
+                }
+            }
+        }
         let solver = SparseSolver::new(dofs.n, &pattern)?;
         let slots = dofs
             .elements
@@ -129,11 +144,11 @@ impl Simulation {
             .nodes
             .iter()
             .map(|nd| {
-                let slot = |a: usize, b: usize, c: usize| {
-                    if a == NONE || b == NONE {
+                let slot = |a: [usize; 3], b: [usize; 3], c: usize| {
+                    if a[c] == NONE || b[c] == NONE {
                         NONE
                     } else {
-                        solver.slot(a + c, b + c)
+                        solver.slot(a[c], b[c])
                     }
                 };
                 [
@@ -142,6 +157,20 @@ impl Simulation {
                     std::array::from_fn(|c| slot(nd.g, nd.u, c)),
                     std::array::from_fn(|c| slot(nd.g, nd.g, c)),
                 ]
+            })
+            .collect();
+        let link_slots = link_dofs
+            .iter()
+            .map(|ix| {
+                std::array::from_fn(|c| {
+                    std::array::from_fn(|d| {
+                        if ix[c] == NONE || ix[d] == NONE {
+                            NONE
+                        } else {
+                            solver.slot(ix[c], ix[d])
+                        }
+                    })
+                })
             })
             .collect();
         let state = State::initial(&model, &data);
@@ -160,6 +189,7 @@ impl Simulation {
             solver,
             slots,
             node_slots,
+            link_slots,
             state,
             inv,
             trans_diss,
@@ -280,28 +310,16 @@ impl Simulation {
         // Nodal terms: point masses and external loads.
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
             let m = self.model.point_mass[a];
-            if nd.u != NONE {
-                let u = Vec3::new(q[nd.u], q[nd.u + 1], q[nd.u + 2]);
-                let g = if nd.g != NONE {
-                    Vec3::new(q[nd.g], q[nd.g + 1], q[nd.g + 2])
-                } else {
-                    Vec3::zeros()
-                };
-                let inertia = m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt;
-                for c in 0..3 {
-                    r[nd.u + c] += inertia[c] - self.force[a][c];
-                }
-                scale[0] = scale[0].max(inertia.amax()).max(self.force[a].amax());
-                if nd.g != NONE {
-                    for c in 0..3 {
-                        r[nd.g + c] += m * g[c];
-                    }
-                    scale[2] = scale[2].max((m * g).amax());
-                }
-                if tangent && m != 0.0 {
-                    let s = self.node_slots[a];
-                    let vals = self.solver.values_mut();
-                    for c in 0..3 {
+            let u = gather3(q, &nd.u);
+            let g = gather3(q, &nd.g);
+            let inertia = m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt;
+            let s = self.node_slots[a];
+            for c in 0..3 {
+                if nd.u[c] != NONE {
+                    r[nd.u[c]] += inertia[c] - self.force[a][c];
+                    scale[0] = scale[0].max(inertia[c].abs()).max(self.force[a][c].abs());
+                    if tangent && m != 0.0 {
+                        let vals = self.solver.values_mut();
                         vals[s[0][c]] += 2.0 * m / (dt * dt);
                         if s[1][c] != NONE {
                             vals[s[1][c]] += -2.0 * m / dt;
@@ -309,12 +327,40 @@ impl Simulation {
                         }
                     }
                 }
-            }
-            if nd.th != NONE {
-                for c in 0..3 {
-                    r[nd.th + c] -= self.moment[a][c];
+                if nd.g[c] != NONE {
+                    r[nd.g[c]] += m * g[c];
+                    scale[2] = scale[2].max((m * g[c]).abs());
                 }
-                scale[1] = scale[1].max(self.moment[a].amax());
+                if nd.th[c] != NONE {
+                    r[nd.th[c]] -= self.moment[a][c];
+                    scale[1] = scale[1].max(self.moment[a][c].abs());
+                }
+            }
+        }
+        // Rigid links: the mid-point bar force (exactly energy-consistent, see `Link`).
+        for (i, link) in self.model.links.iter().enumerate() {
+            let a = link.node;
+            let ix = self.dofs.nodes[a].u;
+            let bar = links::bar_terms(
+                link,
+                self.state.lambda[i],
+                &self.state.r[a],
+                &gather3(q, &ix),
+            );
+            for c in 0..3 {
+                if ix[c] == NONE {
+                    continue;
+                }
+                r[ix[c]] += bar.force[c];
+                scale[0] = scale[0].max(bar.force[c].abs());
+                if tangent {
+                    let vals = self.solver.values_mut();
+                    for d in 0..3 {
+                        if ix[d] != NONE {
+                            vals[self.link_slots[i][c][d]] += bar.stiffness[(c, d)];
+                        }
+                    }
+                }
             }
         }
         let mut worst: f64 = 0.0;
@@ -332,9 +378,9 @@ impl Simulation {
     fn row_kinds(dofs: &DofMap) -> Vec<usize> {
         let mut k = vec![0; dofs.n];
         for nd in &dofs.nodes {
-            for (base, kind) in [(nd.u, 0), (nd.th, 1), (nd.g, 2)] {
-                if base != NONE {
-                    k[base..base + 3].iter_mut().for_each(|x| *x = kind);
+            for (idx, kind) in [(nd.u, 0), (nd.th, 1), (nd.g, 2)] {
+                for i in idx.into_iter().filter(|&i| i != NONE) {
+                    k[i] = kind;
                 }
             }
         }
@@ -357,7 +403,11 @@ impl Simulation {
                     residuals: history,
                 });
             }
-            let stalled = it >= 3 && res <= 10.0 * tol && res >= 0.5 * history[it - 1];
+            // Newton converges quadratically: from a residual of 1e4·tol the next one is
+            // far below tol. A residual that stops falling there sits on its f64 floor
+            // (stiff members under small loads: the arch at t ≈ 0), so accept it; the energy
+            // checks that follow still apply.
+            let stalled = it >= 2 && res <= ROUNDOFF_RESIDUAL * tol && res >= 0.5 * history[it - 1];
             if res <= tol || stalled {
                 return Ok((it, history));
             }
@@ -426,14 +476,8 @@ impl Simulation {
     fn external_work(&self, q: &[f64]) -> f64 {
         let mut w = 0.0;
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
-            for c in 0..3 {
-                if nd.u != NONE {
-                    w += self.force[a][c] * q[nd.u + c];
-                }
-                if nd.th != NONE {
-                    w += self.moment[a][c] * q[nd.th + c];
-                }
-            }
+            w += self.force[a].dot(&gather3(q, &nd.u));
+            w += self.moment[a].dot(&gather3(q, &nd.th));
         }
         w
     }
@@ -491,24 +535,31 @@ impl Simulation {
             reason: "no attempt".into(),
             residuals: vec![],
         };
-        let dissipative = self.params.scheme.is_dissipative();
+        let (lambda0, inv0) = (self.state.lambda.clone(), self.inv);
         for pred in predictors {
             let mut q = pred;
-            let attempt = if !dissipative {
-                self.frozen
-                    .iter_mut()
-                    .for_each(|s| *s = FrozenScalars::default());
-                self.solve_once(&mut q, Mode::Frozen, &mut total_iters)
-            } else {
-                match self.params.strategy {
-                    Strategy::Monolithic => {
-                        self.solve_once(&mut q, Mode::Consistent, &mut total_iters)
-                    }
-                    Strategy::Staggered => self.solve_staggered(&mut q, &mut total_iters),
-                }
-            };
-            match attempt {
-                Ok((next, inv, diss, w, outer, res, consistent)) => {
+            let mut multipliers = links::MultiplierIteration::default();
+            // Augmented-Lagrangian rounds (a single round without links): each round is a
+            // complete, checked solve with the multipliers fixed, so the energy identity of
+            // every round is exact; the multipliers move between rounds until every link
+            // holds its tolerance.
+            for round in 1..=self.params.max_link_rounds.max(1) {
+                let (next, inv, diss, w, outer, res, consistent) =
+                    match self.solve_with_fixed_multipliers(&mut q, &mut total_iters) {
+                        Ok(x) => x,
+                        Err(f) => {
+                            last = f;
+                            break;
+                        }
+                    };
+                let g1: Vec<f64> = self
+                    .model
+                    .links
+                    .iter()
+                    .map(|l| l.strain(&next.r[l.node]))
+                    .collect();
+                let max_link_g = g1.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+                if multipliers.update(&self.model.links, &g1, &mut self.state.lambda) {
                     let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
                     self.state = next;
                     self.inv = inv;
@@ -522,12 +573,43 @@ impl Simulation {
                         external_work: w,
                         acc_trans: at,
                         acc_rot: ar,
+                        max_link_g,
+                        link_rounds: round,
                     });
                 }
-                Err(f) => last = f,
+                // H_n with the new multipliers: the next round's energy identity is
+                // measured against it.
+                self.inv = invariants(&self.model, &self.data, &self.state);
+                last = StepFailure {
+                    reason: format!(
+                        "augmented Lagrangian: links still violated after {round} rounds (max |g| = {max_link_g:.3e})"
+                    ),
+                    residuals: vec![res],
+                };
             }
+            self.state.lambda.clone_from(&lambda0);
+            self.inv = inv0;
         }
         Err(last)
+    }
+
+    /// One checked solve of the step with the link multipliers held fixed.
+    #[allow(clippy::type_complexity)]
+    fn solve_with_fixed_multipliers(
+        &mut self,
+        q: &mut [f64],
+        total_iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
+        if !self.params.scheme.is_dissipative() {
+            self.frozen
+                .iter_mut()
+                .for_each(|s| *s = FrozenScalars::default());
+            return self.solve_once(q, Mode::Frozen, total_iters);
+        }
+        match self.params.strategy {
+            Strategy::Monolithic => self.solve_once(q, Mode::Consistent, total_iters),
+            Strategy::Staggered => self.solve_staggered(q, total_iters),
+        }
     }
 
     #[allow(clippy::type_complexity)]
@@ -628,6 +710,16 @@ impl Simulation {
     pub fn set_frozen(&mut self, s: FrozenScalars) {
         self.frozen.iter_mut().for_each(|x| *x = s);
     }
+}
+
+/// A Newton residual that stops falling below this multiple of the tolerance is at its
+/// round-off floor (see `newton`).
+const ROUNDOFF_RESIDUAL: f64 = 1e4;
+
+/// The components `idx` of `q` as a vector (zero where removed).
+#[inline]
+fn gather3(q: &[f64], idx: &[usize; 3]) -> Vec3 {
+    Vec3::from_fn(|c, _| if idx[c] == NONE { 0.0 } else { q[idx[c]] })
 }
 
 /// Kind of an element-local row: 0 = u, 1 = θ, 2 = g.

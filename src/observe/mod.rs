@@ -15,7 +15,7 @@ use crate::model::{Model, Vec3};
 pub struct Invariants {
     /// Kinetic energy.
     pub kinetic: f64,
-    /// Stored energy.
+    /// Stored energy (strain energy of the rods and the `λg + ½κg²` of rigid links).
     pub potential: f64,
     /// Linear momentum.
     pub l: Vec3,
@@ -60,6 +60,9 @@ pub fn invariants(model: &Model, data: &[ElementData], state: &State) -> Invaria
         );
         out.potential +=
             0.5 * p.h * (g.dot(&p.c_gamma.component_mul(&g)) + o.dot(&(p.c_omega * o)));
+    }
+    for (link, &lambda) in model.links.iter().zip(&state.lambda) {
+        out.potential += link.energy(lambda, &state.r[link.node]);
     }
     for (a, &m) in model.point_mass.iter().enumerate() {
         if m != 0.0 {

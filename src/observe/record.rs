@@ -36,6 +36,8 @@ pub struct StepRecord {
     pub outer_iters: usize,
     /// Final residual norm ‖R‖∞ of the step.
     pub residual: f64,
+    /// Largest rigid-link strain `|g|` at this level (0 without links).
+    pub max_link_g: f64,
 }
 
 /// How a run ended.

@@ -28,6 +28,7 @@ pub const HISTORY_COLUMNS: &[&str] = &[
     "newton_iters",
     "outer_iters",
     "residual",
+    "max_link_g",
 ];
 
 /// Streams `history.csv`: the header is written on [`create`](Self::create), one row per
@@ -113,6 +114,8 @@ fn format_row(r: &StepRecord, out: &mut String) {
     }
     let _ = write!(out, ",{},{},", r.newton_iters, r.outer_iters);
     fmt_f64(r.residual, out);
+    out.push(',');
+    fmt_f64(r.max_link_g, out);
     out.push('\n');
 }
 
@@ -200,6 +203,7 @@ fn parse_row(line: &str) -> Result<StepRecord, String> {
         newton_iters: int(15)?,
         outer_iters: int(16)?,
         residual: flt(17)?,
+        max_link_g: flt(18)?,
     })
 }
 
@@ -223,6 +227,7 @@ mod tests {
             newton_iters: 3 + step,
             outer_iters: 1,
             residual: 1.234e-12 * seed,
+            max_link_g: 3e-11 * seed,
         }
     }
 
@@ -243,6 +248,7 @@ mod tests {
             r.acc_trans,
             r.acc_rot,
             r.residual,
+            r.max_link_g,
         ]
         .iter()
         .map(|v| v.to_bits())

@@ -8,13 +8,13 @@ use std::fmt::Display;
 use nalgebra::Matrix2;
 
 use super::raw::{
-    RawInitialVelocity, RawIntegrator, RawLoad, RawMaterial, RawRod, RawScene, RawSection,
+    RawInitialVelocity, RawIntegrator, RawLink, RawLoad, RawMaterial, RawRod, RawScene, RawSection,
 };
 use super::span::{Doc, KeyPath};
 use super::{fmt_num, key_name, Scene, SceneError};
 use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
 use crate::model::{
-    Element, ElementProps, Mat3, Model, NodalLoad, RodInfo, Support, TimeTable, Vec3,
+    Element, ElementProps, Link, Mat3, Model, NodalLoad, Plane, RodInfo, Support, TimeTable, Vec3,
 };
 
 type Result<T> = std::result::Result<T, SceneError>;
@@ -609,6 +609,7 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
     }
     p.max_iter = cx.count(&k("max_iter"), r.max_iter, p.max_iter)?;
     p.max_outer = cx.count(&k("max_outer"), r.max_outer, p.max_outer)?;
+    p.max_link_rounds = cx.count(&k("max_link_rounds"), r.max_link_rounds, p.max_link_rounds)?;
     let output_every = cx.count(&k("output_every"), r.output_every, 1)?;
     Ok((p, output_every))
 }
@@ -817,6 +818,144 @@ fn initial_velocities(
     Ok((velocity0, omega0))
 }
 
+/// Default penalty `κ` of a `[[link]]` (DESIGN §6: 1e5 for the mechanism).
+const LINK_PENALTY: f64 = 1e5;
+/// Default tolerance on a link's `|g|`.
+const LINK_TOL: f64 = 1e-10;
+
+fn link(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLink) -> Result<Link> {
+    let pp = path.key("pivot");
+    let pivot = cx.required(&pp, cx.opt_vec3(&pp, &l.pivot)?)?;
+    let node = node_at(cx, nodes, &path.key("at"), &l.at)?;
+    let length = (nodes.nodes[node] - pivot).norm();
+    if length <= nodes.tol {
+        return Err(cx.err(
+            &pp,
+            "the pivot coincides with the linked node (zero length)",
+        ));
+    }
+    let penalty = match l.penalty {
+        Some(k) => cx.positive(&path.key("penalty"), k)?,
+        None => LINK_PENALTY,
+    };
+    let tol = match l.tol {
+        Some(t) => cx.positive(&path.key("tol"), t)?,
+        None => LINK_TOL,
+    };
+    Ok(Link {
+        node,
+        pivot,
+        length,
+        penalty,
+        tol,
+    })
+}
+
+fn plane(cx: &Ctx, path: &KeyPath, name: &str) -> Result<Plane> {
+    let normal = match name {
+        "e2e3" | "e3e2" => 0,
+        "e1e3" | "e3e1" => 1,
+        "e1e2" | "e2e1" => 2,
+        other => {
+            return Err(cx.err(
+                path,
+                format!("unknown plane `{other}` (expected \"e2e3\", \"e1e3\" or \"e1e2\")"),
+            ))
+        }
+    };
+    Ok(Plane { normal })
+}
+
+/// A planar scene must be planar: every point, velocity, load, the gravity and the links
+/// in the plane, every spin and moment about its normal, and the normal a principal axis
+/// of every section (so that in-plane bending does not couple out of the plane). Then
+/// removing the out-of-plane unknowns is exact, not an approximation.
+#[allow(clippy::too_many_arguments)]
+fn check_planar(
+    cx: &Ctx,
+    p: Plane,
+    nodes: &NodeSet,
+    elements: &[Element],
+    loads: &[NodalLoad],
+    links: &[Link],
+    velocity0: &[Vec3],
+    omega0: &[Vec3],
+    gravity: &Vec3,
+) -> Result<()> {
+    let root = KeyPath::root();
+    let k = p.normal;
+    let off = |v: &Vec3| v[k].abs() > MERGE_TOL * v.norm().max(1.0);
+    let tilted = |v: &Vec3| (0..3).any(|c| c != k && v[c].abs() > MERGE_TOL * v.norm().max(1.0));
+    let why = |what: String| format!("scene is planar = \"{}\" but {what}", p.name());
+    let plane_coord = nodes.nodes.first().map_or(0.0, |x| x[k]);
+    let size = nodes.tol / MERGE_TOL;
+    for (a, x) in nodes.nodes.iter().enumerate() {
+        if (x[k] - plane_coord).abs() > MERGE_TOL * size.max(1.0) {
+            return Err(cx.err(
+                &root.key("planar"),
+                why(format!("node {a} at {} is out of the plane", fmt_v(x))),
+            ));
+        }
+    }
+    for (e, el) in elements.iter().enumerate() {
+        let tri = el.ref_triad[0];
+        let n = tri.transpose() * Vec3::from_fn(|c, _| if c == k { 1.0 } else { 0.0 });
+        // The normal in section coordinates must be d1 or d2 (n3 = 0 holds: in plane).
+        let sec = &el.props;
+        let principal = n[0].abs() < 1e-9 || n[1].abs() < 1e-9;
+        let isotropic = sec.c_omega[(0, 1)] == 0.0
+            && sec.c_omega[(0, 0)] == sec.c_omega[(1, 1)]
+            && sec.c_gamma[0] == sec.c_gamma[1]
+            && sec.i_rho[(0, 1)] == 0.0
+            && sec.i_rho[(0, 0)] == sec.i_rho[(1, 1)];
+        if !(principal && sec.c_omega[(0, 1)] == 0.0 && sec.i_rho[(0, 1)] == 0.0) && !isotropic {
+            return Err(cx.err(
+                &root.key("rod").idx(el.rod).key("d1"),
+                why(format!(
+                    "element {e}: the plane's normal is not a principal axis of the section (give d1 along or across the normal)"
+                )),
+            ));
+        }
+    }
+    if off(gravity) {
+        return Err(cx.err(
+            &root.key("gravity"),
+            why("gravity has an out-of-plane component".into()),
+        ));
+    }
+    for (i, l) in loads.iter().enumerate() {
+        if off(&l.force) {
+            return Err(cx.err(
+                &root.key("load").idx(i).key("force"),
+                why("the force leaves the plane".into()),
+            ));
+        }
+        if tilted(&l.moment) {
+            return Err(cx.err(
+                &root.key("load").idx(i).key("moment"),
+                why("the moment is not about the normal".into()),
+            ));
+        }
+    }
+    for (i, l) in links.iter().enumerate() {
+        if (l.pivot[k] - plane_coord).abs() > MERGE_TOL * size.max(1.0) {
+            return Err(cx.err(
+                &root.key("link").idx(i).key("pivot"),
+                why("the pivot is out of the plane".into()),
+            ));
+        }
+    }
+    for (a, (v, w)) in velocity0.iter().zip(omega0).enumerate() {
+        if off(v) || tilted(w) {
+            return Err(cx.err(
+                &root.key("initial_velocity"),
+                why(format!("node {a} starts with v = {} and omega = {} (must stay in the plane and spin about its normal)", fmt_v(v), fmt_v(w))),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// A supported node cannot start moving in the directions its support fixes.
 fn check_supported(
     cx: &Ctx,
@@ -951,6 +1090,23 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
 
     let (velocity0, omega0) = initial_velocities(&cx, &raw.initial_velocity, &nodes, &supports)?;
 
+    let links = raw
+        .link
+        .iter()
+        .enumerate()
+        .map(|(i, l)| link(&cx, &nodes, &root.key("link").idx(i), l))
+        .collect::<Result<Vec<_>>>()?;
+    let planar = match &raw.planar {
+        None => None,
+        Some(name) => {
+            let p = plane(&cx, &root.key("planar"), name)?;
+            check_planar(
+                &cx, p, &nodes, &elements, &loads, &links, &velocity0, &omega0, &gravity,
+            )?;
+            Some(p)
+        }
+    };
+
     let model = Model {
         nodes: nodes.nodes,
         elements,
@@ -961,6 +1117,8 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         velocity0,
         omega0,
         rods,
+        links,
+        planar,
     };
     Ok(Scene {
         name,

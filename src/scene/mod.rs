@@ -67,6 +67,22 @@ static BUILTINS: &[BuiltinScene] = &[
         description: "clamped 50-element 3D cantilever, tip kicked obliquely (speed benchmark)",
         toml: include_str!("../../scenes/cantilever.toml"),
     },
+    BuiltinScene {
+        name: "arch",
+        description: "shallow arch snap-through under a ramped apex load (paper §5.2, DESIGN §6.2)",
+        toml: include_str!("../../scenes/arch.toml"),
+    },
+    BuiltinScene {
+        name: "mechanism",
+        description:
+            "plane four-bar: flexible coupler, rigid links, point masses (paper §5.3, square)",
+        toml: include_str!("../../scenes/mechanism.toml"),
+    },
+    BuiltinScene {
+        name: "mechanism_hexagon",
+        description: "plane four-bar, half-hexagon reading that bends the coupler (paper §5.3)",
+        toml: include_str!("../../scenes/mechanism_hexagon.toml"),
+    },
 ];
 
 /// Everything that can go wrong loading a scene.

@@ -13,6 +13,7 @@ pub(crate) struct RawScene {
     pub name: Option<String>,
     pub description: Option<String>,
     pub gravity: Option<Vec<f64>>,
+    pub planar: Option<String>,
     #[serde(default)]
     pub material: BTreeMap<String, RawMaterial>,
     #[serde(default)]
@@ -27,6 +28,8 @@ pub(crate) struct RawScene {
     pub point_mass: Vec<RawPointMass>,
     #[serde(default)]
     pub load: Vec<RawLoad>,
+    #[serde(default)]
+    pub link: Vec<RawLink>,
     #[serde(default)]
     pub initial_velocity: Vec<RawInitialVelocity>,
     pub integrator: Option<RawIntegrator>,
@@ -105,6 +108,16 @@ pub(crate) struct RawLoad {
     pub factor: Option<Vec<f64>>,
 }
 
+/// `[[link]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawLink {
+    pub pivot: Option<Vec<f64>>,
+    pub at: Option<Vec<f64>>,
+    pub penalty: Option<f64>,
+    pub tol: Option<f64>,
+}
+
 /// `[[initial_velocity]]`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -138,5 +151,6 @@ pub(crate) struct RawIntegrator {
     pub outer_tol: Option<f64>,
     pub max_outer: Option<i64>,
     pub energy_tol: Option<f64>,
+    pub max_link_rounds: Option<i64>,
     pub output_every: Option<i64>,
 }

@@ -74,6 +74,8 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         velocity0: vec![Vec3::zeros(); n],
         omega0: vec![Vec3::zeros(); n],
         rods: infos,
+        links: vec![],
+        planar: None,
     }
 }
 
