@@ -25,6 +25,7 @@
 // DESIGN §2–4 term by term; iterator rewrites would hide that correspondence.
 #![allow(clippy::needless_range_loop)]
 
+pub mod driver;
 pub mod element;
 pub mod integrator;
 pub mod linsolve;
@@ -32,4 +33,5 @@ pub mod math;
 pub mod model;
 pub mod observe;
 pub mod output;
+pub mod reproduce;
 pub mod scene;

@@ -4,13 +4,13 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 
-use cosserat::integrator::run::{run, RunOutcome};
-use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
-use cosserat::observe::record::{RunStatus, RunSummary, StepRecord};
-use cosserat::output::{plot_energy, plot_momenta, write_summary, HistoryWriter, Progress};
+use cosserat::driver::{run_to_dir, RunOptions};
+use cosserat::integrator::{IntegratorParams, Scheme, Strategy};
+use cosserat::observe::record::{RunStatus, RunSummary};
+use cosserat::reproduce::reproduce;
 use cosserat::scene::{builtin_scenes, load_scene, Scene};
 
 /// Nonlinear dynamics of geometrically exact (Cosserat) rods with energy-momentum and
@@ -35,6 +35,19 @@ enum Command {
     },
     /// List the built-in scenes.
     Scenes,
+    /// Run the paper's examples (frame, arch, mechanism) into DIR with figures and a
+    /// generated DIR/REPORT.md.
+    Reproduce {
+        /// Output directory.
+        #[arg(long, default_value = "out/reproduce")]
+        out: PathBuf,
+        /// Shorter runs (arch to t = 1200, mechanisms to t = 6 at Δt = 0.05 only).
+        #[arg(long)]
+        quick: bool,
+        /// Skip the ParaView (VTK) files, which are on by default.
+        #[arg(long)]
+        no_vtk: bool,
+    },
 }
 
 #[derive(clap::Args, Debug)]
@@ -63,6 +76,12 @@ struct RunArgs {
     /// Write every N-th step to history.csv (default: the scene's `output_every`).
     #[arg(long)]
     every: Option<usize>,
+    /// Also write ParaView files: `vtk/NAME_STEP.vtu` at every saved step and `vtk/NAME.pvd`.
+    #[arg(long)]
+    vtk: bool,
+    /// Draw `snapshots.png` with the deformed rods every N steps.
+    #[arg(long, value_name = "N")]
+    snapshots: Option<usize>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -90,9 +109,12 @@ fn main() -> ExitCode {
             strategy: None,
             out: Some(PathBuf::from("out/frame")),
             every: None,
+            vtk: false,
+            snapshots: Some(10),
         }),
         Some(Command::Run(a)) => run_command(a),
         Some(Command::Check { scene }) => check_command(&scene),
+        Some(Command::Reproduce { out, quick, no_vtk }) => reproduce_command(&out, quick, !no_vtk),
         Some(Command::Scenes) => {
             for s in builtin_scenes() {
                 println!("{:<12} {}", s.name, s.description);
@@ -182,61 +204,39 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         .out
         .clone()
         .unwrap_or_else(|| Path::new("out").join(&scene.name));
-    std::fs::create_dir_all(&out)
-        .with_context(|| format!("cannot create output directory {}", out.display()))?;
     let every = a.every.unwrap_or(scene.output_every).max(1);
-    let mut sim =
-        Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
-    let outcome = simulate(&mut sim, &out, every, &scene.name)?;
-    let summary = summarize(&scene, &sim, &outcome);
-    write_summary(&out.join("summary.json"), &summary)?;
-    print_summary(&summary, &out);
+    let opts = RunOptions {
+        every,
+        vtk_every: a.vtk.then_some(every),
+        snapshot_every: a.snapshots,
+        label: scene.name.clone(),
+        length_unit: "m".into(),
+    };
+    let result = run_to_dir(&scene, params, &out, &opts)?;
+    print_summary(&result.summary, &out);
     Ok(ExitCode::SUCCESS)
 }
 
-/// Runs the time loop, streaming history.csv, then draws the charts from what was
-/// written (also after a failed step: every accepted level is kept).
-fn simulate(sim: &mut Simulation, out: &Path, every: usize, label: &str) -> Result<RunOutcome> {
-    let mut history = HistoryWriter::create(&out.join("history.csv"))?;
-    let mut records: Vec<StepRecord> = Vec::new();
-    let progress = Progress::new(sim.params().n_steps() as u64, label);
-    let outcome = run(
-        sim,
-        every,
-        |rec: &StepRecord, _sim: &Simulation| -> Result<()> {
-            history.push(rec)?;
-            progress.step(rec.t, rec.newton_iters);
-            records.push(rec.clone());
-            Ok(())
-        },
-    )?;
-    progress.finish();
-    let title = format!("{label}: {}", sim.params().scheme.name());
-    plot_energy(&out.join("energy.png"), &records, &title)?;
-    plot_momenta(&out.join("momenta.png"), &records, &title)?;
-    Ok(outcome)
-}
-
-fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
-    RunSummary {
-        scene: scene.source.clone(),
-        status: o.status,
-        t_reached: o.t_reached,
-        steps: o.steps,
-        reason: o.reason.clone(),
-        failed_step_residuals: o.failed_step_residuals.clone(),
-        wall_s: o.wall_s,
-        scheme: sim.params().scheme.name().to_string(),
-        params: *sim.params(),
-        nodes: sim.model().n_nodes(),
-        elements: sim.model().elements.len(),
-        dofs: sim.n_dofs(),
-        newton_iters_total: o.newton_iters_total,
-        max_rel_dl: o.max_rel_dl,
-        max_rel_dj: o.max_rel_dj,
-        energy_initial: o.energy_initial,
-        energy_final: o.energy_final,
-    }
+fn reproduce_command(out: &Path, quick: bool, vtk: bool) -> Result<ExitCode> {
+    let start = std::time::Instant::now();
+    let done = reproduce(out, quick, vtk, |f| {
+        let sm = &f.result.summary;
+        let status = match sm.status {
+            RunStatus::Completed => "completed".to_string(),
+            RunStatus::Failed => format!("FAILED at t = {:.4}", sm.t_reached),
+        };
+        println!(
+            "{:<18} {:<22} {status:<24} H {:.6e} → {:.6e}  ({:.2} s)",
+            f.run.scene, f.run.folder, sm.energy_initial, sm.energy_final, sm.wall_s
+        );
+    })?;
+    println!(
+        "{} runs in {:.1} s; report: {}",
+        done.len(),
+        start.elapsed().as_secs_f64(),
+        out.join("REPORT.md").display()
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 fn print_summary(s: &RunSummary, out: &Path) {

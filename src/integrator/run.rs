@@ -33,6 +33,8 @@ pub struct RunOutcome {
     pub energy_final: f64,
     /// Wall time of the loop.
     pub wall_s: f64,
+    /// Largest rigid-link strain `|g|` over the accepted steps.
+    pub max_link_g: f64,
 }
 
 /// The record of the current level of `sim`.
@@ -115,6 +117,7 @@ pub fn run<E>(
         energy_initial: inv0.total(),
         energy_final: inv0.total(),
         wall_s: 0.0,
+        max_link_g: 0.0,
     };
     let mut prev = inv0;
     let every = every.max(1);
@@ -130,6 +133,7 @@ pub fn run<E>(
                 out.max_rel_dl = max_dl / l_ref;
                 out.max_rel_dj = max_dj / j_ref;
                 out.newton_iters_total += rep.newton_iters;
+                out.max_link_g = out.max_link_g.max(rep.max_link_g);
                 out.steps = step;
                 out.t_reached = sim.state().t;
                 out.energy_final = inv.total();

@@ -87,4 +87,6 @@ pub struct RunSummary {
     pub energy_initial: f64,
     /// H at the last accepted step.
     pub energy_final: f64,
+    /// Largest rigid-link strain `|g|` over the accepted steps (0 without links).
+    pub max_link_g: f64,
 }

@@ -8,12 +8,16 @@ use std::path::PathBuf;
 mod history;
 mod plot;
 mod progress;
+mod snapshot;
 mod summary;
+mod vtk;
 
 pub use history::{read_history, HistoryWriter, HISTORY_COLUMNS};
-pub use plot::{plot_energy, plot_momenta};
+pub use plot::{plot_accelerations, plot_comparison, plot_energy, plot_momenta, LabelledHistory};
 pub use progress::Progress;
+pub use snapshot::{plot_snapshots, Snapshot};
 pub use summary::write_summary;
+pub use vtk::VtkSeries;
 
 /// Errors of the output writers. Every variant names the file it concerns.
 #[derive(Debug, thiserror::Error)]

@@ -25,7 +25,7 @@ const MOMENTA_SIZE: (u32, u32) = (1000, 900);
 /// The smallest y range drawn, relative to the largest magnitude on the axis.
 pub const REL_MIN_SPAN: f64 = 1e-6;
 
-const FONT: &str = "sans-serif";
+pub(super) const FONT: &str = "sans-serif";
 const TITLE_PX: u32 = 28;
 const DESC_PX: u32 = 21;
 const LABEL_PX: u32 = 18;
@@ -38,7 +38,7 @@ static FONT_ONCE: Once = Once::new();
 static FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// Registers the embedded DejaVu Sans as the "sans-serif" family (once per process).
-fn ensure_font() {
+pub(super) fn ensure_font() {
     FONT_ONCE.call_once(|| {
         if plotters::style::register_font(FONT, FontStyle::Normal, FONT_BYTES).is_err() {
             // The font is embedded at compile time; this cannot fail for a valid file.
@@ -47,16 +47,16 @@ fn ensure_font() {
     });
 }
 
-const BLACK_ISH: RGBColor = RGBColor(20, 20, 20);
-const RED: RGBColor = RGBColor(214, 39, 40);
-const BLUE: RGBColor = RGBColor(31, 119, 180);
-const ORANGE: RGBColor = RGBColor(255, 127, 14);
-const GREEN: RGBColor = RGBColor(44, 160, 44);
+pub(super) const BLACK_ISH: RGBColor = RGBColor(20, 20, 20);
+pub(super) const RED: RGBColor = RGBColor(214, 39, 40);
+pub(super) const BLUE: RGBColor = RGBColor(31, 119, 180);
+pub(super) const ORANGE: RGBColor = RGBColor(255, 127, 14);
+pub(super) const GREEN: RGBColor = RGBColor(44, 160, 44);
 
 /// One line of a chart: its legend label, colour and (t, value) samples, which may hold
 /// non-finite values.
 struct Series {
-    label: &'static str,
+    label: String,
     color: RGBColor,
     width: u32,
     points: Vec<(f64, f64)>,
@@ -64,14 +64,14 @@ struct Series {
 
 impl Series {
     fn new(
-        label: &'static str,
+        label: &str,
         color: RGBColor,
         width: u32,
         records: &[StepRecord],
         f: impl Fn(&StepRecord) -> f64,
     ) -> Self {
         Self {
-            label,
+            label: label.to_string(),
             color,
             width,
             points: records.iter().map(|r| (r.t, f(r))).collect(),
@@ -286,6 +286,75 @@ pub fn plot_momenta(path: &Path, records: &[StepRecord], title: &str) -> Result<
         ],
     };
     render(path, MOMENTA_SIZE, title, &[linear, angular])
+}
+
+/// Draws `accelerations.png` (paper fig. 11): the L2 norms over the rods of the
+/// translational acceleration `(v_{n+1} − v_n)/Δt` and of the director acceleration, in two
+/// stacked panels.
+pub fn plot_accelerations(
+    path: &Path,
+    records: &[StepRecord],
+    title: &str,
+) -> Result<(), OutputError> {
+    // Row 0 is the initial state: no step has ended there, so it has no acceleration.
+    let steps = records.get(1..).unwrap_or(&[]);
+    let trans = Panel {
+        quantity: "‖a‖ translational",
+        unit: "m/s²",
+        series: vec![Series::new(
+            "‖(v_n+1 − v_n)/Δt‖ (L2 over the rods)",
+            RED,
+            2,
+            steps,
+            |r| r.acc_trans,
+        )],
+    };
+    let rot = Panel {
+        quantity: "‖a‖ directors",
+        unit: "1/s²",
+        series: vec![Series::new(
+            "‖(ḋ_n+1 − ḋ_n)/Δt‖ (L2 over the rods)",
+            BLUE,
+            2,
+            steps,
+            |r| r.acc_rot,
+        )],
+    };
+    render(path, MOMENTA_SIZE, title, &[trans, rot])
+}
+
+/// One run's history for [`plot_comparison`].
+pub struct LabelledHistory<'a> {
+    /// Legend label (e.g. "EM", "EDMC-2 α = 1").
+    pub label: String,
+    /// The run's records.
+    pub records: &'a [StepRecord],
+}
+
+/// Overlays one quantity of several runs (e.g. the total energy of EM and EDMC-2): one
+/// panel per entry of `quantities` (`(name, unit, accessor)`), one line per run.
+#[allow(clippy::type_complexity)]
+pub fn plot_comparison(
+    path: &Path,
+    title: &str,
+    runs: &[LabelledHistory<'_>],
+    quantities: &[(&'static str, &'static str, &dyn Fn(&StepRecord) -> f64)],
+) -> Result<(), OutputError> {
+    const PALETTE: [RGBColor; 5] = [BLACK_ISH, RED, BLUE, ORANGE, GREEN];
+    let panels: Vec<Panel> = quantities
+        .iter()
+        .map(|(q, unit, f)| Panel {
+            quantity: q,
+            unit,
+            series: runs
+                .iter()
+                .enumerate()
+                .map(|(i, r)| Series::new(&r.label, PALETTE[i % PALETTE.len()], 2, r.records, f))
+                .collect(),
+        })
+        .collect();
+    let height = 120 + 330 * panels.len() as u32;
+    render(path, (1000, height), title, &panels)
 }
 
 /// Chooses the backend by the file extension (`.svg` → SVG, anything else → bitmap, whose
@@ -555,7 +624,7 @@ fn draw_legend<DB: DrawingBackend>(
         .pos(Pos::new(HPos::Left, VPos::Center));
     let mut widths = Vec::with_capacity(series.len());
     for s in series {
-        widths.push(area.estimate_text_size(s.label, &font)?.0 as i32);
+        widths.push(area.estimate_text_size(&s.label, &font)?.0 as i32);
     }
     let total: i32 = widths.iter().map(|w| SAMPLE + GAP + w).sum::<i32>()
         + SPACING * (series.len() as i32 - 1).max(0);
@@ -566,7 +635,7 @@ fn draw_legend<DB: DrawingBackend>(
         let style = ShapeStyle::from(&s.color).stroke_width(s.width + 1);
         area.draw(&PathElement::new(vec![(x, y), (x + SAMPLE, y)], style))?;
         area.draw(&Text::new(
-            s.label,
+            s.label.as_str(),
             (x + SAMPLE + GAP, y + text_dy),
             font.clone(),
         ))?;

@@ -1,0 +1,183 @@
+//! Runs one simulation into a folder: the time loop with every observer the outputs need
+//! (`history.csv` streamed row by row, snapshots, VTK frames), then the charts and
+//! `summary.json`. Shared by `cosserat run` and `cosserat reproduce`, so both write the
+//! same files in the same way. A failed step is a result (status `failed`), never an error:
+//! errors here are only I/O and set-up failures.
+
+use std::path::{Path, PathBuf};
+
+use crate::integrator::run::{run, RunOutcome};
+use crate::integrator::{IntegratorParams, Simulation};
+use crate::observe::record::{RunSummary, StepRecord};
+use crate::output::{
+    plot_accelerations, plot_energy, plot_momenta, plot_snapshots, write_summary, HistoryWriter,
+    OutputError, Progress, Snapshot, VtkSeries,
+};
+use crate::scene::Scene;
+
+/// What to write besides `history.csv`, `summary.json`, `energy.png`, `momenta.png` and
+/// `accelerations.png` (always written).
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// Write every N-th step to `history.csv` (the last accepted step always).
+    pub every: usize,
+    /// Write `vtk/NAME_STEP.vtu` every this many steps and `vtk/NAME.pvd` (`None`: no VTK).
+    pub vtk_every: Option<usize>,
+    /// Draw `snapshots.png` from the levels at every this many steps (`None`: none).
+    pub snapshot_every: Option<usize>,
+    /// Label of the progress bar and chart titles.
+    pub label: String,
+    /// Unit of length on snapshot axes.
+    pub length_unit: String,
+}
+
+/// Errors that stop a run before it could finish writing (not a failed step).
+#[derive(Debug, thiserror::Error)]
+pub enum DriverError {
+    /// Writing an output failed.
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    /// The linear solver could not be set up.
+    #[error("cannot set up the linear solver: {0}")]
+    Setup(#[from] crate::linsolve::LinsolveError),
+    /// The output folder could not be created.
+    #[error("cannot create output directory {}: {error}", path.display())]
+    Dir {
+        /// The folder.
+        path: PathBuf,
+        /// The I/O error.
+        error: std::io::Error,
+    },
+}
+
+/// What a finished (completed or failed) run leaves for reports.
+#[derive(Clone, Debug)]
+pub struct RunResult {
+    /// The summary also written to `summary.json`.
+    pub summary: RunSummary,
+    /// Every record written to `history.csv`.
+    pub records: Vec<StepRecord>,
+    /// Whether the model flies freely (momenta are then conserved and their drift means
+    /// something).
+    pub free_flight: bool,
+}
+
+/// Runs `scene` with `params` into `out` (created if missing).
+pub fn run_to_dir(
+    scene: &Scene,
+    params: IntegratorParams,
+    out: &Path,
+    opts: &RunOptions,
+) -> Result<RunResult, DriverError> {
+    std::fs::create_dir_all(out).map_err(|error| DriverError::Dir {
+        path: out.to_path_buf(),
+        error,
+    })?;
+    let mut sim = Simulation::new(scene.model.clone(), params)?;
+    let mut history = HistoryWriter::create(&out.join("history.csv"))?;
+    let mut vtk = match opts.vtk_every {
+        Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.name)?),
+        None => None,
+    };
+    let mut records: Vec<StepRecord> = Vec::new();
+    let mut last_seen: Option<StepRecord> = None;
+    let mut snapshots: Vec<Snapshot> = Vec::new();
+    let progress = Progress::new(sim.params().n_steps() as u64, &opts.label);
+    let every = opts.every.max(1);
+    // The observer sees row 0 and every `every`-th step; snapshots and VTK frames are
+    // taken on their own strides, so the loop shows the observer every step they need.
+    let stride = [Some(every), opts.vtk_every, opts.snapshot_every]
+        .into_iter()
+        .flatten()
+        .fold(every, gcd);
+    let outcome: RunOutcome = run(&mut sim, stride, |rec: &StepRecord, s: &Simulation| {
+        let on = |k: Option<usize>| k.is_some_and(|k| rec.step % k.max(1) == 0);
+        let last = rec.step == s.params().n_steps();
+        if rec.step % every == 0 || last {
+            history.push(rec)?;
+            records.push(rec.clone());
+        }
+        if on(opts.snapshot_every) {
+            snapshots.push(Snapshot::of(s));
+        }
+        if let (Some(v), true) = (vtk.as_mut(), on(opts.vtk_every) || last) {
+            v.write_frame(s, rec.step)?;
+        }
+        progress.step(rec.t, rec.newton_iters);
+        last_seen = Some(rec.clone());
+        Ok::<(), DriverError>(())
+    })?;
+    progress.finish();
+    if let Some(v) = &vtk {
+        v.finish()?;
+    }
+    // A failed run: `run` shows the last accepted level even off-stride; keep it in the
+    // history too.
+    if let Some(rec) = last_seen {
+        if records.last().map(|r| r.step) != Some(rec.step) {
+            history.push(&rec)?;
+            records.push(rec);
+        }
+    }
+    let title = format!("{}: {}", opts.label, sim.params().scheme.name());
+    plot_energy(&out.join("energy.png"), &records, &title)?;
+    plot_momenta(&out.join("momenta.png"), &records, &title)?;
+    plot_accelerations(&out.join("accelerations.png"), &records, &title)?;
+    if opts.snapshot_every.is_some() {
+        if snapshots.last().map(|s| s.t) != Some(sim.state().t) {
+            snapshots.push(Snapshot::of(&sim));
+        }
+        plot_snapshots(
+            &out.join("snapshots.png"),
+            &title,
+            &snapshots,
+            sim.model().planar,
+            &opts.length_unit,
+        )?;
+    }
+    let summary = summarize(scene, &sim, &outcome, &records);
+    write_summary(&out.join("summary.json"), &summary)?;
+    Ok(RunResult {
+        summary,
+        records,
+        free_flight: scene.model.is_free_flight(),
+    })
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+fn summarize(
+    scene: &Scene,
+    sim: &Simulation,
+    o: &RunOutcome,
+    records: &[StepRecord],
+) -> RunSummary {
+    RunSummary {
+        scene: scene.source.clone(),
+        status: o.status,
+        t_reached: o.t_reached,
+        steps: o.steps,
+        reason: o.reason.clone(),
+        failed_step_residuals: o.failed_step_residuals.clone(),
+        wall_s: o.wall_s,
+        scheme: sim.params().scheme.name().to_string(),
+        params: *sim.params(),
+        nodes: sim.model().n_nodes(),
+        elements: sim.model().elements.len(),
+        dofs: sim.n_dofs(),
+        newton_iters_total: o.newton_iters_total,
+        max_rel_dl: o.max_rel_dl,
+        max_rel_dj: o.max_rel_dj,
+        energy_initial: o.energy_initial,
+        energy_final: o.energy_final,
+        max_link_g: o
+            .max_link_g
+            .max(records.iter().fold(0.0, |m, r| m.max(r.max_link_g))),
+    }
+}
