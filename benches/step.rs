@@ -4,6 +4,9 @@
 //!   at Δt = 1e-2 (issue goal: ≤ 0.25 ms on the 2-core machine).
 //! * `edmc2_step/frame`: one EDMC-2 (α = 0.5) step of the free-flying frame, both
 //!   dissipation strategies.
+//! * `planar_vs_3d`: whole runs of the planar arch and mechanism with the planar unknowns
+//!   only and with the full 3D system (same results to round-off, see
+//!   `tests/paper_examples.rs`).
 //! * `assembly+solve` breakdown: residual/tangent assembly vs sparse LU for the cantilever.
 //!
 //! Throughput in rods·elements·steps per second is printed by criterion as
@@ -56,5 +59,42 @@ fn frame(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, cantilever, frame);
+/// Planar mode against the full 3D system on the same planar scenes: 200 steps of the arch
+/// (EDMC-2 α = 1, Δt = 1) and 40 of the half-hexagon mechanism (EDMC-2 α = 0.5, Δt = 0.05).
+fn planar(c: &mut Criterion) {
+    let mut g = c.benchmark_group("planar_vs_3d");
+    g.sample_size(10);
+    for (name, alpha, t_end) in [("arch", 1.0, 200.0), ("mechanism_hexagon", 0.5, 2.0)] {
+        let scene = load_scene(name).unwrap();
+        let mut p = scene.params;
+        p.scheme = Scheme::Edmc2 {
+            alpha_gv: alpha,
+            alpha_gn: 0.0,
+            alpha_ov: 0.0,
+            alpha_on: 0.0,
+        };
+        p.t_end = t_end;
+        g.throughput(Throughput::Elements(
+            (scene.model.elements.len() * p.n_steps()) as u64,
+        ));
+        for planar in [true, false] {
+            let mut model = scene.model.clone();
+            if !planar {
+                model.planar = None;
+            }
+            let label = if planar { "planar" } else { "3d" };
+            g.bench_function(format!("{name}/{label}"), |b| {
+                b.iter(|| {
+                    let mut sim = Simulation::new(model.clone(), p).unwrap();
+                    for _ in 0..p.n_steps() {
+                        sim.step().unwrap();
+                    }
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, cantilever, frame, planar);
 criterion_main!(benches);

@@ -91,9 +91,9 @@ pub fn run_to_dir(
         .flatten()
         .fold(every, gcd);
     let outcome: RunOutcome = run(&mut sim, stride, |rec: &StepRecord, s: &Simulation| {
-        let on = |k: Option<usize>| k.is_some_and(|k| rec.step % k.max(1) == 0);
+        let on = |k: Option<usize>| k.is_some_and(|k| rec.step.is_multiple_of(k.max(1)));
         let last = rec.step == s.params().n_steps();
-        if rec.step % every == 0 || last {
+        if rec.step.is_multiple_of(every) || last {
             history.push(rec)?;
             records.push(rec.clone());
         }

@@ -425,3 +425,87 @@ fn complete_example_in_docs_matches_builtin_frame() {
     assert_eq!(from_docs.model, builtin.model);
     assert_eq!(from_docs.params, builtin.params);
 }
+
+/// The built-in mechanism (planar, rigid links) as a template for the planar/link keys.
+const MECH: &str = include_str!("../scenes/mechanism.toml");
+
+fn mech_edit(from: &str, to: &str) -> String {
+    assert!(
+        MECH.contains(from),
+        "test bug: {from:?} not in the mechanism scene"
+    );
+    MECH.replacen(from, to, 1)
+}
+
+#[test]
+fn unknown_plane() {
+    let t = mech_edit("planar = \"e2e3\"", "planar = \"xy\"");
+    fails_at(&t, "planar", "unknown plane `xy`", "\"xy\"");
+}
+
+#[test]
+fn planar_scene_with_out_of_plane_load() {
+    let t = mech_edit("force = [0, -25, 2]", "force = [1, -25, 2]");
+    fails(&t, "load[0].force", "the force leaves the plane");
+}
+
+#[test]
+fn planar_scene_with_out_of_plane_rod() {
+    let t = mech_edit(
+        "points = [[0, 0, 1], [0, 1, 1]]",
+        "points = [[0, 0, 1], [0.5, 1, 1]]",
+    );
+    // The point masses and link still sit at (0, 1, 1), which is no longer a node.
+    let err = parse_scene(&t, FILE).expect_err("rejected").to_string();
+    assert!(
+        err.contains("is not a node") || err.contains("out of the plane"),
+        "{err}"
+    );
+}
+
+#[test]
+fn link_with_negative_penalty() {
+    let t = mech_edit("penalty = 1e5", "penalty = -1e5");
+    fails_at(&t, "link[0].penalty", "must be > 0", "-1e5");
+}
+
+#[test]
+fn link_with_nan_tolerance() {
+    let t = mech_edit("tol = 1e-10", "tol = nan");
+    fails_at(&t, "link[0].tol", "must be finite", "nan");
+}
+
+#[test]
+fn link_to_a_point_that_is_not_a_node() {
+    let t = mech_edit(
+        "pivot = [0, 0, 0]\nat = [0, 0, 1]",
+        "pivot = [0, 0, 0]\nat = [0, 0.1, 1]",
+    );
+    fails(&t, "link[0].at", "is not a node");
+}
+
+#[test]
+fn link_of_zero_length() {
+    let t = mech_edit(
+        "pivot = [0, 0, 0]\nat = [0, 0, 1]",
+        "pivot = [0, 0, 1]\nat = [0, 0, 1]",
+    );
+    fails(&t, "link[0].pivot", "zero length");
+}
+
+#[test]
+fn link_missing_pivot() {
+    let t = mech_edit("pivot = [0, 0, 0]\n", "");
+    fails(&t, "link[0].pivot", "required key missing");
+}
+
+#[test]
+fn unknown_key_in_link() {
+    let t = mech_edit("tol = 1e-10", "tol = 1e-10\nstiffness = 3");
+    fails_at(
+        &t,
+        "link[0].stiffness",
+        "unknown field `stiffness`",
+        "stiffness",
+    );
+}

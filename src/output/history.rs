@@ -299,7 +299,7 @@ mod tests {
         drop(HistoryWriter::create(&path).unwrap());
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text, format!("{}\n", HISTORY_COLUMNS.join(",")));
-        assert_eq!(HISTORY_COLUMNS.len(), 18);
+        assert_eq!(HISTORY_COLUMNS.len(), 19);
         assert!(read_history(&path).unwrap().is_empty());
     }
 
@@ -338,7 +338,7 @@ mod tests {
         let msg = read_history(&missing).unwrap_err().to_string();
         assert!(msg.contains("nope.csv"), "{msg}");
 
-        let bad_field = "1,0.1,abc".to_string() + &",0".repeat(15);
+        let bad_field = "1,0.1,abc".to_string() + &",0".repeat(16);
         std::fs::write(
             &path,
             format!("{}\n{bad_field}\n", HISTORY_COLUMNS.join(",")),

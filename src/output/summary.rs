@@ -48,6 +48,7 @@ mod tests {
             newton_iters_total: 400,
             max_rel_dl: 1e-15,
             max_rel_dj: 2e-15,
+            max_link_g: 0.0,
             energy_initial: 9.166666666666666,
             energy_final: f64::NAN,
         }

@@ -62,7 +62,7 @@ impl VtkSeries {
         let text = vtu_text(sim);
         write_file(&path, &text)?;
         self.frames.push((sim.state().t, file));
-        if self.frames.len() % PVD_EVERY == 0 {
+        if self.frames.len().is_multiple_of(PVD_EVERY) {
             self.write_pvd()?;
         }
         Ok(())

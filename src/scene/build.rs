@@ -908,7 +908,8 @@ fn check_planar(
             && sec.c_gamma[0] == sec.c_gamma[1]
             && sec.i_rho[(0, 1)] == 0.0
             && sec.i_rho[(0, 0)] == sec.i_rho[(1, 1)];
-        if !(principal && sec.c_omega[(0, 1)] == 0.0 && sec.i_rho[(0, 1)] == 0.0) && !isotropic {
+        let aligned = principal && sec.c_omega[(0, 1)] == 0.0 && sec.i_rho[(0, 1)] == 0.0;
+        if !(aligned || isotropic) {
             return Err(cx.err(
                 &root.key("rod").idx(el.rod).key("d1"),
                 why(format!(

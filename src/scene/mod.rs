@@ -264,20 +264,25 @@ impl Scene {
                 fmt_num(length)
             );
         }
-        let removed: usize = m
-            .supports
-            .iter()
-            .map(|sp| 3 * sp.translation as usize + 3 * sp.rotation as usize)
-            .sum();
+        // Newton unknowns (u, θ) per node without the translational-dissipation g, which
+        // exists only for schemes that need it.
+        let dofs = crate::integrator::dofs::DofMap::new(m, false);
+        let removed = 6 * m.n_nodes() - dofs.n;
         let _ = writeln!(s, "nodes: {}", m.n_nodes());
         let _ = writeln!(s, "elements: {}", m.elements.len());
+        let why = match m.planar {
+            Some(p) => format!("by supports and the plane {}", p.name()),
+            None => "by supports".to_string(),
+        };
         let _ = writeln!(
             s,
-            "DOFs: {} (6 per node = {}, {} removed by supports)",
-            6 * m.n_nodes() - removed,
+            "DOFs: {} (6 per node = {}, {removed} removed {why}; EDMC translational dissipation adds a g unknown per free translation)",
+            dofs.n,
             6 * m.n_nodes(),
-            removed
         );
+        if let Some(p) = m.planar {
+            let _ = writeln!(s, "planar: {} (normal e{})", p.name(), p.normal + 1);
+        }
         let _ = writeln!(
             s,
             "mass: {} (rods {}, point masses {})",
@@ -314,6 +319,19 @@ impl Scene {
         let _ = writeln!(s, "point masses: {}", masses.len());
         list(&mut s, masses.iter(), |(a, x)| {
             format!("{} at node {a} {}", fmt_num(*x), fmt_vec(&m.nodes[*a]))
+        });
+
+        let _ = writeln!(s, "rigid links: {}", m.links.len());
+        list(&mut s, m.links.iter(), |l| {
+            format!(
+                "pivot {} — node {} {}, length {}, penalty {}, tol {}",
+                fmt_vec(&l.pivot),
+                l.node,
+                fmt_vec(&m.nodes[l.node]),
+                fmt_num(l.length),
+                fmt_num(l.penalty),
+                fmt_num(l.tol)
+            )
         });
 
         let _ = writeln!(s, "loads: {}", m.loads.len());

@@ -1,0 +1,245 @@
+//! The paper's three examples (DESIGN §6) on the built-in scenes, asserted as our runs
+//! show them (the honesty rule of issue 3: where the paper's EM failures do not appear, the
+//! test pins what does happen, with the reason in a comment).
+use cosserat::integrator::run::{run, RunOutcome};
+use cosserat::integrator::{Scheme, Simulation};
+use cosserat::observe::record::{RunStatus, StepRecord};
+use cosserat::scene::load_scene;
+
+fn edmc2(alpha: f64) -> Scheme {
+    Scheme::Edmc2 {
+        alpha_gv: alpha,
+        alpha_gn: 0.0,
+        alpha_ov: 0.0,
+        alpha_on: 0.0,
+    }
+}
+
+/// Runs a built-in scene with `scheme`, `dt`, `t_end`; every level recorded.
+fn simulate(
+    scene: &str,
+    scheme: Scheme,
+    dt: f64,
+    t_end: f64,
+    planar: bool,
+) -> (RunOutcome, Vec<StepRecord>, Simulation) {
+    let s = load_scene(scene).unwrap();
+    let mut params = s.params;
+    params.scheme = scheme;
+    params.dt = dt;
+    params.t_end = t_end;
+    let mut model = s.model.clone();
+    if !planar {
+        model.planar = None;
+    }
+    let mut sim = Simulation::new(model, params).unwrap();
+    let mut recs = Vec::new();
+    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
+        recs.push(r.clone());
+        Ok::<(), ()>(())
+    })
+    .unwrap();
+    (out, recs, sim)
+}
+
+/// Largest per-step increase of H relative to max |H|, over steps after `t_load_end`.
+fn max_growth_after(recs: &[StepRecord], t_load_end: f64) -> f64 {
+    let href = recs.iter().fold(0.0f64, |m, r| m.max(r.total.abs()));
+    recs.windows(2)
+        .filter(|w| w[0].t >= t_load_end - 1e-12)
+        .map(|w| (w[1].total - w[0].total) / href)
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+#[test]
+fn frame_conserves_momenta_and_energy_as_the_paper_says() {
+    for alpha in [0.0, 0.5] {
+        let (out, recs, _) = simulate("frame", edmc2(alpha), 0.2, 10.0, false);
+        assert_eq!(out.status, RunStatus::Completed);
+        assert_eq!(out.steps, 50);
+        let (l0, j0) = (recs[0].l, recs[0].j);
+        for r in &recs {
+            assert!(
+                (r.l - l0).norm() <= 1e-10 * l0.norm(),
+                "α={alpha} L drift at t={}",
+                r.t
+            );
+            assert!(
+                (r.j - j0).norm() <= 1e-10 * j0.norm(),
+                "α={alpha} J drift at t={}",
+                r.t
+            );
+        }
+        let h0 = recs[0].total;
+        for w in recs.windows(2) {
+            if alpha == 0.0 {
+                assert!(
+                    (w[1].total - w[0].total).abs() <= 1e-10 * h0,
+                    "EM: H not exact at t={}",
+                    w[1].t
+                );
+            } else {
+                assert!(w[1].total <= w[0].total, "EDMC-2: H grew at t={}", w[1].t);
+            }
+        }
+        if alpha > 0.0 {
+            // Independent reference (DESIGN §6): 9.15148 at t = 10.
+            assert!((recs.last().unwrap().total - 9.15148).abs() < 5e-6);
+        }
+    }
+}
+
+#[test]
+fn arch_edmc2_runs_to_2000_and_snaps_through() {
+    let (out, recs, sim) = simulate("arch", edmc2(1.0), 1.0, 2000.0, true);
+    assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
+    assert_eq!(out.steps, 2000);
+    // Unloaded after t = 1000: energy never grows; EDMC-2 dissipates, but (DESIGN §6) very
+    // little — its dissipation follows changes of speed, not the snap-through itself.
+    assert!(max_growth_after(&recs, 1000.0) <= 1e-9);
+    let at = |t: f64| recs.iter().find(|r| (r.t - t).abs() < 1e-9).unwrap().total;
+    let (h_unload, h_end) = (at(1001.0), at(2000.0));
+    assert!(h_end <= h_unload && (h_unload - h_end) < 1e-5 * h_unload);
+    // The apex (node 15, rise 3.15) went through the chord: the arch snapped.
+    let _ = sim;
+    let (_, _, sim_1100) = simulate("arch", edmc2(1.0), 1.0, 1087.0, true);
+    assert!(
+        sim_1100.state().r[15].z < -1.0,
+        "apex at {}",
+        sim_1100.state().r[15].z
+    );
+}
+
+/// EM in the arch, as observed: it does NOT fail (the paper reports a failure after
+/// t ≈ 1163). With our reconstruction (rise 3.15, DESIGN §6.2) and a standard Newton, EM
+/// completes to t = 2000 with the energy held to round-off after the load is removed; an
+/// independent implementation saw the same. The paper's failure may depend on its solver or
+/// on geometry its text does not give.
+#[test]
+fn arch_em_completes_with_exact_energy_as_observed() {
+    let (out, recs, _) = simulate("arch", edmc2(0.0), 1.0, 2000.0, true);
+    assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
+    let after: Vec<&StepRecord> = recs.iter().filter(|r| r.t >= 1001.0).collect();
+    let h = after[0].total;
+    for r in &after {
+        assert!(
+            (r.total - h).abs() <= 1e-10 * h,
+            "EM energy moved at t={}",
+            r.t
+        );
+    }
+}
+
+/// The mechanisms at the paper's three steps. Observed (and asserted):
+/// * square parallelogram (`mechanism`): EDMC-2 completes at Δt = 0.01 and 0.005 (α = 5)
+///   but fails at Δt = 0.05 with α = 0.5 near t = 5.5, and EM fails at Δt = 0.05 near
+///   t = 6.75 and completes at the two smaller steps. The square four-bar passes its flat
+///   (change-point) configuration every half turn, where it can switch to the crossed
+///   branch and must bend the coupler hard; at Δt = 0.05 Newton stops converging in such a
+///   passage for both schemes (snapshots in `cosserat reproduce`).
+/// * half hexagon (`mechanism_hexagon`): both schemes complete at all three steps.
+///
+/// In every accepted step every link holds its tolerance, and with the load gone
+/// (t > 0.5) the energy never grows (EDMC-2) or stays constant (EM) up to the multiplier
+/// update between steps (|Δλ|·|g| with |g| ≤ 1e-10).
+#[test]
+fn mechanisms_as_observed() {
+    let cases = [
+        // (scene, em?, alpha, dt, completes?, failure window)
+        ("mechanism", false, 0.5, 0.05, false, (4.5, 6.5)),
+        ("mechanism", true, 0.0, 0.05, false, (5.5, 8.0)),
+        ("mechanism", false, 5.0, 0.01, true, (0.0, 0.0)),
+        ("mechanism", true, 0.0, 0.01, true, (0.0, 0.0)),
+        ("mechanism", false, 5.0, 0.005, true, (0.0, 0.0)),
+        ("mechanism", true, 0.0, 0.005, true, (0.0, 0.0)),
+        ("mechanism_hexagon", false, 0.5, 0.05, true, (0.0, 0.0)),
+        ("mechanism_hexagon", true, 0.0, 0.05, true, (0.0, 0.0)),
+        ("mechanism_hexagon", false, 5.0, 0.01, true, (0.0, 0.0)),
+        ("mechanism_hexagon", false, 5.0, 0.005, true, (0.0, 0.0)),
+    ];
+    for (scene, em, alpha, dt, completes, window) in cases {
+        let scheme = if em { Scheme::Em } else { edmc2(alpha) };
+        let (out, recs, sim) = simulate(scene, scheme, dt, 10.0, true);
+        let tag = format!("{scene} {} α={alpha} Δt={dt}", scheme.name());
+        if completes {
+            assert_eq!(out.status, RunStatus::Completed, "{tag}: {:?}", out.reason);
+        } else {
+            assert_eq!(
+                out.status,
+                RunStatus::Failed,
+                "{tag} was expected to fail (as observed)"
+            );
+            assert!(
+                out.t_reached > window.0 && out.t_reached < window.1,
+                "{tag}: failed at t = {} outside the observed window {window:?}",
+                out.t_reached
+            );
+        }
+        for r in &recs {
+            assert!(
+                r.max_link_g <= 1e-10,
+                "{tag}: link strain {} at t={}",
+                r.max_link_g,
+                r.t
+            );
+        }
+        for link in &sim.model().links {
+            assert!(link.strain(&sim.state().r[link.node]).abs() <= link.tol);
+        }
+        let growth = max_growth_after(&recs, 0.5);
+        assert!(
+            growth <= 1e-9,
+            "{tag}: energy grew by {growth:e} (relative) after the load"
+        );
+        if em {
+            let after: Vec<&StepRecord> = recs.iter().filter(|r| r.t >= 0.5 - 1e-12).collect();
+            let h = after[0].total;
+            for r in &after {
+                assert!(
+                    (r.total - h).abs() <= 1e-8 * h,
+                    "{tag}: EM energy moved at t={}",
+                    r.t
+                );
+            }
+        }
+    }
+}
+
+/// Planar mode removes only unknowns the plane cannot excite: the planar and the full 3D
+/// systems give the same motion to round-off (over a horizon short enough that round-off
+/// does not grow chaotically), with half the unknowns.
+#[test]
+fn planar_equals_full_3d_to_round_off() {
+    for (scene, dt, t_end) in [("arch", 1.0, 1000.0), ("mechanism_hexagon", 0.05, 2.0)] {
+        let (o2, r2, s2) = simulate(scene, edmc2(0.5), dt, t_end, true);
+        let (o3, r3, s3) = simulate(scene, edmc2(0.5), dt, t_end, false);
+        assert_eq!(o2.status, RunStatus::Completed);
+        assert_eq!(o3.status, RunStatus::Completed);
+        // Per free node: u, θ, g (EDMC-2 α_Γv dissipates translationally) = 9 unknowns in
+        // 3D; the plane keeps u2, u3, θ1, g2, g3 = 5.
+        assert_eq!(
+            9 * s2.n_dofs(),
+            5 * s3.n_dofs(),
+            "{scene}: planar keeps 5 of 9 per node"
+        );
+        let size = s2.state().r.iter().fold(0.0f64, |m, x| m.max(x.norm()));
+        for (a, b) in s2.state().r.iter().zip(&s3.state().r) {
+            assert!(
+                (a - b).norm() <= 1e-9 * size,
+                "{scene}: positions differ by {}",
+                (a - b).norm()
+            );
+            assert_eq!(b.x, 0.0, "{scene}: the 3D run left the plane");
+        }
+        let href = r2.iter().fold(0.0f64, |m, r| m.max(r.total.abs()));
+        for (a, b) in r2.iter().zip(&r3) {
+            assert!(
+                (a.total - b.total).abs() <= 1e-9 * href,
+                "{scene} t={}: H {} vs {}",
+                a.t,
+                a.total,
+                b.total
+            );
+        }
+    }
+}
