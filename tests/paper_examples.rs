@@ -2,7 +2,7 @@
 //! show them (the honesty rule of issue 3: where the paper's EM failures do not appear, the
 //! test pins what does happen, with the reason in a comment).
 use cosserat::integrator::run::{run, RunOutcome};
-use cosserat::integrator::{Scheme, Simulation};
+use cosserat::integrator::{Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::load_scene;
 
@@ -15,7 +15,8 @@ fn edmc2(alpha: f64) -> Scheme {
     }
 }
 
-/// Runs a built-in scene with `scheme`, `dt`, `t_end`; every level recorded.
+/// Runs a built-in scene with `scheme`, `dt`, `t_end` (staggered EDMC); every level
+/// recorded.
 fn simulate(
     scene: &str,
     scheme: Scheme,
@@ -23,8 +24,20 @@ fn simulate(
     t_end: f64,
     planar: bool,
 ) -> (RunOutcome, Vec<StepRecord>, Simulation) {
+    simulate_with(scene, scheme, dt, t_end, planar, Strategy::Staggered)
+}
+
+fn simulate_with(
+    scene: &str,
+    scheme: Scheme,
+    dt: f64,
+    t_end: f64,
+    planar: bool,
+    strategy: Strategy,
+) -> (RunOutcome, Vec<StepRecord>, Simulation) {
     let s = load_scene(scene).unwrap();
     let mut params = s.params;
+    params.strategy = strategy;
     params.scheme = scheme;
     params.dt = dt;
     params.t_end = t_end;
@@ -131,8 +144,9 @@ fn arch_em_completes_with_exact_energy_as_observed() {
 }
 
 /// The mechanisms at the paper's three steps. Observed (and asserted):
-/// * square parallelogram (`mechanism`): EDMC-2 completes at Δt = 0.01 and 0.005 (α = 5)
-///   but fails at Δt = 0.05 with α = 0.5 near t = 5.5, and EM fails at Δt = 0.05 near
+/// * square parallelogram (`mechanism`): EDMC-2 completes at Δt = 0.01 and 0.005 (α = 5);
+///   at Δt = 0.05 with α = 0.5 the paper's staggered loop fails near t = 5.5 while the
+///   monolithic Newton completes (as the paper reports for EDMC-2); EM fails at Δt = 0.05 near
 ///   t = 6.75 and completes at the two smaller steps. The square four-bar passes its flat
 ///   (change-point) configuration every half turn, where it can switch to the crossed
 ///   branch and must bend the coupler hard; at Δt = 0.05 Newton stops converging in such a
@@ -145,7 +159,7 @@ fn arch_em_completes_with_exact_energy_as_observed() {
 #[test]
 fn mechanisms_as_observed() {
     let cases = [
-        // (scene, em?, alpha, dt, completes?, failure window)
+        // (scene, em?, alpha, dt, completes?, failure window); EDMC-2 staggered
         ("mechanism", false, 0.5, 0.05, false, (4.5, 6.5)),
         ("mechanism", true, 0.0, 0.05, false, (5.5, 8.0)),
         ("mechanism", false, 5.0, 0.01, true, (0.0, 0.0)),
@@ -157,10 +171,24 @@ fn mechanisms_as_observed() {
         ("mechanism_hexagon", false, 5.0, 0.01, true, (0.0, 0.0)),
         ("mechanism_hexagon", false, 5.0, 0.005, true, (0.0, 0.0)),
     ];
-    for (scene, em, alpha, dt, completes, window) in cases {
+    let monolithic = [
+        ("mechanism", 0.5, 0.05),
+        ("mechanism", 5.0, 0.01),
+        ("mechanism_hexagon", 0.5, 0.05),
+    ];
+    let all = cases
+        .iter()
+        .map(|&(sc, em, a, dt, c, w)| (sc, em, a, dt, c, w, Strategy::Staggered))
+        .chain(
+            monolithic
+                .iter()
+                .map(|&(sc, a, dt)| (sc, false, a, dt, true, (0.0, 0.0), Strategy::Monolithic)),
+        );
+    for (scene, em, alpha, dt, completes, window, strategy) in all {
         let scheme = if em { Scheme::Em } else { edmc2(alpha) };
-        let (out, recs, sim) = simulate(scene, scheme, dt, 10.0, true);
-        let tag = format!("{scene} {} α={alpha} Δt={dt}", scheme.name());
+        let (out, recs, sim) = simulate_with(scene, scheme, dt, 10.0, true, strategy);
+        let scheme_name = format!("{} {strategy:?}", scheme.name());
+        let tag = format!("{scene} {scheme_name} α={alpha} Δt={dt}");
         if completes {
             assert_eq!(out.status, RunStatus::Completed, "{tag}: {:?}", out.reason);
         } else {
