@@ -259,6 +259,13 @@ fn planar_equals_full_3d_to_round_off() {
             );
             assert_eq!(b.x, 0.0, "{scene}: the 3D run left the plane");
         }
+        let dx = s2
+            .state()
+            .r
+            .iter()
+            .zip(&s3.state().r)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).norm()));
+        eprintln!("{scene}: planar vs 3D max position difference {:.2e} (relative {:.2e}), unknowns {} vs {}", dx, dx / size, s2.n_dofs(), s3.n_dofs());
         let href = r2.iter().fold(0.0f64, |m, r| m.max(r.total.abs()));
         for (a, b) in r2.iter().zip(&r3) {
             assert!(
