@@ -54,6 +54,10 @@ struct RunArgs {
     /// End time (default: the scene's).
     #[arg(long)]
     t_end: Option<f64>,
+    /// Generalized-α spectral radius ρ∞ ∈ [0, 1]; implies `--scheme gen-alpha` when no
+    /// `--scheme` is given.
+    #[arg(long)]
+    rho_inf: Option<f64>,
     /// Dissipation strategy (default: the scene's, else staggered).
     #[arg(long, value_enum)]
     strategy: Option<StrategyArg>,
@@ -70,6 +74,10 @@ enum SchemeArg {
     Em,
     Edmc1,
     Edmc2,
+    /// Baseline: plain implicit mid-point rule (stresses from the mid-point strains).
+    Midpoint,
+    /// Baseline: Lie-group generalized-α (`--rho-inf`).
+    GenAlpha,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -87,6 +95,7 @@ fn main() -> ExitCode {
             alpha: Some(0.5),
             dt: None,
             t_end: None,
+            rho_inf: None,
             strategy: None,
             out: Some(PathBuf::from("out/frame")),
             every: None,
@@ -119,13 +128,24 @@ fn check_command(spec: &str) -> Result<ExitCode> {
 /// constants when it names the same scheme, zero otherwise); `--alpha` sets α_Γv.
 fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     let mut p = scene.params;
-    let wanted = a.scheme.or(match (a.alpha, p.scheme) {
-        (Some(_), Scheme::Edmc2 { .. }) | (None, _) => None,
-        (Some(_), _) => Some(SchemeArg::Edmc2),
-    });
+    let wanted = a
+        .scheme
+        .or(match (a.alpha, p.scheme) {
+            (Some(_), Scheme::Edmc2 { .. }) | (None, _) => None,
+            (Some(_), _) => Some(SchemeArg::Edmc2),
+        })
+        .or(match (a.rho_inf, p.scheme) {
+            (Some(_), Scheme::GenAlpha { .. }) | (None, _) => None,
+            (Some(_), _) => Some(SchemeArg::GenAlpha),
+        });
     if let Some(s) = wanted {
         p.scheme = match (s, p.scheme) {
             (SchemeArg::Em, _) => Scheme::Em,
+            (SchemeArg::Midpoint, _) => Scheme::Midpoint,
+            (SchemeArg::GenAlpha, s @ Scheme::GenAlpha { .. }) => s,
+            (SchemeArg::GenAlpha, _) => Scheme::GenAlpha {
+                rho_inf: cosserat::integrator::gen_alpha::DEFAULT_RHO_INF,
+            },
             (SchemeArg::Edmc1, s @ Scheme::Edmc1 { .. }) => s,
             (SchemeArg::Edmc1, _) => Scheme::Edmc1 {
                 chi_gamma: 0.0,
@@ -150,6 +170,18 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
             Scheme::Edmc2 { alpha_gv, .. } => *alpha_gv = alpha,
             other => bail!(
                 "--alpha sets the EDMC-2 parameter α_Γv, but the scheme is {}",
+                other.name()
+            ),
+        }
+    }
+    if let Some(rho) = a.rho_inf {
+        if !(0.0..=1.0).contains(&rho) {
+            bail!("--rho-inf: must be in [0, 1] (got {rho})");
+        }
+        match &mut p.scheme {
+            Scheme::GenAlpha { rho_inf } => *rho_inf = rho,
+            other => bail!(
+                "--rho-inf sets the generalized-α parameter ρ∞, but the scheme is {}",
                 other.name()
             ),
         }
