@@ -12,6 +12,7 @@ use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, RunSummary, StepRecord};
 use cosserat::output::{plot_energy, plot_momenta, write_summary, HistoryWriter, Progress};
 use cosserat::scene::{builtin_scenes, load_scene, Scene};
+use cosserat::study;
 
 /// Nonlinear dynamics of geometrically exact (Cosserat) rods with energy-momentum and
 /// energy-dissipative momentum-conserving time stepping. With no arguments: runs the
@@ -35,6 +36,79 @@ enum Command {
     },
     /// List the built-in scenes.
     Scenes,
+    /// Speed-vs-accuracy and stability studies over the schemes.
+    #[command(subcommand)]
+    Study(StudyCommand),
+}
+
+#[derive(Subcommand, Debug)]
+enum StudyCommand {
+    /// Error against wall time for several schemes and time steps: writes
+    /// work_precision.csv and work_precision.png.
+    WorkPrecision(WorkPrecisionArgs),
+    /// Fraction of the run completed over a grid Δt × dissipation parameter per scheme:
+    /// writes stability.csv and stability.png.
+    Stability(StabilityArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct WorkPrecisionArgs {
+    /// Scene file or built-in name.
+    scene: String,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Schemes with parameters, `NAME[:PARAM]` (edmc1: χ_Γ = χ_Ω, edmc2: α_Γv,
+    /// gen-alpha: ρ∞).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "em,edmc1:0.2,edmc2:0.5,midpoint,gen-alpha:0.8"
+    )]
+    schemes: Vec<String>,
+    /// Time steps (default: the scene's Δt times 1, ½, ¼, ⅛).
+    #[arg(long, value_delimiter = ',')]
+    dts: Option<Vec<f64>>,
+    /// End time (default: the scene's).
+    #[arg(long)]
+    t_end: Option<f64>,
+    /// Δt of the EM reference run (default: the smallest Δt / 8).
+    #[arg(long)]
+    reference_dt: Option<f64>,
+    /// Parallel runs (default: the number of cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+}
+
+#[derive(clap::Args, Debug)]
+struct StabilityArgs {
+    /// Scene file or built-in name.
+    scene: String,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Scheme families, one chart panel each.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "em,edmc1,edmc2,midpoint,gen-alpha"
+    )]
+    schemes: Vec<String>,
+    /// Dissipation parameters of edmc1 (χ_Γ = χ_Ω) and edmc2 (α_Γv).
+    #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2")]
+    params: Vec<f64>,
+    /// ρ∞ values of gen-alpha.
+    #[arg(long, value_delimiter = ',', default_value = "0,0.5,0.8,1")]
+    rho_inf: Vec<f64>,
+    /// Time steps (default: the scene's Δt times ¼, ½, 1, 2, 4).
+    #[arg(long, value_delimiter = ',')]
+    dts: Option<Vec<f64>>,
+    /// End time (default: the scene's).
+    #[arg(long)]
+    t_end: Option<f64>,
+    /// Parallel runs (default: the number of cores).
+    #[arg(long)]
+    jobs: Option<usize>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -102,6 +176,8 @@ fn main() -> ExitCode {
         }),
         Some(Command::Run(a)) => run_command(a),
         Some(Command::Check { scene }) => check_command(&scene),
+        Some(Command::Study(StudyCommand::WorkPrecision(a))) => work_precision_command(&a),
+        Some(Command::Study(StudyCommand::Stability(a))) => stability_command(&a),
         Some(Command::Scenes) => {
             for s in builtin_scenes() {
                 println!("{:<12} {}", s.name, s.description);
@@ -294,4 +370,110 @@ fn print_summary(s: &RunSummary, out: &Path) {
         s.max_rel_dj,
         out.display()
     );
+}
+
+fn default_jobs(jobs: Option<usize>) -> usize {
+    jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1)
+}
+
+fn create_out(out: &Path) -> Result<()> {
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output directory {}", out.display()))
+}
+
+fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
+    let scene = load_scene(&a.scene)?;
+    let schemes = a
+        .schemes
+        .iter()
+        .map(|s| study::SchemeSpec::parse(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let dt0 = scene.params.dt;
+    let dts = a
+        .dts
+        .clone()
+        .unwrap_or_else(|| vec![dt0, dt0 / 2.0, dt0 / 4.0, dt0 / 8.0]);
+    let smallest = dts.iter().copied().fold(f64::INFINITY, f64::min);
+    let cfg = study::WorkPrecisionConfig {
+        schemes,
+        t_end: a.t_end.unwrap_or(scene.params.t_end),
+        reference_dt: a.reference_dt.unwrap_or(smallest / 8.0),
+        dts,
+        jobs: default_jobs(a.jobs),
+    };
+    create_out(&a.out)?;
+    let wp = study::work_precision(&scene, &cfg)?;
+    study::write_work_precision_csv(&a.out.join("work_precision.csv"), &wp)?;
+    study::plot_work_precision(&a.out.join("work_precision.png"), &wp)?;
+    let mut seen = Vec::new();
+    for r in &wp.rows {
+        if !seen.contains(&r.spec) {
+            seen.push(r.spec);
+            let runs: Vec<_> = wp.rows.iter().filter(|x| x.spec == r.spec).collect();
+            let failed = runs
+                .iter()
+                .filter(|x| x.status == RunStatus::Failed)
+                .count();
+            println!(
+                "{:<18} observed order {:>6.3}   errors {}   ({} of {} runs failed)",
+                r.spec.label(),
+                r.observed_order,
+                runs.iter()
+                    .map(|x| format!("{:.2e}", x.error))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+                failed,
+                runs.len()
+            );
+        }
+    }
+    println!(
+        "{}: work–precision study, reference EM Δt = {:e}; outputs in {}",
+        scene.name,
+        wp.reference_dt,
+        a.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
+    let scene = load_scene(&a.scene)?;
+    let kinds = a
+        .schemes
+        .iter()
+        .map(|s| {
+            study::SchemeKind::parse(s.trim()).with_context(|| {
+                format!("--schemes: unknown scheme `{s}` (expected em, edmc1, edmc2, midpoint or gen-alpha)")
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let dt0 = scene.params.dt;
+    let cfg = study::StabilityConfig {
+        kinds,
+        params: a.params.clone(),
+        rho_infs: a.rho_inf.clone(),
+        dts: a
+            .dts
+            .clone()
+            .unwrap_or_else(|| vec![dt0 / 4.0, dt0 / 2.0, dt0, 2.0 * dt0, 4.0 * dt0]),
+        t_end: a.t_end.unwrap_or(scene.params.t_end),
+        jobs: default_jobs(a.jobs),
+    };
+    create_out(&a.out)?;
+    let st = study::stability(&scene, &cfg)?;
+    study::write_stability_csv(&a.out.join("stability.csv"), &st)?;
+    study::plot_stability(&a.out.join("stability.png"), &st)?;
+    let done = st
+        .cells
+        .iter()
+        .filter(|c| c.status == RunStatus::Completed)
+        .count();
+    println!(
+        "{}: stability study, {done} of {} runs completed; outputs in {}",
+        scene.name,
+        st.cells.len(),
+        a.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
 }

@@ -11,6 +11,7 @@ mod progress;
 mod summary;
 
 pub use history::{read_history, HistoryWriter, HISTORY_COLUMNS};
+pub(crate) use plot::{ensure_font, FONT};
 pub use plot::{plot_energy, plot_momenta};
 pub use progress::Progress;
 pub use summary::write_summary;
