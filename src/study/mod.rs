@@ -252,6 +252,10 @@ pub struct MemberResult {
     /// `max_k (H_k − H_0 − W_{0→k}) / |H_0|` over the accepted levels (≤ 0: no energy
     /// created; `|H_0|` replaced by the largest |H_k| when H_0 = 0).
     pub max_energy_growth: f64,
+    /// H at the start.
+    pub energy_initial: f64,
+    /// H at the last accepted level.
+    pub energy_final: f64,
     /// Largest per-step change of L relative to the momentum scale.
     pub max_rel_dl: f64,
     /// Largest per-step change of J relative to the angular momentum scale.
@@ -329,6 +333,8 @@ pub fn run_member(
         wall_s: outcome.wall_s,
         newton_iters_total: outcome.newton_iters_total,
         max_energy_growth: if href > 0.0 { growth / href } else { 0.0 },
+        energy_initial: outcome.energy_initial,
+        energy_final: outcome.energy_final,
         max_rel_dl: outcome.max_rel_dl,
         max_rel_dj: outcome.max_rel_dj,
         samples,
