@@ -50,6 +50,10 @@ pub const DEFAULT_RHO_INF: f64 = 0.8;
 /// `~h²`, round-off `~ε/h`; both ≈ 1e-12 relative at 1e-6).
 const FD_REL_STEP: f64 = 1e-6;
 
+/// A Newton iteration that no longer halves the residual is accepted once the residual
+/// is below this multiple of `newton_tol` (the round-off floor; see [`GenAlpha::step`]).
+const STALL_FACTOR: f64 = 100.0;
+
 /// The four generalized-α coefficients.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Coefficients {
@@ -537,7 +541,12 @@ impl GenAlpha {
                 if !res.is_finite() {
                     break;
                 }
-                let stalled = it >= 3 && res <= 10.0 * newton_tol && res >= 0.5 * history[it - 1];
+                // Round-off floor: with the finite-difference tangent and the inertia
+                // formed from x/(βΔt²), the residual of slow, strongly damped phases
+                // stalls at ~1e-10 relative (measured on the cantilever at ρ∞ = 0.5);
+                // accept a stall below STALL_FACTOR · newton_tol.
+                let stalled =
+                    it >= 2 && res <= STALL_FACTOR * newton_tol && res >= 0.5 * history[it - 1];
                 if res <= newton_tol || stalled {
                     converged = Some((it, res));
                     break;
