@@ -75,6 +75,9 @@ struct WorkPrecisionArgs {
     /// Δt of the EM reference run (default: the smallest Δt / 8).
     #[arg(long)]
     reference_dt: Option<f64>,
+    /// Relative Newton tolerance of every run (default: the scene's).
+    #[arg(long)]
+    newton_tol: Option<f64>,
     /// Parallel runs (default: the number of cores).
     #[arg(long)]
     jobs: Option<usize>,
@@ -106,6 +109,9 @@ struct StabilityArgs {
     /// End time (default: the scene's).
     #[arg(long)]
     t_end: Option<f64>,
+    /// Relative Newton tolerance of every run (default: the scene's).
+    #[arg(long)]
+    newton_tol: Option<f64>,
     /// Parallel runs (default: the number of cores).
     #[arg(long)]
     jobs: Option<usize>,
@@ -377,13 +383,25 @@ fn default_jobs(jobs: Option<usize>) -> usize {
         .max(1)
 }
 
+/// Loads a study's scene, with `--newton-tol` applied to its integrator parameters.
+fn study_scene(spec: &str, newton_tol: Option<f64>) -> Result<Scene> {
+    let mut scene = load_scene(spec)?;
+    if let Some(tol) = newton_tol {
+        if !(tol.is_finite() && tol > 0.0) {
+            bail!("--newton-tol: must be a finite number > 0 (got {tol})");
+        }
+        scene.params.newton_tol = tol;
+    }
+    Ok(scene)
+}
+
 fn create_out(out: &Path) -> Result<()> {
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output directory {}", out.display()))
 }
 
 fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
-    let scene = load_scene(&a.scene)?;
+    let scene = study_scene(&a.scene, a.newton_tol)?;
     let schemes = a
         .schemes
         .iter()
@@ -438,7 +456,7 @@ fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
 }
 
 fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
-    let scene = load_scene(&a.scene)?;
+    let scene = study_scene(&a.scene, a.newton_tol)?;
     let kinds = a
         .schemes
         .iter()

@@ -349,17 +349,19 @@ fn draw_stability_panel<DB: DrawingBackend>(
                     WHITE.stroke_width(1),
                 )))
                 .map_err(e)?;
-            let pct = format!("{:.0}%", 100.0 * c.fraction());
-            let txt = format!("{pct} {}", growth_text(c.max_energy_growth));
+            // Two lines: percentage reached, energy growth.
+            let style = (FONT, 13)
+                .into_font()
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Center, VPos::Center));
+            let lines = [
+                format!("{:.0}%", 100.0 * c.fraction()),
+                growth_text(c.max_energy_growth),
+            ];
             chart
-                .draw_series(std::iter::once(Text::new(
-                    txt,
-                    (x + 0.5, y + 0.5),
-                    (FONT, 13)
-                        .into_font()
-                        .color(&BLACK)
-                        .pos(Pos::new(HPos::Center, VPos::Center)),
-                )))
+                .draw_series(lines.into_iter().zip([-8, 8]).map(|(t, dy)| {
+                    EmptyElement::at((x + 0.5, y + 0.5)) + Text::new(t, (0, dy), style.clone())
+                }))
                 .map_err(e)?;
         }
     }
