@@ -681,6 +681,57 @@ fn observer_state(model: &Model, data: &[ElementData], t: f64, lv: &Level) -> St
 mod tests {
     use super::*;
 
+    /// Nodes of one colour share no closed neighbourhood (graph distance ≥ 3), so one
+    /// perturbation per colour gives every Jacobian column exactly.
+    #[test]
+    fn colouring_separates_nodes_by_three_edges() {
+        // A chain of 10 nodes plus a branch at node 4 (a corner shared by three elements).
+        let mut edges: Vec<[usize; 2]> = (0..9).map(|a| [a, a + 1]).collect();
+        edges.extend([[4, 10], [10, 11]]);
+        let n = 12;
+        let props = crate::model::ElementProps {
+            h: 1.0,
+            a_rho: 1.0,
+            i_rho: nalgebra::Matrix2::identity(),
+            c_gamma: Vec3::repeat(1.0),
+            c_omega: Mat3::identity(),
+        };
+        let model = Model {
+            nodes: vec![Vec3::zeros(); n],
+            elements: edges
+                .iter()
+                .map(|&nodes| crate::model::Element {
+                    nodes,
+                    ref_triad: [Mat3::identity(); 2],
+                    props: props.clone(),
+                    rod: 0,
+                })
+                .collect(),
+            supports: vec![Default::default(); n],
+            point_mass: vec![0.0; n],
+            loads: vec![],
+            gravity: Vec3::zeros(),
+            velocity0: vec![Vec3::zeros(); n],
+            omega0: vec![Vec3::zeros(); n],
+            rods: vec![],
+        };
+        let colour = colour_nodes(&model);
+        let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);
+        for a in 0..n {
+            for b in 0..n {
+                if a == b || colour[a] != colour[b] {
+                    continue;
+                }
+                assert!(!adj(a, b), "{a}, {b} adjacent");
+                assert!(
+                    !(0..n).any(|c| adj(a, c) && adj(c, b)),
+                    "{a}, {b} at distance 2"
+                );
+            }
+        }
+        assert!(colour.iter().max().copied().unwrap_or(0) < 5);
+    }
+
     #[test]
     fn coefficients_match_chung_hulbert_limits() {
         // ρ∞ = 1: the trapezoidal rule (α_m = α_f = ½, β = ¼, γ = ½).

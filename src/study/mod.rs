@@ -635,3 +635,34 @@ pub fn stability(scene: &Scene, cfg: &StabilityConfig) -> Result<Stability, Stud
         cells,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scheme_specs_parse_with_defaults_and_ranges() {
+        let s = SchemeSpec::parse("edmc2:0.7").unwrap();
+        assert_eq!((s.kind, s.param), (SchemeKind::Edmc2, 0.7));
+        assert_eq!(
+            SchemeSpec::parse("gen-alpha").unwrap().param,
+            DEFAULT_RHO_INF
+        );
+        assert_eq!(SchemeSpec::parse("em").unwrap().label(), "EM");
+        assert!(SchemeSpec::parse("em:1").is_err());
+        assert!(SchemeSpec::parse("gen-alpha:1.5").is_err());
+        assert!(SchemeSpec::parse("edmc1:-1").is_err());
+        assert!(SchemeSpec::parse("rk4").is_err());
+    }
+
+    #[test]
+    fn loglog_slope_recovers_a_power_law() {
+        let pts: Vec<(f64, f64)> = [0.1, 0.05, 0.025]
+            .iter()
+            .map(|&h| (h, 3.0 * h * h))
+            .collect();
+        assert!((loglog_slope(&pts) - 2.0).abs() < 1e-12);
+        // Failed runs (NaN) are ignored; one point is not a fit.
+        assert!(loglog_slope(&[(0.1, 1.0), (0.05, f64::NAN)]).is_nan());
+    }
+}

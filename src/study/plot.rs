@@ -47,7 +47,7 @@ fn decades(lo: f64, hi: f64) -> (f64, f64) {
 
 fn sci(v: f64) -> String {
     let s = format!("{v:.0e}");
-    s.replace("e0", "").replace("e", "e")
+    s.strip_suffix("e0").map_or(s.clone(), str::to_string)
 }
 
 /// Draws `work_precision.png`: error against wall time on log-log axes, one line per
