@@ -424,6 +424,7 @@ fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
     let wp = study::work_precision(&scene, &cfg)?;
     study::write_work_precision_csv(&a.out.join("work_precision.csv"), &wp)?;
     study::plot_work_precision(&a.out.join("work_precision.png"), &wp)?;
+    study::write_failures(&a.out.join("failures.txt"), &wp.failures())?;
     let mut seen = Vec::new();
     for r in &wp.rows {
         if !seen.contains(&r.spec) {
@@ -482,6 +483,7 @@ fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
     let st = study::stability(&scene, &cfg)?;
     study::write_stability_csv(&a.out.join("stability.csv"), &st)?;
     study::plot_stability(&a.out.join("stability.png"), &st)?;
+    study::write_failures(&a.out.join("failures.txt"), &st.failures())?;
     let done = st
         .cells
         .iter()

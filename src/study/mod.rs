@@ -28,7 +28,8 @@ use std::sync::Mutex;
 
 pub use plot::{plot_stability, plot_work_precision};
 pub use write::{
-    write_stability_csv, write_work_precision_csv, STABILITY_COLUMNS, WORK_PRECISION_COLUMNS,
+    write_failures, write_stability_csv, write_work_precision_csv, STABILITY_COLUMNS,
+    WORK_PRECISION_COLUMNS,
 };
 
 use crate::integrator::gen_alpha::DEFAULT_RHO_INF;

@@ -92,3 +92,53 @@ pub fn write_stability_csv(path: &Path, st: &Stability) -> Result<(), OutputErro
         .collect();
     write_lines(path, &STABILITY_COLUMNS, &lines)
 }
+
+/// Writes `failures.txt`: one line per failed run of a study, `scheme param dt: reason`
+/// (empty file when every run completed), so that a tolerance floor can be told from a
+/// divergence.
+pub fn write_failures(
+    path: &Path,
+    failures: &[(String, f64, f64, String)],
+) -> Result<(), OutputError> {
+    let text: String = failures
+        .iter()
+        .map(|(s, p, dt, r)| format!("{s} {p} dt={dt}: {r}\n"))
+        .collect();
+    std::fs::write(path, text).map_err(|e| OutputError::io(path, e))
+}
+
+impl WorkPrecision {
+    /// `(scheme, param, dt, reason)` of every failed run.
+    pub fn failures(&self) -> Vec<(String, f64, f64, String)> {
+        self.rows
+            .iter()
+            .filter(|r| r.status == RunStatus::Failed)
+            .map(|r| {
+                (
+                    r.spec.kind.name().to_string(),
+                    r.spec.param,
+                    r.dt,
+                    r.reason.clone().unwrap_or_default(),
+                )
+            })
+            .collect()
+    }
+}
+
+impl Stability {
+    /// `(scheme, param, dt, reason)` of every failed run.
+    pub fn failures(&self) -> Vec<(String, f64, f64, String)> {
+        self.cells
+            .iter()
+            .filter(|c| c.status == RunStatus::Failed)
+            .map(|c| {
+                (
+                    c.kind.name().to_string(),
+                    c.param,
+                    c.dt,
+                    c.reason.clone().unwrap_or_default(),
+                )
+            })
+            .collect()
+    }
+}
