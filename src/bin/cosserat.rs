@@ -51,13 +51,29 @@ enum StudyCommand {
     Stability(StabilityArgs),
 }
 
+/// Options every study takes.
 #[derive(clap::Args, Debug)]
-struct WorkPrecisionArgs {
+struct StudyCommon {
     /// Scene file or built-in name.
     scene: String,
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
+    /// End time (default: the scene's).
+    #[arg(long)]
+    t_end: Option<f64>,
+    /// Relative Newton tolerance of every run (default: the scene's).
+    #[arg(long)]
+    newton_tol: Option<f64>,
+    /// Parallel runs (default: the number of cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+}
+
+#[derive(clap::Args, Debug)]
+struct WorkPrecisionArgs {
+    #[command(flatten)]
+    common: StudyCommon,
     /// Schemes with parameters, `NAME[:PARAM]` (edmc1: χ_Γ = χ_Ω, edmc2: α_Γv,
     /// gen-alpha: ρ∞).
     #[arg(
@@ -69,27 +85,15 @@ struct WorkPrecisionArgs {
     /// Time steps (default: the scene's Δt times 1, ½, ¼, ⅛).
     #[arg(long, value_delimiter = ',')]
     dts: Option<Vec<f64>>,
-    /// End time (default: the scene's).
-    #[arg(long)]
-    t_end: Option<f64>,
     /// Δt of the EM reference run (default: the smallest Δt / 8).
     #[arg(long)]
     reference_dt: Option<f64>,
-    /// Relative Newton tolerance of every run (default: the scene's).
-    #[arg(long)]
-    newton_tol: Option<f64>,
-    /// Parallel runs (default: the number of cores).
-    #[arg(long)]
-    jobs: Option<usize>,
 }
 
 #[derive(clap::Args, Debug)]
 struct StabilityArgs {
-    /// Scene file or built-in name.
-    scene: String,
-    /// Output directory.
-    #[arg(long)]
-    out: PathBuf,
+    #[command(flatten)]
+    common: StudyCommon,
     /// Scheme families, one chart panel each.
     #[arg(
         long,
@@ -106,15 +110,6 @@ struct StabilityArgs {
     /// Time steps (default: the scene's Δt times ¼, ½, 1, 2, 4).
     #[arg(long, value_delimiter = ',')]
     dts: Option<Vec<f64>>,
-    /// End time (default: the scene's).
-    #[arg(long)]
-    t_end: Option<f64>,
-    /// Relative Newton tolerance of every run (default: the scene's).
-    #[arg(long)]
-    newton_tol: Option<f64>,
-    /// Parallel runs (default: the number of cores).
-    #[arg(long)]
-    jobs: Option<usize>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -383,10 +378,12 @@ fn default_jobs(jobs: Option<usize>) -> usize {
         .max(1)
 }
 
-/// Loads a study's scene, with `--newton-tol` applied to its integrator parameters.
-fn study_scene(spec: &str, newton_tol: Option<f64>) -> Result<Scene> {
-    let mut scene = load_scene(spec)?;
-    if let Some(tol) = newton_tol {
+/// Loads a study's scene, with `--newton-tol` applied to its integrator parameters, and
+/// creates the output directory.
+fn study_scene(c: &StudyCommon) -> Result<Scene> {
+    let mut scene = load_scene(&c.scene)?;
+    create_out(&c.out)?;
+    if let Some(tol) = c.newton_tol {
         if !(tol.is_finite() && tol > 0.0) {
             bail!("--newton-tol: must be a finite number > 0 (got {tol})");
         }
@@ -401,7 +398,7 @@ fn create_out(out: &Path) -> Result<()> {
 }
 
 fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
-    let scene = study_scene(&a.scene, a.newton_tol)?;
+    let scene = study_scene(&a.common)?;
     let schemes = a
         .schemes
         .iter()
@@ -415,16 +412,15 @@ fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
     let smallest = dts.iter().copied().fold(f64::INFINITY, f64::min);
     let cfg = study::WorkPrecisionConfig {
         schemes,
-        t_end: a.t_end.unwrap_or(scene.params.t_end),
+        t_end: a.common.t_end.unwrap_or(scene.params.t_end),
         reference_dt: a.reference_dt.unwrap_or(smallest / 8.0),
         dts,
-        jobs: default_jobs(a.jobs),
+        jobs: default_jobs(a.common.jobs),
     };
-    create_out(&a.out)?;
     let wp = study::work_precision(&scene, &cfg)?;
-    study::write_work_precision_csv(&a.out.join("work_precision.csv"), &wp)?;
-    study::plot_work_precision(&a.out.join("work_precision.png"), &wp)?;
-    study::write_failures(&a.out.join("failures.txt"), &wp.failures())?;
+    study::write_work_precision_csv(&a.common.out.join("work_precision.csv"), &wp)?;
+    study::plot_work_precision(&a.common.out.join("work_precision.png"), &wp)?;
+    study::write_failures(&a.common.out.join("failures.txt"), &wp.failures())?;
     let mut seen = Vec::new();
     for r in &wp.rows {
         if !seen.contains(&r.spec) {
@@ -451,13 +447,13 @@ fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
         "{}: work–precision study, reference EM Δt = {:e}; outputs in {}",
         scene.name,
         wp.reference_dt,
-        a.out.display()
+        a.common.out.display()
     );
     Ok(ExitCode::SUCCESS)
 }
 
 fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
-    let scene = study_scene(&a.scene, a.newton_tol)?;
+    let scene = study_scene(&a.common)?;
     let kinds = a
         .schemes
         .iter()
@@ -476,14 +472,13 @@ fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
             .dts
             .clone()
             .unwrap_or_else(|| vec![dt0 / 4.0, dt0 / 2.0, dt0, 2.0 * dt0, 4.0 * dt0]),
-        t_end: a.t_end.unwrap_or(scene.params.t_end),
-        jobs: default_jobs(a.jobs),
+        t_end: a.common.t_end.unwrap_or(scene.params.t_end),
+        jobs: default_jobs(a.common.jobs),
     };
-    create_out(&a.out)?;
     let st = study::stability(&scene, &cfg)?;
-    study::write_stability_csv(&a.out.join("stability.csv"), &st)?;
-    study::plot_stability(&a.out.join("stability.png"), &st)?;
-    study::write_failures(&a.out.join("failures.txt"), &st.failures())?;
+    study::write_stability_csv(&a.common.out.join("stability.csv"), &st)?;
+    study::plot_stability(&a.common.out.join("stability.png"), &st)?;
+    study::write_failures(&a.common.out.join("failures.txt"), &st.failures())?;
     let done = st
         .cells
         .iter()
@@ -493,7 +488,7 @@ fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
         "{}: stability study, {done} of {} runs completed; outputs in {}",
         scene.name,
         st.cells.len(),
-        a.out.display()
+        a.common.out.display()
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -37,7 +37,7 @@
 use crate::element::strain::{Config, A0, B0, R0, R1};
 use crate::element::{elastic_field_forces, ElementData, M2};
 use crate::integrator::dofs::{DofMap, NONE};
-use crate::integrator::state::State;
+use crate::integrator::state::{rigid_director_velocities, State};
 use crate::integrator::system::StepFailure;
 use crate::linsolve::{LinsolveError, SparseSolver};
 use crate::math::exp_so3;
@@ -643,38 +643,17 @@ fn observer_state(model: &Model, data: &[ElementData], t: f64, lv: &Level) -> St
         .iter()
         .map(|e| std::array::from_fn(|l| lv.lam[e.nodes[l]] * e.ref_triad[l]))
         .collect();
-    let vd = model
-        .elements
-        .iter()
-        .zip(&d)
-        .map(|(e, tri)| {
-            std::array::from_fn(|l| {
-                let a = e.nodes[l];
-                let omega = lv.lam[a] * lv.vel[a][1];
-                std::array::from_fn(|al| omega.cross(&tri[l].column(al).into_owned()))
-            })
-        })
-        .collect();
-    let eps = model
-        .elements
-        .iter()
-        .enumerate()
-        .map(|(e, el)| {
-            let cfg = Config {
-                r: [lv.r[el.nodes[0]], lv.r[el.nodes[1]]],
-                d: d[e],
-            };
-            crate::element::strains6(&cfg, data[e].props.h)
-        })
-        .collect();
-    State {
+    let vd = rigid_director_velocities(model, &d, |a| lv.lam[a] * lv.vel[a][1]);
+    let mut s = State {
         t,
         r: lv.r.clone(),
         v: lv.vel.iter().map(|v| v[0]).collect(),
         d,
         vd,
-        eps,
-    }
+        eps: Vec::new(),
+    };
+    s.eps = s.strains(model, data);
+    s
 }
 
 #[cfg(test)]
