@@ -20,6 +20,10 @@
 //!   applies the staggered or monolithic dissipation strategy and accepts or rejects steps.
 //! * [`observe`] computes energies, momenta and accelerations from a state.
 //! * [`output`] writes `history.csv`, `summary.json` and the PNG charts.
+//! * [`study`] runs work–precision and stability studies over the schemes (including the
+//!   mid-point and generalized-α baselines) and charts them.
+//! * [`study`] runs work–precision and stability studies over the schemes (including the
+//!   mid-point and generalized-α baselines) and charts them.
 
 // Index loops over element ends l, m and director indices α, β mirror the equations of
 // DESIGN §2–4 term by term; iterator rewrites would hide that correspondence.
@@ -35,3 +39,4 @@ pub mod observe;
 pub mod output;
 pub mod reproduce;
 pub mod scene;
+pub mod study;

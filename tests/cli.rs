@@ -139,3 +139,90 @@ fn check_and_scenes_describe_the_builtin_frame() {
     let st = cosserat().arg("scenes").output().unwrap();
     assert!(String::from_utf8_lossy(&st.stdout).contains("frame"));
 }
+
+/// `study work-precision` and `study stability` write their CSV and PNG (small grids on
+/// the frame; the physics of the studies is pinned in tests/study.rs).
+#[test]
+fn study_commands_write_csv_and_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("wp");
+    let st = cosserat()
+        .args([
+            "study",
+            "work-precision",
+            "frame",
+            "--schemes",
+            "em,midpoint,gen-alpha:0.5",
+            "--dts",
+            "0.1,0.05",
+            "--t-end",
+            "0.4",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for f in ["work_precision.csv", "work_precision.png"] {
+        assert!(std::fs::metadata(out.join(f)).unwrap().len() > 100, "{f}");
+    }
+    let csv = std::fs::read_to_string(out.join("work_precision.csv")).unwrap();
+    assert!(
+        csv.starts_with("scheme,param,dt,error,wall_s,status,newton_iters_total,observed_order\n")
+    );
+    assert_eq!(csv.lines().count(), 1 + 3 * 2);
+
+    let out = dir.path().join("st");
+    let st = cosserat()
+        .args([
+            "study",
+            "stability",
+            "frame",
+            "--schemes",
+            "em,edmc2,gen-alpha",
+            "--params",
+            "0,1",
+            "--rho-inf",
+            "0.8",
+            "--dts",
+            "0.1,0.4",
+            "--t-end",
+            "0.8",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for f in ["stability.csv", "stability.png"] {
+        assert!(std::fs::metadata(out.join(f)).unwrap().len() > 100, "{f}");
+    }
+    let csv = std::fs::read_to_string(out.join("stability.csv")).unwrap();
+    assert!(csv.starts_with("scheme,param,dt,t_reached,t_end,status,max_energy_growth\n"));
+    // em: 1 row × 2 Δt; edmc2: 2 × 2; gen-alpha: 1 × 2.
+    assert_eq!(csv.lines().count(), 1 + 2 + 4 + 2);
+
+    // A bad scheme name is bad input (exit code 2).
+    let st = cosserat()
+        .args([
+            "study",
+            "work-precision",
+            "frame",
+            "--schemes",
+            "rk4",
+            "--out",
+        ])
+        .arg(dir.path().join("bad"))
+        .output()
+        .unwrap();
+    assert_eq!(st.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("unknown scheme"));
+}

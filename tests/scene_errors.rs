@@ -509,3 +509,39 @@ fn unknown_key_in_link() {
         "stiffness",
     );
 }
+
+#[test]
+fn rho_inf_out_of_range() {
+    let t = edit(
+        "scheme = \"edmc2\"\nalpha = 0.5",
+        "scheme = \"gen-alpha\"\nrho_inf = 1.5",
+    );
+    fails(&t, "integrator.rho_inf", "must be in [0, 1] (got 1.5)");
+}
+
+#[test]
+fn rho_inf_belongs_to_gen_alpha() {
+    let t = edit("alpha = 0.5", "rho_inf = 0.5");
+    fails(
+        &t,
+        "integrator.rho_inf",
+        "not a parameter of scheme edmc2 (it belongs to gen-alpha)",
+    );
+}
+
+#[test]
+fn baseline_schemes_parse() {
+    let t = edit("scheme = \"edmc2\"\nalpha = 0.5", "scheme = \"midpoint\"");
+    assert_eq!(
+        parse_scene(&t, FILE).unwrap().params.scheme,
+        cosserat::integrator::Scheme::Midpoint
+    );
+    let t = edit(
+        "scheme = \"edmc2\"\nalpha = 0.5",
+        "scheme = \"gen-alpha\"\nrho_inf = 0.25",
+    );
+    assert_eq!(
+        parse_scene(&t, FILE).unwrap().params.scheme,
+        cosserat::integrator::Scheme::GenAlpha { rho_inf: 0.25 }
+    );
+}

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 
 use cosserat::driver::{run_to_dir, RunOptions};
@@ -12,6 +12,7 @@ use cosserat::integrator::{IntegratorParams, Scheme, Strategy};
 use cosserat::observe::record::{RunStatus, RunSummary};
 use cosserat::reproduce::reproduce;
 use cosserat::scene::{builtin_scenes, load_scene, Scene};
+use cosserat::study;
 
 /// Nonlinear dynamics of geometrically exact (Cosserat) rods with energy-momentum and
 /// energy-dissipative momentum-conserving time stepping. With no arguments: runs the
@@ -48,6 +49,80 @@ enum Command {
         #[arg(long)]
         no_vtk: bool,
     },
+    /// Speed-vs-accuracy and stability studies over the schemes.
+    #[command(subcommand)]
+    Study(StudyCommand),
+}
+
+#[derive(Subcommand, Debug)]
+enum StudyCommand {
+    /// Error against wall time for several schemes and time steps: writes
+    /// work_precision.csv and work_precision.png.
+    WorkPrecision(WorkPrecisionArgs),
+    /// Fraction of the run completed over a grid Δt × dissipation parameter per scheme:
+    /// writes stability.csv and stability.png.
+    Stability(StabilityArgs),
+}
+
+/// Options every study takes.
+#[derive(clap::Args, Debug)]
+struct StudyCommon {
+    /// Scene file or built-in name.
+    scene: String,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// End time (default: the scene's).
+    #[arg(long)]
+    t_end: Option<f64>,
+    /// Relative Newton tolerance of every run (default: the scene's).
+    #[arg(long)]
+    newton_tol: Option<f64>,
+    /// Parallel runs (default: the number of cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+}
+
+#[derive(clap::Args, Debug)]
+struct WorkPrecisionArgs {
+    #[command(flatten)]
+    common: StudyCommon,
+    /// Schemes with parameters, `NAME[:PARAM]` (edmc1: χ_Γ = χ_Ω, edmc2: α_Γv,
+    /// gen-alpha: ρ∞).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "em,edmc1:0.2,edmc2:0.5,midpoint,gen-alpha:0.8"
+    )]
+    schemes: Vec<String>,
+    /// Time steps (default: the scene's Δt times 1, ½, ¼, ⅛).
+    #[arg(long, value_delimiter = ',')]
+    dts: Option<Vec<f64>>,
+    /// Δt of the EM reference run (default: the smallest Δt / 8).
+    #[arg(long)]
+    reference_dt: Option<f64>,
+}
+
+#[derive(clap::Args, Debug)]
+struct StabilityArgs {
+    #[command(flatten)]
+    common: StudyCommon,
+    /// Scheme families, one chart panel each.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "em,edmc1,edmc2,midpoint,gen-alpha"
+    )]
+    schemes: Vec<String>,
+    /// Dissipation parameters of edmc1 (χ_Γ = χ_Ω) and edmc2 (α_Γv).
+    #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2")]
+    params: Vec<f64>,
+    /// ρ∞ values of gen-alpha.
+    #[arg(long, value_delimiter = ',', default_value = "0,0.5,0.8,1")]
+    rho_inf: Vec<f64>,
+    /// Time steps (default: the scene's Δt times ¼, ½, 1, 2, 4).
+    #[arg(long, value_delimiter = ',')]
+    dts: Option<Vec<f64>>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -67,6 +142,10 @@ struct RunArgs {
     /// End time (default: the scene's).
     #[arg(long)]
     t_end: Option<f64>,
+    /// Generalized-α spectral radius ρ∞ ∈ [0, 1]; implies `--scheme gen-alpha` when no
+    /// `--scheme` is given.
+    #[arg(long)]
+    rho_inf: Option<f64>,
     /// Dissipation strategy (default: the scene's, else staggered).
     #[arg(long, value_enum)]
     strategy: Option<StrategyArg>,
@@ -89,6 +168,10 @@ enum SchemeArg {
     Em,
     Edmc1,
     Edmc2,
+    /// Baseline: plain implicit mid-point rule (stresses from the mid-point strains).
+    Midpoint,
+    /// Baseline: Lie-group generalized-α (`--rho-inf`).
+    GenAlpha,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -106,6 +189,7 @@ fn main() -> ExitCode {
             alpha: Some(0.5),
             dt: None,
             t_end: None,
+            rho_inf: None,
             strategy: None,
             out: Some(PathBuf::from("out/frame")),
             every: None,
@@ -115,6 +199,8 @@ fn main() -> ExitCode {
         Some(Command::Run(a)) => run_command(a),
         Some(Command::Check { scene }) => check_command(&scene),
         Some(Command::Reproduce { out, quick, no_vtk }) => reproduce_command(&out, quick, !no_vtk),
+        Some(Command::Study(StudyCommand::WorkPrecision(a))) => work_precision_command(&a),
+        Some(Command::Study(StudyCommand::Stability(a))) => stability_command(&a),
         Some(Command::Scenes) => {
             for s in builtin_scenes() {
                 println!("{:<12} {}", s.name, s.description);
@@ -141,13 +227,24 @@ fn check_command(spec: &str) -> Result<ExitCode> {
 /// constants when it names the same scheme, zero otherwise); `--alpha` sets α_Γv.
 fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     let mut p = scene.params;
-    let wanted = a.scheme.or(match (a.alpha, p.scheme) {
-        (Some(_), Scheme::Edmc2 { .. }) | (None, _) => None,
-        (Some(_), _) => Some(SchemeArg::Edmc2),
-    });
+    let wanted = a
+        .scheme
+        .or(match (a.alpha, p.scheme) {
+            (Some(_), Scheme::Edmc2 { .. }) | (None, _) => None,
+            (Some(_), _) => Some(SchemeArg::Edmc2),
+        })
+        .or(match (a.rho_inf, p.scheme) {
+            (Some(_), Scheme::GenAlpha { .. }) | (None, _) => None,
+            (Some(_), _) => Some(SchemeArg::GenAlpha),
+        });
     if let Some(s) = wanted {
         p.scheme = match (s, p.scheme) {
             (SchemeArg::Em, _) => Scheme::Em,
+            (SchemeArg::Midpoint, _) => Scheme::Midpoint,
+            (SchemeArg::GenAlpha, s @ Scheme::GenAlpha { .. }) => s,
+            (SchemeArg::GenAlpha, _) => Scheme::GenAlpha {
+                rho_inf: cosserat::integrator::gen_alpha::DEFAULT_RHO_INF,
+            },
             (SchemeArg::Edmc1, s @ Scheme::Edmc1 { .. }) => s,
             (SchemeArg::Edmc1, _) => Scheme::Edmc1 {
                 chi_gamma: 0.0,
@@ -172,6 +269,18 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
             Scheme::Edmc2 { alpha_gv, .. } => *alpha_gv = alpha,
             other => bail!(
                 "--alpha sets the EDMC-2 parameter α_Γv, but the scheme is {}",
+                other.name()
+            ),
+        }
+    }
+    if let Some(rho) = a.rho_inf {
+        if !(0.0..=1.0).contains(&rho) {
+            bail!("--rho-inf: must be in [0, 1] (got {rho})");
+        }
+        match &mut p.scheme {
+            Scheme::GenAlpha { rho_inf } => *rho_inf = rho,
+            other => bail!(
+                "--rho-inf sets the generalized-α parameter ρ∞, but the scheme is {}",
                 other.name()
             ),
         }
@@ -262,4 +371,124 @@ fn print_summary(s: &RunSummary, out: &Path) {
         s.max_rel_dj,
         out.display()
     );
+}
+
+fn default_jobs(jobs: Option<usize>) -> usize {
+    jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1)
+}
+
+/// Loads a study's scene, with `--newton-tol` applied to its integrator parameters, and
+/// creates the output directory.
+fn study_scene(c: &StudyCommon) -> Result<Scene> {
+    let mut scene = load_scene(&c.scene)?;
+    create_out(&c.out)?;
+    if let Some(tol) = c.newton_tol {
+        if !(tol.is_finite() && tol > 0.0) {
+            bail!("--newton-tol: must be a finite number > 0 (got {tol})");
+        }
+        scene.params.newton_tol = tol;
+    }
+    Ok(scene)
+}
+
+fn create_out(out: &Path) -> Result<()> {
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output directory {}", out.display()))
+}
+
+fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
+    let scene = study_scene(&a.common)?;
+    let schemes = a
+        .schemes
+        .iter()
+        .map(|s| study::SchemeSpec::parse(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let dt0 = scene.params.dt;
+    let dts = a
+        .dts
+        .clone()
+        .unwrap_or_else(|| vec![dt0, dt0 / 2.0, dt0 / 4.0, dt0 / 8.0]);
+    let smallest = dts.iter().copied().fold(f64::INFINITY, f64::min);
+    let cfg = study::WorkPrecisionConfig {
+        schemes,
+        t_end: a.common.t_end.unwrap_or(scene.params.t_end),
+        reference_dt: a.reference_dt.unwrap_or(smallest / 8.0),
+        dts,
+        jobs: default_jobs(a.common.jobs),
+    };
+    let wp = study::work_precision(&scene, &cfg)?;
+    study::write_work_precision_csv(&a.common.out.join("work_precision.csv"), &wp)?;
+    study::plot_work_precision(&a.common.out.join("work_precision.png"), &wp)?;
+    study::write_failures(&a.common.out.join("failures.txt"), &wp.failures())?;
+    let mut seen = Vec::new();
+    for r in &wp.rows {
+        if !seen.contains(&r.spec) {
+            seen.push(r.spec);
+            let runs: Vec<_> = wp.rows.iter().filter(|x| x.spec == r.spec).collect();
+            let failed = runs
+                .iter()
+                .filter(|x| x.status == RunStatus::Failed)
+                .count();
+            println!(
+                "{:<18} observed order {:>6.3}   errors {}   ({} of {} runs failed)",
+                r.spec.label(),
+                r.observed_order,
+                runs.iter()
+                    .map(|x| format!("{:.2e}", x.error))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+                failed,
+                runs.len()
+            );
+        }
+    }
+    println!(
+        "{}: work–precision study, reference EM Δt = {:e}; outputs in {}",
+        scene.name,
+        wp.reference_dt,
+        a.common.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
+    let scene = study_scene(&a.common)?;
+    let kinds = a
+        .schemes
+        .iter()
+        .map(|s| {
+            study::SchemeKind::parse(s.trim()).with_context(|| {
+                format!("--schemes: unknown scheme `{s}` (expected em, edmc1, edmc2, midpoint or gen-alpha)")
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let dt0 = scene.params.dt;
+    let cfg = study::StabilityConfig {
+        kinds,
+        params: a.params.clone(),
+        rho_infs: a.rho_inf.clone(),
+        dts: a
+            .dts
+            .clone()
+            .unwrap_or_else(|| vec![dt0 / 4.0, dt0 / 2.0, dt0, 2.0 * dt0, 4.0 * dt0]),
+        t_end: a.common.t_end.unwrap_or(scene.params.t_end),
+        jobs: default_jobs(a.common.jobs),
+    };
+    let st = study::stability(&scene, &cfg)?;
+    study::write_stability_csv(&a.common.out.join("stability.csv"), &st)?;
+    study::plot_stability(&a.common.out.join("stability.png"), &st)?;
+    study::write_failures(&a.common.out.join("failures.txt"), &st.failures())?;
+    let done = st
+        .cells
+        .iter()
+        .filter(|c| c.status == RunStatus::Completed)
+        .count();
+    println!(
+        "{}: stability study, {done} of {} runs completed; outputs in {}",
+        scene.name,
+        st.cells.len(),
+        a.common.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
 }

@@ -79,7 +79,7 @@ pub fn local_scalars(
     dt_over_h: f64,
 ) -> LocalScalars {
     match *scheme {
-        Scheme::Em => LocalScalars::default(),
+        Scheme::Em | Scheme::Midpoint | Scheme::GenAlpha { .. } => LocalScalars::default(),
         Scheme::Edmc1 {
             chi_gamma,
             chi_omega,

@@ -8,7 +8,9 @@
 //! * kinematics: `r_{n+1} = r_n + u`, `d_{n+1} = cay(θ) d_n`,
 //!   `v_{n+1} = 2u/Δt − v_n − 2g`, director velocities
 //!   `v_{α,n+1} = 2(d_{α,n+1} − d_{α,n})/Δt − v_{α,n} − 2κ_l w_α`;
-//! * stresses from the **mean of the strains** plus the dissipative parts;
+//! * stresses from the **mean of the strains** plus the dissipative parts (EM/EDMC), or
+//!   from the strains of the mid-point configuration for the plain mid-point baseline
+//!   ([`StressRule`]);
 //! * generalized forces on the eight vector fields projected onto `(u, θ)` with the
 //!   mid-point directors (`δd = δθ × d_{n+½}`).
 //!
@@ -161,6 +163,18 @@ pub struct Kinematics {
     pub inputs: LocalInputs,
 }
 
+/// Which strains the element stresses are formed from: the only difference between the
+/// energy–momentum scheme and the plain implicit mid-point rule on this discretization.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StressRule {
+    /// `S = C(½(ε_n + ε_{n+1}) − ε°)`: the mean of the strains (EM, EDMC-1, EDMC-2;
+    /// energy-consistent because `B_{n+½}(Φ_{n+1} − Φ_n) = ε_{n+1} − ε_n`).
+    MeanOfStrains,
+    /// `S = C(ε(Φ_{n+½}) − ε°)`: the strain of the mid-point configuration (the plain
+    /// mid-point rule; momenta still conserved, energy not).
+    MidpointStrain,
+}
+
 /// Per-step constants shared by all elements.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepConsts {
@@ -304,15 +318,29 @@ pub fn consistent_scalars(
     (frozen, loc, kin)
 }
 
-/// Generalized stresses `S* = (N*, M*)`: mean of the strains plus the dissipative parts.
-pub fn stresses(data: &ElementData, kin: &Kinematics, s: &FrozenScalars) -> Vector6<f64> {
+/// Generalized stresses `S* = (N*, M*)`: the strains of `rule` (mean of the strains, or
+/// the strain of the mid-point configuration) plus the dissipative parts.
+pub fn stresses(
+    data: &ElementData,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    rule: StressRule,
+) -> Vector6<f64> {
     let p = &data.props;
-    let mean = 0.5 * (kin.eps_n + kin.eps1) - data.eps0;
+    let mean = match rule {
+        StressRule::MeanOfStrains => 0.5 * (kin.eps_n + kin.eps1),
+        StressRule::MidpointStrain => strains6(&kin.mid, p.h),
+    } - data.eps0;
     let de = kin.eps1 - kin.eps_n;
     let g = mean.fixed_rows::<3>(0) + 0.5 * s.beta_gamma * de.fixed_rows::<3>(0);
     let o = mean.fixed_rows::<3>(3) + 0.5 * s.beta_omega * de.fixed_rows::<3>(3);
-    let n = p.c_gamma.component_mul(&g.into_owned());
-    let m = p.c_omega * o;
+    constitutive(p, &g.into_owned(), &o.into_owned())
+}
+
+/// `(N, M) = (C_Γ Γ, C_Ω Ω)` for strains measured from the reference.
+fn constitutive(p: &ElementProps, gamma: &Vec3, omega: &Vec3) -> Vector6<f64> {
+    let n = p.c_gamma.component_mul(gamma);
+    let m = p.c_omega * omega;
     Vector6::new(n.x, n.y, n.z, m.x, m.y, m.z)
 }
 
@@ -328,6 +356,33 @@ fn gross_stress(data: &ElementData, kin: &Kinematics) -> Vector6<f64> {
     let n = p.c_gamma.abs().component_mul(&e.fixed_rows::<3>(0));
     let m = p.c_omega.abs() * e.fixed_rows::<3>(3);
     Vector6::new(n.x, n.y, n.z, m.x, m.y, m.z)
+}
+
+/// Generalized stress forces `h Bᵀ S` on the eight vector fields of an element
+/// (one-point rule).
+pub fn field_forces(b: &strain::StrainGradient, s: &Vector6<f64>, h: f64) -> [Vec3; NFIELDS] {
+    let mut f = [Vec3::zeros(); NFIELDS];
+    for (row, &sk) in b.iter().zip(s.iter()) {
+        for q in 0..NFIELDS {
+            f[q] += row[q] * (h * sk);
+        }
+    }
+    f
+}
+
+/// Elastic forces of one element at a single configuration: `h B(Φ)ᵀ C(ε(Φ) − ε°)` on the
+/// eight fields, and the strains `ε(Φ)`. Used by the generalized-α baseline, which
+/// balances inertia against the elastic forces *at* `t_{n+1}`.
+pub fn elastic_field_forces(data: &ElementData, cfg: &Config) -> ([Vec3; NFIELDS], Vector6<f64>) {
+    let p = &data.props;
+    let eps = strains6(cfg, p.h);
+    let de = eps - data.eps0;
+    let s = constitutive(
+        p,
+        &de.fixed_rows::<3>(0).into_owned(),
+        &de.fixed_rows::<3>(3).into_owned(),
+    );
+    (field_forces(&strain_gradient(cfg, p.h), &s, p.h), eps)
 }
 
 /// Output of [`residual_tangent`].
@@ -355,16 +410,11 @@ pub fn residual_tangent(
 ) -> ElementEval {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
-    let sstar = stresses(data, kin, s);
+    let sstar = stresses(data, kin, s, k.scheme.stress_rule());
     let b_mid = strain_gradient(&kin.mid, h);
 
     // Generalized forces on the eight fields: stress part h B_{n+½}ᵀ S*, then inertia.
-    let mut f = [Vec3::zeros(); NFIELDS];
-    for (row, &sk) in b_mid.iter().zip(sstar.iter()) {
-        for q in 0..NFIELDS {
-            f[q] += row[q] * (h * sk);
-        }
-    }
+    let mut f = field_forces(&b_mid, &sstar, h);
     // Round-off floor of the stress forces: S* is C times a difference of strains of size
     // |ε| (not |ε − ε0|), so in f64 the forces are uncertain by ~1e-16 of the "gross"
     // forces h |B|ᵀ |C| (|ε̄| + |ε0|). Stiff, barely loaded members (the arch at t = 0:
@@ -506,7 +556,12 @@ fn tangent(
 ) {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
-    let b1 = strain_gradient(&kin.cfg1, h);
+    // Trial side: ∂ε/∂Φ_{n+1} = ½ B(Φ_{n+1}) for the mean of the strains, ½ B(Φ_{n+½})
+    // for the strain of the mid-point configuration (the ½ is in `dmat` below).
+    let b1 = match k.scheme.stress_rule() {
+        StressRule::MeanOfStrains => strain_gradient(&kin.cfg1, h),
+        StressRule::MidpointStrain => *b_mid,
+    };
     let dmid = [kin.mid.d[0], kin.mid.d[1]];
 
     // Test-side map T (δΦ = T δq) and trial-side map J (dΦ_{n+1} = J dq) per field:
@@ -534,7 +589,7 @@ fn tangent(
             }
         }
     }
-    // Material part: h B̃_½ᵀ (∂S*/∂ε_{n+1}) B̃_{n+1}, ∂S*/∂ε_{n+1} = ½(1+β) C.
+    // Material part: h B̃_½ᵀ (∂S*/∂ε) B̃_trial, ∂S*/∂ε = ½(1+β) C.
     let mut dmat = nalgebra::Matrix6::<f64>::zeros();
     for i in 0..3 {
         dmat[(i, i)] = 0.5 * (1.0 + s.beta_gamma) * p.c_gamma[i];

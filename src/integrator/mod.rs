@@ -3,6 +3,7 @@
 //! (DESIGN §4).
 
 pub mod dofs;
+pub mod gen_alpha;
 mod links;
 pub mod params;
 pub mod run;

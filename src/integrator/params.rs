@@ -31,6 +31,18 @@ pub enum Scheme {
         /// α_Ων: couples moment strains to director speed.
         alpha_on: f64,
     },
+    /// Baseline: the plain implicit mid-point rule on the same discretization. Stresses
+    /// come from the strains of the mid-point configuration `Φ_{n+½}` instead of the mean
+    /// of the strains: momenta are still conserved, energy is not.
+    Midpoint,
+    /// Baseline: a Lie-group generalized-α scheme (Brüls–Cardona–Arnold) on the nodal
+    /// `(r, Λ)`, same elements, strains and consistent mass (module
+    /// [`crate::integrator::gen_alpha`]). Neither energy nor momenta are exact.
+    #[serde(rename = "gen-alpha")]
+    GenAlpha {
+        /// Spectral radius at infinite frequency ρ∞ ∈ [0, 1] (1: no numerical damping).
+        rho_inf: f64,
+    },
 }
 
 impl Scheme {
@@ -40,6 +52,24 @@ impl Scheme {
             Scheme::Em => "em",
             Scheme::Edmc1 { .. } => "edmc1",
             Scheme::Edmc2 { .. } => "edmc2",
+            Scheme::Midpoint => "midpoint",
+            Scheme::GenAlpha { .. } => "gen-alpha",
+        }
+    }
+
+    /// True when the scheme guarantees `H_{n+1} ≤ H_n + W` (EM and the EDMC schemes), so
+    /// that a step whose energy grows is rejected. False for the baselines (mid-point,
+    /// generalized-α), whose energy is not controlled by construction.
+    pub fn controls_energy(&self) -> bool {
+        !matches!(self, Scheme::Midpoint | Scheme::GenAlpha { .. })
+    }
+
+    /// How the element kernel forms the stresses (mean of the strains for EM/EDMC, strain
+    /// of the mid-point configuration for [`Scheme::Midpoint`]).
+    pub fn stress_rule(&self) -> crate::element::StressRule {
+        match self {
+            Scheme::Midpoint => crate::element::StressRule::MidpointStrain,
+            _ => crate::element::StressRule::MeanOfStrains,
         }
     }
 
@@ -47,7 +77,7 @@ impl Scheme {
     /// (an extra three unknowns per translationally free node).
     pub fn translational_dissipation(&self) -> bool {
         match *self {
-            Scheme::Em => false,
+            Scheme::Em | Scheme::Midpoint | Scheme::GenAlpha { .. } => false,
             Scheme::Edmc1 { chi_v, .. } => chi_v != 0.0,
             Scheme::Edmc2 {
                 alpha_gv, alpha_ov, ..
@@ -58,7 +88,7 @@ impl Scheme {
     /// True when director velocities carry a dissipative correction.
     pub fn director_dissipation(&self) -> bool {
         match *self {
-            Scheme::Em => false,
+            Scheme::Em | Scheme::Midpoint | Scheme::GenAlpha { .. } => false,
             Scheme::Edmc1 { chi_nu, .. } => chi_nu != 0.0,
             Scheme::Edmc2 {
                 alpha_gn, alpha_on, ..
@@ -69,7 +99,7 @@ impl Scheme {
     /// True when any dissipation is switched on (otherwise the scheme is EM).
     pub fn is_dissipative(&self) -> bool {
         match *self {
-            Scheme::Em => false,
+            Scheme::Em | Scheme::Midpoint | Scheme::GenAlpha { .. } => false,
             Scheme::Edmc1 {
                 chi_gamma,
                 chi_omega,

@@ -30,17 +30,7 @@ impl State {
     /// director velocities `ω × d` from the nodal angular velocities.
     pub fn initial(model: &Model, data: &[ElementData]) -> Self {
         let d: Vec<[Mat3; 2]> = model.elements.iter().map(|e| e.ref_triad).collect();
-        let vd = model
-            .elements
-            .iter()
-            .zip(&d)
-            .map(|(e, tri)| {
-                std::array::from_fn(|l| {
-                    let w = model.omega0[e.nodes[l]];
-                    std::array::from_fn(|a| w.cross(&tri[l].column(a).into_owned()))
-                })
-            })
-            .collect();
+        let vd = rigid_director_velocities(model, &d, |a| model.omega0[a]);
         let mut s = Self {
             t: 0.0,
             r: model.nodes.clone(),
@@ -50,9 +40,7 @@ impl State {
             eps: Vec::new(),
             lambda: vec![0.0; model.links.len()],
         };
-        s.eps = (0..model.elements.len())
-            .map(|e| strains6(&s.config(model, e), data[e].props.h))
-            .collect();
+        s.eps = s.strains(model, data);
         // Supported nodes do not move.
         for (a, sup) in model.supports.iter().enumerate() {
             if sup.translation {
@@ -67,6 +55,13 @@ impl State {
             }
         }
         s
+    }
+
+    /// Raw strains `(Γ, Ω)` of every element of this state.
+    pub fn strains(&self, model: &Model, data: &[ElementData]) -> Vec<Vector6<f64>> {
+        (0..model.elements.len())
+            .map(|e| strains6(&self.config(model, e), data[e].props.h))
+            .collect()
     }
 
     /// Configuration of element `e`.
@@ -89,4 +84,24 @@ impl State {
             vd: self.vd[e],
         }
     }
+}
+
+/// Director velocities `ω^A × d_α^{(e)l}` of a rigid cross-section motion, per element end,
+/// for nodal spatial angular velocities `omega(A)` and triads `d` (`[e][l]`).
+pub fn rigid_director_velocities(
+    model: &Model,
+    d: &[[Mat3; 2]],
+    omega: impl Fn(usize) -> Vec3,
+) -> Vec<[[Vec3; 2]; 2]> {
+    model
+        .elements
+        .iter()
+        .zip(d)
+        .map(|(e, tri)| {
+            std::array::from_fn(|l| {
+                let w = omega(e.nodes[l]);
+                std::array::from_fn(|a| w.cross(&tri[l].column(a).into_owned()))
+            })
+        })
+        .collect()
 }

@@ -39,6 +39,21 @@ pub fn cay_inv(r: &Mat3) -> Vec3 {
     )
 }
 
+/// Exponential map of SO(3) (Rodrigues): `exp(θ̂) = I + sin|θ|/|θ| θ̂ + (1 − cos|θ|)/|θ|² θ̂²`.
+/// Used only by the generalized-α baseline (CPU only); the EM/EDMC schemes use [`cay`].
+pub fn exp_so3(theta: &Vec3) -> Mat3 {
+    let t = hat(theta);
+    let a2 = theta.norm_squared();
+    let a = a2.sqrt();
+    // Series below |θ| = 1e-4 (relative error of the truncated terms < 1e-17).
+    let (s, c) = if a < 1e-4 {
+        (1.0 - a2 / 6.0, 0.5 - a2 / 24.0)
+    } else {
+        (a.sin() / a, (1.0 - a.cos()) / a2)
+    };
+    Mat3::identity() + t * s + t * t * c
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -56,5 +71,18 @@ mod tests {
         assert!(((d1 - d) - th.cross(&(0.5 * (d + d1)))).norm() < 1e-14);
         let a = inv_i_minus_half_hat(&th);
         assert!(((Mat3::identity() - 0.5 * hat(&th)) * a - Mat3::identity()).norm() < 1e-14);
+    }
+
+    #[test]
+    fn exponential_is_a_rotation_about_its_axis() {
+        for th in [Vec3::new(0.3, -1.2, 0.7), Vec3::new(1e-6, 2e-6, -1e-6)] {
+            let r = exp_so3(&th);
+            assert!((r.transpose() * r - Mat3::identity()).norm() < 1e-14);
+            assert!((r * th - th).norm() < 1e-14);
+            // exp(θ̂) = cay(θ') with |θ'| = 2 tan(|θ|/2) along the same axis.
+            let n = th.norm();
+            let c = cay(&(th * (2.0 * (0.5 * n).tan() / n)));
+            assert!((r - c).norm() < 1e-13);
+        }
     }
 }

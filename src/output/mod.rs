@@ -13,6 +13,7 @@ mod summary;
 mod vtk;
 
 pub use history::{read_history, HistoryWriter, HISTORY_COLUMNS};
+pub(crate) use plot::{ensure_font, FONT};
 pub use plot::{plot_accelerations, plot_comparison, plot_energy, plot_momenta, LabelledHistory};
 pub use progress::Progress;
 pub use snapshot::{plot_snapshots, Snapshot};

@@ -25,7 +25,8 @@ const MOMENTA_SIZE: (u32, u32) = (1000, 900);
 /// The smallest y range drawn, relative to the largest magnitude on the axis.
 pub const REL_MIN_SPAN: f64 = 1e-6;
 
-pub(super) const FONT: &str = "sans-serif";
+/// Family name of the embedded chart font (registered by [`ensure_font`]).
+pub(crate) const FONT: &str = "sans-serif";
 const TITLE_PX: u32 = 28;
 const DESC_PX: u32 = 21;
 const LABEL_PX: u32 = 18;
@@ -38,7 +39,7 @@ static FONT_ONCE: Once = Once::new();
 static FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// Registers the embedded DejaVu Sans as the "sans-serif" family (once per process).
-pub(super) fn ensure_font() {
+pub(crate) fn ensure_font() {
     FONT_ONCE.call_once(|| {
         if plotters::style::register_font(FONT, FontStyle::Normal, FONT_BYTES).is_err() {
             // The font is embedded at compile time; this cannot fail for a valid file.

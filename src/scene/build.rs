@@ -529,7 +529,7 @@ fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalL
 fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorParams, usize)> {
     let k = |name: &str| ip.key(name);
     let scheme_name = cx.required(&k("scheme"), r.scheme.as_deref())?;
-    let all_params: [(&str, Option<f64>, &str); 9] = [
+    let all_params: [(&str, Option<f64>, &str); 10] = [
         ("alpha", r.alpha, "edmc2"),
         ("alpha_gv", r.alpha_gv, "edmc2"),
         ("alpha_gn", r.alpha_gn, "edmc2"),
@@ -539,11 +539,17 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
         ("chi_omega", r.chi_omega, "edmc1"),
         ("chi_v", r.chi_v, "edmc1"),
         ("chi_nu", r.chi_nu, "edmc1"),
+        ("rho_inf", r.rho_inf, "gen-alpha"),
     ];
-    if !matches!(scheme_name, "em" | "edmc1" | "edmc2") {
+    if !matches!(
+        scheme_name,
+        "em" | "edmc1" | "edmc2" | "midpoint" | "gen-alpha"
+    ) {
         return Err(cx.err(
             &k("scheme"),
-            format!("unknown scheme `{scheme_name}` (expected \"em\", \"edmc1\" or \"edmc2\")"),
+            format!(
+                "unknown scheme `{scheme_name}` (expected \"em\", \"edmc1\", \"edmc2\", \"midpoint\" or \"gen-alpha\")"
+            ),
         ));
     }
     for (name, value, owner) in all_params {
@@ -556,6 +562,16 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
     }
     let scheme = match scheme_name {
         "em" => Scheme::Em,
+        "midpoint" => Scheme::Midpoint,
+        "gen-alpha" => {
+            let rho_inf = r
+                .rho_inf
+                .unwrap_or(crate::integrator::gen_alpha::DEFAULT_RHO_INF);
+            if !(0.0..=1.0).contains(&rho_inf) {
+                return Err(cx.err(&k("rho_inf"), format!("must be in [0, 1] (got {rho_inf})")));
+            }
+            Scheme::GenAlpha { rho_inf }
+        }
         "edmc1" => Scheme::Edmc1 {
             chi_gamma: cx.opt_non_negative(&k("chi_gamma"), r.chi_gamma)?,
             chi_omega: cx.opt_non_negative(&k("chi_omega"), r.chi_omega)?,

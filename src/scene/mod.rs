@@ -404,6 +404,8 @@ impl Scene {
             } => format!(
                 "edmc2 (alpha_gv {alpha_gv}, alpha_gn {alpha_gn}, alpha_ov {alpha_ov}, alpha_on {alpha_on})"
             ),
+            Scheme::Midpoint => "midpoint".to_string(),
+            Scheme::GenAlpha { rho_inf } => format!("gen-alpha (rho_inf {rho_inf})"),
         };
         let strategy = match p.strategy {
             Strategy::Monolithic => "monolithic",

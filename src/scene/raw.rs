@@ -145,6 +145,7 @@ pub(crate) struct RawIntegrator {
     pub chi_omega: Option<f64>,
     pub chi_v: Option<f64>,
     pub chi_nu: Option<f64>,
+    pub rho_inf: Option<f64>,
     pub strategy: Option<String>,
     pub newton_tol: Option<f64>,
     pub max_iter: Option<i64>,
