@@ -26,6 +26,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod element;
+pub mod gpu;
 pub mod integrator;
 pub mod linsolve;
 pub mod math;
