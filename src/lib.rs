@@ -25,6 +25,7 @@
 // DESIGN §2–4 term by term; iterator rewrites would hide that correspondence.
 #![allow(clippy::needless_range_loop)]
 
+pub mod batch;
 pub mod element;
 pub mod gpu;
 pub mod integrator;

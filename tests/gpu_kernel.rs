@@ -25,7 +25,7 @@ use nalgebra::{Matrix2, Vector6};
 /// f64 parity: a few hundred round-offs of the largest term.
 const KERNEL_PARITY_RTOL: f64 = 1e-12;
 /// f32 fallback bound (documented in README, "GPU precision").
-const F32_RTOL: f64 = 2e-3;
+const F32_RTOL: f64 = 1e-4;
 
 struct Rng(u64);
 impl Rng {

@@ -259,8 +259,18 @@ impl ElementKernel {
         self.dirty[0] = true;
     }
 
-    /// Writes the state at `n` of slot `i` (and its cached strains).
+    /// Writes the state at `n` of slot `i` (and its cached strains). The state buffer is
+    /// uploaded again only when some slot's state changed (once per step, not per Newton
+    /// iteration).
     pub fn set_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
+        let before = self.dirty[1];
+        let old: [f64; NS] = std::array::from_fn(|f| self.host[1][f * self.cap + i]);
+        self.write_state(i, st, eps_n);
+        let changed = (0..NS).any(|f| self.host[1][f * self.cap + i] != old[f]);
+        self.dirty[1] = before || changed;
+    }
+
+    fn write_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
         for l in 0..2 {
             self.put3(1, S_R + 3 * l, i, &st.cfg.r[l]);
             self.put3(1, S_V + 3 * l, i, &st.v[l]);
@@ -274,7 +284,6 @@ impl ElementKernel {
         for c in 0..6 {
             self.put(1, S_EPS + c, i, eps_n[c]);
         }
-        self.dirty[1] = true;
     }
 
     /// Writes the increment and frozen scalars of slot `i` and marks it active.
