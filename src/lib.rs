@@ -35,3 +35,4 @@ pub mod model;
 pub mod observe;
 pub mod output;
 pub mod scene;
+pub mod sweep;

@@ -266,3 +266,35 @@ pub fn run_members(
     stats.wall_s = start.elapsed().as_secs_f64();
     Ok(stats)
 }
+
+/// The benchmark batch of `cosserat bench`: `rods` clamped 3D cantilevers of `elements`
+/// elements each (the built-in `cantilever` scene's rod and section), EDMC-2 α = 0.5,
+/// staggered, Δt = 0.01, `steps` steps, each member's tip kicked with a different speed
+/// (so the members need different Newton iteration counts, as in a real sweep).
+pub fn bench_members(rods: usize, elements: usize, steps: usize) -> Vec<Member> {
+    let base = crate::scene::load_scene("cantilever").expect("built-in scene");
+    let text = crate::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "cantilever")
+        .expect("built-in scene")
+        .toml
+        .replace("elements = 50", &format!("elements = {}", elements.max(1)));
+    let scene = crate::scene::parse_scene(&text, "builtin:cantilever").unwrap_or(base);
+    let mut params = scene.params;
+    params.scheme = crate::integrator::Scheme::Edmc2 {
+        alpha_gv: 0.5,
+        alpha_gn: 0.0,
+        alpha_ov: 0.0,
+        alpha_on: 0.0,
+    };
+    params.dt = 0.01;
+    params.t_end = steps as f64 * params.dt;
+    (0..rods)
+        .map(|i| {
+            let mut model = scene.model.clone();
+            let s = 0.5 + (i % 16) as f64 / 16.0;
+            model.velocity0.iter_mut().for_each(|v| *v *= s);
+            Member { model, params }
+        })
+        .collect()
+}

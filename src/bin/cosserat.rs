@@ -13,6 +13,9 @@ use cosserat::observe::record::{RunStatus, RunSummary, StepRecord};
 use cosserat::output::{plot_energy, plot_momenta, write_summary, HistoryWriter, Progress};
 use cosserat::scene::{builtin_scenes, load_scene, Scene};
 
+#[path = "cosserat_cmds/mod.rs"]
+mod cmds;
+
 /// Nonlinear dynamics of geometrically exact (Cosserat) rods with energy-momentum and
 /// energy-dissipative momentum-conserving time stepping. With no arguments: runs the
 /// built-in `frame` scene with EDMC-2 α = 0.5 into `out/frame/`.
@@ -35,6 +38,11 @@ enum Command {
     },
     /// List the built-in scenes.
     Scenes,
+    /// Run a parameter sweep (a base scene + parameters to vary) as one batch and write
+    /// DIR/members.csv.
+    Sweep(cmds::SweepArgs),
+    /// Time the same batch on the CPU path and on the GPU path.
+    Bench(cmds::BenchArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -63,6 +71,12 @@ struct RunArgs {
     /// Write every N-th step to history.csv (default: the scene's `output_every`).
     #[arg(long)]
     every: Option<usize>,
+    /// Where the element kernel runs (`auto`: the GPU when an f64 adapter exists).
+    #[arg(long, value_enum, default_value_t = cmds::BackendArg::Cpu)]
+    backend: cmds::BackendArg,
+    /// GPU adapter: first adapter whose name contains this (case-insensitive).
+    #[arg(long)]
+    adapter: Option<String>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -90,9 +104,13 @@ fn main() -> ExitCode {
             strategy: None,
             out: Some(PathBuf::from("out/frame")),
             every: None,
+            backend: cmds::BackendArg::Cpu,
+            adapter: None,
         }),
         Some(Command::Run(a)) => run_command(a),
         Some(Command::Check { scene }) => check_command(&scene),
+        Some(Command::Sweep(a)) => cmds::sweep_command(a),
+        Some(Command::Bench(a)) => cmds::bench_command(a),
         Some(Command::Scenes) => {
             for s in builtin_scenes() {
                 println!("{:<12} {}", s.name, s.description);
@@ -187,6 +205,7 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
     let every = a.every.unwrap_or(scene.output_every).max(1);
     let mut sim =
         Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
+    let _gpu = cmds::attach(&mut sim, a.backend, a.adapter.as_deref())?;
     let outcome = simulate(&mut sim, &out, every, &scene.name)?;
     let summary = summarize(&scene, &sim, &outcome);
     write_summary(&out.join("summary.json"), &summary)?;
