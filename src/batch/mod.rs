@@ -126,6 +126,8 @@ pub struct BatchOptions {
 pub struct BatchStats {
     /// Wall time of the batch.
     pub wall_s: f64,
+    /// GPU path: pipeline and buffer creation (shader compilation included).
+    pub setup_s: f64,
     /// GPU stage timers (zero on the CPU path).
     pub gpu: KernelTimers,
 }
@@ -229,7 +231,9 @@ pub fn run_members(
                 opts.workers
             };
             let workers = want.min(cap).min(members.len()).max(1);
+            let t0 = Instant::now();
             let batcher = Arc::new(GpuBatcher::new(ctx, workers, per_slot)?);
+            stats.setup_s = t0.elapsed().as_secs_f64();
             let next = AtomicUsize::new(0);
             std::thread::scope(|sc| {
                 for slot in 0..workers {

@@ -79,6 +79,16 @@ pub struct SweepSummary {
     pub gpu: KernelTimers,
 }
 
+/// Shortest round-trip text of a number, in exponent form outside [1e-3, 1e6).
+fn num(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 || !x.is_finite() || (1e-3..1e6).contains(&a) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
 fn csv_escape(s: &str) -> String {
     format!("\"{}\"", s.replace('"', "\"\"").replace('\n', " "))
 }
@@ -92,15 +102,15 @@ impl MemberRow {
         let mut s = format!(
             "{},{status},{},{},{},{},{},{}",
             self.member,
-            self.t_reached,
-            self.final_total,
-            self.max_rel_dl,
-            self.max_rel_dj,
+            num(self.t_reached),
+            num(self.final_total),
+            num(self.max_rel_dl),
+            num(self.max_rel_dj),
             self.newton_iters_total,
-            self.wall_s
+            num(self.wall_s)
         );
         for v in &self.values {
-            s.push_str(&format!(",{v}"));
+            s.push_str(&format!(",{}", num(*v)));
         }
         s.push(',');
         s.push_str(&csv_escape(self.reason.as_deref().unwrap_or("")));

@@ -209,6 +209,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             obj["gpu_wall_s"] = g.wall_s.into();
             obj["gpu_newton_iters"] = (*it).into();
             obj["gpu_failed"] = (*f).into();
+            obj["gpu_setup_s"] = g.setup_s.into();
             obj["gpu_upload_s"] = g.gpu.upload_s.into();
             obj["gpu_kernel_s"] = g.gpu.kernel_s.into();
             obj["gpu_readback_s"] = g.gpu.readback_s.into();
@@ -236,9 +237,11 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
                     "gpu ({adapter}): {:.3} s, {:.0} element-steps/s, {} Newton iterations, {} failed; ratio gpu/cpu {:.2}",
                     g.wall_s, rate, it, f, rate / cpu_rate
                 );
-                let other = g.wall_s - g.gpu.upload_s - g.gpu.kernel_s - g.gpu.readback_s;
+                let other =
+                    g.wall_s - g.setup_s - g.gpu.upload_s - g.gpu.kernel_s - g.gpu.readback_s;
                 println!(
-                    "gpu time: upload {:.3} s, kernel+copy {:.3} s, readback {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down); host assembly+solve+barrier {:.3} s",
+                    "gpu time: pipeline setup {:.3} s, upload {:.3} s, kernel+copy {:.3} s, readback {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down); host gather+assembly+solve+barrier {:.3} s",
+                    g.setup_s,
                     g.gpu.upload_s,
                     g.gpu.kernel_s,
                     g.gpu.readback_s,
