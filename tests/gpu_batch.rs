@@ -123,3 +123,32 @@ fn gpu_path_conserves_momenta_and_dissipates() {
         }
     }
 }
+
+#[test]
+fn cli_run_with_gpu_backend_matches_cpu_run() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mut totals = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let out = dir.path().join(backend);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+            .args(["run", "frame", "--t-end", "1", "--backend", backend, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(stdout.contains("completed"), "{stdout}");
+        if backend == "gpu" {
+            assert!(stdout.contains("backend: gpu:"), "{stdout}");
+        }
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        totals.push(s["energy_final"].as_f64().unwrap());
+    }
+    let rel = (totals[0] - totals[1]).abs() / totals[0].abs();
+    assert!(rel <= HISTORY_RTOL, "cpu {} gpu {}", totals[0], totals[1]);
+}

@@ -41,7 +41,7 @@ fn bad_sweep_files_name_file_line_key_and_reason() {
         ("base = \"frame\"\nmode = \"random\"\nsamples = 4\n[[vary]]\nkey = \"integrator.dt\"\nrange = [0.2, 0.1]\n", "s.toml:6:9: vary[0].range: must be [lo, hi]"),
         ("base = \"frame\"\nmode = \"list\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [0.1, 0.2]\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [1]\n", "s.toml:8:10: vary[1].values: mode list needs equal lengths"),
         ("base = \"frame\"\n", "s.toml: vary: no [[vary]] table"),
-        ("base = \"frame\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [\"x\"]\n", "s.toml:4:11:"),
+        ("base = \"frame\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [\"x\"]\n", "s.toml:4:11: vary[0].values: invalid type"),
         ("base = \"frame\n", "s.toml:1:"),
     ];
     for (text, want) in cases {

@@ -245,6 +245,28 @@ fn set_in(root: &mut toml::Value, key: &str, x: f64) -> Result<(), String> {
     Ok(())
 }
 
+/// The key path of the value at a byte offset: `KEY` at top level, `vary[i].KEY` inside
+/// the i-th `[[vary]]` table (the sweep format has no deeper nesting).
+fn key_at(text: &str, offset: usize) -> String {
+    let before = &text[..offset.min(text.len())];
+    let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
+    let line_end = text[line_start..]
+        .find('\n')
+        .map(|i| line_start + i)
+        .unwrap_or(text.len());
+    let line = &text[line_start..line_end];
+    let key = line.split('=').next().unwrap_or("").trim().to_string();
+    let tables = before[..line_start]
+        .lines()
+        .filter(|l| l.trim_start().starts_with("[[vary]]"))
+        .count();
+    match (tables, line.contains('=')) {
+        (0, _) => key,
+        (n, true) => format!("vary[{}].{key}", n - 1),
+        (n, false) => format!("vary[{}]", n - 1),
+    }
+}
+
 /// 1-based line and column (in characters) of a byte offset.
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
@@ -316,12 +338,16 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
         let location = e.span().and_then(|s| at(s.start));
         let msg = e.message().trim().to_string();
         // serde reports unknown/missing/mistyped keys; name the key when it says which.
-        let key = msg
-            .split('`')
-            .nth(1)
-            .filter(|_| msg.starts_with("unknown field") || msg.starts_with("missing field"))
-            .unwrap_or("(top level)")
-            .to_string();
+        let key = e
+            .span()
+            .map(|sp| key_at(&text, sp.start))
+            .or_else(|| {
+                msg.split('`')
+                    .nth(1)
+                    .filter(|_| msg.starts_with("missing field"))
+                    .map(str::to_string)
+            })
+            .unwrap_or_else(|| "(top level)".into());
         if toml::de::DeTable::parse(&text).is_err() {
             SweepError::Syntax {
                 file: file.clone(),
