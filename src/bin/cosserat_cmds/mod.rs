@@ -160,6 +160,9 @@ pub struct BenchArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Time the CPU path only (e.g. to measure its scaling with rods and threads).
+    #[arg(long)]
+    pub cpu_only: bool,
 }
 
 fn timed(members: &[cosserat::batch::Member], exec: &Executor) -> Result<(BatchStats, usize, usize)> {
@@ -179,7 +182,11 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let work = (a.rods * a.elements * a.steps) as f64;
     let (cpu, cpu_iters, cpu_failed) = timed(&members, &Executor::Cpu)?;
     let cpu_rate = work / cpu.wall_s;
-    let gpu_exec = Executor::resolve(BackendChoice::Gpu, a.adapter.as_deref());
+    let gpu_exec = if a.cpu_only {
+        Ok((Executor::Cpu, None))
+    } else {
+        Executor::resolve(BackendChoice::Gpu, a.adapter.as_deref())
+    };
     let (adapter, f64_ok, gpu) = match &gpu_exec {
         Ok((Executor::Gpu(ctx), _)) => {
             let r = timed(&members, &gpu_exec.as_ref().map(|e| e.0.clone()).unwrap())
