@@ -36,7 +36,10 @@ fn kernels(c: &mut Criterion) {
     };
     let ne = m.model.elements.len();
     let inc = |e: usize| Increment {
-        u: [Vec3::new(1e-4, 2e-4 * e as f64, 0.0), Vec3::new(0.0, 1e-4, 3e-4)],
+        u: [
+            Vec3::new(1e-4, 2e-4 * e as f64, 0.0),
+            Vec3::new(0.0, 1e-4, 3e-4),
+        ],
         theta: [Vec3::new(1e-3, 0.0, 2e-3), Vec3::new(0.0, 1e-3, 1e-3)],
         g: [Vec3::zeros(); 2],
     };
@@ -63,11 +66,7 @@ fn kernels(c: &mut Criterion) {
             for i in 0..n {
                 let e = i % ne;
                 kern.set_element(i, &sim.element_data()[e], &k, trans);
-                kern.set_state(
-                    i,
-                    &sim.state().element(&m.model, e),
-                    &sim.state().eps[e],
-                );
+                kern.set_state(i, &sim.state().element(&m.model, e), &sim.state().eps[e]);
             }
             g.bench_with_input(BenchmarkId::new("gpu", n), &n, |b, &n| {
                 b.iter(|| {
@@ -102,7 +101,11 @@ fn solves(c: &mut Criterion) {
             let vals = solver.values_mut();
             vals.iter_mut().for_each(|x| *x = 0.0);
             for &(i, j, sl) in &slots {
-                vals[sl] += if i == j { 10.0 } else { 0.01 * ((i + 2 * j) % 7) as f64 };
+                vals[sl] += if i == j {
+                    10.0
+                } else {
+                    0.01 * ((i + 2 * j) % 7) as f64
+                };
             }
             let mut rhs: Vec<f64> = (0..dofs.n).map(|i| (i % 5) as f64).collect();
             solver.factor_solve(&mut rhs).unwrap();

@@ -71,7 +71,7 @@ fn edmc2(i: usize) -> Scheme {
         alpha_gv: 0.1 + 0.9 * (i % 8) as f64 / 8.0,
         alpha_gn: 0.0,
         alpha_ov: 0.0,
-        alpha_on: if i % 2 == 0 { 0.3 } else { 0.0 },
+        alpha_on: if i.is_multiple_of(2) { 0.3 } else { 0.0 },
     }
 }
 
@@ -82,11 +82,18 @@ fn gpu_batch_energy_histories_match_cpu() {
     let cpu = run_all(&ms, &Executor::Cpu);
     let gpu = run_all(&ms, &exec);
     let mut worst = 0.0f64;
-    let completed = cpu.iter().filter(|c| c.outcome.status == RunStatus::Completed).count();
+    let completed = cpu
+        .iter()
+        .filter(|c| c.outcome.status == RunStatus::Completed)
+        .count();
     // A member whose step fails is recorded and the batch goes on (both paths agree on it).
     assert!(completed >= 48, "only {completed} of 64 completed");
     for (c, g) in cpu.iter().zip(&gpu) {
-        assert_eq!(g.outcome.status, c.outcome.status, "member {}: {:?}", g.index, g.outcome.reason);
+        assert_eq!(
+            g.outcome.status, c.outcome.status,
+            "member {}: {:?}",
+            g.index, g.outcome.reason
+        );
         assert_eq!(g.history.len(), c.history.len());
         for (a, b) in c.history.iter().zip(&g.history) {
             let rel = (a.total - b.total).abs() / a.total.abs().max(1e-300);
@@ -106,12 +113,23 @@ fn gpu_path_conserves_momenta_and_dissipates() {
         for r in run_all(&ms, &exec) {
             let o = &r.outcome;
             assert_eq!(o.status, RunStatus::Completed, "{:?}", o.reason);
-            assert!(o.max_rel_dl <= MOMENTUM_RTOL, "L drift {:.3e}", o.max_rel_dl);
-            assert!(o.max_rel_dj <= MOMENTUM_RTOL, "J drift {:.3e}", o.max_rel_dj);
+            assert!(
+                o.max_rel_dl <= MOMENTUM_RTOL,
+                "L drift {:.3e}",
+                o.max_rel_dl
+            );
+            assert!(
+                o.max_rel_dj <= MOMENTUM_RTOL,
+                "J drift {:.3e}",
+                o.max_rel_dj
+            );
             let h0 = r.history[0].total;
             for w in r.history.windows(2) {
                 if dissipative {
-                    assert!(w[1].total <= w[0].total + EM_ENERGY_RTOL * h0, "energy grew");
+                    assert!(
+                        w[1].total <= w[0].total + EM_ENERGY_RTOL * h0,
+                        "energy grew"
+                    );
                 } else {
                     let rel = (w[1].total - h0).abs() / h0;
                     assert!(rel <= EM_ENERGY_RTOL, "EM energy drift {rel:.3e}");
@@ -134,7 +152,15 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
     for backend in ["cpu", "gpu"] {
         let out = dir.path().join(backend);
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
-            .args(["run", "frame", "--t-end", "1", "--backend", backend, "--out"])
+            .args([
+                "run",
+                "frame",
+                "--t-end",
+                "1",
+                "--backend",
+                backend,
+                "--out",
+            ])
             .arg(&out)
             .output()
             .unwrap();

@@ -65,7 +65,17 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
         a_rho: rho * a,
         i_rho: Matrix2::new(rho * i1, rho * i12, rho * i12, rho * 1.3 * i1),
         c_gamma: Vec3::new(0.4 * e * a, 0.38 * e * a, e * a),
-        c_omega: Mat3::new(e * i1, e * i12, 0.0, e * i12, 1.3 * e * i1, 0.0, 0.0, 0.0, 0.8 * e * i1),
+        c_omega: Mat3::new(
+            e * i1,
+            e * i12,
+            0.0,
+            e * i12,
+            1.3 * e * i1,
+            0.0,
+            0.0,
+            0.0,
+            0.8 * e * i1,
+        ),
     };
     let tri0 = cay(&rng.v3(1.0));
     let r0 = rng.v3(1.0);
@@ -94,7 +104,13 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
         d: [d0, d1],
     };
     let vd = std::array::from_fn(|l| {
-        std::array::from_fn(|_| if rot_free[l] { rng.v3(0.5) } else { Vec3::zeros() })
+        std::array::from_fn(|_| {
+            if rot_free[l] {
+                rng.v3(0.5)
+            } else {
+                Vec3::zeros()
+            }
+        })
     });
     let st = ElementState {
         cfg,
@@ -109,11 +125,19 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
             chi_gamma: rng.next(),
             chi_omega: rng.next(),
             chi_v: rng.next(),
-            chi_nu: if idx % 2 == 0 { rng.next() } else { 0.0 },
+            chi_nu: if idx.is_multiple_of(2) {
+                rng.next()
+            } else {
+                0.0
+            },
         },
         _ => Scheme::Edmc2 {
             alpha_gv: rng.next(),
-            alpha_gn: if idx % 2 == 0 { rng.next() } else { 0.0 },
+            alpha_gn: if idx.is_multiple_of(2) {
+                rng.next()
+            } else {
+                0.0
+            },
             alpha_ov: rng.next(),
             alpha_on: rng.next(),
         },
@@ -134,7 +158,11 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
             beta_gamma: rng.next(),
             beta_omega: rng.next(),
             c_v: 0.3 * rng.next(),
-            c_nu: if scheme.director_dissipation() { 0.3 * rng.next() } else { 0.0 },
+            c_nu: if scheme.director_dissipation() {
+                0.3 * rng.next()
+            } else {
+                0.0
+            },
         }
     } else {
         FrozenScalars::default()
@@ -218,14 +246,27 @@ fn cases(n: usize, seed: u64) -> Vec<Case> {
 fn gpu_matches_cpu_element_kernel_f64() {
     let Some(ctx) = context() else { return };
     if !ctx.is_f64() {
-        println!("adapter {} has no SHADER_F64: f64 parity not applicable", ctx.describe());
+        println!(
+            "adapter {} has no SHADER_F64: f64 parity not applicable",
+            ctx.describe()
+        );
         return;
     }
     let cs = cases(240, 0x9E37_79B9_7F4A_7C15);
     for mode in [KernelMode::Frozen, KernelMode::Consistent] {
         let w = worst_error(&ctx, &cs, mode);
-        println!("{mode:?}: worst relative error r {:.2e} scale {:.2e} K {:.2e} scalars {:.2e} on {}", w[0], w[1], w[2], w[3], ctx.describe());
-        for (q, name) in ["residual", "scales", "tangent", "scalars"].iter().enumerate() {
+        println!(
+            "{mode:?}: worst relative error r {:.2e} scale {:.2e} K {:.2e} scalars {:.2e} on {}",
+            w[0],
+            w[1],
+            w[2],
+            w[3],
+            ctx.describe()
+        );
+        for (q, name) in ["residual", "scales", "tangent", "scalars"]
+            .iter()
+            .enumerate()
+        {
             assert!(w[q] <= KERNEL_PARITY_RTOL, "{mode:?} {name}: {:.3e}", w[q]);
         }
     }
@@ -237,7 +278,10 @@ fn gpu_f32_fallback_error_is_bounded() {
     let ctx32 = ctx.with_precision(Precision::F32);
     let cs = cases(240, 0x0123_4567_89AB_CDEF);
     let w = worst_error(&ctx32, &cs, KernelMode::Frozen);
-    println!("f32 fallback: worst relative error r {:.2e} scale {:.2e} K {:.2e}", w[0], w[1], w[2]);
+    println!(
+        "f32 fallback: worst relative error r {:.2e} scale {:.2e} K {:.2e}",
+        w[0], w[1], w[2]
+    );
     for (q, name) in ["residual", "scales", "tangent"].iter().enumerate() {
         assert!(w[q] <= F32_RTOL, "f32 {name}: {:.3e}", w[q]);
     }

@@ -46,7 +46,10 @@ fn bad_sweep_files_name_file_line_key_and_reason() {
     ];
     for (text, want) in cases {
         let got = err(text);
-        assert!(got.contains(want), "for\n{text}\nwant `{want}`\ngot  `{got}`");
+        assert!(
+            got.contains(want),
+            "for\n{text}\nwant `{want}`\ngot  `{got}`"
+        );
     }
 }
 
@@ -80,7 +83,10 @@ fn sweep_writes_rows_and_resume_skips_recorded_members() {
     let mut lines = csv.lines();
     let head: Vec<&str> = lines.next().unwrap().split(',').collect();
     assert_eq!(&head[..8], &CSV_COLUMNS);
-    assert_eq!(&head[8..], &["integrator.alpha", "integrator.t_end", "reason"]);
+    assert_eq!(
+        &head[8..],
+        &["integrator.alpha", "integrator.t_end", "reason"]
+    );
     assert_eq!(lines.clone().count(), 2);
     assert!(out.join("member_1/history.csv").exists());
     // Drop member 1's row, resume: only member 1 runs again.
@@ -93,7 +99,11 @@ fn sweep_writes_rows_and_resume_skips_recorded_members() {
     let s = run_sweep(&spec, &Executor::Cpu, &out, &opts, |_| {}).unwrap();
     assert_eq!((s.skipped, s.completed), (1, 1));
     let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
-    let mut ids: Vec<&str> = csv.lines().skip(1).map(|l| l.split(',').next().unwrap()).collect();
+    let mut ids: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
     ids.sort();
     assert_eq!(ids, ["0", "1"]);
 }
@@ -123,5 +133,8 @@ fn cli_sweep_exit_codes_and_auto_backend() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let csv = std::fs::read_to_string(dir.path().join("o2/members.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
-    assert!(csv.lines().skip(1).all(|l| l.contains(",completed,")), "{csv}");
+    assert!(
+        csv.lines().skip(1).all(|l| l.contains(",completed,")),
+        "{csv}"
+    );
 }

@@ -59,7 +59,10 @@ impl GpuContext {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let mut adapters = instance.enumerate_adapters(wgpu::Backends::all()).await;
-        let available: Vec<String> = adapters.iter().map(|a| adapter_line(&a.get_info())).collect();
+        let available: Vec<String> = adapters
+            .iter()
+            .map(|a| adapter_line(&a.get_info()))
+            .collect();
         if let Some(f) = filter {
             let f = f.to_lowercase();
             adapters.retain(|a| a.get_info().name.to_lowercase().contains(&f));

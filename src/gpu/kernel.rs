@@ -10,8 +10,8 @@ use super::context::{GpuContext, Precision};
 use super::layout::*;
 use super::GpuError;
 use crate::element::{
-    ElemMat, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars, Increment,
-    StepConsts, NDOF,
+    ElemMat, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars, Increment, StepConsts,
+    NDOF,
 };
 use crate::integrator::params::Scheme;
 
@@ -26,7 +26,10 @@ pub fn shader_source(p: Precision) -> String {
         Precision::F32 => ELEMENT_WGSL
             .replace("alias Real = f64;", "alias Real = f32;")
             .replace("const TINY: Real = 1e-300;", "const TINY: Real = 1e-30;")
-            .replace("const CNU_TOL: Real = 1e-15;", "const CNU_TOL: Real = 1e-7;"),
+            .replace(
+                "const CNU_TOL: Real = 1e-15;",
+                "const CNU_TOL: Real = 1e-7;",
+            ),
     }
 }
 
@@ -85,7 +88,6 @@ pub struct ElementKernel {
     pub timers: KernelTimers,
 }
 
-
 impl ElementKernel {
     /// Bytes per scalar.
     fn width(p: Precision) -> usize {
@@ -98,7 +100,10 @@ impl ElementKernel {
     /// The largest number of element slots one kernel may hold on this device.
     pub fn max_capacity(ctx: &GpuContext) -> usize {
         let per = (NO * Self::width(ctx.precision)) as u64;
-        let lim = (ctx.limits.max_storage_buffer_binding_size as u64).min(ctx.limits.max_buffer_size);
+        let lim = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
         (lim / per) as usize
     }
 
@@ -181,7 +186,11 @@ impl ElementKernel {
             bufs,
             params,
             staging,
-            host: [vec![0.0; NE * cap], vec![0.0; NS * cap], vec![0.0; NI * cap]],
+            host: [
+                vec![0.0; NE * cap],
+                vec![0.0; NS * cap],
+                vec![0.0; NI * cap],
+            ],
             dirty: [true; 3],
             out: vec![0.0; NO * cap],
             timers: KernelTimers::default(),
@@ -254,7 +263,11 @@ impl ElementKernel {
         for (c, x) in sp.iter().enumerate() {
             self.put(0, E_SP + c, i, *x);
         }
-        let dd = if k.scheme.director_dissipation() { 1.0 } else { 0.0 };
+        let dd = if k.scheme.director_dissipation() {
+            1.0
+        } else {
+            0.0
+        };
         self.put(0, E_DIRDISS, i, dd);
         self.dirty[0] = true;
     }
@@ -275,7 +288,12 @@ impl ElementKernel {
             self.put3(1, S_R + 3 * l, i, &st.cfg.r[l]);
             self.put3(1, S_V + 3 * l, i, &st.v[l]);
             for c in 0..3 {
-                self.put3(1, S_D + 9 * l + 3 * c, i, &st.cfg.d[l].column(c).into_owned());
+                self.put3(
+                    1,
+                    S_D + 9 * l + 3 * c,
+                    i,
+                    &st.cfg.d[l].column(c).into_owned(),
+                );
             }
             for a in 0..2 {
                 self.put3(1, S_VD + 6 * l + 3 * a, i, &st.vd[l][a]);
@@ -292,7 +310,10 @@ impl ElementKernel {
         for c in 0..NDOF {
             self.put(2, I_X + c, i, x[c]);
         }
-        for (c, v) in [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu].iter().enumerate() {
+        for (c, v) in [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu]
+            .iter()
+            .enumerate()
+        {
             self.put(2, I_S + c, i, *v);
         }
         self.put(2, I_ACTIVE, i, 1.0);
@@ -320,7 +341,8 @@ impl ElementKernel {
                 }
                 Precision::F32 => {
                     let v: Vec<f32> = self.host[b].iter().map(|&x| x as f32).collect();
-                    self.queue.write_buffer(&self.bufs[b], 0, bytemuck::cast_slice(&v));
+                    self.queue
+                        .write_buffer(&self.bufs[b], 0, bytemuck::cast_slice(&v));
                     v.len() * 4
                 }
             };

@@ -42,7 +42,9 @@ pub enum GpuError {
     #[error("GPU kernel failed: {0}")]
     Kernel(String),
     /// The requested batch does not fit the adapter's buffer limits.
-    #[error("batch of {elements} elements exceeds the adapter's storage-buffer limit ({max} elements)")]
+    #[error(
+        "batch of {elements} elements exceeds the adapter's storage-buffer limit ({max} elements)"
+    )]
     TooLarge {
         /// Elements requested.
         elements: usize,

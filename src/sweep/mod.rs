@@ -288,12 +288,14 @@ impl SweepSpec {
 
     /// The scene of member `i` (the base scene with the member's values written in).
     pub fn member_scene(&self, i: usize) -> Result<Scene, SceneError> {
-        let text = self.member_text(&self.values[i]).map_err(|reason| SceneError::Invalid {
-            file: self.base_source.clone(),
-            location: None,
-            key: "(sweep)".into(),
-            reason,
-        })?;
+        let text = self
+            .member_text(&self.values[i])
+            .map_err(|reason| SceneError::Invalid {
+                file: self.base_source.clone(),
+                location: None,
+                key: "(sweep)".into(),
+                reason,
+            })?;
         parse_scene(&text, &format!("{}#member{i}", self.base_source))
     }
 
@@ -316,7 +318,6 @@ fn set_value_table(doc: &mut toml::Table, key: &str, x: f64) -> Result<(), Strin
     r
 }
 
-
 /// Reads and validates a sweep file: syntax, keys, modes, ranges, and that the base scene
 /// accepts every varied key (checked on the first member).
 pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
@@ -326,14 +327,13 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
         error,
     })?;
     let at = |off: usize| Some(line_col(&text, off));
-    let invalid = |span: Option<std::ops::Range<usize>>, key: &str, reason: String| {
-        SweepError::Invalid {
+    let invalid =
+        |span: Option<std::ops::Range<usize>>, key: &str, reason: String| SweepError::Invalid {
             file: file.clone(),
             location: span.and_then(|s| at(s.start)),
             key: key.to_string(),
             reason,
-        }
-    };
+        };
     let raw: RawSweep = toml::from_str(&text).map_err(|e| {
         let location = e.span().and_then(|s| at(s.start));
         let msg = e.message().trim().to_string();
@@ -470,7 +470,11 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
                         &format!("vary[{i}].range"),
                         format!(
                             "must be [lo, hi] with finite lo ≤ hi{} (got {rv:?})",
-                            if v.log { " and lo > 0 (log = true)" } else { "" }
+                            if v.log {
+                                " and lo > 0 (log = true)"
+                            } else {
+                                ""
+                            }
                         ),
                     ));
                 }
@@ -501,14 +505,23 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
                 return Err(invalid(
                     raw.vary[i].get_ref().values.as_ref().map(|v| v.span()),
                     &format!("vary[{i}].values"),
-                    format!("mode list needs equal lengths: {} values here, {n} in vary[0]", l.len()),
+                    format!(
+                        "mode list needs equal lengths: {} values here, {n} in vary[0]",
+                        l.len()
+                    ),
                 ));
             }
-            (0..n).map(|m| lists.iter().map(|l| l[m]).collect()).collect()
+            (0..n)
+                .map(|m| lists.iter().map(|l| l[m]).collect())
+                .collect()
         }
         SweepMode::Random => {
             let Some(samples) = &raw.samples else {
-                return Err(invalid(None, "samples", "mode random needs `samples = N`".into()));
+                return Err(invalid(
+                    None,
+                    "samples",
+                    "mode random needs `samples = N`".into(),
+                ));
             };
             let n = *samples.get_ref();
             if n < 1 {

@@ -167,9 +167,11 @@ pub fn run_sweep(
     mut on_row: impl FnMut(&MemberRow),
 ) -> Result<SweepSummary, SweepError> {
     let start = std::time::Instant::now();
-    let ctx = |what: String| move |error| SweepError::Output {
-        context: what,
-        error,
+    let ctx = |what: String| {
+        move |error| SweepError::Output {
+            context: what,
+            error,
+        }
     };
     std::fs::create_dir_all(out).map_err(ctx(format!("cannot create {}", out.display())))?;
     let csv_path = out.join("members.csv");

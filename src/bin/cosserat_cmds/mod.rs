@@ -165,7 +165,10 @@ pub struct BenchArgs {
     pub cpu_only: bool,
 }
 
-fn timed(members: &[cosserat::batch::Member], exec: &Executor) -> Result<(BatchStats, usize, usize)> {
+fn timed(
+    members: &[cosserat::batch::Member],
+    exec: &Executor,
+) -> Result<(BatchStats, usize, usize)> {
     let (mut iters, mut failed) = (0usize, 0usize);
     let stats = run_members(members, exec, BatchOptions::default(), |r| {
         iters += r.outcome.newton_iters_total;
