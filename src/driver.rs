@@ -69,11 +69,22 @@ pub fn run_to_dir(
     out: &Path,
     opts: &RunOptions,
 ) -> Result<RunResult, DriverError> {
+    let mut sim = Simulation::new(scene.model.clone(), params)?;
+    run_sim_to_dir(scene, &mut sim, out, opts)
+}
+
+/// Like [`run_to_dir`] for a simulation already set up (e.g. with a GPU element backend
+/// attached); `sim` must have been built from `scene.model`.
+pub fn run_sim_to_dir(
+    scene: &Scene,
+    sim: &mut Simulation,
+    out: &Path,
+    opts: &RunOptions,
+) -> Result<RunResult, DriverError> {
     std::fs::create_dir_all(out).map_err(|error| DriverError::Dir {
         path: out.to_path_buf(),
         error,
     })?;
-    let mut sim = Simulation::new(scene.model.clone(), params)?;
     let mut history = HistoryWriter::create(&out.join("history.csv"))?;
     let mut vtk = match opts.vtk_every {
         Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.name)?),
@@ -90,7 +101,7 @@ pub fn run_to_dir(
         .into_iter()
         .flatten()
         .fold(every, gcd);
-    let outcome: RunOutcome = run(&mut sim, stride, |rec: &StepRecord, s: &Simulation| {
+    let outcome: RunOutcome = run(sim, stride, |rec: &StepRecord, s: &Simulation| {
         let on = |k: Option<usize>| k.is_some_and(|k| rec.step.is_multiple_of(k.max(1)));
         let last = rec.step == s.params().n_steps();
         if rec.step.is_multiple_of(every) || last {
@@ -125,7 +136,7 @@ pub fn run_to_dir(
     plot_accelerations(&out.join("accelerations.png"), &records, &title)?;
     if opts.snapshot_every.is_some() {
         if snapshots.last().map(|s| s.t) != Some(sim.state().t) {
-            snapshots.push(Snapshot::of(&sim));
+            snapshots.push(Snapshot::of(sim));
         }
         plot_snapshots(
             &out.join("snapshots.png"),
@@ -135,7 +146,7 @@ pub fn run_to_dir(
             &opts.length_unit,
         )?;
     }
-    let summary = summarize(scene, &sim, &outcome, &records);
+    let summary = summarize(scene, sim, &outcome, &records);
     write_summary(&out.join("summary.json"), &summary)?;
     Ok(RunResult {
         summary,

@@ -29,8 +29,10 @@
 // DESIGN §2–4 term by term; iterator rewrites would hide that correspondence.
 #![allow(clippy::needless_range_loop)]
 
+pub mod batch;
 pub mod driver;
 pub mod element;
+pub mod gpu;
 pub mod integrator;
 pub mod linsolve;
 pub mod math;
@@ -40,3 +42,4 @@ pub mod output;
 pub mod reproduce;
 pub mod scene;
 pub mod study;
+pub mod sweep;

@@ -7,12 +7,15 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 
-use cosserat::driver::{run_to_dir, RunOptions};
-use cosserat::integrator::{IntegratorParams, Scheme, Strategy};
+use cosserat::driver::{run_sim_to_dir, RunOptions};
+use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, RunSummary};
 use cosserat::reproduce::reproduce;
 use cosserat::scene::{builtin_scenes, load_scene, Scene};
 use cosserat::study;
+
+#[path = "cosserat_cmds/mod.rs"]
+mod cmds;
 
 /// Nonlinear dynamics of geometrically exact (Cosserat) rods with energy-momentum and
 /// energy-dissipative momentum-conserving time stepping. With no arguments: runs the
@@ -49,6 +52,11 @@ enum Command {
         #[arg(long)]
         no_vtk: bool,
     },
+    /// Run a parameter sweep (a base scene + parameters to vary) as one batch and write
+    /// DIR/members.csv.
+    Sweep(cmds::SweepArgs),
+    /// Time the same batch on the CPU path and on the GPU path.
+    Bench(cmds::BenchArgs),
     /// Speed-vs-accuracy and stability studies over the schemes.
     #[command(subcommand)]
     Study(StudyCommand),
@@ -161,6 +169,12 @@ struct RunArgs {
     /// Draw `snapshots.png` with the deformed rods every N steps.
     #[arg(long, value_name = "N")]
     snapshots: Option<usize>,
+    /// Where the element kernel runs (`auto`: the GPU when an f64 adapter exists).
+    #[arg(long, value_enum, default_value_t = cmds::BackendArg::Cpu)]
+    backend: cmds::BackendArg,
+    /// GPU adapter: first adapter whose name contains this (case-insensitive).
+    #[arg(long)]
+    adapter: Option<String>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -195,12 +209,16 @@ fn main() -> ExitCode {
             every: None,
             vtk: false,
             snapshots: Some(10),
+            backend: cmds::BackendArg::Cpu,
+            adapter: None,
         }),
         Some(Command::Run(a)) => run_command(a),
         Some(Command::Check { scene }) => check_command(&scene),
         Some(Command::Reproduce { out, quick, no_vtk }) => reproduce_command(&out, quick, !no_vtk),
         Some(Command::Study(StudyCommand::WorkPrecision(a))) => work_precision_command(&a),
         Some(Command::Study(StudyCommand::Stability(a))) => stability_command(&a),
+        Some(Command::Sweep(a)) => cmds::sweep_command(a),
+        Some(Command::Bench(a)) => cmds::bench_command(a),
         Some(Command::Scenes) => {
             for s in builtin_scenes() {
                 println!("{:<12} {}", s.name, s.description);
@@ -321,7 +339,11 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         label: scene.name.clone(),
         length_unit: "m".into(),
     };
-    let result = run_to_dir(&scene, params, &out, &opts)?;
+    let mut sim =
+        Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
+    // Keeps the GPU batch (if any) alive for the run.
+    let _gpu = cmds::attach(&mut sim, a.backend, a.adapter.as_deref())?;
+    let result = run_sim_to_dir(&scene, &mut sim, &out, &opts)?;
     print_summary(&result.summary, &out);
     Ok(ExitCode::SUCCESS)
 }

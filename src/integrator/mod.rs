@@ -2,6 +2,7 @@
 //! (DESIGN §3), with the dissipation treated by the staggered or monolithic strategy
 //! (DESIGN §4).
 
+pub mod backend;
 pub mod dofs;
 pub mod gen_alpha;
 mod links;

@@ -64,6 +64,12 @@ impl Scheme {
         !matches!(self, Scheme::Midpoint | Scheme::GenAlpha { .. })
     }
 
+    /// Whether the WGSL element kernel implements this scheme (EM, EDMC-1, EDMC-2). The
+    /// baselines run on the CPU path only.
+    pub fn has_gpu_kernel(&self) -> bool {
+        self.controls_energy()
+    }
+
     /// How the element kernel forms the stresses (mean of the strains for EM/EDMC, strain
     /// of the mid-point configuration for [`Scheme::Midpoint`]).
     pub fn stress_rule(&self) -> crate::element::StressRule {

@@ -3,11 +3,14 @@
 //! (a step whose energy grows or whose dissipation identity misses its tolerance is a
 //! failed step, never an accepted one).
 
+use std::sync::Arc;
+
 use crate::element::strain::Config;
 use crate::element::{
     consistent_scalars, g_idx, kinematics, monolithic_correction, residual_tangent, strains6,
-    th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
+    th_idx, u_idx, ElementData, ElementEval, FrozenScalars, Increment, StepConsts, NDOF,
 };
+use crate::integrator::backend::{ElementBackend, ElementInput};
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::gen_alpha::GenAlpha;
 use crate::integrator::links;
@@ -90,6 +93,9 @@ pub struct Simulation {
     /// [`Scheme::GenAlpha`], which steps through it instead of the element kernel's
     /// mid-point residual).
     gen_alpha: Option<GenAlpha>,
+    /// Element evaluator replacing the CPU kernel in frozen-scalar assembly, and this
+    /// simulation's slot in it (the GPU batch path).
+    backend: Option<(Arc<dyn ElementBackend>, usize)>,
 }
 
 impl Simulation {
@@ -210,7 +216,20 @@ impl Simulation {
             state,
             inv,
             trans_diss,
+            backend: None,
         })
+    }
+
+    /// Evaluates the elements through `backend` (slot `slot`) whenever the dissipation
+    /// scalars are frozen (EM, staggered); monolithic assembly stays on the CPU kernel.
+    /// Returns false (and attaches nothing) for schemes the GPU kernel does not implement
+    /// (the mid-point and generalized-α baselines), which then run on the CPU kernel.
+    pub fn set_backend(&mut self, backend: Arc<dyn ElementBackend>, slot: usize) -> bool {
+        if !self.params.scheme.has_gpu_kernel() {
+            return false;
+        }
+        self.backend = Some((backend, slot));
+        true
     }
 
     /// The model.
@@ -278,7 +297,28 @@ impl Simulation {
         if tangent {
             self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
         }
+        let mut batch = match (&self.backend, mode) {
+            (Some((b, slot)), Mode::Frozen) => {
+                let inputs: Vec<ElementInput> = (0..self.model.elements.len())
+                    .map(|e| ElementInput {
+                        st: self.state.element(&self.model, e),
+                        eps_n: self.state.eps[e],
+                        inc: self.gather(e, q),
+                        s: self.frozen[e],
+                    })
+                    .collect();
+                match b.evaluate(*slot, &inputs, tangent) {
+                    Ok(v) => Some(v.into_iter()),
+                    Err(_) => return f64::NAN,
+                }
+            }
+            _ => None,
+        };
         for e in 0..self.model.elements.len() {
+            if let Some(ev) = batch.as_mut().and_then(|b| b.next()) {
+                self.scatter(e, &ev, tangent, r, &mut scale);
+                continue;
+            }
             let inc = self.gather(e, q);
             let st = self.state.element(&self.model, e);
             let eps_n = self.state.eps[e];
@@ -308,23 +348,7 @@ impl Simulation {
                     &mut ev.k,
                 );
             }
-            for i in 0..NDOF {
-                if map[i] == NONE {
-                    continue;
-                }
-                r[map[i]] += ev.r[i];
-                let kind = kind_of_local(i);
-                scale[kind] = scale[kind].max(ev.scale[i]);
-                if tangent {
-                    let vals = self.solver.values_mut();
-                    let srow = &self.slots[e][i * NDOF..(i + 1) * NDOF];
-                    for j in 0..NDOF {
-                        if srow[j] != NONE {
-                            vals[srow[j]] += ev.k[(i, j)];
-                        }
-                    }
-                }
-            }
+            self.scatter(e, &ev, tangent, r, &mut scale);
         }
         // Nodal terms: point masses and external loads.
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
@@ -392,6 +416,36 @@ impl Simulation {
             worst = worst.max(rel);
         }
         worst
+    }
+
+    /// Adds one element's residual, row scales and (if `tangent`) tangent into the
+    /// global system.
+    fn scatter(
+        &mut self,
+        e: usize,
+        ev: &ElementEval,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        let map = &self.dofs.elements[e];
+        for i in 0..NDOF {
+            if map[i] == NONE {
+                continue;
+            }
+            r[map[i]] += ev.r[i];
+            let kind = kind_of_local(i);
+            scale[kind] = scale[kind].max(ev.scale[i]);
+            if tangent {
+                let vals = self.solver.values_mut();
+                let srow = &self.slots[e][i * NDOF..(i + 1) * NDOF];
+                for j in 0..NDOF {
+                    if srow[j] != NONE {
+                        vals[srow[j]] += ev.k[(i, j)];
+                    }
+                }
+            }
+        }
     }
 
     fn row_kinds(dofs: &DofMap) -> Vec<usize> {

@@ -1,0 +1,650 @@
+// ELEMENT KERNEL, WGSL twin of `src/element/{mod,strain,dissipation}.rs` (and of the
+// Cayley helpers of `src/math/mod.rs`). Same arithmetic, term by term: kinematics, strains,
+// mid-point strain gradient, stresses, EDMC local scalars (incl. the 4×4 EDMC-2 solve),
+// element residual (18), row scales (18) and tangent (18×18). Rational operations and sqrt
+// only (lavapipe's f64 transcendentals are wrong; the scheme needs none).
+//
+// Buffers are struct-of-arrays, field-major: field `f` of element `i` is `buf[f * n + i]`
+// (coalesced loads on a real GPU). Field offsets are the constants below; their Rust twin is
+// `src/gpu/layout.rs`. `Real` is rewritten to `f32` by `src/gpu/pipeline.rs` on adapters
+// without SHADER_F64 (measured error: README, "GPU precision").
+
+alias Real = f64;
+alias V3 = vec3<Real>;
+alias Tri = array<V3, 3>;
+
+// Substituted together with `Real` for f32.
+const TINY: Real = 1e-300;
+const CNU_TOL: Real = 1e-15;
+
+// ---- element constants (binding 0), NE fields ----
+const E_H: u32 = 0u;
+const E_ARHO: u32 = 1u;
+const E_IRHO: u32 = 2u;   // 4: (0,0) (0,1) (1,0) (1,1)
+const E_CG: u32 = 6u;     // 3: diagonal of C_Γ
+const E_CO: u32 = 9u;     // 9: C_Ω row-major
+const E_EPS0: u32 = 18u;  // 6
+const E_ROTFREE: u32 = 24u; // 2: 1 = free
+const E_DT: u32 = 26u;
+const E_TRANS: u32 = 27u; // 1 = translational dissipation rows on
+const E_SCHEME: u32 = 28u; // 0 EM, 1 EDMC-1, 2 EDMC-2
+const E_SP: u32 = 29u;    // 4 scheme constants (χ_Γ χ_Ω χ_v χ_ν | α_Γv α_Γν α_Ωv α_Ων)
+const E_DIRDISS: u32 = 33u; // 1 = director dissipation on
+// ---- state at n (binding 1), NS fields ----
+const S_R: u32 = 0u;      // 6: r_0, r_1
+const S_D: u32 = 6u;      // 18: d[l] column i component c at 9l + 3i + c
+const S_V: u32 = 24u;     // 6
+const S_VD: u32 = 30u;    // 12: vd[l][α] component c at 6l + 3α + c
+const S_EPS: u32 = 42u;   // 6
+// ---- per Newton iteration (binding 2), NI fields ----
+const I_X: u32 = 0u;      // 18: element-local increment (u0 θ0 u1 θ1 g0 g1)
+const I_S: u32 = 18u;     // 4: frozen β_Γ β_Ω c_v c_ν
+const I_ACTIVE: u32 = 22u; // 1 = evaluate this element
+// ---- output (binding 3), NO fields ----
+const O_R: u32 = 0u;      // 18
+const O_SC: u32 = 18u;    // 18
+const O_K: u32 = 36u;     // 324 row-major
+const O_S: u32 = 360u;    // 4: the scalars used (frozen or consistent)
+
+struct Params {
+    n: u32,
+    want_tangent: u32,
+    // 0: frozen scalars from binding 2; 1: consistent scalars (DESIGN §4 local law).
+    mode: u32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<storage, read> elem: array<Real>;
+@group(0) @binding(1) var<storage, read> state: array<Real>;
+@group(0) @binding(2) var<storage, read> iter: array<Real>;
+@group(0) @binding(3) var<storage, read_write> outp: array<Real>;
+@group(0) @binding(4) var<uniform> prm: Params;
+
+var<private> gi: u32;
+
+fn ld_e(f: u32) -> Real { return elem[f * prm.n + gi]; }
+fn ld_s(f: u32) -> Real { return state[f * prm.n + gi]; }
+fn ld_i(f: u32) -> Real { return iter[f * prm.n + gi]; }
+fn st_o(f: u32, x: Real) { outp[f * prm.n + gi] = x; }
+fn ld_s3(f: u32) -> V3 { return V3(ld_s(f), ld_s(f + 1u), ld_s(f + 2u)); }
+fn ld_i3(f: u32) -> V3 { return V3(ld_i(f), ld_i(f + 1u), ld_i(f + 2u)); }
+
+// ---- small algebra (twin of src/math/mod.rs); a Tri holds the columns ----
+fn norm(v: V3) -> Real { return sqrt(dot(v, v)); }
+fn amax(v: V3) -> Real { return max(max(abs(v.x), abs(v.y)), abs(v.z)); }
+fn mv(m: Tri, x: V3) -> V3 { return m[0] * x.x + m[1] * x.y + m[2] * x.z; }
+fn mtv(m: Tri, x: V3) -> V3 { return V3(dot(m[0], x), dot(m[1], x), dot(m[2], x)); }
+fn mm(a: Tri, b: Tri) -> Tri { return Tri(mv(a, b[0]), mv(a, b[1]), mv(a, b[2])); }
+fn madd(a: Tri, b: Tri) -> Tri { return Tri(a[0] + b[0], a[1] + b[1], a[2] + b[2]); }
+fn mscale(a: Tri, s: Real) -> Tri { return Tri(a[0] * s, a[1] * s, a[2] * s); }
+fn mt(a: Tri) -> Tri {
+    return Tri(V3(a[0].x, a[1].x, a[2].x), V3(a[0].y, a[1].y, a[2].y), V3(a[0].z, a[1].z, a[2].z));
+}
+fn eye() -> Tri { return Tri(V3(1.0, 0.0, 0.0), V3(0.0, 1.0, 0.0), V3(0.0, 0.0, 1.0)); }
+fn hat(a: V3) -> Tri { return Tri(V3(0.0, a.z, -a.y), V3(-a.z, 0.0, a.x), V3(a.y, -a.x, 0.0)); }
+fn cay(th: V3) -> Tri {
+    let t = hat(th);
+    let s = 1.0 / (1.0 + 0.25 * dot(th, th));
+    return madd(eye(), mscale(madd(t, mm(mscale(t, 0.5), t)), s));
+}
+fn inv_i_minus_half_hat(th: V3) -> Tri {
+    let t = hat(th);
+    let s = 1.0 / (1.0 + 0.25 * dot(th, th));
+    return madd(eye(), mscale(madd(mscale(t, 0.5), mm(mscale(t, 0.25), t)), s));
+}
+fn m2(l: u32, m: u32) -> Real {
+    if l == m { return 2.0 / 6.0; }
+    return 1.0 / 6.0;
+}
+fn irho(a: u32, b: u32) -> Real { return ld_e(E_IRHO + 2u * a + b); }
+fn irho_amax() -> Real {
+    return max(max(abs(irho(0u, 0u)), abs(irho(0u, 1u))), max(abs(irho(1u, 0u)), abs(irho(1u, 1u))));
+}
+fn c_omega_mv(x: V3) -> V3 {
+    return V3(
+        ld_e(E_CO) * x.x + ld_e(E_CO + 1u) * x.y + ld_e(E_CO + 2u) * x.z,
+        ld_e(E_CO + 3u) * x.x + ld_e(E_CO + 4u) * x.y + ld_e(E_CO + 5u) * x.z,
+        ld_e(E_CO + 6u) * x.x + ld_e(E_CO + 7u) * x.y + ld_e(E_CO + 8u) * x.z,
+    );
+}
+
+// ---- strains (twin of src/element/strain.rs); fields R0 R1 A0..A2 B0..B2 = 0..7 ----
+struct Cfg { r0: V3, r1: V3, d0: Tri, d1: Tri, }
+
+fn cfg_mean(a: Cfg, b: Cfg) -> Cfg {
+    return Cfg(0.5 * (a.r0 + b.r0), 0.5 * (a.r1 + b.r1), mscale(madd(a.d0, b.d0), 0.5), mscale(madd(a.d1, b.d1), 0.5));
+}
+fn cfg_r(c: Cfg, l: u32) -> V3 { if l == 0u { return c.r0; } return c.r1; }
+fn cfg_d(c: Cfg, l: u32) -> Tri { if l == 0u { return c.d0; } return c.d1; }
+
+struct Eps6 { g: V3, o: V3, }
+
+fn raw_strains(c: Cfg, h: Real) -> Eps6 {
+    let dr = (c.r1 - c.r0) / h;
+    let a = c.d0;
+    let b = c.d1;
+    let gamma = V3(0.5 * dot(a[0] + b[0], dr), 0.5 * dot(a[1] + b[1], dr), 0.5 * dot(a[2] + b[2], dr));
+    let s = 0.5 / h;
+    let omega = V3(
+        s * (dot(a[2], b[1]) - dot(a[1], b[2])),
+        s * (dot(a[0], b[2]) - dot(a[2], b[0])),
+        s * (dot(a[1], b[0]) - dot(a[0], b[1])),
+    );
+    return Eps6(gamma, omega);
+}
+
+// B[k][p] at index 8k + p.
+fn strain_gradient(c: Cfg, h: Real) -> array<V3, 48> {
+    var bm: array<V3, 48>;
+    let dr = (c.r1 - c.r0) / h;
+    let a = c.d0;
+    let b = c.d1;
+    for (var i = 0u; i < 3u; i++) {
+        let di = 0.5 * (a[i] + b[i]);
+        bm[8u * i + 0u] = -di / h;
+        bm[8u * i + 1u] = di / h;
+        bm[8u * i + 2u + i] = 0.5 * dr;
+        bm[8u * i + 5u + i] = 0.5 * dr;
+    }
+    let s = 0.5 / h;
+    for (var k = 0u; k < 3u; k++) {
+        let i = (k + 1u) % 3u;
+        let j = (k + 2u) % 3u;
+        let row = 8u * (3u + k);
+        bm[row + 2u + j] += s * b[i];
+        bm[row + 5u + i] += s * a[j];
+        bm[row + 2u + i] -= s * b[j];
+        bm[row + 5u + j] -= s * a[i];
+    }
+    return bm;
+}
+
+// ---- dissipation (twin of src/element/dissipation.rs) ----
+struct Inputs { v_n: Real, v_n1: Real, nu_n: Real, nu_n1: Real, x_g: Real, x_o: Real, }
+struct Local { beta_g: Real, beta_o: Real, dv: Real, dnu: Real, }
+
+fn ratio(num: Real, den: Real) -> Real {
+    if den > TINY { return num / den; }
+    return 0.0;
+}
+
+// Gaussian elimination with partial pivoting (what nalgebra's LU does); zeros if singular.
+fn solve4(m_in: array<Real, 16>, rhs_in: array<Real, 4>) -> array<Real, 4> {
+    var m = m_in;
+    var r = rhs_in;
+    for (var c = 0u; c < 4u; c++) {
+        var piv = c;
+        var best = abs(m[4u * c + c]);
+        for (var k = c + 1u; k < 4u; k++) {
+            if abs(m[4u * k + c]) > best { best = abs(m[4u * k + c]); piv = k; }
+        }
+        if best == 0.0 { return array<Real, 4>(0.0, 0.0, 0.0, 0.0); }
+        if piv != c {
+            for (var j = 0u; j < 4u; j++) {
+                let t = m[4u * c + j]; m[4u * c + j] = m[4u * piv + j]; m[4u * piv + j] = t;
+            }
+            let t = r[c]; r[c] = r[piv]; r[piv] = t;
+        }
+        let p = m[4u * c + c];
+        for (var k = c + 1u; k < 4u; k++) {
+            let f = m[4u * k + c] / p;
+            for (var j = c; j < 4u; j++) { m[4u * k + j] -= f * m[4u * c + j]; }
+            r[k] -= f * r[c];
+        }
+    }
+    var x: array<Real, 4>;
+    for (var ci = 0u; ci < 4u; ci++) {
+        let c = 3u - ci;
+        var s = r[c];
+        for (var j = c + 1u; j < 4u; j++) { s -= m[4u * c + j] * x[j]; }
+        x[c] = s / m[4u * c + c];
+    }
+    return x;
+}
+
+fn local_scalars(inp: Inputs, a_rho: Real, dt_h: Real) -> Local {
+    let kind = u32(ld_e(E_SCHEME));
+    let p0 = ld_e(E_SP);
+    let p1 = ld_e(E_SP + 1u);
+    let p2 = ld_e(E_SP + 2u);
+    let p3 = ld_e(E_SP + 3u);
+    if kind == 1u {
+        return Local(p0, p1, p2 * (inp.v_n1 - inp.v_n), p3 * (inp.nu_n1 - inp.nu_n));
+    }
+    if kind == 2u {
+        let agv = p0 * dt_h;
+        let agn = p1 * dt_h;
+        let aov = p2 * dt_h;
+        let aon = p3 * dt_h;
+        let xg = inp.x_g;
+        let xo = inp.x_o;
+        let m = array<Real, 16>(
+            1.0, 0.0, -agv, -agn,
+            0.0, 1.0, -aov, -aon,
+            agv * xg, aov * xo, a_rho, 0.0,
+            agn * xg, aon * xo, 0.0, a_rho,
+        );
+        let rhs = array<Real, 4>(
+            -agv * inp.v_n1 - agn * inp.nu_n1,
+            -aov * inp.v_n1 - aon * inp.nu_n1,
+            a_rho * inp.v_n + agv * xg + aov * xo,
+            a_rho * inp.nu_n + agn * xg + aon * xo,
+        );
+        let s = solve4(m, rhs);
+        return Local(s[0], s[1], s[2] - inp.v_n, s[3] - inp.nu_n);
+    }
+    return Local(0.0, 0.0, 0.0, 0.0);
+}
+
+// ---- kinematics (twin of element::kinematics) ----
+struct St { cfg: Cfg, v0: V3, v1: V3, vd: array<V3, 4>, eps: Eps6, }
+struct Kin {
+    cfg1: Cfg,
+    mid: Cfg,
+    amat0: Tri,
+    amat1: Tri,
+    eps1: Eps6,
+    v10: V3,
+    v11: V3,
+    vd1: array<V3, 4>, // [l][α] at 2l + α
+    inputs: Inputs,
+}
+
+fn load_state() -> St {
+    let cfg = Cfg(
+        ld_s3(S_R), ld_s3(S_R + 3u),
+        Tri(ld_s3(S_D), ld_s3(S_D + 3u), ld_s3(S_D + 6u)),
+        Tri(ld_s3(S_D + 9u), ld_s3(S_D + 12u), ld_s3(S_D + 15u)),
+    );
+    let vd = array<V3, 4>(ld_s3(S_VD), ld_s3(S_VD + 3u), ld_s3(S_VD + 6u), ld_s3(S_VD + 9u));
+    let eps = Eps6(ld_s3(S_EPS), ld_s3(S_EPS + 3u));
+    return St(cfg, ld_s3(S_V), ld_s3(S_V + 3u), vd, eps);
+}
+
+fn kappa(l: u32) -> Real {
+    let f0 = ld_e(E_ROTFREE) != 0.0;
+    let f1 = ld_e(E_ROTFREE + 1u) != 0.0;
+    if f0 && f1 { return 1.0; }
+    if l == 0u && f0 { return 1.5; }
+    if l == 1u && f1 { return 1.5; }
+    return 0.0;
+}
+
+fn director_speed(a: V3, b: V3, a_rho: Real) -> Real {
+    var s: Real = 0.0;
+    s += irho(0u, 0u) * dot(a, a);
+    s += irho(0u, 1u) * dot(a, b);
+    s += irho(1u, 0u) * dot(b, a);
+    s += irho(1u, 1u) * dot(b, b);
+    return sqrt(max(s, 0.0) / a_rho);
+}
+
+fn kinematics(st: St, x: array<Real, 18>, c_nu: Real, dt: Real) -> Kin {
+    let h = ld_e(E_H);
+    let a_rho = ld_e(E_ARHO);
+    let u0 = V3(x[0], x[1], x[2]);
+    let th0 = V3(x[3], x[4], x[5]);
+    let u1 = V3(x[6], x[7], x[8]);
+    let th1 = V3(x[9], x[10], x[11]);
+    let g0 = V3(x[12], x[13], x[14]);
+    let g1 = V3(x[15], x[16], x[17]);
+    let cfg1 = Cfg(st.cfg.r0 + u0, st.cfg.r1 + u1, mm(cay(th0), st.cfg.d0), mm(cay(th1), st.cfg.d1));
+    let mid = cfg_mean(st.cfg, cfg1);
+    let eps1 = raw_strains(cfg1, h);
+    let v10 = 2.0 * u0 / dt - st.v0 - 2.0 * g0;
+    let v11 = 2.0 * u1 / dt - st.v1 - 2.0 * g1;
+    let k0 = kappa(0u);
+    let k1 = kappa(1u);
+    let ksum = k0 + k1;
+    var w: array<V3, 2>;
+    var vd1: array<V3, 4>;
+    for (var a = 0u; a < 2u; a++) {
+        let dd0 = cfg1.d0[a] - st.cfg.d0[a];
+        let dd1 = cfg1.d1[a] - st.cfg.d1[a];
+        let y = (dd0 + dd1) / dt;
+        w[a] = y * (c_nu / (1.0 + ksum * c_nu));
+        vd1[a] = 2.0 * dd0 / dt - st.vd[a] - 2.0 * k0 * w[a];
+        vd1[2u + a] = 2.0 * dd1 / dt - st.vd[2u + a] - 2.0 * k1 * w[a];
+    }
+    let vh_n = 0.5 * (st.v0 + st.v1);
+    let vh_1 = 0.5 * (v10 + v11);
+    let vdh_n0 = 0.5 * (st.vd[0] + st.vd[2]);
+    let vdh_n1 = 0.5 * (st.vd[1] + st.vd[3]);
+    let vdh_10 = 0.5 * (vd1[0] + vd1[2]);
+    let vdh_11 = 0.5 * (vd1[1] + vd1[3]);
+    let dg = eps1.g - st.eps.g;
+    let dom = eps1.o - st.eps.o;
+    let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
+    let inputs = Inputs(
+        norm(vh_n),
+        norm(vh_1),
+        director_speed(vdh_n0, vdh_n1, a_rho),
+        director_speed(vdh_10, vdh_11, a_rho),
+        dot(dg, cg * dg),
+        dot(dom, c_omega_mv(dom)),
+    );
+    return Kin(cfg1, mid, inv_i_minus_half_hat(th0), inv_i_minus_half_hat(th1), eps1, v10, v11, vd1, inputs);
+}
+
+// Twin of element::consistent_scalars: returns (β_Γ, β_Ω, c_v, c_ν) and the kinematics.
+struct Consistent { s: array<Real, 4>, kin: Kin, }
+
+fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real) -> Consistent {
+    let h = ld_e(E_H);
+    let a_rho = ld_e(E_ARHO);
+    let dt_h = dt / h;
+    var c_nu: Real = 0.0;
+    var kin = kinematics(st, x, c_nu, dt);
+    var loc = local_scalars(kin.inputs, a_rho, dt_h);
+    if ld_e(E_DIRDISS) != 0.0 {
+        for (var it = 0u; it < 200u; it++) {
+            let next = ratio(0.5 * loc.dnu, kin.inputs.nu_n + kin.inputs.nu_n1);
+            let done = abs(next - c_nu) <= CNU_TOL * (1.0 + abs(c_nu));
+            c_nu = next;
+            kin = kinematics(st, x, c_nu, dt);
+            loc = local_scalars(kin.inputs, a_rho, dt_h);
+            if done { break; }
+        }
+    }
+    let c_v = ratio(0.5 * loc.dv, kin.inputs.v_n + kin.inputs.v_n1);
+    return Consistent(array<Real, 4>(loc.beta_g, loc.beta_o, c_v, c_nu), kin);
+}
+
+// ---- residual and tangent (twin of element::residual_tangent / tangent) ----
+fn u_idx(l: u32) -> u32 { return 6u * l; }
+fn th_idx(l: u32) -> u32 { return 6u * l + 3u; }
+fn g_idx(l: u32) -> u32 { return 12u + 3u * l; }
+fn field_start(p: u32) -> u32 {
+    if p == 0u { return 0u; }
+    if p == 1u { return 6u; }
+    if p <= 4u { return 3u; }
+    return 9u;
+}
+fn field_of(l: u32, a: u32) -> u32 { return 2u + 3u * l + a; }
+fn kin_v1(k: Kin, l: u32) -> V3 { if l == 0u { return k.v10; } return k.v11; }
+fn st_v(s: St, l: u32) -> V3 { if l == 0u { return s.v0; } return s.v1; }
+fn amat(k: Kin, l: u32) -> Tri { if l == 0u { return k.amat0; } return k.amat1; }
+fn kin_g(st: St, k: Kin, m: u32, dt: Real) -> V3 {
+    return (cfg_r(k.cfg1, m) - cfg_r(st.cfg, m)) / dt - 0.5 * (st_v(st, m) + kin_v1(k, m));
+}
+
+var<private> kt: array<Real, 324>;
+
+fn kadd(i: u32, j: u32, x: Real) { kt[18u * i + j] += x; }
+fn kadd_blk(r0: u32, c0: u32, b: Tri) {
+    for (var c = 0u; c < 3u; c++) {
+        kadd(r0, c0 + c, b[c].x);
+        kadd(r0 + 1u, c0 + c, b[c].y);
+        kadd(r0 + 2u, c0 + c, b[c].z);
+    }
+}
+
+// Weight of the gross stress forces in the row scales (GROSS_WEIGHT in src/element/mod.rs).
+const GROSS_WEIGHT = 1e-4;
+
+fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
+    let h = ld_e(E_H);
+    let a_rho = ld_e(E_ARHO);
+    let trans = ld_e(E_TRANS) != 0.0;
+    let beta_g = s[0];
+    let beta_o = s[1];
+    let c_v = s[2];
+    let c_nu = s[3];
+    // stresses
+    let eps0g = V3(ld_e(E_EPS0), ld_e(E_EPS0 + 1u), ld_e(E_EPS0 + 2u));
+    let eps0o = V3(ld_e(E_EPS0 + 3u), ld_e(E_EPS0 + 4u), ld_e(E_EPS0 + 5u));
+    let mean_g = 0.5 * (st.eps.g + kin.eps1.g) - eps0g;
+    let mean_o = 0.5 * (st.eps.o + kin.eps1.o) - eps0o;
+    let gg = mean_g + 0.5 * beta_g * (kin.eps1.g - st.eps.g);
+    let oo = mean_o + 0.5 * beta_o * (kin.eps1.o - st.eps.o);
+    let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
+    let nn = cg * gg;
+    let mmm = c_omega_mv(oo);
+    let sstar = array<Real, 6>(nn.x, nn.y, nn.z, mmm.x, mmm.y, mmm.z);
+    let b_mid = strain_gradient(kin.mid, h);
+
+    var f: array<V3, 8>;
+    for (var k = 0u; k < 6u; k++) {
+        let hs = h * sstar[k];
+        for (var q = 0u; q < 8u; q++) { f[q] += b_mid[8u * k + q] * hs; }
+    }
+    // Round-off floor of the stress forces: GROSS_WEIGHT × h |B|ᵀ |C| (|ε̄| + |ε0|), the
+    // twin of `gross_stress` in src/element/mod.rs.
+    let eg = abs(0.5 * (st.eps.g + kin.eps1.g)) + abs(eps0g);
+    let eo = abs(0.5 * (st.eps.o + kin.eps1.o)) + abs(eps0o);
+    let gn = abs(cg) * eg;
+    let gross = array<Real, 6>(
+        gn.x,
+        gn.y,
+        gn.z,
+        abs(ld_e(E_CO)) * eo.x + abs(ld_e(E_CO + 1u)) * eo.y + abs(ld_e(E_CO + 2u)) * eo.z,
+        abs(ld_e(E_CO + 3u)) * eo.x + abs(ld_e(E_CO + 4u)) * eo.y + abs(ld_e(E_CO + 5u)) * eo.z,
+        abs(ld_e(E_CO + 6u)) * eo.x + abs(ld_e(E_CO + 7u)) * eo.y + abs(ld_e(E_CO + 8u)) * eo.z,
+    );
+    var f_gross: array<Real, 8>;
+    for (var k = 0u; k < 6u; k++) {
+        for (var q = 0u; q < 8u; q++) { f_gross[q] += amax(b_mid[8u * k + q]) * h * gross[k]; }
+    }
+    var scale: array<Real, 18>;
+    var r: array<Real, 18>;
+    let stress_scale = array<Real, 2>(
+        max(amax(f[0]), GROSS_WEIGHT * f_gross[0]),
+        max(amax(f[1]), GROSS_WEIGHT * f_gross[1]),
+    );
+    var inertia_r: array<V3, 2>;
+    for (var l = 0u; l < 2u; l++) {
+        for (var m = 0u; m < 2u; m++) {
+            let c = a_rho * h * m2(l, m) / dt;
+            inertia_r[l] += c * (kin_v1(kin, m) - st_v(st, m));
+        }
+    }
+    var fd_scale = array<Real, 2>(0.0, 0.0);
+    let ira = irho_amax();
+    for (var l = 0u; l < 2u; l++) {
+        let base = 2u + 3u * l;
+        for (var a = 0u; a < 2u; a++) {
+            var fi = V3(0.0, 0.0, 0.0);
+            for (var m = 0u; m < 2u; m++) {
+                for (var b = 0u; b < 2u; b++) {
+                    fi += (h * m2(l, m) * irho(a, b) / dt) * (kin.vd1[2u * m + b] - st.vd[2u * m + b]);
+                }
+            }
+            let rate = h * ira * (amax(st.vd[2u * l + a]) + amax(kin.vd1[2u * l + a])) / dt;
+            fd_scale[l] = max(max(max(max(fd_scale[l], amax(fi)), amax(f[base + a])), rate), GROSS_WEIGHT * f_gross[base + a]);
+            f[base + a] += fi;
+        }
+        fd_scale[l] = max(max(fd_scale[l], amax(f[base + 2u])), GROSS_WEIGHT * f_gross[base + 2u]);
+    }
+    for (var l = 0u; l < 2u; l++) {
+        let fr = f[l] + inertia_r[l];
+        let base = 2u + 3u * l;
+        let dm = cfg_d(kin.mid, l);
+        var rt = V3(0.0, 0.0, 0.0);
+        for (var i = 0u; i < 3u; i++) { rt += cross(dm[i], f[base + i]); }
+        let momentum_rate = a_rho * h * (amax(st_v(st, l)) + amax(kin_v1(kin, l))) / dt;
+        let su = max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate);
+        let dnorm = max(max(norm(dm[0]), norm(dm[1])), norm(dm[2]));
+        for (var c = 0u; c < 3u; c++) {
+            r[u_idx(l) + c] = fr[c];
+            r[th_idx(l) + c] = rt[c];
+            scale[u_idx(l) + c] = su;
+            scale[th_idx(l) + c] = fd_scale[l] * dnorm;
+        }
+    }
+    let vsum = 0.5 * (st.v0 + st.v1) + 0.5 * (kin.v10 + kin.v11);
+    if trans {
+        let bb = 0.5 * h * a_rho * c_v * vsum;
+        for (var l = 0u; l < 2u; l++) {
+            var mg = V3(0.0, 0.0, 0.0);
+            for (var m = 0u; m < 2u; m++) { mg += a_rho * h * m2(l, m) * kin_g(st, kin, m, dt); }
+            let rg = mg - bb;
+            var momentum = 0.5 * a_rho * h * max(amax(st_v(st, l)), amax(kin_v1(kin, l)));
+            var psum: Real = 0.0;
+            for (var m = 0u; m < 2u; m++) {
+                psum += amax((cfg_r(kin.cfg1, m) - cfg_r(st.cfg, m)) / dt) + amax(kin_g(st, kin, m, dt));
+            }
+            let pieces = 0.5 * h * a_rho * abs(c_v) * psum;
+            momentum = max(momentum, pieces);
+            let sg = max(max(amax(mg), amax(bb)), momentum);
+            for (var c = 0u; c < 3u; c++) {
+                r[g_idx(l) + c] = rg[c];
+                scale[g_idx(l) + c] = sg;
+            }
+        }
+    }
+    for (var i = 0u; i < 18u; i++) {
+        st_o(O_R + i, r[i]);
+        st_o(O_SC + i, scale[i]);
+    }
+    for (var i = 0u; i < 4u; i++) { st_o(O_S + i, s[i]); }
+    if !want_tangent { return; }
+
+    // ---- tangent ----
+    for (var i = 0u; i < 324u; i++) { kt[i] = 0.0; }
+    let b1 = strain_gradient(kin.cfg1, h);
+    var tmat: array<Tri, 8>;
+    var jmat: array<Tri, 8>;
+    tmat[0] = eye(); tmat[1] = eye(); jmat[0] = eye(); jmat[1] = eye();
+    for (var l = 0u; l < 2u; l++) {
+        let dm = cfg_d(kin.mid, l);
+        for (var i = 0u; i < 3u; i++) {
+            let q = 2u + 3u * l + i;
+            tmat[q] = mscale(hat(dm[i]), -1.0);
+            jmat[q] = mm(amat(kin, l), tmat[q]);
+        }
+    }
+    var bt_mid: array<Real, 72>; // 6 × 12 row-major
+    var bt_1: array<Real, 72>;
+    for (var kk = 0u; kk < 6u; kk++) {
+        for (var q = 0u; q < 8u; q++) {
+            let c0 = field_start(q);
+            let a = mtv(tmat[q], b_mid[8u * kk + q]);
+            let b = mtv(jmat[q], b1[8u * kk + q]);
+            for (var c = 0u; c < 3u; c++) {
+                bt_mid[12u * kk + c0 + c] += a[c];
+                bt_1[12u * kk + c0 + c] += b[c];
+            }
+        }
+    }
+    // D B̃_{n+1}, D = ½(1+β) C.
+    var db: array<Real, 72>;
+    let sg = 0.5 * (1.0 + beta_g);
+    let so = 0.5 * (1.0 + beta_o);
+    for (var j = 0u; j < 12u; j++) {
+        for (var i = 0u; i < 3u; i++) {
+            db[12u * i + j] = sg * ld_e(E_CG + i) * bt_1[12u * i + j];
+            var acc: Real = 0.0;
+            for (var k = 0u; k < 3u; k++) {
+                acc += so * ld_e(E_CO + 3u * i + k) * bt_1[12u * (3u + k) + j];
+            }
+            db[12u * (3u + i) + j] = acc;
+        }
+    }
+    for (var i = 0u; i < 12u; i++) {
+        for (var j = 0u; j < 12u; j++) {
+            var acc: Real = 0.0;
+            for (var k = 0u; k < 6u; k++) { acc += (h * bt_mid[12u * k + i]) * db[12u * k + j]; }
+            kt[18u * i + j] = acc;
+        }
+    }
+    // G_s: ½ h H(S*) + inertia.
+    var gs: array<Real, 64>;
+    let ch = 0.5 / h;
+    let half_h = 0.5 * h;
+    for (var i = 0u; i < 3u; i++) {
+        let n = sstar[i] * ch;
+        for (var e = 0u; e < 2u; e++) {
+            let p = 2u + 3u * e + i;
+            gs[8u * 1u + p] += n;
+            gs[8u * p + 1u] += n;
+            gs[8u * 0u + p] -= n;
+            gs[8u * p + 0u] -= n;
+        }
+    }
+    for (var k = 0u; k < 3u; k++) {
+        let i = (k + 1u) % 3u;
+        let j = (k + 2u) % 3u;
+        let m = sstar[3u + k] * ch;
+        gs[8u * (2u + j) + 5u + i] += m;
+        gs[8u * (5u + i) + 2u + j] += m;
+        gs[8u * (2u + i) + 5u + j] -= m;
+        gs[8u * (5u + j) + 2u + i] -= m;
+    }
+    for (var i = 0u; i < 64u; i++) { gs[i] *= half_h; }
+    let two_dt2 = 2.0 / (dt * dt);
+    for (var l = 0u; l < 2u; l++) {
+        for (var m = 0u; m < 2u; m++) { gs[8u * l + m] += two_dt2 * a_rho * h * m2(l, m); }
+    }
+    let kap = array<Real, 2>(kappa(0u), kappa(1u));
+    let ksum = kap[0] + kap[1];
+    let rot_free = array<bool, 2>(ld_e(E_ROTFREE) != 0.0, ld_e(E_ROTFREE + 1u) != 0.0);
+    let dw = c_nu / (dt * (1.0 + ksum * c_nu));
+    for (var l = 0u; l < 2u; l++) {
+        for (var m = 0u; m < 2u; m++) {
+            for (var a = 0u; a < 2u; a++) {
+                for (var b = 0u; b < 2u; b++) {
+                    let mass = h * m2(l, m) * irho(a, b) / dt;
+                    let pl = field_of(l, a);
+                    let qm = field_of(m, b);
+                    gs[8u * pl + qm] += mass * 2.0 / dt;
+                    for (var qq = 0u; qq < 2u; qq++) {
+                        if rot_free[qq] {
+                            gs[8u * pl + field_of(qq, b)] -= mass * 2.0 * kap[m] * dw;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for (var pf = 0u; pf < 8u; pf++) {
+        let r0 = field_start(pf);
+        let tt = mt(tmat[pf]);
+        for (var qf = 0u; qf < 8u; qf++) {
+            let gpq = gs[8u * pf + qf];
+            if gpq == 0.0 { continue; }
+            kadd_blk(r0, field_start(qf), mscale(mm(tt, jmat[qf]), gpq));
+        }
+    }
+    for (var l = 0u; l < 2u; l++) {
+        let base = 2u + 3u * l;
+        let dm = cfg_d(kin.mid, l);
+        var blk = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
+        for (var i = 0u; i < 3u; i++) {
+            blk = madd(blk, mm(mm(hat(f[base + i]), amat(kin, l)), hat(dm[i])));
+        }
+        kadd_blk(th_idx(l), th_idx(l), mscale(blk, 0.5));
+    }
+    if trans {
+        let cv = 0.5 * h * a_rho * c_v;
+        for (var l = 0u; l < 2u; l++) {
+            for (var m = 0u; m < 2u; m++) {
+                let mmass = a_rho * h * m2(l, m);
+                for (var c = 0u; c < 3u; c++) {
+                    kadd(u_idx(l) + c, g_idx(m) + c, -2.0 * mmass / dt);
+                    kadd(g_idx(l) + c, u_idx(m) + c, -cv / dt);
+                    kadd(g_idx(l) + c, g_idx(m) + c, mmass + cv);
+                }
+            }
+        }
+    }
+    for (var i = 0u; i < 324u; i++) { st_o(O_K + i, kt[i]); }
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n { return; }
+    gi = gid.x;
+    if ld_i(I_ACTIVE) == 0.0 { return; }
+    let dt = ld_e(E_DT);
+    let st = load_state();
+    var x: array<Real, 18>;
+    for (var i = 0u; i < 18u; i++) { x[i] = ld_i(I_X + i); }
+    if prm.mode == 1u {
+        let c = consistent_scalars(st, x, dt);
+        evaluate(st, c.kin, c.s, dt, prm.want_tangent != 0u);
+    } else {
+        let s = array<Real, 4>(ld_i(I_S), ld_i(I_S + 1u), ld_i(I_S + 2u), ld_i(I_S + 3u));
+        let kin = kinematics(st, x, s[3], dt);
+        evaluate(st, kin, s, dt, prm.want_tangent != 0u);
+    }
+}

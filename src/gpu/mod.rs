@@ -1,0 +1,60 @@
+//! Headless GPU evaluation of the element kernel (wgpu compute, WGSL twin of
+//! [`crate::element`]).
+//!
+//! * [`context`]: adapter choice (`--adapter` substring, `WGPU_BACKEND`), device with the
+//!   adapter's own limits, `SHADER_F64` detection, a one-line adapter description.
+//! * [`layout`]: the struct-of-arrays buffer layout (field offsets), twin of the constants
+//!   at the top of `shaders/element.wgsl`.
+//! * [`kernel`]: the compute pipeline built once, host mirrors of the buffers, upload,
+//!   dispatch and readback of a batch of elements.
+//!
+//! f64 is used whenever the adapter offers `SHADER_F64`; otherwise the same shader runs in
+//! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (README,
+//! "GPU precision"); callers are told which precision they got, never silently.
+
+pub mod context;
+pub mod kernel;
+pub mod layout;
+
+pub use context::{GpuContext, Precision};
+pub use kernel::ElementKernel;
+
+/// Everything that can go wrong on the GPU path.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter matches (or none exists at all).
+    #[error("no GPU adapter{}: available adapters: [{}]", match .filter { Some(f) => format!(" matching `{f}`"), None => String::new() }, .available.join("; "))]
+    NoAdapter {
+        /// The `--adapter` substring, if any.
+        filter: Option<String>,
+        /// Names of the adapters that exist.
+        available: Vec<String>,
+    },
+    /// The device could not be created.
+    #[error("cannot create a device on {adapter}: {reason}")]
+    Device {
+        /// Adapter description.
+        adapter: String,
+        /// wgpu's message.
+        reason: String,
+    },
+    /// A validation, mapping or polling error while running a kernel.
+    #[error("GPU kernel failed: {0}")]
+    Kernel(String),
+    /// The requested batch does not fit the adapter's buffer limits.
+    #[error(
+        "batch of {elements} elements exceeds the adapter's storage-buffer limit ({max} elements)"
+    )]
+    TooLarge {
+        /// Elements requested.
+        elements: usize,
+        /// Largest batch that fits.
+        max: usize,
+    },
+}
+
+/// Whether tests that need an adapter must fail when none exists (`COSSERAT_REQUIRE_GPU`
+/// set, as in CI) rather than print `skipped: no adapter`.
+pub fn gpu_required() -> bool {
+    std::env::var_os("COSSERAT_REQUIRE_GPU").is_some()
+}

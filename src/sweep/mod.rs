@@ -1,0 +1,584 @@
+//! Parameter sweeps: a base scene plus parameters to vary (a grid, explicit lists, or
+//! seeded random samples) over any numeric scene key (`integrator.alpha`, `integrator.dt`,
+//! `material.soft.E`, `initial_velocity[0].v[2]`, …). Each member is the base scene with
+//! its values written in and validated by the scene parser; members run as one batch
+//! ([`crate::batch`]) and `DIR/members.csv` grows by one row per finished member.
+//!
+//! File format (`docs/sweeps.md` is not separate: README, "Sweeps"):
+//!
+//! ```toml
+//! base = "frame"            # built-in name, or a scene path relative to this file
+//! mode = "grid"             # "grid" (all combinations, default), "list" (zip), "random"
+//! seed = 7                  # random mode: seed of the sampler
+//! samples = 16              # random mode: number of members
+//!
+//! [[vary]]
+//! key = "integrator.alpha"
+//! values = [0.1, 0.5, 1.0]  # grid and list modes
+//!
+//! [[vary]]
+//! key = "integrator.dt"
+//! range = [0.05, 0.2]       # random mode: uniform in [lo, hi] (`log = true`: log-uniform)
+//! ```
+//!
+//! Every error names the file, `line:column`, the key and the reason, like scene errors:
+//! `sweep.toml:7:7: vary[0].key: base scene rejects it: builtin:frame: integrator.alpha: …`.
+
+mod run;
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
+pub use run::{run_sweep, MemberRow, SweepOptions, SweepSummary, CSV_COLUMNS};
+
+/// Everything that can go wrong reading a sweep file (or its output directory).
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    /// The file cannot be read.
+    #[error("cannot read {path}: {error}")]
+    Io {
+        /// Path as given.
+        path: String,
+        /// The underlying error.
+        #[source]
+        error: std::io::Error,
+    },
+    /// TOML syntax error.
+    #[error("{file}{}: {reason}", loc(*.location))]
+    Syntax {
+        /// File.
+        file: String,
+        /// 1-based line and column.
+        location: Option<(usize, usize)>,
+        /// Why.
+        reason: String,
+    },
+    /// A key is unknown, missing, of the wrong type or has an invalid value.
+    #[error("{file}{}: {key}: {reason}", loc(*.location))]
+    Invalid {
+        /// File.
+        file: String,
+        /// 1-based line and column of the value (or enclosing table).
+        location: Option<(usize, usize)>,
+        /// Key path in the sweep file, e.g. `vary[1].values`.
+        key: String,
+        /// Why.
+        reason: String,
+    },
+    /// Writing the results failed.
+    #[error("{context}: {error}")]
+    Output {
+        /// What was being written.
+        context: String,
+        /// The underlying error.
+        #[source]
+        error: std::io::Error,
+    },
+    /// The GPU backend failed as a whole.
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+}
+
+fn loc(l: Option<(usize, usize)>) -> String {
+    match l {
+        Some((a, b)) => format!(":{a}:{b}"),
+        None => String::new(),
+    }
+}
+
+/// How the varied values combine into members.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SweepMode {
+    /// Cartesian product of every parameter's `values`.
+    Grid,
+    /// The `values` lists zipped (all of one length).
+    List,
+    /// `samples` members, each parameter drawn from its `range` by a seeded generator.
+    Random,
+}
+
+/// One varied parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VaryParam {
+    /// Scene key path (`integrator.alpha`, `rod[0].elements`, …).
+    pub key: String,
+}
+
+/// A validated sweep: its members' values, ready to build scenes.
+#[derive(Clone, Debug)]
+pub struct SweepSpec {
+    /// Path of the sweep file.
+    pub source: String,
+    /// The base scene as named in the file.
+    pub base: String,
+    base_text: String,
+    base_source: String,
+    /// How members are formed.
+    pub mode: SweepMode,
+    /// The varied parameters (CSV column order).
+    pub params: Vec<VaryParam>,
+    /// Per member, one value per parameter.
+    pub values: Vec<Vec<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSweep {
+    base: Spanned<String>,
+    mode: Option<Spanned<String>>,
+    seed: Option<Spanned<i64>>,
+    samples: Option<Spanned<i64>>,
+    #[serde(default)]
+    vary: Vec<Spanned<RawVary>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawVary {
+    key: Spanned<String>,
+    values: Option<Spanned<Vec<f64>>>,
+    range: Option<Spanned<Vec<f64>>>,
+    #[serde(default)]
+    log: bool,
+}
+
+/// A small seeded generator (xorshift64*), so a sweep file fixes its samples.
+struct Rng(u64);
+impl Rng {
+    fn new(seed: u64) -> Self {
+        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A path step of a scene key.
+enum Step {
+    Key(String),
+    Index(usize),
+}
+
+fn parse_key(key: &str) -> Option<Vec<Step>> {
+    let mut out = Vec::new();
+    for part in key.split('.') {
+        let (name, mut rest) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        if name.is_empty() {
+            return None;
+        }
+        out.push(Step::Key(name.to_string()));
+        while !rest.is_empty() {
+            let close = rest.find(']')?;
+            if !rest.starts_with('[') {
+                return None;
+            }
+            out.push(Step::Index(rest[1..close].trim().parse().ok()?));
+            rest = &rest[close + 1..];
+        }
+    }
+    Some(out)
+}
+
+/// Writes `x` at `key` into a scene document. The parent must exist; the leaf may be new
+/// (a table key) or must be a number (an array entry). Integers stay integers when `x` is
+/// integral.
+fn set_in(root: &mut toml::Value, key: &str, x: f64) -> Result<(), String> {
+    let steps = parse_key(key).ok_or_else(|| {
+        format!("`{key}` is not a key path (expected e.g. `integrator.alpha` or `rod[0].elements`)")
+    })?;
+    let new = |old: Option<&toml::Value>| -> Result<toml::Value, String> {
+        match old {
+            Some(toml::Value::Integer(_)) if x.fract() == 0.0 && x.abs() < 9e15 => {
+                Ok(toml::Value::Integer(x as i64))
+            }
+            Some(toml::Value::Integer(_)) | Some(toml::Value::Float(_)) | None => {
+                Ok(toml::Value::Float(x))
+            }
+            Some(v) => Err(format!(
+                "the base scene's value there is a {}, not a number",
+                v.type_str()
+            )),
+        }
+    };
+    let mut cur = root;
+    for (i, st) in steps.iter().enumerate() {
+        let last = i + 1 == steps.len();
+        match st {
+            Step::Key(k) => {
+                let t = cur
+                    .as_table_mut()
+                    .ok_or_else(|| format!("`{k}` is not inside a table in the base scene"))?;
+                if last {
+                    let v = new(t.get(k))?;
+                    t.insert(k.clone(), v);
+                    return Ok(());
+                }
+                cur = t
+                    .get_mut(k)
+                    .ok_or_else(|| format!("the base scene has no `{k}` here"))?;
+            }
+            Step::Index(j) => {
+                let a = cur
+                    .as_array_mut()
+                    .ok_or_else(|| format!("[{j}]: the base scene has no array here"))?;
+                let n = a.len();
+                let v = a
+                    .get_mut(*j)
+                    .ok_or_else(|| format!("index {j} out of range (the array has {n} entries)"))?;
+                if last {
+                    *v = new(Some(v))?;
+                    return Ok(());
+                }
+                cur = v;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The key path of the value at a byte offset: `KEY` at top level, `vary[i].KEY` inside
+/// the i-th `[[vary]]` table (the sweep format has no deeper nesting).
+fn key_at(text: &str, offset: usize) -> String {
+    let before = &text[..offset.min(text.len())];
+    let line_start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
+    let line_end = text[line_start..]
+        .find('\n')
+        .map(|i| line_start + i)
+        .unwrap_or(text.len());
+    let line = &text[line_start..line_end];
+    let key = line.split('=').next().unwrap_or("").trim().to_string();
+    let tables = before[..line_start]
+        .lines()
+        .filter(|l| l.trim_start().starts_with("[[vary]]"))
+        .count();
+    match (tables, line.contains('=')) {
+        (0, _) => key,
+        (n, true) => format!("vary[{}].{key}", n - 1),
+        (n, false) => format!("vary[{}]", n - 1),
+    }
+}
+
+/// 1-based line and column (in characters) of a byte offset.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().unwrap_or("").chars().count() + 1;
+    (line, col)
+}
+
+impl SweepSpec {
+    /// Number of members.
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// True when the sweep has no members.
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// The scene of member `i` (the base scene with the member's values written in).
+    pub fn member_scene(&self, i: usize) -> Result<Scene, SceneError> {
+        let text = self
+            .member_text(&self.values[i])
+            .map_err(|reason| SceneError::Invalid {
+                file: self.base_source.clone(),
+                location: None,
+                key: "(sweep)".into(),
+                reason,
+            })?;
+        parse_scene(&text, &format!("{}#member{i}", self.base_source))
+    }
+
+    fn member_text(&self, vals: &[f64]) -> Result<String, String> {
+        let mut doc: toml::Table = self.base_text.parse().map_err(|e| format!("{e}"))?;
+        for (p, &x) in self.params.iter().zip(vals) {
+            set_value_table(&mut doc, &p.key, x)?;
+        }
+        toml::to_string(&doc).map_err(|e| e.to_string())
+    }
+}
+
+/// [`set_in`] on a table (keeps the table in place).
+fn set_value_table(doc: &mut toml::Table, key: &str, x: f64) -> Result<(), String> {
+    let mut root = toml::Value::Table(std::mem::take(doc));
+    let r = set_in(&mut root, key, x);
+    if let toml::Value::Table(t) = root {
+        *doc = t;
+    }
+    r
+}
+
+/// Reads and validates a sweep file: syntax, keys, modes, ranges, and that the base scene
+/// accepts every varied key (checked on the first member).
+pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|error| SweepError::Io {
+        path: file.clone(),
+        error,
+    })?;
+    let at = |off: usize| Some(line_col(&text, off));
+    let invalid =
+        |span: Option<std::ops::Range<usize>>, key: &str, reason: String| SweepError::Invalid {
+            file: file.clone(),
+            location: span.and_then(|s| at(s.start)),
+            key: key.to_string(),
+            reason,
+        };
+    let raw: RawSweep = toml::from_str(&text).map_err(|e| {
+        let location = e.span().and_then(|s| at(s.start));
+        let msg = e.message().trim().to_string();
+        // serde reports unknown/missing/mistyped keys; name the key when it says which.
+        let key = e
+            .span()
+            .map(|sp| key_at(&text, sp.start))
+            .or_else(|| {
+                msg.split('`')
+                    .nth(1)
+                    .filter(|_| msg.starts_with("missing field"))
+                    .map(str::to_string)
+            })
+            .unwrap_or_else(|| "(top level)".into());
+        if toml::de::DeTable::parse(&text).is_err() {
+            SweepError::Syntax {
+                file: file.clone(),
+                location,
+                reason: msg,
+            }
+        } else {
+            SweepError::Invalid {
+                file: file.clone(),
+                location,
+                key,
+                reason: msg,
+            }
+        }
+    })?;
+    // Base scene: a path relative to the sweep file, else a built-in name.
+    let base = raw.base.get_ref().clone();
+    let rel: PathBuf = path.parent().unwrap_or(Path::new(".")).join(&base);
+    let (base_text, base_source) = if rel.is_file() {
+        let t = std::fs::read_to_string(&rel).map_err(|error| SweepError::Io {
+            path: rel.display().to_string(),
+            error,
+        })?;
+        (t, rel.display().to_string())
+    } else if let Some(b) = builtin_scenes().iter().find(|b| b.name == base) {
+        (b.toml.to_string(), format!("builtin:{}", b.name))
+    } else {
+        let names: Vec<&str> = builtin_scenes().iter().map(|b| b.name).collect();
+        return Err(invalid(
+            Some(raw.base.span()),
+            "base",
+            format!(
+                "no scene file {} and no built-in scene `{base}` (built-in: {})",
+                rel.display(),
+                names.join(", ")
+            ),
+        ));
+    };
+    let mode = match raw.mode.as_ref().map(|m| m.get_ref().as_str()) {
+        None | Some("grid") => SweepMode::Grid,
+        Some("list") => SweepMode::List,
+        Some("random") => SweepMode::Random,
+        Some(other) => {
+            return Err(invalid(
+                raw.mode.as_ref().map(|m| m.span()),
+                "mode",
+                format!("must be \"grid\", \"list\" or \"random\" (got \"{other}\")"),
+            ))
+        }
+    };
+    if raw.vary.is_empty() {
+        return Err(invalid(
+            None,
+            "vary",
+            "no [[vary]] table: name at least one parameter to vary".into(),
+        ));
+    }
+    let mut params = Vec::new();
+    let mut lists: Vec<Vec<f64>> = Vec::new();
+    let mut ranges: Vec<(f64, f64, bool)> = Vec::new();
+    for (i, v) in raw.vary.iter().enumerate() {
+        let v = v.get_ref();
+        let k = v.key.get_ref();
+        if parse_key(k).is_none() {
+            return Err(invalid(
+                Some(v.key.span()),
+                &format!("vary[{i}].key"),
+                format!("`{k}` is not a key path (expected e.g. `integrator.alpha` or `rod[0].elements`)"),
+            ));
+        }
+        if params.iter().any(|p: &VaryParam| p.key == *k) {
+            return Err(invalid(
+                Some(v.key.span()),
+                &format!("vary[{i}].key"),
+                format!("`{k}` is varied twice"),
+            ));
+        }
+        params.push(VaryParam { key: k.clone() });
+        match mode {
+            SweepMode::Grid | SweepMode::List => {
+                let Some(vals) = &v.values else {
+                    return Err(invalid(
+                        Some(v.key.span()),
+                        &format!("vary[{i}]"),
+                        format!("mode {mode:?} needs `values = [...]`").to_lowercase(),
+                    ));
+                };
+                if vals.get_ref().is_empty() {
+                    return Err(invalid(
+                        Some(vals.span()),
+                        &format!("vary[{i}].values"),
+                        "must not be empty".into(),
+                    ));
+                }
+                if let Some(x) = vals.get_ref().iter().find(|x| !x.is_finite()) {
+                    return Err(invalid(
+                        Some(vals.span()),
+                        &format!("vary[{i}].values"),
+                        format!("must be finite numbers (got {x})"),
+                    ));
+                }
+                lists.push(vals.get_ref().clone());
+            }
+            SweepMode::Random => {
+                let Some(r) = &v.range else {
+                    return Err(invalid(
+                        Some(v.key.span()),
+                        &format!("vary[{i}]"),
+                        "mode random needs `range = [lo, hi]`".into(),
+                    ));
+                };
+                let rv = r.get_ref();
+                let ok = rv.len() == 2
+                    && rv.iter().all(|x| x.is_finite())
+                    && rv[0] <= rv[1]
+                    && (!v.log || rv[0] > 0.0);
+                if !ok {
+                    return Err(invalid(
+                        Some(r.span()),
+                        &format!("vary[{i}].range"),
+                        format!(
+                            "must be [lo, hi] with finite lo ≤ hi{} (got {rv:?})",
+                            if v.log {
+                                " and lo > 0 (log = true)"
+                            } else {
+                                ""
+                            }
+                        ),
+                    ));
+                }
+                ranges.push((rv[0], rv[1], v.log));
+            }
+        }
+    }
+    let values: Vec<Vec<f64>> = match mode {
+        SweepMode::Grid => {
+            let mut out = vec![vec![]];
+            for l in &lists {
+                out = out
+                    .into_iter()
+                    .flat_map(|pre| {
+                        l.iter().map(move |&x| {
+                            let mut p = pre.clone();
+                            p.push(x);
+                            p
+                        })
+                    })
+                    .collect();
+            }
+            out
+        }
+        SweepMode::List => {
+            let n = lists[0].len();
+            if let Some((i, l)) = lists.iter().enumerate().find(|(_, l)| l.len() != n) {
+                return Err(invalid(
+                    raw.vary[i].get_ref().values.as_ref().map(|v| v.span()),
+                    &format!("vary[{i}].values"),
+                    format!(
+                        "mode list needs equal lengths: {} values here, {n} in vary[0]",
+                        l.len()
+                    ),
+                ));
+            }
+            (0..n)
+                .map(|m| lists.iter().map(|l| l[m]).collect())
+                .collect()
+        }
+        SweepMode::Random => {
+            let Some(samples) = &raw.samples else {
+                return Err(invalid(
+                    None,
+                    "samples",
+                    "mode random needs `samples = N`".into(),
+                ));
+            };
+            let n = *samples.get_ref();
+            if n < 1 {
+                return Err(invalid(
+                    Some(samples.span()),
+                    "samples",
+                    format!("must be ≥ 1 (got {n})"),
+                ));
+            }
+            let seed = raw.seed.as_ref().map(|s| *s.get_ref()).unwrap_or(0);
+            let mut rng = Rng::new(seed as u64);
+            (0..n)
+                .map(|_| {
+                    ranges
+                        .iter()
+                        .map(|&(lo, hi, log)| {
+                            let u = rng.uniform();
+                            if log {
+                                // exp/ln only here, on the host.
+                                (lo.ln() + u * (hi.ln() - lo.ln())).exp()
+                            } else {
+                                lo + u * (hi - lo)
+                            }
+                        })
+                        .collect()
+                })
+                .collect()
+        }
+    };
+    let spec = SweepSpec {
+        source: file.clone(),
+        base,
+        base_text,
+        base_source,
+        mode,
+        params,
+        values,
+    };
+    // Every key must be accepted by the base scene: try each parameter alone on the first
+    // member, so the error names the parameter.
+    let first = spec.values[0].clone();
+    for (i, p) in spec.params.iter().enumerate() {
+        let span = Some(raw.vary[i].get_ref().key.span());
+        let mut doc: toml::Table = spec
+            .base_text
+            .parse()
+            .map_err(|e| invalid(None, "base", format!("base scene: {e}")))?;
+        set_value_table(&mut doc, &p.key, first[i])
+            .map_err(|r| invalid(span.clone(), &format!("vary[{i}].key"), r))?;
+        let t = toml::to_string(&doc).map_err(|e| invalid(None, "base", e.to_string()))?;
+        parse_scene(&t, &spec.base_source).map_err(|e| {
+            invalid(
+                span.clone(),
+                &format!("vary[{i}].key"),
+                format!("base scene rejects it: {e}"),
+            )
+        })?;
+    }
+    Ok(spec)
+}

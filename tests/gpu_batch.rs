@@ -1,0 +1,180 @@
+//! GPU batch ≡ CPU batch, and the invariants of DESIGN §5 on the GPU path.
+//!
+//! * A 64-member EDMC-2 batch of the free-flying frame (α_Γv and the initial-velocity
+//!   scale varied per member, α_Ων on for half of them) run on the GPU path gives every
+//!   member's energy history of the CPU path to `HISTORY_RTOL` (same steps, same status).
+//! * On the GPU path, in free flight: L and J are constant step to step
+//!   (`MOMENTUM_RTOL`); EDMC-2 energy never increases; EM energy is constant
+//!   (`EM_ENERGY_RTOL`).
+//!
+//! Without an adapter the tests print `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
+//! is set, in which case they fail.
+
+use cosserat::batch::{run_members, BackendChoice, BatchOptions, Executor, Member, MemberResult};
+use cosserat::gpu::gpu_required;
+use cosserat::integrator::Scheme;
+use cosserat::observe::record::RunStatus;
+use cosserat::scene::load_scene;
+
+/// GPU and CPU histories: both Newton solves converge to 1e-11 of the force scale from
+/// round-off-different element blocks.
+const HISTORY_RTOL: f64 = 1e-9;
+const MOMENTUM_RTOL: f64 = 1e-10;
+const EM_ENERGY_RTOL: f64 = 1e-10;
+
+fn gpu() -> Option<Executor> {
+    match Executor::resolve(BackendChoice::Gpu, None) {
+        Ok((e, _)) => Some(e),
+        Err(e) if !gpu_required() => {
+            println!("skipped: no adapter ({e})");
+            None
+        }
+        Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no usable adapter: {e}"),
+    }
+}
+
+fn members(n: usize, scheme_of: impl Fn(usize) -> Scheme, t_end: f64) -> Vec<Member> {
+    let scene = load_scene("frame").unwrap();
+    (0..n)
+        .map(|i| {
+            let mut model = scene.model.clone();
+            let s = 0.6 + 0.8 * (i as f64) / (n as f64);
+            model.velocity0.iter_mut().for_each(|v| *v *= s);
+            let mut params = scene.params;
+            params.scheme = scheme_of(i);
+            params.t_end = t_end;
+            Member { model, params }
+        })
+        .collect()
+}
+
+fn run_all(ms: &[Member], exec: &Executor) -> Vec<MemberResult> {
+    let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
+    run_members(
+        ms,
+        exec,
+        BatchOptions {
+            keep_history: true,
+            workers: 0,
+        },
+        |r| {
+            let i = r.index;
+            out[i] = Some(r);
+        },
+    )
+    .unwrap();
+    out.into_iter().map(|r| r.unwrap()).collect()
+}
+
+fn edmc2(i: usize) -> Scheme {
+    Scheme::Edmc2 {
+        alpha_gv: 0.1 + 0.9 * (i % 8) as f64 / 8.0,
+        alpha_gn: 0.0,
+        alpha_ov: 0.0,
+        alpha_on: if i.is_multiple_of(2) { 0.3 } else { 0.0 },
+    }
+}
+
+#[test]
+fn gpu_batch_energy_histories_match_cpu() {
+    let Some(exec) = gpu() else { return };
+    let ms = members(64, edmc2, 2.0);
+    let cpu = run_all(&ms, &Executor::Cpu);
+    let gpu = run_all(&ms, &exec);
+    let mut worst = 0.0f64;
+    let completed = cpu
+        .iter()
+        .filter(|c| c.outcome.status == RunStatus::Completed)
+        .count();
+    // A member whose step fails is recorded and the batch goes on (both paths agree on it).
+    assert!(completed >= 48, "only {completed} of 64 completed");
+    for (c, g) in cpu.iter().zip(&gpu) {
+        assert_eq!(
+            g.outcome.status, c.outcome.status,
+            "member {}: {:?}",
+            g.index, g.outcome.reason
+        );
+        assert_eq!(g.history.len(), c.history.len());
+        for (a, b) in c.history.iter().zip(&g.history) {
+            let rel = (a.total - b.total).abs() / a.total.abs().max(1e-300);
+            worst = worst.max(rel);
+        }
+    }
+    println!("64 EDMC-2 members ({completed} completed): worst relative energy difference GPU vs CPU {worst:.2e}");
+    assert!(worst <= HISTORY_RTOL, "{worst:.3e}");
+}
+
+#[test]
+fn gpu_path_conserves_momenta_and_dissipates() {
+    let Some(exec) = gpu() else { return };
+    let em = members(4, |_| Scheme::Em, 2.0);
+    let ed = members(4, edmc2, 2.0);
+    for (ms, dissipative) in [(em, false), (ed, true)] {
+        for r in run_all(&ms, &exec) {
+            let o = &r.outcome;
+            assert_eq!(o.status, RunStatus::Completed, "{:?}", o.reason);
+            assert!(
+                o.max_rel_dl <= MOMENTUM_RTOL,
+                "L drift {:.3e}",
+                o.max_rel_dl
+            );
+            assert!(
+                o.max_rel_dj <= MOMENTUM_RTOL,
+                "J drift {:.3e}",
+                o.max_rel_dj
+            );
+            let h0 = r.history[0].total;
+            for w in r.history.windows(2) {
+                if dissipative {
+                    assert!(
+                        w[1].total <= w[0].total + EM_ENERGY_RTOL * h0,
+                        "energy grew"
+                    );
+                } else {
+                    let rel = (w[1].total - h0).abs() / h0;
+                    assert!(rel <= EM_ENERGY_RTOL, "EM energy drift {rel:.3e}");
+                }
+            }
+            if dissipative {
+                assert!(r.history.last().unwrap().total < h0);
+            }
+        }
+    }
+}
+
+#[test]
+fn cli_run_with_gpu_backend_matches_cpu_run() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mut totals = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let out = dir.path().join(backend);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+            .args([
+                "run",
+                "frame",
+                "--t-end",
+                "1",
+                "--backend",
+                backend,
+                "--out",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(stdout.contains("completed"), "{stdout}");
+        if backend == "gpu" {
+            assert!(stdout.contains("backend: gpu:"), "{stdout}");
+        }
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        totals.push(s["energy_final"].as_f64().unwrap());
+    }
+    let rel = (totals[0] - totals[1]).abs() / totals[0].abs();
+    assert!(rel <= HISTORY_RTOL, "cpu {} gpu {}", totals[0], totals[1]);
+}

@@ -1,0 +1,323 @@
+//! GPU element kernel ≡ CPU element kernel.
+//!
+//! On seeded random elements (random sections, distorted triads, velocities, increments,
+//! every scheme, clamped/free ends, with and without translational dissipation), the WGSL
+//! kernel (`shaders/element.wgsl`) returns the residual, row scales, tangent and — in
+//! consistent mode — the EDMC local scalars of [`cosserat::element`] to
+//! `KERNEL_PARITY_RTOL` (f64), measured relative to the largest entry of each quantity.
+//! The f32 fallback is measured on the same elements and must stay within
+//! `F32_RTOL` (the bound README's "GPU precision" documents).
+//! Without an adapter the GPU tests print `skipped: no adapter` unless
+//! `COSSERAT_REQUIRE_GPU` is set, in which case they fail.
+
+use cosserat::element::strain::Config;
+use cosserat::element::{
+    consistent_scalars, kinematics, residual_tangent, strains6, ElementData, ElementEval,
+    ElementState, FrozenScalars, Increment, StepConsts,
+};
+use cosserat::gpu::kernel::{KernelMode, ELEMENT_WGSL};
+use cosserat::gpu::{gpu_required, layout, ElementKernel, GpuContext, Precision};
+use cosserat::integrator::Scheme;
+use cosserat::math::cay;
+use cosserat::model::{ElementProps, Mat3, Vec3};
+use nalgebra::{Matrix2, Vector6};
+
+/// f64 parity: a few hundred round-offs of the largest term.
+const KERNEL_PARITY_RTOL: f64 = 1e-12;
+/// f32 fallback bound (documented in README, "GPU precision").
+const F32_RTOL: f64 = 1e-4;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn sym(&mut self, s: f64) -> f64 {
+        s * (2.0 * self.next() - 1.0)
+    }
+    fn v3(&mut self, s: f64) -> Vec3 {
+        Vec3::new(self.sym(s), self.sym(s), self.sym(s))
+    }
+}
+
+struct Case {
+    data: ElementData,
+    st: ElementState,
+    eps_n: Vector6<f64>,
+    inc: Increment,
+    s: FrozenScalars,
+    k: StepConsts,
+    trans: bool,
+}
+
+fn case(rng: &mut Rng, idx: usize) -> Case {
+    let h = 0.2 + rng.next();
+    let a = 1e-3 + 1e-2 * rng.next();
+    let i1 = 1e-6 + 1e-5 * rng.next();
+    let i12 = 0.2 * i1 * rng.sym(1.0);
+    let e = 1e5 + 1e6 * rng.next();
+    let rho = 100.0 + 1000.0 * rng.next();
+    let props = ElementProps {
+        h,
+        a_rho: rho * a,
+        i_rho: Matrix2::new(rho * i1, rho * i12, rho * i12, rho * 1.3 * i1),
+        c_gamma: Vec3::new(0.4 * e * a, 0.38 * e * a, e * a),
+        c_omega: Mat3::new(
+            e * i1,
+            e * i12,
+            0.0,
+            e * i12,
+            1.3 * e * i1,
+            0.0,
+            0.0,
+            0.0,
+            0.8 * e * i1,
+        ),
+    };
+    let tri0 = cay(&rng.v3(1.0));
+    let r0 = rng.v3(1.0);
+    let r1 = r0 + tri0.column(2) * h;
+    let ref_cfg = Config {
+        r: [r0, r1],
+        d: [tri0, tri0],
+    };
+    let rot_free = match idx % 4 {
+        0 => [true, true],
+        1 => [false, true],
+        2 => [true, false],
+        _ => [true, true],
+    };
+    let data = ElementData {
+        eps0: strains6(&ref_cfg, h),
+        props,
+        rot_free,
+    };
+    // Current state: moved, rotated and slightly non-orthonormal triads.
+    let distort = |rng: &mut Rng| Mat3::identity() + Mat3::from_fn(|_, _| rng.sym(1e-3));
+    let d0 = cay(&rng.v3(0.3)) * tri0 * distort(rng);
+    let d1 = cay(&rng.v3(0.3)) * tri0 * distort(rng);
+    let cfg = Config {
+        r: [r0 + rng.v3(0.05), r1 + rng.v3(0.05)],
+        d: [d0, d1],
+    };
+    let vd = std::array::from_fn(|l| {
+        std::array::from_fn(|_| {
+            if rot_free[l] {
+                rng.v3(0.5)
+            } else {
+                Vec3::zeros()
+            }
+        })
+    });
+    let st = ElementState {
+        cfg,
+        v: [rng.v3(1.0), rng.v3(1.0)],
+        vd,
+    };
+    let eps_n = strains6(&cfg, h);
+    let dt = 0.01 + 0.2 * rng.next();
+    let scheme = match idx % 3 {
+        0 => Scheme::Em,
+        1 => Scheme::Edmc1 {
+            chi_gamma: rng.next(),
+            chi_omega: rng.next(),
+            chi_v: rng.next(),
+            chi_nu: if idx.is_multiple_of(2) {
+                rng.next()
+            } else {
+                0.0
+            },
+        },
+        _ => Scheme::Edmc2 {
+            alpha_gv: rng.next(),
+            alpha_gn: if idx.is_multiple_of(2) {
+                rng.next()
+            } else {
+                0.0
+            },
+            alpha_ov: rng.next(),
+            alpha_on: rng.next(),
+        },
+    };
+    let trans = scheme.translational_dissipation();
+    let th = |rng: &mut Rng, free: bool| if free { rng.v3(0.2) } else { Vec3::zeros() };
+    let inc = Increment {
+        u: [rng.v3(0.05), rng.v3(0.05)],
+        theta: [th(rng, rot_free[0]), th(rng, rot_free[1])],
+        g: if trans {
+            [rng.v3(0.1), rng.v3(0.1)]
+        } else {
+            [Vec3::zeros(); 2]
+        },
+    };
+    let s = if scheme.is_dissipative() {
+        FrozenScalars {
+            beta_gamma: rng.next(),
+            beta_omega: rng.next(),
+            c_v: 0.3 * rng.next(),
+            c_nu: if scheme.director_dissipation() {
+                0.3 * rng.next()
+            } else {
+                0.0
+            },
+        }
+    } else {
+        FrozenScalars::default()
+    };
+    Case {
+        data,
+        st,
+        eps_n,
+        inc,
+        s,
+        k: StepConsts { dt, scheme },
+        trans,
+    }
+}
+
+fn context() -> Option<GpuContext> {
+    match GpuContext::new(None) {
+        Ok(c) => Some(c),
+        Err(e) if !gpu_required() => {
+            println!("skipped: no adapter ({e})");
+            None
+        }
+        Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no adapter: {e}"),
+    }
+}
+
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
+}
+
+/// Worst relative difference (residual, scales, tangent, scalars) over all cases.
+fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
+    let mut kern = ElementKernel::new(ctx, cases.len()).unwrap();
+    for (i, c) in cases.iter().enumerate() {
+        kern.set_element(i, &c.data, &c.k, c.trans);
+        kern.set_state(i, &c.st, &c.eps_n);
+        kern.set_iter(i, &c.inc, &c.s);
+    }
+    kern.run(mode, true).unwrap();
+    let mut worst = [0.0f64; 4];
+    for (i, c) in cases.iter().enumerate() {
+        let (s, kin) = match mode {
+            KernelMode::Frozen => (
+                c.s,
+                kinematics(&c.data, &c.st, &c.eps_n, &c.inc, c.s.c_nu, c.k.dt),
+            ),
+            KernelMode::Consistent => {
+                let (s, _, kin) = consistent_scalars(&c.data, &c.st, &c.eps_n, &c.inc, &c.k);
+                (s, kin)
+            }
+        };
+        let cpu: ElementEval = residual_tangent(&c.data, &c.st, &kin, &s, &c.k, c.trans, true);
+        let gpu = kern.eval(i, true);
+        let gs = kern.scalars(i);
+        let errs = [
+            rel(gpu.r.as_slice(), cpu.r.as_slice()),
+            rel(gpu.scale.as_slice(), cpu.scale.as_slice()),
+            rel(gpu.k.as_slice(), cpu.k.as_slice()),
+            rel(
+                &[gs.beta_gamma, gs.beta_omega, gs.c_v, gs.c_nu],
+                &[s.beta_gamma, s.beta_omega, s.c_v, s.c_nu],
+            ),
+        ];
+        for q in 0..4 {
+            worst[q] = worst[q].max(errs[q]);
+        }
+    }
+    worst
+}
+
+fn cases(n: usize, seed: u64) -> Vec<Case> {
+    let mut rng = Rng(seed);
+    (0..n).map(|i| case(&mut rng, i)).collect()
+}
+
+#[test]
+fn gpu_matches_cpu_element_kernel_f64() {
+    let Some(ctx) = context() else { return };
+    if !ctx.is_f64() {
+        println!(
+            "adapter {} has no SHADER_F64: f64 parity not applicable",
+            ctx.describe()
+        );
+        return;
+    }
+    let cs = cases(240, 0x9E37_79B9_7F4A_7C15);
+    for mode in [KernelMode::Frozen, KernelMode::Consistent] {
+        let w = worst_error(&ctx, &cs, mode);
+        println!(
+            "{mode:?}: worst relative error r {:.2e} scale {:.2e} K {:.2e} scalars {:.2e} on {}",
+            w[0],
+            w[1],
+            w[2],
+            w[3],
+            ctx.describe()
+        );
+        for (q, name) in ["residual", "scales", "tangent", "scalars"]
+            .iter()
+            .enumerate()
+        {
+            assert!(w[q] <= KERNEL_PARITY_RTOL, "{mode:?} {name}: {:.3e}", w[q]);
+        }
+    }
+}
+
+#[test]
+fn gpu_f32_fallback_error_is_bounded() {
+    let Some(ctx) = context() else { return };
+    let ctx32 = ctx.with_precision(Precision::F32);
+    let cs = cases(240, 0x0123_4567_89AB_CDEF);
+    let w = worst_error(&ctx32, &cs, KernelMode::Frozen);
+    println!(
+        "f32 fallback: worst relative error r {:.2e} scale {:.2e} K {:.2e}",
+        w[0], w[1], w[2]
+    );
+    for (q, name) in ["residual", "scales", "tangent"].iter().enumerate() {
+        assert!(w[q] <= F32_RTOL, "f32 {name}: {:.3e}", w[q]);
+    }
+}
+
+/// The shader's field offsets are the Rust layout's (no GPU needed).
+#[test]
+fn shader_layout_matches_rust_layout() {
+    let consts: Vec<(&str, usize)> = vec![
+        ("E_H", layout::E_H),
+        ("E_ARHO", layout::E_ARHO),
+        ("E_IRHO", layout::E_IRHO),
+        ("E_CG", layout::E_CG),
+        ("E_CO", layout::E_CO),
+        ("E_EPS0", layout::E_EPS0),
+        ("E_ROTFREE", layout::E_ROTFREE),
+        ("E_DT", layout::E_DT),
+        ("E_TRANS", layout::E_TRANS),
+        ("E_SCHEME", layout::E_SCHEME),
+        ("E_SP", layout::E_SP),
+        ("E_DIRDISS", layout::E_DIRDISS),
+        ("S_R", layout::S_R),
+        ("S_D", layout::S_D),
+        ("S_V", layout::S_V),
+        ("S_VD", layout::S_VD),
+        ("S_EPS", layout::S_EPS),
+        ("I_X", layout::I_X),
+        ("I_S", layout::I_S),
+        ("I_ACTIVE", layout::I_ACTIVE),
+        ("O_R", layout::O_R),
+        ("O_SC", layout::O_SC),
+        ("O_K", layout::O_K),
+        ("O_S", layout::O_S),
+    ];
+    for (name, val) in consts {
+        let needle = format!("const {name}: u32 = {val}u;");
+        assert!(ELEMENT_WGSL.contains(&needle), "shader lacks `{needle}`");
+    }
+}

@@ -1,0 +1,140 @@
+//! Sweeps: bad sweep files give scene-quality errors (`FILE:LINE:COL: KEY: REASON`,
+//! exit code 2 from the CLI); a grid sweep writes one `members.csv` row per member with
+//! the documented columns plus one per varied parameter; `--resume` runs only the members
+//! not yet recorded; `--backend auto` runs whether or not an adapter exists.
+
+use std::path::Path;
+use std::process::Command;
+
+use cosserat::batch::Executor;
+use cosserat::sweep::{load_sweep, run_sweep, SweepOptions, CSV_COLUMNS};
+
+fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn err(text: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(dir.path(), "s.toml", text);
+    match load_sweep(&p) {
+        Ok(_) => panic!("accepted:\n{text}"),
+        Err(e) => e.to_string().replace(&p.display().to_string(), "s.toml"),
+    }
+}
+
+const GOOD: &str = "base = \"frame\"\n\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [0.0, 0.5]\n\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [0.6]\n";
+
+#[test]
+fn bad_sweep_files_name_file_line_key_and_reason() {
+    let cases: &[(&str, &str)] = &[
+        ("base = \"frame\"\nvry = 1\n", "s.toml:2:1: vry: unknown field `vry`"),
+        ("base = \"nope\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [1]\n", "s.toml:1:8: base: no scene file"),
+        ("base = \"frame\"\nmode = \"grd\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [1]\n", "s.toml:2:8: mode: must be \"grid\", \"list\" or \"random\" (got \"grd\")"),
+        ("base = \"frame\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = []\n", "s.toml:4:10: vary[0].values: must not be empty"),
+        ("base = \"frame\"\n[[vary]]\nkey = \"integrator.alfa\"\nvalues = [1]\n", "s.toml:3:7: vary[0].key: base scene rejects it: builtin:frame"),
+        ("base = \"frame\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [-0.1]\n", "integrator.dt: must be > 0 (got -0.1)"),
+        ("base = \"frame\"\n[[vary]]\nkey = \"rod[7].elements\"\nvalues = [3]\n", "s.toml:3:7: vary[0].key: index 7 out of range"),
+        ("base = \"frame\"\n[[vary]]\nkey = \"name\"\nvalues = [3]\n", "vary[0].key: the base scene's value there is a string, not a number"),
+        ("base = \"frame\"\nmode = \"random\"\nsamples = 4\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [1]\n", "s.toml:5:7: vary[0]: mode random needs `range = [lo, hi]`"),
+        ("base = \"frame\"\nmode = \"random\"\nsamples = 4\n[[vary]]\nkey = \"integrator.dt\"\nrange = [0.2, 0.1]\n", "s.toml:6:9: vary[0].range: must be [lo, hi]"),
+        ("base = \"frame\"\nmode = \"list\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [0.1, 0.2]\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [1]\n", "s.toml:8:10: vary[1].values: mode list needs equal lengths"),
+        ("base = \"frame\"\n", "s.toml: vary: no [[vary]] table"),
+        ("base = \"frame\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [\"x\"]\n", "s.toml:4:11: vary[0].values: invalid type"),
+        ("base = \"frame\n", "s.toml:1:"),
+    ];
+    for (text, want) in cases {
+        let got = err(text);
+        assert!(
+            got.contains(want),
+            "for\n{text}\nwant `{want}`\ngot  `{got}`"
+        );
+    }
+}
+
+#[test]
+fn grid_random_and_list_member_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(dir.path(), "g.toml", GOOD);
+    assert_eq!(load_sweep(&p).unwrap().len(), 2);
+    let r = "base = \"frame\"\nmode = \"random\"\nseed = 3\nsamples = 5\n[[vary]]\nkey = \"integrator.alpha\"\nrange = [0.1, 1.0]\nlog = true\n";
+    let p = write(dir.path(), "r.toml", r);
+    let a = load_sweep(&p).unwrap();
+    let b = load_sweep(&p).unwrap();
+    assert_eq!(a.len(), 5);
+    assert_eq!(a.values, b.values, "seeded samples repeat");
+    assert!(a.values.iter().all(|v| (0.1..=1.0).contains(&v[0])));
+}
+
+#[test]
+fn sweep_writes_rows_and_resume_skips_recorded_members() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(dir.path(), "g.toml", GOOD);
+    let spec = load_sweep(&p).unwrap();
+    let out = dir.path().join("out");
+    let opts = SweepOptions {
+        histories: true,
+        ..Default::default()
+    };
+    let s = run_sweep(&spec, &Executor::Cpu, &out, &opts, |_| {}).unwrap();
+    assert_eq!((s.completed, s.failed), (2, 0));
+    let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
+    let mut lines = csv.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(&head[..8], &CSV_COLUMNS);
+    assert_eq!(
+        &head[8..],
+        &["integrator.alpha", "integrator.t_end", "reason"]
+    );
+    assert_eq!(lines.clone().count(), 2);
+    assert!(out.join("member_1/history.csv").exists());
+    // Drop member 1's row, resume: only member 1 runs again.
+    let kept: Vec<&str> = csv.lines().filter(|l| !l.starts_with("1,")).collect();
+    std::fs::write(out.join("members.csv"), kept.join("\n") + "\n").unwrap();
+    let opts = SweepOptions {
+        resume: true,
+        ..Default::default()
+    };
+    let s = run_sweep(&spec, &Executor::Cpu, &out, &opts, |_| {}).unwrap();
+    assert_eq!((s.skipped, s.completed), (1, 1));
+    let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
+    let mut ids: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    ids.sort();
+    assert_eq!(ids, ["0", "1"]);
+}
+
+#[test]
+fn cli_sweep_exit_codes_and_auto_backend() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = write(dir.path(), "bad.toml", "base = \"frame\"\nvry = 1\n");
+    let o = Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["sweep"])
+        .arg(&bad)
+        .args(["--out"])
+        .arg(dir.path().join("o1"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("bad.toml:2:1: vry: unknown field"), "{e}");
+    let good = write(dir.path(), "g.toml", GOOD);
+    let o = Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["sweep"])
+        .arg(&good)
+        .args(["--backend", "auto", "--out"])
+        .arg(dir.path().join("o2"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(dir.path().join("o2/members.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert!(
+        csv.lines().skip(1).all(|l| l.contains(",completed,")),
+        "{csv}"
+    );
+}
