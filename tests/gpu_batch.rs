@@ -55,7 +55,7 @@ fn run_all(ms: &[Member], exec: &Executor) -> Vec<MemberResult> {
         exec,
         BatchOptions {
             keep_history: true,
-            workers: 0,
+            ..Default::default()
         },
         |r| {
             let i = r.index;

@@ -82,7 +82,13 @@ pub struct Simulation {
     /// Element evaluator replacing the CPU kernel in frozen-scalar assembly, and this
     /// simulation's slot in it (the GPU batch path).
     backend: Option<(Arc<dyn ElementBackend>, usize)>,
+    /// Reuse the tangent across Newton iterations (see [`Simulation::set_modified_newton`]).
+    modified_newton: bool,
 }
+
+/// Modified Newton takes a fresh tangent when the last iteration reduced the residual by
+/// less than this factor.
+const MODIFIED_NEWTON_RATE: f64 = 0.2;
 
 impl Simulation {
     /// Sets up a simulation of `model` with `params` (the linear solver's symbolic
@@ -170,6 +176,7 @@ impl Simulation {
             inv,
             trans_diss,
             backend: None,
+            modified_newton: false,
         })
     }
 
@@ -177,6 +184,14 @@ impl Simulation {
     /// scalars are frozen (EM, staggered); monolithic assembly stays on the CPU kernel.
     pub fn set_backend(&mut self, backend: Arc<dyn ElementBackend>, slot: usize) {
         self.backend = Some((backend, slot));
+    }
+
+    /// Modified Newton (default off): the tangent of the first iteration of each solve is
+    /// kept (not re-evaluated; the matrix is refactorized) while every iteration reduces the
+    /// relative residual by at least a factor 5; a slower iteration triggers a fresh
+    /// tangent. Saves the element tangents (on the GPU: their kernel work and readback).
+    pub fn set_modified_newton(&mut self, on: bool) {
+        self.modified_newton = on;
     }
 
     /// The model.
@@ -397,7 +412,11 @@ impl Simulation {
         let mut history = Vec::new();
         let tol = self.params.newton_tol;
         for it in 0..=self.params.max_iter {
-            let res = self.assemble(q, mode, true, &mut r);
+            // Modified Newton: keep the last tangent while the residual contracts fast.
+            let fresh = !self.modified_newton
+                || it == 0
+                || (it >= 2 && history[it - 1] > MODIFIED_NEWTON_RATE * history[it - 2]);
+            let res = self.assemble(q, mode, fresh, &mut r);
             history.push(res);
             if !res.is_finite() {
                 return Err(StepFailure {

@@ -241,6 +241,7 @@ pub fn run_sweep(
         BatchOptions {
             keep_history: opts.histories,
             workers: opts.workers,
+            modified_newton: false,
         },
         |r: MemberResult| {
             let id = ids[r.index];
