@@ -186,10 +186,10 @@ impl Simulation {
         self.backend = Some((backend, slot));
     }
 
-    /// Modified Newton (default off): the tangent of the first iteration of each solve is
-    /// kept (not re-evaluated; the matrix is refactorized) while every iteration reduces the
-    /// relative residual by at least a factor 5; a slower iteration triggers a fresh
-    /// tangent. Saves the element tangents (on the GPU: their kernel work and readback).
+    /// Modified Newton (default off): from the third iteration of a solve on, the last
+    /// tangent is kept (not re-evaluated; the matrix is refactorized) as long as the previous
+    /// iteration reduced the relative residual by at least a factor 5; a slower iteration
+    /// triggers a fresh tangent. Saves the element tangents (on the GPU: their kernel work and readback).
     pub fn set_modified_newton(&mut self, on: bool) {
         self.modified_newton = on;
     }
@@ -414,8 +414,8 @@ impl Simulation {
         for it in 0..=self.params.max_iter {
             // Modified Newton: keep the last tangent while the residual contracts fast.
             let fresh = !self.modified_newton
-                || it == 0
-                || (it >= 2 && history[it - 1] > MODIFIED_NEWTON_RATE * history[it - 2]);
+                || it < 2
+                || history[it - 1] > MODIFIED_NEWTON_RATE * history[it - 2];
             let res = self.assemble(q, mode, fresh, &mut r);
             history.push(res);
             if !res.is_finite() {
