@@ -462,20 +462,7 @@ mod tests {
     /// `306 · 2.2e-16 · 10 ≈ 7e-13 < 1e-12`. (Observed: 3e-17 … 2e-16 on these matrices.)
     const TEST_BACKWARD_TOL: f64 = 1e-12;
 
-    /// xorshift64* generator, uniform in [-1, 1).
-    struct Rng(u64);
-    impl Rng {
-        fn new(seed: u64) -> Self {
-            Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-        }
-        fn uniform(&mut self) -> f64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            let u = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
-            (u >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        }
-    }
+    use crate::math::rng::Rng;
 
     /// Pattern of a block-tridiagonal matrix of `nb` blocks of size `bs`, row-major order.
     fn block_tridiag_pattern(nb: usize, bs: usize) -> Vec<(usize, usize)> {
@@ -504,7 +491,7 @@ mod tests {
         let v = s.values_mut();
         v.fill(0.0);
         for (&(r, c), &k) in entries.iter().zip(&slots) {
-            v[k] += rng.uniform() + if r == c { diag_shift } else { 0.0 };
+            v[k] += rng.symmetric() + if r == c { diag_shift } else { 0.0 };
         }
     }
 
@@ -543,7 +530,7 @@ mod tests {
     }
 
     fn random_vec(n: usize, rng: &mut Rng) -> Vec<f64> {
-        (0..n).map(|_| rng.uniform()).collect()
+        (0..n).map(|_| rng.symmetric()).collect()
     }
 
     #[test]

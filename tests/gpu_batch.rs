@@ -3,6 +3,8 @@
 //! * A 64-member EDMC-2 batch of the free-flying frame (α_Γv and the initial-velocity
 //!   scale varied per member, α_Ων on for half of them) run on the GPU path gives every
 //!   member's energy history of the CPU path to `HISTORY_RTOL` (same steps, same status).
+//! * Modified Newton (tangent reuse) gives the full-Newton histories to `HISTORY_RTOL` on
+//!   the CPU path (no adapter needed) and on the GPU path.
 //! * On the GPU path, in free flight: L and J are constant step to step
 //!   (`MOMENTUM_RTOL`); EDMC-2 energy never increases; EM energy is constant
 //!   (`EM_ENERGY_RTOL`).
@@ -49,13 +51,18 @@ fn members(n: usize, scheme_of: impl Fn(usize) -> Scheme, t_end: f64) -> Vec<Mem
 }
 
 fn run_all(ms: &[Member], exec: &Executor) -> Vec<MemberResult> {
+    run_opts(ms, exec, false)
+}
+
+fn run_opts(ms: &[Member], exec: &Executor, modified_newton: bool) -> Vec<MemberResult> {
     let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
     run_members(
         ms,
         exec,
         BatchOptions {
             keep_history: true,
-            workers: 0,
+            modified_newton,
+            ..Default::default()
         },
         |r| {
             let i = r.index;
@@ -177,4 +184,27 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
     }
     let rel = (totals[0] - totals[1]).abs() / totals[0].abs();
     assert!(rel <= HISTORY_RTOL, "cpu {} gpu {}", totals[0], totals[1]);
+}
+
+#[test]
+fn modified_newton_matches_full_newton() {
+    let ms = members(8, edmc2, 1.0);
+    let full = run_all(&ms, &Executor::Cpu);
+    let mut paths = vec![("cpu", run_opts(&ms, &Executor::Cpu, true))];
+    if let Some(exec) = gpu() {
+        paths.push(("gpu", run_opts(&ms, &exec, true)));
+    }
+    for (name, got) in paths {
+        for (a, b) in full.iter().zip(&got) {
+            assert_eq!(
+                a.outcome.status, b.outcome.status,
+                "{name} member {}: {:?}",
+                a.index, b.outcome.reason
+            );
+            for (x, y) in a.history.iter().zip(&b.history) {
+                let rel = (x.total - y.total).abs() / x.total.abs();
+                assert!(rel <= HISTORY_RTOL, "{name} member {}: {rel:.3e}", a.index);
+            }
+        }
+    }
 }

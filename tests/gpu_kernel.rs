@@ -205,7 +205,17 @@ fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
         kern.set_state(i, &c.st, &c.eps_n);
         kern.set_iter(i, &c.inc, &c.s);
     }
+    // Residual-only readback first (modified Newton), then everything.
+    kern.run(mode, false).unwrap();
+    let r_only: Vec<ElementEval> = (0..cases.len()).map(|i| kern.eval(i, false)).collect();
     kern.run(mode, true).unwrap();
+    for (i, e) in r_only.iter().enumerate() {
+        assert_eq!(
+            e.r,
+            kern.eval(i, true).r,
+            "residual-only readback of element {i}"
+        );
+    }
     let mut worst = [0.0f64; 4];
     for (i, c) in cases.iter().enumerate() {
         let (s, kin) = match mode {

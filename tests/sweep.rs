@@ -1,7 +1,8 @@
 //! Sweeps: bad sweep files give scene-quality errors (`FILE:LINE:COL: KEY: REASON`,
 //! exit code 2 from the CLI); a grid sweep writes one `members.csv` row per member with
 //! the documented columns plus one per varied parameter; `--resume` runs only the members
-//! not yet recorded; `--backend auto` runs whether or not an adapter exists.
+//! not yet recorded; `--backend auto` runs whether or not an adapter exists (falling back
+//! to the CPU with a note when none does), `--backend gpu` without one exits with code 2.
 
 use std::path::Path;
 use std::process::Command;
@@ -89,6 +90,8 @@ fn sweep_writes_rows_and_resume_skips_recorded_members() {
     );
     assert_eq!(lines.clone().count(), 2);
     assert!(out.join("member_1/history.csv").exists());
+    let info = std::fs::read_to_string(out.join("sweep.json")).unwrap();
+    assert!(info.contains("\"backend\": \"cpu\""), "{info}");
     // Drop member 1's row, resume: only member 1 runs again.
     let kept: Vec<&str> = csv.lines().filter(|l| !l.starts_with("1,")).collect();
     std::fs::write(out.join("members.csv"), kept.join("\n") + "\n").unwrap();
@@ -137,4 +140,26 @@ fn cli_sweep_exit_codes_and_auto_backend() {
         csv.lines().skip(1).all(|l| l.contains(",completed,")),
         "{csv}"
     );
+
+    // No adapter at all (Vulkan pointed at a missing driver): `auto` falls back and says
+    // so; `gpu` is an error (exit code 2).
+    for (backend, code) in [("auto", 0), ("gpu", 2)] {
+        let o = Command::new(env!("CARGO_BIN_EXE_cosserat"))
+            .env("WGPU_BACKEND", "vulkan")
+            .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+            .args(["sweep"])
+            .arg(&good)
+            .args(["--backend", backend, "--out"])
+            .arg(dir.path().join(format!("o3{backend}")))
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{backend}: {e}");
+        let want = if code == 0 {
+            "backend auto: using the CPU (no GPU adapter"
+        } else {
+            "error: no GPU adapter"
+        };
+        assert!(e.contains(want), "{backend}: {e}");
+    }
 }

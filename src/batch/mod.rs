@@ -119,6 +119,8 @@ pub struct BatchOptions {
     /// GPU path: worker threads (members in flight at once); 0 = all members, capped by
     /// the adapter's buffer limit and 4096.
     pub workers: usize,
+    /// Modified Newton (tangent reuse, [`Simulation::set_modified_newton`]).
+    pub modified_newton: bool,
 }
 
 /// What the batch as a whole measured.
@@ -153,9 +155,10 @@ fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
 fn run_member(
     index: usize,
     m: &Member,
-    keep_history: bool,
+    opts: BatchOptions,
     gpu: Option<(&Arc<GpuBatcher>, usize)>,
 ) -> MemberResult {
+    let keep_history = opts.keep_history;
     let mut sim = match Simulation::new(m.model.clone(), m.params) {
         Ok(s) => s,
         Err(e) => {
@@ -166,6 +169,7 @@ fn run_member(
             }
         }
     };
+    sim.set_modified_newton(opts.modified_newton);
     // Baseline schemes have no GPU kernel: such a member runs on the CPU kernel and never
     // joins the batcher (whose barrier waits only for registered members).
     if let Some((b, slot)) = gpu.filter(|_| m.params.scheme.has_gpu_kernel()) {
@@ -213,7 +217,7 @@ pub fn run_members(
                     .par_iter()
                     .enumerate()
                     .for_each_with(tx, |tx, (i, m)| {
-                        let _ = tx.send(run_member(i, m, opts.keep_history, None));
+                        let _ = tx.send(run_member(i, m, opts, None));
                     });
             });
             for r in rx {
@@ -251,12 +255,7 @@ pub fn run_members(
                                 if i >= members.len() {
                                     break;
                                 }
-                                let r = run_member(
-                                    i,
-                                    &members[i],
-                                    opts.keep_history,
-                                    Some((batcher, slot)),
-                                );
+                                let r = run_member(i, &members[i], opts, Some((batcher, slot)));
                                 let _ = tx.send(r);
                             }
                         })

@@ -400,22 +400,20 @@ impl ElementKernel {
             enc.copy_buffer_to_buffer(&self.bufs[3], off, &self.staging, off, len);
         }
         self.queue.submit(Some(enc.finish()));
+        // One mapping covering every copied range (a buffer admits one pending map).
+        let end = ranges.iter().map(|&(o, l)| o + l).max().unwrap_or(0);
         let (tx, rx) = std::sync::mpsc::channel();
-        for &(off, len) in &ranges {
-            let tx = tx.clone();
-            self.staging
-                .slice(off..off + len)
-                .map_async(wgpu::MapMode::Read, move |r| {
-                    let _ = tx.send(r);
-                });
-        }
-        drop(tx);
+        self.staging
+            .slice(0..end)
+            .map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| GpuError::Kernel(e.to_string()))?;
-        for r in rx.iter() {
-            r.map_err(|e| GpuError::Kernel(e.to_string()))?;
-        }
+        rx.recv()
+            .map_err(|e| GpuError::Kernel(e.to_string()))?
+            .map_err(|e| GpuError::Kernel(e.to_string()))?;
         let t2 = Instant::now();
         for &(off, len) in &ranges {
             let view = self

@@ -96,7 +96,13 @@ pub struct Simulation {
     /// Element evaluator replacing the CPU kernel in frozen-scalar assembly, and this
     /// simulation's slot in it (the GPU batch path).
     backend: Option<(Arc<dyn ElementBackend>, usize)>,
+    /// Reuse the tangent across Newton iterations (see [`Simulation::set_modified_newton`]).
+    modified_newton: bool,
 }
+
+/// Modified Newton takes a fresh tangent when the last iteration reduced the residual by
+/// less than this factor.
+const MODIFIED_NEWTON_RATE: f64 = 0.2;
 
 impl Simulation {
     /// Sets up a simulation of `model` with `params` (the linear solver's symbolic
@@ -217,6 +223,7 @@ impl Simulation {
             inv,
             trans_diss,
             backend: None,
+            modified_newton: false,
         })
     }
 
@@ -230,6 +237,14 @@ impl Simulation {
         }
         self.backend = Some((backend, slot));
         true
+    }
+
+    /// Modified Newton (default off): from the third iteration of a solve on, the last
+    /// tangent is kept (not re-evaluated; the matrix is refactorized) as long as the previous
+    /// iteration reduced the relative residual by at least a factor 5; a slower iteration
+    /// triggers a fresh tangent. Saves the element tangents (on the GPU: their kernel work and readback).
+    pub fn set_modified_newton(&mut self, on: bool) {
+        self.modified_newton = on;
     }
 
     /// The model.
@@ -468,7 +483,11 @@ impl Simulation {
         let mut history = Vec::new();
         let tol = self.params.newton_tol;
         for it in 0..=self.params.max_iter {
-            let res = self.assemble(q, mode, true, &mut r);
+            // Modified Newton: keep the last tangent while the residual contracts fast.
+            let fresh = !self.modified_newton
+                || it < 2
+                || history[it - 1] > MODIFIED_NEWTON_RATE * history[it - 2];
+            let res = self.assemble(q, mode, fresh, &mut r);
             history.push(res);
             if !res.is_finite() {
                 return Err(StepFailure {

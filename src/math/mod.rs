@@ -2,6 +2,8 @@
 //! rotation increment (the Cayley transform), never `exp`/`log`: this keeps the CPU and
 //! GPU kernels to `+ − × ÷` and `sqrt`.
 
+pub mod rng;
+
 use crate::model::{Mat3, Vec3};
 
 /// Skew matrix `â` with `â b = a × b`.

@@ -31,6 +31,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::math::rng::Rng;
 use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
 pub use run::{run_sweep, MemberRow, SweepOptions, SweepSummary, CSV_COLUMNS};
 
@@ -143,20 +144,6 @@ struct RawVary {
     range: Option<Spanned<Vec<f64>>>,
     #[serde(default)]
     log: bool,
-}
-
-/// A small seeded generator (xorshift64*), so a sweep file fixes its samples.
-struct Rng(u64);
-impl Rng {
-    fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-    }
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 /// A path step of a scene key.

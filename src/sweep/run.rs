@@ -157,7 +157,8 @@ fn recorded(path: &Path, head: &str) -> Result<HashSet<usize>, SweepError> {
 }
 
 /// Runs every member of `spec` not yet recorded, appending one row per finished member
-/// to `out/members.csv` (flushed at once, so an interrupted sweep loses nothing).
+/// to `out/members.csv` (flushed at once, so an interrupted sweep loses nothing), then
+/// writes `out/sweep.json` (counts of this invocation, backend and adapter).
 /// `on_row` sees each row (progress display).
 pub fn run_sweep(
     spec: &SweepSpec,
@@ -240,6 +241,7 @@ pub fn run_sweep(
         BatchOptions {
             keep_history: opts.histories,
             workers: opts.workers,
+            modified_newton: false,
         },
         |r: MemberResult| {
             let id = ids[r.index];
@@ -292,5 +294,20 @@ pub fn run_sweep(
     }
     summary.gpu = stats.gpu;
     summary.wall_s = start.elapsed().as_secs_f64();
+    let info = serde_json::json!({
+        "sweep": spec.source,
+        "base": spec.base,
+        "mode": format!("{:?}", spec.mode).to_lowercase(),
+        "parameters": spec.params.iter().map(|p| p.key.clone()).collect::<Vec<_>>(),
+        "members": summary.members,
+        "completed": summary.completed,
+        "failed": summary.failed,
+        "skipped": summary.skipped,
+        "backend": exec.describe(),
+        "wall_s": summary.wall_s,
+    });
+    let path = out.join("sweep.json");
+    std::fs::write(&path, format!("{info:#}\n"))
+        .map_err(ctx(format!("cannot write {}", path.display())))?;
     Ok(summary)
 }

@@ -170,16 +170,32 @@ pub struct BenchArgs {
     /// Time the CPU path only (e.g. to measure its scaling with rods and threads).
     #[arg(long)]
     pub cpu_only: bool,
+    /// Modified Newton: reuse the tangent while the residual contracts by ≥ 5× per
+    /// iteration.
+    #[arg(long)]
+    pub modified_newton: bool,
 }
 
 fn timed(
     members: &[cosserat::batch::Member],
     exec: &Executor,
+    modified_newton: bool,
 ) -> Result<(BatchStats, usize, usize)> {
     let (mut iters, mut failed) = (0usize, 0usize);
-    let stats = run_members(members, exec, BatchOptions::default(), |r| {
+    let opts = BatchOptions {
+        modified_newton,
+        ..Default::default()
+    };
+    let stats = run_members(members, exec, opts, |r| {
         iters += r.outcome.newton_iters_total;
         if r.outcome.status == RunStatus::Failed {
+            if failed == 0 {
+                eprintln!(
+                    "member {} failed: {}",
+                    r.index,
+                    r.outcome.reason.as_deref().unwrap_or("")
+                );
+            }
             failed += 1;
         }
     })?;
@@ -190,7 +206,7 @@ fn timed(
 pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let members = bench_members(a.rods, a.elements, a.steps);
     let work = (a.rods * a.elements * a.steps) as f64;
-    let (cpu, cpu_iters, cpu_failed) = timed(&members, &Executor::Cpu)?;
+    let (cpu, cpu_iters, cpu_failed) = timed(&members, &Executor::Cpu, a.modified_newton)?;
     let cpu_rate = work / cpu.wall_s;
     let gpu_exec = if a.cpu_only {
         Ok((Executor::Cpu, None))
@@ -199,8 +215,12 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     };
     let (adapter, f64_ok, gpu) = match &gpu_exec {
         Ok((Executor::Gpu(ctx), _)) => {
-            let r = timed(&members, &gpu_exec.as_ref().map(|e| e.0.clone()).unwrap())
-                .context("GPU batch")?;
+            let r = timed(
+                &members,
+                &gpu_exec.as_ref().map(|e| e.0.clone()).unwrap(),
+                a.modified_newton,
+            )
+            .context("GPU batch")?;
             (ctx.describe(), ctx.is_f64(), Some(r))
         }
         Ok((Executor::Cpu, _)) => ("none".into(), false, None),
@@ -218,6 +238,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             "adapter": adapter,
             "f64": f64_ok,
             "cpu_threads": rayon::current_num_threads(),
+            "modified_newton": a.modified_newton,
             "cpu_wall_s": cpu.wall_s,
             "cpu_newton_iters": cpu_iters,
             "cpu_failed": cpu_failed,
@@ -237,8 +258,15 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         println!("{obj}");
     } else {
         println!(
-            "batch: {} rods × {} elements × {} steps (EDMC-2 α = 0.5, staggered, Δt = 0.01)",
-            a.rods, a.elements, a.steps
+            "batch: {} rods × {} elements × {} steps (EDMC-2 α = 0.5, staggered, Δt = 0.01){}",
+            a.rods,
+            a.elements,
+            a.steps,
+            if a.modified_newton {
+                ", modified Newton"
+            } else {
+                ""
+            }
         );
         println!(
             "cpu ({} threads): {:.3} s, {:.0} element-steps/s, {} Newton iterations, {} failed",
