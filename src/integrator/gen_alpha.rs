@@ -560,7 +560,9 @@ impl GenAlpha {
                 r.iter_mut().for_each(|v| *v = -*v);
                 if let Err(e) = self.solver.factor_solve(&mut r) {
                     last = StepFailure {
-                        reason: format!("linear solve failed: {e}"),
+                        reason: format!(
+                            "linear solve failed at Newton iteration {it} (relative residual {res:.3e}): {e}"
+                        ),
                         residuals: history.clone(),
                     };
                     history.clear();
