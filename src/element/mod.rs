@@ -371,18 +371,49 @@ pub fn field_forces(b: &strain::StrainGradient, s: &Vector6<f64>, h: f64) -> [Ve
 }
 
 /// Elastic forces of one element at a single configuration: `h B(Φ)ᵀ C(ε(Φ) − ε°)` on the
-/// eight fields, and the strains `ε(Φ)`. Used by the generalized-α baseline, which
-/// balances inertia against the elastic forces *at* `t_{n+1}`.
+/// eight fields, and the stresses `S = C(ε(Φ) − ε°)`. Used by the generalized-α baseline,
+/// which balances inertia against the elastic forces *at* `t_{n+1}`.
 pub fn elastic_field_forces(data: &ElementData, cfg: &Config) -> ([Vec3; NFIELDS], Vector6<f64>) {
     let p = &data.props;
-    let eps = strains6(cfg, p.h);
-    let de = eps - data.eps0;
+    let de = strains6(cfg, p.h) - data.eps0;
     let s = constitutive(
         p,
         &de.fixed_rows::<3>(0).into_owned(),
         &de.fixed_rows::<3>(3).into_owned(),
     );
-    (field_forces(&strain_gradient(cfg, p.h), &s, p.h), eps)
+    (field_forces(&strain_gradient(cfg, p.h), &s, p.h), s)
+}
+
+/// Derivative of [`elastic_field_forces`] with respect to the fields:
+/// `∂f_p/∂Φ_q = h Σ_kk' B[k][p] C_kk' B[k'][q]ᵀ + h H_s[p, q] I₃` (material and geometric
+/// stiffness; `s` the stresses at `cfg`). Block `[p][q]` is 3×3.
+pub fn elastic_field_stiffness(
+    data: &ElementData,
+    cfg: &Config,
+    s: &Vector6<f64>,
+) -> [[Mat3; NFIELDS]; NFIELDS] {
+    let p = &data.props;
+    let h = p.h;
+    let b = strain_gradient(cfg, h);
+    let mut c = nalgebra::Matrix6::<f64>::zeros();
+    for i in 0..3 {
+        c[(i, i)] = p.c_gamma[i];
+    }
+    c.fixed_view_mut::<3, 3>(3, 3).copy_from(&p.c_omega);
+    let hs = stress_hessian(s, h);
+    std::array::from_fn(|pf| {
+        std::array::from_fn(|qf| {
+            let mut k = Mat3::identity() * (h * hs[(pf, qf)]);
+            for (k1, row1) in b.iter().enumerate() {
+                for (k2, row2) in b.iter().enumerate() {
+                    if c[(k1, k2)] != 0.0 {
+                        k += row1[pf] * row2[qf].transpose() * (h * c[(k1, k2)]);
+                    }
+                }
+            }
+            k
+        })
+    })
 }
 
 /// Output of [`residual_tangent`].

@@ -42,7 +42,8 @@ fn decades(lo: f64, hi: f64) -> (f64, f64) {
     if b <= a {
         b = a * 10.0;
     }
-    (a, b)
+    // A hair wider, so that round-off in 10^k keeps the end decades' tick labels.
+    (a * 0.999, b * 1.001)
 }
 
 fn sci(v: f64) -> String {
