@@ -38,8 +38,11 @@
 //! Neither energy nor momenta are exact for this scheme; the acceptance check on energy
 //! does not apply (see `Scheme::controls_energy`).
 
+use crate::element::strain::strain_gradient;
 use crate::element::strain::{Config, A0, B0, R0, R1};
-use crate::element::{elastic_field_forces, elastic_field_stiffness, ElementData, M2};
+use crate::element::{
+    elastic_field_forces, elastic_field_stiffness, stress_force_floor, ElementData, M2,
+};
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::state::{rigid_director_velocities, State};
 use crate::integrator::system::StepFailure;
@@ -56,7 +59,7 @@ const FD_REL_STEP: f64 = 1e-6;
 
 /// A Newton iteration that no longer halves the residual is accepted once the residual
 /// is below this multiple of `newton_tol` (the round-off floor; see [`GenAlpha::step`]).
-const STALL_FACTOR: f64 = 100.0;
+const STALL_FACTOR: f64 = crate::integrator::system::ROUNDOFF_RESIDUAL;
 
 /// The four generalized-α coefficients.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -457,18 +460,21 @@ impl GenAlpha {
             }
         }
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
-            if nd.u != NONE && model.point_mass[a] != 0.0 {
-                for c in 0..3 {
-                    vals[self.solver.slot(nd.u + c, nd.u + c)] += model.point_mass[a] * ca;
+            if model.point_mass[a] != 0.0 {
+                for i in nd.u.into_iter().filter(|&i| i != NONE) {
+                    vals[self.solver.slot(i, i)] += model.point_mass[a] * ca;
                 }
             }
-            if nd.th != NONE {
-                // δ(Λᵀ) m = (Λᵀm)^ T δΘ, with Λᵀ m the residual's rotational rows.
-                let rm = Vec3::new(r[nd.th], r[nd.th + 1], r[nd.th + 2]);
+            if nd.th.iter().any(|&i| i != NONE) {
+                // δ(Λᵀ) m = (Λᵀm)^ T δΘ, with Λᵀ m the residual's rotational rows (a removed
+                // planar row is zero by symmetry).
+                let rm = Vec3::from_fn(|c, _| if nd.th[c] == NONE { 0.0 } else { r[nd.th[c]] });
                 let blk = hat(&rm) * tj[a];
                 for i in 0..3 {
                     for j in 0..3 {
-                        vals[self.solver.slot(nd.th + i, nd.th + j)] += blk[(i, j)];
+                        if nd.th[i] != NONE && nd.th[j] != NONE {
+                            vals[self.solver.slot(nd.th[i], nd.th[j])] += blk[(i, j)];
+                        }
                     }
                 }
             }
@@ -542,7 +548,9 @@ impl GenAlpha {
                 r: [r[nodes[0]], r[nodes[1]]],
                 d,
             };
-            let (f, _) = elastic_field_forces(&data[e], &cfg);
+            let (f, eps) = elastic_field_forces(&data[e], &cfg);
+            // Round-off floor of the elastic forces (as in the element kernel's scales).
+            let ff = stress_force_floor(&data[e], &strain_gradient(&cfg, h), &eps);
             let ine = element_inertia(&data[e], el, lam, vel, acc);
             for l in 0..2 {
                 let a = nodes[l];
@@ -550,13 +558,17 @@ impl GenAlpha {
                 let fr = f[if l == 0 { R0 } else { R1 }];
                 fu[a] += fr + inertia;
                 let floor = p.a_rho * h * vel[a][0].amax() / dt;
-                scale[0] = scale[0].max(fr.amax()).max(inertia.amax()).max(floor);
+                scale[0] = scale[0]
+                    .max(fr.amax())
+                    .max(inertia.amax())
+                    .max(floor)
+                    .max(ff[if l == 0 { R0 } else { R1 }]);
                 let base = if l == 0 { A0 } else { B0 };
                 let mut mom = Vec3::zeros();
                 for i in 0..3 {
                     let di: Vec3 = d[l].column(i).into_owned();
                     let mut fi = f[base + i];
-                    scale[1] = scale[1].max(fi.amax() * di.norm());
+                    scale[1] = scale[1].max(fi.amax().max(ff[base + i]) * di.norm());
                     if i < 2 {
                         let fin = ine.dir[l][i];
                         let floor = h * p.i_rho.amax() * vel[a][1].amax() / dt;

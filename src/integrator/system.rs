@@ -495,7 +495,7 @@ impl Simulation {
                     residuals: history,
                 });
             }
-            // Newton converges quadratically: from a residual of 1e4·tol the next one is
+            // Newton converges quadratically: from a residual of 1e5·tol the next one is
             // far below tol. A residual that stops falling there sits on its f64 floor
             // (stiff members under small loads: the arch at t ≈ 0), so accept it; the energy
             // checks that follow still apply.
@@ -869,7 +869,7 @@ impl Simulation {
 
 /// A Newton residual that stops falling below this multiple of the tolerance is at its
 /// round-off floor (see `newton`).
-const ROUNDOFF_RESIDUAL: f64 = 1e4;
+pub(crate) const ROUNDOFF_RESIDUAL: f64 = 1e5;
 
 /// The components `idx` of `q` as a vector (zero where removed).
 #[inline]
