@@ -131,6 +131,13 @@ struct StabilityArgs {
     /// Time steps (default: the scene's Δt times ¼, ½, 1, 2, 4).
     #[arg(long, value_delimiter = ',')]
     dts: Option<Vec<f64>>,
+    /// Where the grid runs: `gpu`/`auto` run it as one batch whose EM/EDMC members share
+    /// each GPU element dispatch (baselines use the CPU kernel inside the batch).
+    #[arg(long, value_enum, default_value_t = cmds::BackendArg::Cpu)]
+    backend: cmds::BackendArg,
+    /// GPU adapter: first adapter whose name contains this (case-insensitive).
+    #[arg(long)]
+    adapter: Option<String>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -497,7 +504,11 @@ fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
         t_end: a.common.t_end.unwrap_or(scene.params.t_end),
         jobs: default_jobs(a.common.jobs),
     };
-    let st = study::stability(&scene, &cfg)?;
+    let exec = cmds::executor(a.backend, a.adapter.as_deref())?;
+    if a.backend != cmds::BackendArg::Cpu {
+        println!("backend: {}", exec.describe());
+    }
+    let st = study::stability_on(&scene, &cfg, &exec)?;
     study::write_stability_csv(&a.common.out.join("stability.csv"), &st)?;
     study::plot_stability(&a.common.out.join("stability.png"), &st)?;
     study::write_failures(&a.common.out.join("failures.txt"), &st.failures())?;

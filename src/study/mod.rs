@@ -32,6 +32,7 @@ pub use write::{
     WORK_PRECISION_COLUMNS,
 };
 
+use crate::batch::{run_members, BatchOptions, Executor, Member};
 use crate::integrator::gen_alpha::DEFAULT_RHO_INF;
 use crate::integrator::run::run;
 use crate::integrator::{IntegratorParams, Scheme, Simulation};
@@ -67,6 +68,9 @@ pub enum StudyError {
     /// Writing an output failed.
     #[error(transparent)]
     Output(#[from] crate::output::OutputError),
+    /// The GPU batch could not be set up.
+    #[error("GPU batch: {0}")]
+    Gpu(#[from] crate::gpu::GpuError),
 }
 
 /// A scheme family of a study; the one number that varies in it is the `param` of
@@ -273,6 +277,51 @@ impl MemberResult {
     }
 }
 
+/// Largest energy created over a run: `max_k (H_k − H_0 − W_{0→k})`, fed one accepted
+/// level at a time (row 0 first).
+#[derive(Clone, Copy, Debug)]
+struct EnergyGrowth {
+    h0: f64,
+    work: f64,
+    growth: f64,
+    hmax: f64,
+}
+
+impl EnergyGrowth {
+    fn new() -> Self {
+        Self {
+            h0: f64::NAN,
+            work: 0.0,
+            growth: f64::NEG_INFINITY,
+            hmax: 0.0,
+        }
+    }
+
+    fn push(&mut self, rec: &StepRecord) {
+        if rec.step == 0 {
+            self.h0 = rec.total;
+        } else {
+            self.work += rec.external_work;
+        }
+        self.hmax = self.hmax.max(rec.total.abs());
+        self.growth = self.growth.max(rec.total - self.h0 - self.work);
+    }
+
+    /// Relative to `|H_0|` (or the largest `|H_k|` when `H_0 = 0`).
+    fn relative(&self) -> f64 {
+        let href = if self.h0.abs() > 0.0 {
+            self.h0.abs()
+        } else {
+            self.hmax
+        };
+        if href > 0.0 {
+            self.growth / href
+        } else {
+            0.0
+        }
+    }
+}
+
 /// Runs one member: `scene` with the scheme `kind(param)`, time step `dt`, to `t_end`
 /// (all other integrator settings from the scene). With `sample_dt`, the nodal positions
 /// are recorded at every multiple of it (linear interpolation between levels when a
@@ -292,18 +341,12 @@ pub fn run_member(
     let mut sim = Simulation::new(scene.model.clone(), params)?;
     let mut samples: Vec<Vec<Vec3>> = Vec::new();
     let mut prev: Option<(f64, Vec<Vec3>)> = None;
-    let (mut h0, mut work, mut growth, mut hmax) = (f64::NAN, 0.0, f64::NEG_INFINITY, 0.0f64);
+    let mut growth = EnergyGrowth::new();
     let outcome = run(
         &mut sim,
         1,
         |rec: &StepRecord, s: &Simulation| -> Result<(), std::convert::Infallible> {
-            if rec.step == 0 {
-                h0 = rec.total;
-            } else {
-                work += rec.external_work;
-            }
-            hmax = hmax.max(rec.total.abs());
-            growth = growth.max(rec.total - h0 - work);
+            growth.push(rec);
             let r = &s.state().r;
             if let (Some(sdt), Some((t0, r0))) = (sample_dt, prev.as_ref()) {
                 // Every sample time in (t0, t] (tolerance: round-off of accumulated t).
@@ -322,7 +365,6 @@ pub fn run_member(
         },
     )
     .unwrap_or_else(|never| match never {});
-    let href = if h0.abs() > 0.0 { h0.abs() } else { hmax };
     Ok(MemberResult {
         kind,
         param,
@@ -333,7 +375,7 @@ pub fn run_member(
         reason: outcome.reason,
         wall_s: outcome.wall_s,
         newton_iters_total: outcome.newton_iters_total,
-        max_energy_growth: if href > 0.0 { growth / href } else { 0.0 },
+        max_energy_growth: growth.relative(),
         energy_initial: outcome.energy_initial,
         energy_final: outcome.energy_final,
         max_rel_dl: outcome.max_rel_dl,
@@ -599,8 +641,20 @@ pub struct Stability {
     pub cells: Vec<MemberResult>,
 }
 
-/// Runs a stability study of `scene`.
+/// Runs a stability study of `scene` on the CPU (`cfg.jobs` threads).
 pub fn stability(scene: &Scene, cfg: &StabilityConfig) -> Result<Stability, StudyError> {
+    stability_on(scene, cfg, &Executor::Cpu)
+}
+
+/// Runs a stability study of `scene` on `exec`. On the GPU the grid is one batch
+/// ([`crate::batch::run_members`]): the members of the schemes the GPU kernel implements
+/// (EM, EDMC-1, EDMC-2) share each element dispatch; the baselines run on the CPU kernel
+/// inside the same batch. The cells are the same as on the CPU path.
+pub fn stability_on(
+    scene: &Scene,
+    cfg: &StabilityConfig,
+    exec: &Executor,
+) -> Result<Stability, StudyError> {
     check_list("dt", &cfg.dts, true)?;
     check_list("t_end", &[cfg.t_end], true)?;
     if cfg.kinds.is_empty() {
@@ -625,16 +679,73 @@ pub fn stability(scene: &Scene, cfg: &StabilityConfig) -> Result<Stability, Stud
             }
         }
     }
-    let cells = parallel_map(&members, cfg.jobs, |&(k, p, dt)| {
-        run_member(scene, k, p, dt, cfg.t_end, None)
-    })
-    .into_iter()
-    .collect::<Result<Vec<_>, _>>()?;
+    let cells = match exec {
+        Executor::Cpu => parallel_map(&members, cfg.jobs, |&(k, p, dt)| {
+            run_member(scene, k, p, dt, cfg.t_end, None)
+        })
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?,
+        Executor::Gpu(_) => batched_cells(scene, &members, cfg.t_end, exec)?,
+    };
     Ok(Stability {
         scene: scene.name.clone(),
         config: cfg.clone(),
         cells,
     })
+}
+
+/// The grid `(kind, param, dt)` as one batch on `exec`, turned into study cells.
+fn batched_cells(
+    scene: &Scene,
+    grid: &[(SchemeKind, f64, f64)],
+    t_end: f64,
+    exec: &Executor,
+) -> Result<Vec<MemberResult>, StudyError> {
+    let members: Vec<Member> = grid
+        .iter()
+        .map(|&(k, p, dt)| {
+            let mut params: IntegratorParams = scene.params;
+            params.scheme = k.scheme(p);
+            params.dt = dt;
+            params.t_end = t_end;
+            Member {
+                model: scene.model.clone(),
+                params,
+            }
+        })
+        .collect();
+    let opts = BatchOptions {
+        keep_history: true,
+        ..Default::default()
+    };
+    let mut out: Vec<Option<MemberResult>> = vec![None; grid.len()];
+    run_members(&members, exec, opts, |r| {
+        let (kind, param, dt) = grid[r.index];
+        let mut growth = EnergyGrowth::new();
+        r.history.iter().for_each(|rec| growth.push(rec));
+        let o = r.outcome;
+        out[r.index] = Some(MemberResult {
+            kind,
+            param,
+            dt,
+            t_end,
+            status: o.status,
+            t_reached: o.t_reached,
+            reason: o.reason,
+            wall_s: o.wall_s,
+            newton_iters_total: o.newton_iters_total,
+            max_energy_growth: growth.relative(),
+            energy_initial: o.energy_initial,
+            energy_final: o.energy_final,
+            max_rel_dl: o.max_rel_dl,
+            max_rel_dj: o.max_rel_dj,
+            samples: Vec::new(),
+        });
+    })?;
+    Ok(out
+        .into_iter()
+        .map(|c| c.expect("every member reports"))
+        .collect())
 }
 
 #[cfg(test)]
