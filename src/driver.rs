@@ -146,7 +146,7 @@ pub fn run_sim_to_dir(
             &opts.length_unit,
         )?;
     }
-    let summary = summarize(scene, sim, &outcome, &records);
+    let summary = summarize(scene, sim, &outcome);
     write_summary(&out.join("summary.json"), &summary)?;
     Ok(RunResult {
         summary,
@@ -163,12 +163,7 @@ fn gcd(a: usize, b: usize) -> usize {
     }
 }
 
-fn summarize(
-    scene: &Scene,
-    sim: &Simulation,
-    o: &RunOutcome,
-    records: &[StepRecord],
-) -> RunSummary {
+fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
     RunSummary {
         scene: scene.source.clone(),
         status: o.status,
@@ -187,8 +182,6 @@ fn summarize(
         max_rel_dj: o.max_rel_dj,
         energy_initial: o.energy_initial,
         energy_final: o.energy_final,
-        max_link_g: o
-            .max_link_g
-            .max(records.iter().fold(0.0, |m, r| m.max(r.max_link_g))),
+        max_link_g: o.max_link_g,
     }
 }

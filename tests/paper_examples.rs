@@ -6,15 +6,6 @@ use cosserat::integrator::{Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::load_scene;
 
-fn edmc2(alpha: f64) -> Scheme {
-    Scheme::Edmc2 {
-        alpha_gv: alpha,
-        alpha_gn: 0.0,
-        alpha_ov: 0.0,
-        alpha_on: 0.0,
-    }
-}
-
 /// Runs a built-in scene with `scheme`, `dt`, `t_end` (staggered EDMC); every level
 /// recorded.
 fn simulate(
@@ -67,7 +58,7 @@ fn max_growth_after(recs: &[StepRecord], t_load_end: f64) -> f64 {
 #[test]
 fn frame_conserves_momenta_and_energy_as_the_paper_says() {
     for alpha in [0.0, 0.5] {
-        let (out, recs, _) = simulate("frame", edmc2(alpha), 0.2, 10.0, false);
+        let (out, recs, _) = simulate("frame", Scheme::edmc2(alpha), 0.2, 10.0, false);
         assert_eq!(out.status, RunStatus::Completed);
         assert_eq!(out.steps, 50);
         let (l0, j0) = (recs[0].l, recs[0].j);
@@ -104,7 +95,7 @@ fn frame_conserves_momenta_and_energy_as_the_paper_says() {
 
 #[test]
 fn arch_edmc2_runs_to_2000_and_snaps_through() {
-    let (out, recs, sim) = simulate("arch", edmc2(1.0), 1.0, 2000.0, true);
+    let (out, recs, _) = simulate("arch", Scheme::edmc2(1.0), 1.0, 2000.0, true);
     assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
     assert_eq!(out.steps, 2000);
     // Unloaded after t = 1000: energy never grows; EDMC-2 dissipates, but (DESIGN §6) very
@@ -114,8 +105,7 @@ fn arch_edmc2_runs_to_2000_and_snaps_through() {
     let (h_unload, h_end) = (at(1001.0), at(2000.0));
     assert!(h_end <= h_unload && (h_unload - h_end) < 1e-5 * h_unload);
     // The apex (node 15, rise 3.15) went through the chord: the arch snapped.
-    let _ = sim;
-    let (_, _, sim_1100) = simulate("arch", edmc2(1.0), 1.0, 1087.0, true);
+    let (_, _, sim_1100) = simulate("arch", Scheme::edmc2(1.0), 1.0, 1087.0, true);
     assert!(
         sim_1100.state().r[15].z < -1.0,
         "apex at {}",
@@ -130,7 +120,7 @@ fn arch_edmc2_runs_to_2000_and_snaps_through() {
 /// on geometry its text does not give.
 #[test]
 fn arch_em_completes_with_exact_energy_as_observed() {
-    let (out, recs, _) = simulate("arch", edmc2(0.0), 1.0, 2000.0, true);
+    let (out, recs, _) = simulate("arch", Scheme::edmc2(0.0), 1.0, 2000.0, true);
     assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
     let after: Vec<&StepRecord> = recs.iter().filter(|r| r.t >= 1001.0).collect();
     let h = after[0].total;
@@ -185,7 +175,7 @@ fn mechanisms_as_observed() {
                 .map(|&(sc, a, dt)| (sc, false, a, dt, true, (0.0, 0.0), Strategy::Monolithic)),
         );
     for (scene, em, alpha, dt, completes, window, strategy) in all {
-        let scheme = if em { Scheme::Em } else { edmc2(alpha) };
+        let scheme = if em { Scheme::Em } else { Scheme::edmc2(alpha) };
         let (out, recs, sim) = simulate_with(scene, scheme, dt, 10.0, true, strategy);
         let scheme_name = format!("{} {strategy:?}", scheme.name());
         let tag = format!("{scene} {scheme_name} α={alpha} Δt={dt}");
@@ -239,8 +229,8 @@ fn mechanisms_as_observed() {
 #[test]
 fn planar_equals_full_3d_to_round_off() {
     for (scene, dt, t_end) in [("arch", 1.0, 1000.0), ("mechanism_hexagon", 0.05, 2.0)] {
-        let (o2, r2, s2) = simulate(scene, edmc2(0.5), dt, t_end, true);
-        let (o3, r3, s3) = simulate(scene, edmc2(0.5), dt, t_end, false);
+        let (o2, r2, s2) = simulate(scene, Scheme::edmc2(0.5), dt, t_end, true);
+        let (o3, r3, s3) = simulate(scene, Scheme::edmc2(0.5), dt, t_end, false);
         assert_eq!(o2.status, RunStatus::Completed);
         assert_eq!(o3.status, RunStatus::Completed);
         // Per free node: u, θ, g (EDMC-2 α_Γv dissipates translationally) = 9 unknowns in

@@ -287,12 +287,7 @@ pub fn bench_members(rods: usize, elements: usize, steps: usize) -> Vec<Member> 
         .replace("elements = 50", &format!("elements = {}", elements.max(1)));
     let scene = crate::scene::parse_scene(&text, "builtin:cantilever").unwrap_or(base);
     let mut params = scene.params;
-    params.scheme = crate::integrator::Scheme::Edmc2 {
-        alpha_gv: 0.5,
-        alpha_gn: 0.0,
-        alpha_ov: 0.0,
-        alpha_on: 0.0,
-    };
+    params.scheme = crate::integrator::Scheme::edmc2(0.5);
     params.dt = 0.01;
     params.t_end = steps as f64 * params.dt;
     (0..rods)

@@ -278,12 +278,7 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
                 chi_nu: 0.0,
             },
             (SchemeArg::Edmc2, s @ Scheme::Edmc2 { .. }) => s,
-            (SchemeArg::Edmc2, _) => Scheme::Edmc2 {
-                alpha_gv: 0.0,
-                alpha_gn: 0.0,
-                alpha_ov: 0.0,
-                alpha_on: 0.0,
-            },
+            (SchemeArg::Edmc2, _) => Scheme::edmc2(0.0),
         };
     }
     if let Some(alpha) = a.alpha {

@@ -384,17 +384,27 @@ pub fn field_forces(b: &strain::StrainGradient, s: &Vector6<f64>, h: f64) -> [Ve
 }
 
 /// Elastic forces of one element at a single configuration: `h B(Φ)ᵀ C(ε(Φ) − ε°)` on the
-/// eight fields, and the stresses `S = C(ε(Φ) − ε°)`. Used by the generalized-α baseline,
-/// which balances inertia against the elastic forces *at* `t_{n+1}`.
-pub fn elastic_field_forces(data: &ElementData, cfg: &Config) -> ([Vec3; NFIELDS], Vector6<f64>) {
+/// eight fields, the stresses `S = C(ε(Φ) − ε°)` and the forces' round-off floor
+/// ([`stress_force_floor`]). Used by the generalized-α baseline, which balances inertia
+/// against the elastic forces *at* `t_{n+1}`.
+pub fn elastic_field_forces(
+    data: &ElementData,
+    cfg: &Config,
+) -> ([Vec3; NFIELDS], Vector6<f64>, [f64; NFIELDS]) {
     let p = &data.props;
-    let de = strains6(cfg, p.h) - data.eps0;
+    let eps = strains6(cfg, p.h);
+    let de = eps - data.eps0;
     let s = constitutive(
         p,
         &de.fixed_rows::<3>(0).into_owned(),
         &de.fixed_rows::<3>(3).into_owned(),
     );
-    (field_forces(&strain_gradient(cfg, p.h), &s, p.h), s)
+    let b = strain_gradient(cfg, p.h);
+    (
+        field_forces(&b, &s, p.h),
+        s,
+        stress_force_floor(data, &b, &eps),
+    )
 }
 
 /// Derivative of [`elastic_field_forces`] with respect to the fields:

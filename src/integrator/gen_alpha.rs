@@ -38,11 +38,8 @@
 //! Neither energy nor momenta are exact for this scheme; the acceptance check on energy
 //! does not apply (see `Scheme::controls_energy`).
 
-use crate::element::strain::strain_gradient;
 use crate::element::strain::{Config, A0, B0, R0, R1};
-use crate::element::{
-    elastic_field_forces, elastic_field_stiffness, stress_force_floor, ElementData, M2,
-};
+use crate::element::{elastic_field_forces, elastic_field_stiffness, ElementData, M2};
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::state::{rigid_director_velocities, State};
 use crate::integrator::system::StepFailure;
@@ -58,7 +55,8 @@ pub const DEFAULT_RHO_INF: f64 = 0.8;
 const FD_REL_STEP: f64 = 1e-6;
 
 /// A Newton iteration that no longer halves the residual is accepted once the residual
-/// is below this multiple of `newton_tol` (the round-off floor; see [`GenAlpha::step`]).
+/// is below this multiple of `newton_tol` (the round-off floor; see [`GenAlpha::step`]);
+/// the same floor as the mid-point Newton of `Simulation`.
 const STALL_FACTOR: f64 = crate::integrator::system::ROUNDOFF_RESIDUAL;
 
 /// The four generalized-α coefficients.
@@ -388,7 +386,7 @@ impl GenAlpha {
                 r: [lv.r[nodes[0]], lv.r[nodes[1]]],
                 d,
             };
-            let (f, st) = elastic_field_forces(&data[e], &cfg);
+            let (f, st, _) = elastic_field_forces(&data[e], &cfg);
             let kf = elastic_field_stiffness(&data[e], &cfg, &st);
             let ine = element_inertia(&data[e], el, &lv.lam, &lv.vel, &lv.acc);
             // Field → (first local column, 3×3 map to the unknowns of that end).
@@ -548,9 +546,8 @@ impl GenAlpha {
                 r: [r[nodes[0]], r[nodes[1]]],
                 d,
             };
-            let (f, eps) = elastic_field_forces(&data[e], &cfg);
-            // Round-off floor of the elastic forces (as in the element kernel's scales).
-            let ff = stress_force_floor(&data[e], &strain_gradient(&cfg, h), &eps);
+            // `ff`: round-off floor of the elastic forces (as in the element kernel's scales).
+            let (f, _, ff) = elastic_field_forces(&data[e], &cfg);
             let ine = element_inertia(&data[e], el, lam, vel, acc);
             for l in 0..2 {
                 let a = nodes[l];

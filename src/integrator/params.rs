@@ -46,6 +46,16 @@ pub enum Scheme {
 }
 
 impl Scheme {
+    /// EDMC-2 with the paper's single parameter α_Γv and the other three α zero.
+    pub fn edmc2(alpha_gv: f64) -> Self {
+        Scheme::Edmc2 {
+            alpha_gv,
+            alpha_gn: 0.0,
+            alpha_ov: 0.0,
+            alpha_on: 0.0,
+        }
+    }
+
     /// Short name as used on the command line.
     pub fn name(&self) -> &'static str {
         match self {

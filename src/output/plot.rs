@@ -358,15 +358,19 @@ pub fn plot_comparison(
     render(path, (1000, height), title, &panels)
 }
 
+/// Whether a chart path asks for SVG (by extension); anything else is a bitmap whose
+/// format follows the extension.
+pub(super) fn is_svg(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("svg"))
+}
+
 /// Chooses the backend by the file extension (`.svg` → SVG, anything else → bitmap, whose
 /// format follows the extension, normally PNG) and draws the panels stacked vertically.
 fn render(path: &Path, size: (u32, u32), title: &str, panels: &[Panel]) -> Result<(), OutputError> {
     ensure_font();
-    let is_svg = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("svg"));
-    let result = if is_svg {
+    let result = if is_svg(path) {
         let root = SVGBackend::new(path, size).into_drawing_area();
         let quirks = Quirks {
             text_dy: 0,

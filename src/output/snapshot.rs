@@ -10,7 +10,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::plot::{ensure_font, BLACK_ISH, FONT};
+use super::plot::{ensure_font, is_svg, BLACK_ISH, FONT};
 use super::OutputError;
 use crate::integrator::Simulation;
 use crate::model::{Plane, Vec3};
@@ -137,11 +137,7 @@ pub fn plot_snapshots(
         path: path.to_path_buf(),
         message,
     };
-    let is_svg = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("svg"));
-    let r = if is_svg {
+    let r = if is_svg(path) {
         let root = SVGBackend::new(path, SIZE).into_drawing_area();
         draw(&root, title, snapshots, proj, unit)
             .and_then(|()| root.present().map_err(|e| e.to_string()))

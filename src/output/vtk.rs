@@ -45,16 +45,6 @@ impl VtkSeries {
         })
     }
 
-    /// Number of frames written.
-    pub fn len(&self) -> usize {
-        self.frames.len()
-    }
-
-    /// Whether no frame was written yet.
-    pub fn is_empty(&self) -> bool {
-        self.frames.is_empty()
-    }
-
     /// Writes the current level of `sim` as the next frame.
     pub fn write_frame(&mut self, sim: &Simulation, step: usize) -> Result<(), OutputError> {
         let file = format!("{}_{step:06}.vtu", self.name);

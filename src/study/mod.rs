@@ -151,12 +151,7 @@ impl SchemeKind {
                 chi_v: 0.0,
                 chi_nu: 0.0,
             },
-            SchemeKind::Edmc2 => Scheme::Edmc2 {
-                alpha_gv: param,
-                alpha_gn: 0.0,
-                alpha_ov: 0.0,
-                alpha_on: 0.0,
-            },
+            SchemeKind::Edmc2 => Scheme::edmc2(param),
             SchemeKind::GenAlpha => Scheme::GenAlpha { rho_inf: param },
         }
     }
