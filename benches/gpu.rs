@@ -82,6 +82,9 @@ fn kernels(c: &mut Criterion) {
     g.finish();
 }
 
+/// One rod's Newton solve (30 elements, 9 unknowns per node): faer's pivoted sparse LU
+/// against the block-tridiagonal LU, and a solve that reuses the factorization (modified
+/// Newton).
 fn solves(c: &mut Criterion) {
     let m = &bench_members(1, 30, 1)[0];
     let dofs = DofMap::new(&m.model, true);
@@ -89,29 +92,41 @@ fn solves(c: &mut Criterion) {
     for i in 0..dofs.n {
         pattern.push((i, i));
     }
-    let mut solver = SparseSolver::new(dofs.n, &pattern).unwrap();
-    let slots: Vec<(usize, usize, usize)> = pattern
-        .iter()
-        .map(|&(i, j)| (i, j, solver.slot(i, j)))
-        .collect();
     let mut g = c.benchmark_group("rod_solve");
     g.throughput(Throughput::Elements(1));
-    g.bench_function("30", |b| {
-        b.iter(|| {
-            let vals = solver.values_mut();
-            vals.iter_mut().for_each(|x| *x = 0.0);
-            for &(i, j, sl) in &slots {
-                vals[sl] += if i == j {
-                    10.0
-                } else {
-                    0.01 * ((i + 2 * j) % 7) as f64
-                };
-            }
-            let mut rhs: Vec<f64> = (0..dofs.n).map(|i| (i % 5) as f64).collect();
-            solver.factor_solve(&mut rhs).unwrap();
-            rhs[0]
-        })
-    });
+    let sparse = SparseSolver::new(dofs.n, &pattern).unwrap();
+    let blocks = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes()).unwrap();
+    for mut solver in [sparse, blocks] {
+        let slots: Vec<(usize, usize, usize)> = pattern
+            .iter()
+            .map(|&(i, j)| (i, j, solver.slot(i, j)))
+            .collect();
+        let vals = solver.values_mut();
+        vals.iter_mut().for_each(|x| *x = 0.0);
+        for &(i, j, sl) in &slots {
+            vals[sl] += if i == j {
+                10.0
+            } else {
+                0.01 * ((i + 2 * j) % 7) as f64
+            };
+        }
+        let kind = format!("{:?}", solver.kind());
+        let rhs0: Vec<f64> = (0..dofs.n).map(|i| (i % 5) as f64).collect();
+        g.bench_function(format!("30/factor_solve/{kind}"), |b| {
+            b.iter(|| {
+                let mut rhs = rhs0.clone();
+                solver.factor_solve(&mut rhs).unwrap();
+                rhs[0]
+            })
+        });
+        g.bench_function(format!("30/solve_only/{kind}"), |b| {
+            b.iter(|| {
+                let mut rhs = rhs0.clone();
+                solver.solve(&mut rhs).unwrap();
+                rhs[0]
+            })
+        });
+    }
     g.finish();
 }
 

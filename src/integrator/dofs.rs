@@ -74,6 +74,21 @@ impl DofMap {
         Self { nodes, elements, n }
     }
 
+    /// Unknowns per node, in numbering order (the node blocks of the block-tridiagonal
+    /// solver: a node's unknowns are numbered consecutively).
+    pub fn node_block_sizes(&self) -> Vec<usize> {
+        self.nodes
+            .iter()
+            .map(|nd| {
+                [nd.u, nd.th, nd.g]
+                    .iter()
+                    .flatten()
+                    .filter(|&&i| i != NONE)
+                    .count()
+            })
+            .collect()
+    }
+
     /// Sparsity pattern: every pair of unknowns of a common element.
     pub fn pattern(&self) -> Vec<(usize, usize)> {
         let mut p = Vec::new();

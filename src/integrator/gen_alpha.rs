@@ -179,7 +179,7 @@ impl GenAlpha {
         for i in 0..dofs.n {
             pattern.push((i, i));
         }
-        let solver = SparseSolver::new(dofs.n, &pattern)?;
+        let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
         let nn = model.n_nodes();
         let mut row_node = vec![0; dofs.n];
         let mut row_kind = vec![0; dofs.n];

@@ -16,7 +16,7 @@ use crate::integrator::gen_alpha::GenAlpha;
 use crate::integrator::links;
 use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
 use crate::integrator::state::State;
-use crate::linsolve::SparseSolver;
+use crate::linsolve::{SolverKind, SparseSolver};
 use crate::model::{Model, Vec3};
 use crate::observe::{acceleration_norms, invariants, Invariants};
 
@@ -143,7 +143,7 @@ impl Simulation {
                 }
             }
         }
-        let solver = SparseSolver::new(dofs.n, &pattern)?;
+        let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
         let slots = dofs
             .elements
             .iter()
@@ -225,6 +225,12 @@ impl Simulation {
             backend: None,
             modified_newton: false,
         })
+    }
+
+    /// The linear solver chosen for this model's tangent, and how many factorizations it
+    /// has handed to its pivoting fallback so far (block-tridiagonal backend only).
+    pub fn linear_solver(&self) -> (SolverKind, usize) {
+        (self.solver.kind(), self.solver.fallbacks())
     }
 
     /// Evaluates the elements through `backend` (slot `slot`) whenever the dissipation
@@ -508,7 +514,13 @@ impl Simulation {
                 break;
             }
             r.iter_mut().for_each(|x| *x = -*x);
-            if let Err(e) = self.solver.factor_solve(&mut r) {
+            // A reused tangent keeps its factorization too (modified Newton).
+            let solved = if fresh {
+                self.solver.factor().and_then(|_| self.solver.solve(&mut r))
+            } else {
+                self.solver.solve(&mut r)
+            };
+            if let Err(e) = solved {
                 return Err(StepFailure {
                     reason: format!("linear solve failed: {e}"),
                     residuals: history,

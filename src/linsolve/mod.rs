@@ -53,10 +53,15 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::lu::partial_pivoting::{factor as dense_factor, solve as dense_solve};
-use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuSymbolicParams, NumericLu, SymbolicLu};
+use faer::sparse::linalg::lu::{
+    factorize_symbolic_lu, LuRef, LuSymbolicParams, NumericLu, SymbolicLu,
+};
 use faer::sparse::linalg::{LuError, SupernodalThreshold};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Conj, Mat, MatMut, Par};
+
+mod block_tridiagonal;
+use block_tridiagonal::BlockLu;
 
 /// Largest dimension factorized with the dense LU backend (see the module documentation for
 /// the measurements behind it).
@@ -87,6 +92,72 @@ pub enum LinsolveError {
 /// Index type of the compressed-column pattern.
 type Ix = usize;
 
+/// faer's sparse supernodal LU with partial pivoting: symbolic analysis once, numeric
+/// storage and scratch reused across refactorizations.
+struct FaerLu {
+    symbolic: SymbolicLu<Ix>,
+    /// Boxed: the struct is large.
+    numeric: Box<NumericLu<Ix, f64>>,
+    mem: MemBuffer,
+}
+
+impl FaerLu {
+    fn new(pattern: faer::sparse::SymbolicSparseColMatRef<'_, Ix>) -> Result<Self, LinsolveError> {
+        let params = LuSymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        let symbolic = factorize_symbolic_lu(pattern, params)
+            .map_err(|e| LinsolveError::Pattern(format!("symbolic LU analysis failed: {e:?}")))?;
+        let req = StackReq::any_of(&[
+            symbolic.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
+        ]);
+        let mem = MemBuffer::try_new(req).map_err(|_| {
+            LinsolveError::Pattern(format!(
+                "cannot allocate LU scratch for n = {}",
+                pattern.nrows()
+            ))
+        })?;
+        Ok(Self {
+            symbolic,
+            numeric: Box::new(NumericLu::new()),
+            mem,
+        })
+    }
+
+    fn factor(
+        &mut self,
+        a: faer::sparse::SparseColMatRef<'_, Ix, f64>,
+    ) -> Result<(), LinsolveError> {
+        self.symbolic
+            .factorize_numeric_lu(
+                &mut self.numeric,
+                a,
+                Par::Seq,
+                MemStack::new(&mut self.mem),
+                Default::default(),
+            )
+            .map(|_| ())
+            .map_err(|e| match e {
+                LuError::SymbolicSingular { index } => LinsolveError::Singular(format!(
+                    "no nonzero pivot available at elimination step {index}"
+                )),
+                LuError::Generic(e) => LinsolveError::Singular(format!("sparse LU failed: {e:?}")),
+            })
+    }
+
+    fn solve(&mut self, rhs: &mut [f64]) {
+        let n = rhs.len();
+        LuRef::new_unchecked(&self.symbolic, &self.numeric).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            Par::Seq,
+            MemStack::new(&mut self.mem),
+        );
+    }
+}
+
 /// Factorization backend; see the module documentation.
 enum Backend {
     /// Dense LU with partial pivoting for small systems.
@@ -97,30 +168,61 @@ enum Backend {
         perm: Vec<Ix>,
         /// Row permutation (inverse).
         perm_inv: Vec<Ix>,
+        /// Scratch of the dense factorization and solve.
+        mem: MemBuffer,
     },
     /// faer's sparse supernodal LU with partial pivoting.
-    Sparse {
-        /// Symbolic analysis, computed once.
-        symbolic: SymbolicLu<Ix>,
-        /// Numeric factors; storage reused across refactorizations (boxed: the struct is
-        /// large and the dense variant small).
-        numeric: Box<NumericLu<Ix, f64>>,
+    Sparse(FaerLu),
+    /// Block-tridiagonal LU, checked by the backward error, with faer's pivoted sparse LU
+    /// (built on first need) as the fallback for the factorizations it cannot handle.
+    Blocks {
+        blocks: Box<dyn BlockLu>,
+        fallback: Option<FaerLu>,
+        /// The current factorization is the fallback's.
+        on_fallback: bool,
     },
 }
 
-/// Sparse LU solver for a fixed sparsity pattern, refactorized with new values on every call
-/// of [`factor_solve`](Self::factor_solve).
+/// Which backend a solver uses (chosen once, from the pattern; see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolverKind {
+    /// Dense LU with partial pivoting.
+    Dense,
+    /// faer's sparse supernodal LU.
+    Sparse,
+    /// Block-tridiagonal LU with node blocks padded to this size.
+    BlockTridiagonal(usize),
+}
+
+/// How [`SparseSolver::with_choice`] picks the backend (tests force each one).
+#[derive(Clone, Copy, Debug)]
+enum Choice<'a> {
+    Dense,
+    #[cfg_attr(not(test), allow(dead_code))]
+    Sparse,
+    /// The block-tridiagonal backend if the pattern is block-tridiagonal in these blocks,
+    /// else sparse.
+    Blocks(&'a [usize]),
+}
+
+/// Sparse LU solver for a fixed sparsity pattern: new values are factorized by
+/// [`factor`](Self::factor) and any number of right-hand sides solved with that
+/// factorization by [`solve`](Self::solve) (modified Newton reuses one factorization over
+/// several iterations); [`factor_solve`](Self::factor_solve) does both.
 pub struct SparseSolver {
     /// Pattern (compressed sparse column, sorted, no duplicates) and values.
     a: SparseColMat<Ix, f64>,
     /// Numeric backend.
     backend: Backend,
-    /// Scratch for factorization and solve, allocated once.
-    mem: MemBuffer,
+    /// `‖A‖₁` of the factorized values; `None` until a factorization succeeded (and after
+    /// one failed).
+    factored_norm: Option<f64>,
     /// Copy of the right-hand side (restored into `rhs` on error).
     b: Vec<f64>,
     /// Residual `b − A x`.
     r: Vec<f64>,
+    /// Solves the block backend handed to its fallback (backward error or singular block).
+    fallbacks: usize,
 }
 
 impl std::fmt::Debug for SparseSolver {
@@ -128,32 +230,43 @@ impl std::fmt::Debug for SparseSolver {
         f.debug_struct("SparseSolver")
             .field("dim", &self.dim())
             .field("nnz", &self.nnz())
-            .field(
-                "backend",
-                &match self.backend {
-                    Backend::Dense { .. } => "dense",
-                    Backend::Sparse { .. } => "sparse-supernodal",
-                },
-            )
+            .field("backend", &self.kind())
             .finish()
     }
 }
 
 impl SparseSolver {
-    /// Analyses the sparsity pattern of an `n × n` matrix.
+    /// Analyses the sparsity pattern of an `n × n` matrix: dense LU up to
+    /// [`DENSE_MAX_DIM`], faer's sparse LU beyond.
     ///
     /// `entries`: (row, col) pairs of the pattern in any order, duplicates allowed (merged).
     /// Fails with [`LinsolveError::Pattern`] if an index is out of range or a row or column
     /// is empty (the matrix would be structurally singular).
     pub fn new(n: usize, entries: &[(usize, usize)]) -> Result<Self, LinsolveError> {
-        Self::with_backend(n, entries, n <= DENSE_MAX_DIM)
+        Self::with_blocks(n, entries, &[])
     }
 
-    /// [`new`](Self::new) with an explicit backend choice (tests compare both).
-    fn with_backend(
+    /// As [`new`](Self::new), with the unknowns partitioned into consecutive blocks of
+    /// `block_sizes` (one per node; zeros allowed): above [`DENSE_MAX_DIM`], a pattern that
+    /// only couples neighbouring blocks (a rod numbered node by node) gets the
+    /// block-tridiagonal LU.
+    pub fn with_blocks(
         n: usize,
         entries: &[(usize, usize)],
-        dense: bool,
+        block_sizes: &[usize],
+    ) -> Result<Self, LinsolveError> {
+        let choice = if n <= DENSE_MAX_DIM {
+            Choice::Dense
+        } else {
+            Choice::Blocks(block_sizes)
+        };
+        Self::with_choice(n, entries, choice)
+    }
+
+    fn with_choice(
+        n: usize,
+        entries: &[(usize, usize)],
+        choice: Choice<'_>,
     ) -> Result<Self, LinsolveError> {
         if let Some(&(r, c)) = entries.iter().find(|&&(r, c)| r >= n || c >= n) {
             return Err(LinsolveError::Pattern(format!(
@@ -183,49 +296,62 @@ impl SparseSolver {
             col_ptr[j + 1] += col_ptr[j];
         }
         let nnz = row_idx.len();
+        let blocks = match choice {
+            Choice::Blocks(sizes) => block_tridiagonal::analyse(n, &col_ptr, &row_idx, sizes),
+            _ => None,
+        };
         let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
         let a = SparseColMat::new(pattern, vec![0.0; nnz]);
 
-        let par = Par::Seq;
-        let (backend, req) = if dense {
-            let req = StackReq::any_of(&[
-                dense_factor::lu_in_place_scratch::<Ix, f64>(n, n, par, Default::default()),
-                dense_solve::solve_in_place_scratch::<Ix, f64>(n, 1, par),
-            ]);
-            let backend = Backend::Dense {
-                lu: Mat::zeros(n, n),
-                perm: vec![0; n],
-                perm_inv: vec![0; n],
-            };
-            (backend, req)
-        } else {
-            let params = LuSymbolicParams {
-                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-                ..Default::default()
-            };
-            let symbolic = factorize_symbolic_lu(a.symbolic(), params).map_err(|e| {
-                LinsolveError::Pattern(format!("symbolic LU analysis failed: {e:?}"))
-            })?;
-            let req = StackReq::any_of(&[
-                symbolic.factorize_numeric_lu_scratch::<f64>(par, Default::default()),
-                symbolic.solve_in_place_scratch::<f64>(1, par),
-            ]);
-            let backend = Backend::Sparse {
-                symbolic,
-                numeric: Box::new(NumericLu::new()),
-            };
-            (backend, req)
+        let backend = match (choice, blocks) {
+            (_, Some(blocks)) => Backend::Blocks {
+                blocks,
+                fallback: None,
+                on_fallback: false,
+            },
+            (Choice::Dense, _) => {
+                let req = StackReq::any_of(&[
+                    dense_factor::lu_in_place_scratch::<Ix, f64>(
+                        n,
+                        n,
+                        Par::Seq,
+                        Default::default(),
+                    ),
+                    dense_solve::solve_in_place_scratch::<Ix, f64>(n, 1, Par::Seq),
+                ]);
+                Backend::Dense {
+                    lu: Mat::zeros(n, n),
+                    perm: vec![0; n],
+                    perm_inv: vec![0; n],
+                    mem: MemBuffer::try_new(req).map_err(|_| {
+                        LinsolveError::Pattern(format!("cannot allocate LU scratch for n = {n}"))
+                    })?,
+                }
+            }
+            _ => Backend::Sparse(FaerLu::new(a.symbolic())?),
         };
-        let mem = MemBuffer::try_new(req).map_err(|_| {
-            LinsolveError::Pattern(format!("cannot allocate LU scratch for n = {n}"))
-        })?;
         Ok(Self {
             a,
             backend,
-            mem,
+            factored_norm: None,
             b: vec![0.0; n],
             r: vec![0.0; n],
+            fallbacks: 0,
         })
+    }
+
+    /// The backend chosen for the pattern.
+    pub fn kind(&self) -> SolverKind {
+        match &self.backend {
+            Backend::Dense { .. } => SolverKind::Dense,
+            Backend::Sparse(_) => SolverKind::Sparse,
+            Backend::Blocks { blocks, .. } => SolverKind::BlockTridiagonal(blocks.block_size()),
+        }
+    }
+
+    /// How many factorizations the block backend handed to its pivoting fallback so far.
+    pub fn fallbacks(&self) -> usize {
+        self.fallbacks
     }
 
     /// Dimension `n` of the matrix.
@@ -256,7 +382,10 @@ impl SparseSolver {
         }
     }
 
-    /// Values in pattern order (compressed sparse column), writable.
+    /// Values in pattern order (compressed sparse column), writable. Writing invalidates
+    /// the factorization only once [`factor`](Self::factor) is called again: until then
+    /// [`solve`](Self::solve) keeps using the factors (and checks its backward error
+    /// against these values, so change them only together with a new factorization).
     pub fn values_mut(&mut self) -> &mut [f64] {
         self.a.val_mut()
     }
@@ -266,19 +395,12 @@ impl SparseSolver {
         self.a.val()
     }
 
-    /// Numeric LU of the current values (reusing the symbolic analysis of `new`) and solve
-    /// of `A x = b` in place (`rhs`: b on entry, x on successful return; unchanged on error).
-    ///
-    /// # Panics
-    /// If `rhs.len() != self.dim()`.
-    pub fn factor_solve(&mut self, rhs: &mut [f64]) -> Result<(), LinsolveError> {
+    /// Numeric LU of the current values (reusing the symbolic analysis of `new`).
+    pub fn factor(&mut self) -> Result<(), LinsolveError> {
+        self.factored_norm = None;
         let n = self.dim();
-        assert_eq!(
-            rhs.len(),
-            n,
-            "linsolve: right-hand side has the wrong length"
-        );
         if n == 0 {
+            self.factored_norm = Some(0.0);
             return Ok(());
         }
         let a = self.a.as_ref();
@@ -312,31 +434,25 @@ impl SparseSolver {
                 },
             ));
         }
-        if let Some(i) = rhs.iter().position(|v| !v.is_finite()) {
-            return Err(LinsolveError::Singular(format!(
-                "non-finite right-hand side entry {} at {i}",
-                rhs[i]
-            )));
-        }
-        let norm_b = norm_1(rhs);
-        self.b.copy_from_slice(rhs);
-
-        let par = Par::Seq;
-        let stack = MemStack::new(&mut self.mem);
         match &mut self.backend {
-            Backend::Dense { lu, perm, perm_inv } => {
+            Backend::Dense {
+                lu,
+                perm,
+                perm_inv,
+                mem,
+            } => {
                 lu.fill(0.0);
                 for j in 0..n {
                     for p in col_ptr[j]..col_ptr[j + 1] {
                         lu[(row_idx[p], j)] = vals[p];
                     }
                 }
-                let (_, row_perm) = dense_factor::lu_in_place(
+                dense_factor::lu_in_place(
                     lu.as_mut(),
                     perm,
                     perm_inv,
-                    par,
-                    stack,
+                    Par::Seq,
+                    MemStack::new(mem),
                     Default::default(),
                 );
                 // A zero pivot makes the later ones inf/NaN, hence the finiteness test.
@@ -353,52 +469,146 @@ impl SparseSolver {
                          max |u_kk| = {pmax:e})"
                     )));
                 }
+            }
+            Backend::Sparse(f) => f.factor(a)?,
+            Backend::Blocks {
+                blocks,
+                fallback,
+                on_fallback,
+            } => {
+                *on_fallback = blocks.factor(vals).is_err();
+                if *on_fallback {
+                    self.fallbacks += 1;
+                    factor_fallback(fallback, a)?;
+                }
+            }
+        }
+        self.factored_norm = Some(norm_a);
+        Ok(())
+    }
+
+    /// Solves `A x = b` in place with the last factorization (`rhs`: b on entry, x on
+    /// successful return; unchanged on error). The solution is checked (finite, backward
+    /// error at most [`MAX_BACKWARD_ERROR`] against the current values); a block
+    /// factorization that fails the check is replaced by the pivoted fallback, which then
+    /// serves until the next [`factor`](Self::factor).
+    ///
+    /// # Panics
+    /// If `rhs.len() != self.dim()`.
+    pub fn solve(&mut self, rhs: &mut [f64]) -> Result<(), LinsolveError> {
+        let n = self.dim();
+        assert_eq!(
+            rhs.len(),
+            n,
+            "linsolve: right-hand side has the wrong length"
+        );
+        let Some(norm_a) = self.factored_norm else {
+            return Err(LinsolveError::Singular(
+                "no valid factorization (the last one failed)".into(),
+            ));
+        };
+        if n == 0 {
+            return Ok(());
+        }
+        if let Some(i) = rhs.iter().position(|v| !v.is_finite()) {
+            return Err(LinsolveError::Singular(format!(
+                "non-finite right-hand side entry {} at {i}",
+                rhs[i]
+            )));
+        }
+        let norm_b = norm_1(rhs);
+        self.b.copy_from_slice(rhs);
+        let a = self.a.as_ref();
+        let check = |x: &[f64], r: &mut [f64]| {
+            check_solution(
+                a.symbolic().col_ptr(),
+                a.symbolic().row_idx(),
+                a.val(),
+                &self.b,
+                x,
+                r,
+                norm_a,
+                norm_b,
+            )
+        };
+        let verdict = match &mut self.backend {
+            Backend::Dense {
+                lu,
+                perm,
+                perm_inv,
+                mem,
+            } => {
+                let row_perm = faer::perm::PermRef::new_checked(perm, perm_inv, n);
                 dense_solve::solve_in_place_with_conj(
                     lu.as_ref(),
                     lu.as_ref(),
                     row_perm,
                     Conj::No,
                     MatMut::from_column_major_slice_mut(rhs, n, 1),
-                    par,
-                    stack,
+                    Par::Seq,
+                    MemStack::new(mem),
                 );
+                check(rhs, &mut self.r)
             }
-            Backend::Sparse { symbolic, numeric } => {
-                let lu = symbolic
-                    .factorize_numeric_lu(numeric, a, par, stack, Default::default())
-                    .map_err(|e| match e {
-                        LuError::SymbolicSingular { index } => LinsolveError::Singular(format!(
-                            "no nonzero pivot available at elimination step {index}"
-                        )),
-                        LuError::Generic(e) => {
-                            LinsolveError::Singular(format!("sparse LU failed: {e:?}"))
-                        }
-                    })?;
-                lu.solve_in_place_with_conj(
-                    Conj::No,
-                    MatMut::from_column_major_slice_mut(rhs, n, 1),
-                    par,
-                    stack,
-                );
+            Backend::Sparse(f) => {
+                f.solve(rhs);
+                check(rhs, &mut self.r)
             }
-        }
-
-        // Checks on the solution; on failure, restore the right-hand side.
-        let verdict = check_solution(
-            col_ptr,
-            row_idx,
-            vals,
-            &self.b,
-            rhs,
-            &mut self.r,
-            norm_a,
-            norm_b,
-        );
+            Backend::Blocks {
+                blocks,
+                fallback,
+                on_fallback,
+            } => {
+                if !*on_fallback {
+                    blocks.solve(rhs);
+                    if check(rhs, &mut self.r).is_err() {
+                        // Pivoting only inside the node blocks was not enough (an
+                        // indefinite tangent, a buckling rod): redo it with full pivoting.
+                        self.fallbacks += 1;
+                        *on_fallback = true;
+                        rhs.copy_from_slice(&self.b);
+                        factor_fallback(fallback, a)?;
+                    }
+                }
+                if *on_fallback {
+                    let f = fallback.as_mut().expect("fallback factorized above");
+                    f.solve(rhs);
+                    check(rhs, &mut self.r)
+                } else {
+                    Ok(())
+                }
+            }
+        };
         if verdict.is_err() {
             rhs.copy_from_slice(&self.b);
         }
         verdict
     }
+
+    /// [`factor`](Self::factor) then [`solve`](Self::solve).
+    ///
+    /// # Panics
+    /// If `rhs.len() != self.dim()`.
+    pub fn factor_solve(&mut self, rhs: &mut [f64]) -> Result<(), LinsolveError> {
+        assert_eq!(
+            rhs.len(),
+            self.dim(),
+            "linsolve: right-hand side has the wrong length"
+        );
+        self.factor()?;
+        self.solve(rhs)
+    }
+}
+
+/// Factorizes `a` with the block backend's pivoting fallback (built on first use).
+fn factor_fallback(
+    fallback: &mut Option<FaerLu>,
+    a: faer::sparse::SparseColMatRef<'_, Ix, f64>,
+) -> Result<(), LinsolveError> {
+    if fallback.is_none() {
+        *fallback = Some(FaerLu::new(a.symbolic())?);
+    }
+    fallback.as_mut().expect("just built").factor(a)
 }
 
 /// `‖v‖₁ = Σ |v_i|` (NaN if any `v_i` is NaN).
@@ -543,7 +753,12 @@ mod tests {
                 if dense && n > 306 {
                     continue; // O(n^3): pointless for large n
                 }
-                let mut s = SparseSolver::with_backend(n, &entries, dense).unwrap();
+                let mut s = SparseSolver::with_choice(
+                    n,
+                    &entries,
+                    if dense { Choice::Dense } else { Choice::Sparse },
+                )
+                .unwrap();
                 assert_eq!(s.dim(), n);
                 assert_eq!(s.nnz(), entries.len());
                 for shift in [8.0, 0.0] {
@@ -561,6 +776,118 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Pattern of a block-tridiagonal matrix with blocks of the given sizes (zeros allowed:
+    /// a clamped node; its neighbours are then not coupled).
+    fn variable_block_pattern(sizes: &[usize]) -> Vec<(usize, usize)> {
+        let starts: Vec<usize> = sizes
+            .iter()
+            .scan(0, |s, &k| {
+                *s += k;
+                Some(*s - k)
+            })
+            .collect();
+        let mut e = Vec::new();
+        for bi in 0..sizes.len() {
+            for bj in bi.saturating_sub(1)..(bi + 2).min(sizes.len()) {
+                for i in 0..sizes[bi] {
+                    for j in 0..sizes[bj] {
+                        e.push((starts[bi] + i, starts[bj] + j));
+                    }
+                }
+            }
+        }
+        e
+    }
+
+    #[test]
+    fn block_tridiagonal_backend_matches_the_pivoted_ones() {
+        let mut rng = Rng::new(11);
+        // Node blocks as the integrator makes them: 9 (u θ g), 6 (u θ), 3 and 5 (planar),
+        // and 0 (clamped node) — padded to 3, 6 or 9.
+        let cases: Vec<(Vec<usize>, usize)> = vec![
+            (vec![6; 51], 6),
+            (vec![9; 40], 9),
+            (vec![3; 30], 3),
+            ([vec![0], vec![5; 30], vec![3], vec![0]].concat(), 6),
+            ((0..40).map(|i| [9, 6, 0, 3, 9][i % 5]).collect(), 9),
+        ];
+        for (sizes, padded) in cases {
+            let n: usize = sizes.iter().sum();
+            let entries = variable_block_pattern(&sizes);
+            let mut blocks = SparseSolver::with_blocks(n, &entries, &sizes).unwrap();
+            assert_eq!(blocks.kind(), SolverKind::BlockTridiagonal(padded));
+            let mut sparse = SparseSolver::with_choice(n, &entries, Choice::Sparse).unwrap();
+            for shift in [8.0, 0.5] {
+                fill_random(&mut blocks, &entries, &mut rng, shift);
+                sparse.values_mut().copy_from_slice(blocks.values());
+                let b = random_vec(n, &mut rng);
+                let (mut x, mut y) = (b.clone(), b.clone());
+                blocks.factor_solve(&mut x).unwrap();
+                sparse.factor_solve(&mut y).unwrap();
+                assert!(backward_error(&blocks, &x, &b) <= TEST_BACKWARD_TOL);
+                let diff = x
+                    .iter()
+                    .zip(&y)
+                    .map(|(p, q)| (p - q).abs())
+                    .fold(0.0, f64::max);
+                assert!(
+                    diff <= 1e-9 * inf_norm(&y),
+                    "{sizes:?}, shift {shift}: {diff:e}"
+                );
+                // The factorization serves further right-hand sides (modified Newton).
+                let c = random_vec(n, &mut rng);
+                let mut z = c.clone();
+                blocks.solve(&mut z).unwrap();
+                assert!(backward_error(&blocks, &z, &c) <= TEST_BACKWARD_TOL);
+            }
+        }
+    }
+
+    #[test]
+    fn block_backend_falls_back_to_pivoting_when_a_block_is_singular() {
+        // Diagonal blocks that are singular on their own (zero diagonal, coupling only
+        // through the neighbours): the block LU cannot pivot across nodes, the fallback can.
+        let sizes = vec![2usize; 40];
+        let n = 80;
+        let entries = variable_block_pattern(&sizes);
+        let mut s = SparseSolver::with_blocks(n, &entries, &sizes).unwrap();
+        s.values_mut().fill(0.0);
+        for i in 0..n {
+            // A permutation matrix pairing node k with node k+1 (or k−1): nonsingular.
+            let j = if (i / 2) % 2 == 0 { i + 2 } else { i - 2 };
+            let k = s.slot(i, j);
+            s.values_mut()[k] = 1.0 + i as f64;
+        }
+        let b: Vec<f64> = (0..n).map(|i| (i as f64).sin()).collect();
+        let mut x = b.clone();
+        s.factor_solve(&mut x).unwrap();
+        assert!(backward_error(&s, &x, &b) <= TEST_BACKWARD_TOL);
+        assert_eq!(s.fallbacks(), 1);
+    }
+
+    #[test]
+    fn patterns_that_are_not_block_tridiagonal_use_the_sparse_lu() {
+        let sizes = vec![6usize; 20];
+        let mut entries = variable_block_pattern(&sizes);
+        entries.push((0, 119)); // couples the first and the last node
+        let s = SparseSolver::with_blocks(120, &entries, &sizes).unwrap();
+        assert_eq!(s.kind(), SolverKind::Sparse);
+        let small = SparseSolver::with_blocks(60, &variable_block_pattern(&[6; 10]), &[6; 10]);
+        assert_eq!(small.unwrap().kind(), SolverKind::Dense);
+    }
+
+    #[test]
+    fn solve_without_a_valid_factorization_is_an_error() {
+        let entries = block_tridiag_pattern(20, 6);
+        let mut s = SparseSolver::with_blocks(120, &entries, &[6; 20]).unwrap();
+        let mut x = vec![1.0; 120];
+        assert!(matches!(s.solve(&mut x), Err(LinsolveError::Singular(_))));
+        s.values_mut()[0] = f64::NAN;
+        assert!(s.factor().is_err());
+        assert!(s.solve(&mut x).is_err());
+        assert_eq!(x, vec![1.0; 120]);
     }
 
     #[test]
@@ -662,7 +989,12 @@ mod tests {
             let n = 6 * nb;
             let entries = block_tridiag_pattern(nb, 6);
             for dense in [true, false] {
-                let mut s = SparseSolver::with_backend(n, &entries, dense).unwrap();
+                let mut s = SparseSolver::with_choice(
+                    n,
+                    &entries,
+                    if dense { Choice::Dense } else { Choice::Sparse },
+                )
+                .unwrap();
                 fill_random(&mut s, &entries, &mut rng, 2.0);
                 let zero_row = n / 2 + 1;
                 for &(r, c) in &entries {
@@ -700,7 +1032,11 @@ mod tests {
         }
         let mut rng = Rng::new(8);
         for dense in [true, false] {
-            match SparseSolver::with_backend(n, &entries, dense) {
+            match SparseSolver::with_choice(
+                n,
+                &entries,
+                if dense { Choice::Dense } else { Choice::Sparse },
+            ) {
                 Err(e) => assert!(matches!(e, LinsolveError::Pattern(_))),
                 Ok(mut s) => {
                     fill_random(&mut s, &entries, &mut rng, 4.0);
