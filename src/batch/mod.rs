@@ -148,6 +148,7 @@ fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
         energy_final: f64::NAN,
         wall_s: 0.0,
         max_link_g: 0.0,
+        timers: Default::default(),
     }
 }
 

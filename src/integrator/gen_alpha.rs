@@ -163,6 +163,11 @@ fn colour_nodes(model: &Model) -> Vec<usize> {
 }
 
 impl GenAlpha {
+    /// The linear solver of its Newton loop.
+    pub fn solver(&self) -> &SparseSolver {
+        &self.solver
+    }
+
     /// Sets up the integrator for `model` starting at `state` (its velocities; nodal
     /// rotations start at the identity) and computes the consistent initial acceleration
     /// with the loads `force`, `moment` at `t = 0`.

@@ -12,4 +12,4 @@ pub mod state;
 pub mod system;
 
 pub use params::{IntegratorParams, Scheme, Strategy};
-pub use system::{Simulation, StepFailure, StepReport};
+pub use system::{Simulation, SolveTimers, StepFailure, StepReport};

@@ -35,6 +35,8 @@ pub struct RunOutcome {
     pub wall_s: f64,
     /// Largest rigid-link strain `|g|` over the accepted steps.
     pub max_link_g: f64,
+    /// Where the simulation's Newton time went (whole life of the simulation).
+    pub timers: crate::integrator::SolveTimers,
 }
 
 /// The record of the current level of `sim`.
@@ -118,6 +120,7 @@ pub fn run<E>(
         energy_final: inv0.total(),
         wall_s: 0.0,
         max_link_g: 0.0,
+        timers: Default::default(),
     };
     let mut prev = inv0;
     let every = every.max(1);
@@ -163,5 +166,6 @@ pub fn run<E>(
         }
     }
     out.wall_s = start.elapsed().as_secs_f64();
+    out.timers = sim.solve_timers();
     Ok(out)
 }

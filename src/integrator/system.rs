@@ -4,6 +4,7 @@
 //! failed step, never an accepted one).
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use crate::element::strain::Config;
 use crate::element::{
@@ -53,6 +54,35 @@ pub struct StepReport {
     pub link_rounds: usize,
 }
 
+/// Where a simulation's Newton time went (accumulated over its life; thread time, so a
+/// batch sums them over members). The generalized-α baseline's own Newton loop is not
+/// timed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SolveTimers {
+    /// Residual (and tangent) assembly: element kernel, scatter, nodal and link terms. On
+    /// the GPU path this includes the wait for the batch's dispatch.
+    pub assemble_s: f64,
+    /// LU factorizations.
+    pub factor_s: f64,
+    /// Triangular solves (with their backward-error checks).
+    pub solve_s: f64,
+    /// Factorizations done.
+    pub factorizations: u64,
+    /// Solves done (more than factorizations under modified Newton).
+    pub solves: u64,
+}
+
+impl SolveTimers {
+    /// Field-wise sum (a batch's total).
+    pub fn add(&mut self, o: &SolveTimers) {
+        self.assemble_s += o.assemble_s;
+        self.factor_s += o.factor_s;
+        self.solve_s += o.solve_s;
+        self.factorizations += o.factorizations;
+        self.solves += o.solves;
+    }
+}
+
 /// How the dissipation scalars are treated in one Newton solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Mode {
@@ -98,6 +128,8 @@ pub struct Simulation {
     backend: Option<(Arc<dyn ElementBackend>, usize)>,
     /// Reuse the tangent across Newton iterations (see [`Simulation::set_modified_newton`]).
     modified_newton: bool,
+    /// Time spent per Newton stage.
+    timers: SolveTimers,
 }
 
 /// Modified Newton takes a fresh tangent when the last iteration reduced the residual by
@@ -224,13 +256,20 @@ impl Simulation {
             trans_diss,
             backend: None,
             modified_newton: false,
+            timers: SolveTimers::default(),
         })
+    }
+
+    /// Time spent so far in assembly, factorization and solves.
+    pub fn solve_timers(&self) -> SolveTimers {
+        self.timers
     }
 
     /// The linear solver chosen for this model's tangent, and how many factorizations it
     /// has handed to its pivoting fallback so far (block-tridiagonal backend only).
     pub fn linear_solver(&self) -> (SolverKind, usize) {
-        (self.solver.kind(), self.solver.fallbacks())
+        let s = self.gen_alpha.as_ref().map_or(&self.solver, |g| g.solver());
+        (s.kind(), s.fallbacks())
     }
 
     /// Evaluates the elements through `backend` (slot `slot`) whenever the dissipation
@@ -493,7 +532,9 @@ impl Simulation {
             let fresh = !self.modified_newton
                 || it < 2
                 || history[it - 1] > MODIFIED_NEWTON_RATE * history[it - 2];
+            let t0 = Instant::now();
             let res = self.assemble(q, mode, fresh, &mut r);
+            self.timers.assemble_s += t0.elapsed().as_secs_f64();
             history.push(res);
             if !res.is_finite() {
                 return Err(StepFailure {
@@ -515,11 +556,18 @@ impl Simulation {
             }
             r.iter_mut().for_each(|x| *x = -*x);
             // A reused tangent keeps its factorization too (modified Newton).
-            let solved = if fresh {
-                self.solver.factor().and_then(|_| self.solver.solve(&mut r))
+            let t0 = Instant::now();
+            let factored = if fresh {
+                self.timers.factorizations += 1;
+                self.solver.factor()
             } else {
-                self.solver.solve(&mut r)
+                Ok(())
             };
+            let t1 = Instant::now();
+            let solved = factored.and_then(|_| self.solver.solve(&mut r));
+            self.timers.solves += 1;
+            self.timers.factor_s += (t1 - t0).as_secs_f64();
+            self.timers.solve_s += t1.elapsed().as_secs_f64();
             if let Err(e) = solved {
                 return Err(StepFailure {
                     reason: format!("linear solve failed: {e}"),

@@ -194,6 +194,16 @@ pub enum SolverKind {
     BlockTridiagonal(usize),
 }
 
+impl std::fmt::Display for SolverKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SolverKind::Dense => write!(f, "dense"),
+            SolverKind::Sparse => write!(f, "sparse"),
+            SolverKind::BlockTridiagonal(b) => write!(f, "block-tridiagonal-{b}"),
+        }
+    }
+}
+
 /// How [`SparseSolver::with_choice`] picks the backend (tests force each one).
 #[derive(Clone, Copy, Debug)]
 enum Choice<'a> {

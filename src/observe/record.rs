@@ -89,4 +89,10 @@ pub struct RunSummary {
     pub energy_final: f64,
     /// Largest rigid-link strain `|g|` over the accepted steps (0 without links).
     pub max_link_g: f64,
+    /// The Newton linear solver (`dense`, `sparse`, `block-tridiagonal-B`).
+    pub linear_solver: String,
+    /// Factorizations the block-tridiagonal solver handed to its pivoting fallback.
+    pub linear_solver_fallbacks: usize,
+    /// Where the Newton time went (assembly, factorizations, solves).
+    pub timers: crate::integrator::SolveTimers,
 }

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use cosserat::batch::{
     bench_members, run_members, BackendChoice, BatchOptions, BatchStats, Executor, GpuBatcher,
 };
-use cosserat::integrator::Simulation;
+use cosserat::integrator::{Simulation, SolveTimers};
 use cosserat::observe::record::RunStatus;
 use cosserat::sweep::{load_sweep, run_sweep, SweepOptions};
 
@@ -176,18 +176,29 @@ pub struct BenchArgs {
     pub modified_newton: bool,
 }
 
+/// One timed batch: its stats, Newton iterations, failed members and the members' summed
+/// Newton stage timers.
+struct Timed {
+    stats: BatchStats,
+    iters: usize,
+    failed: usize,
+    stages: SolveTimers,
+}
+
 fn timed(
     members: &[cosserat::batch::Member],
     exec: &Executor,
     modified_newton: bool,
-) -> Result<(BatchStats, usize, usize)> {
+) -> Result<Timed> {
     let (mut iters, mut failed) = (0usize, 0usize);
+    let mut stages = SolveTimers::default();
     let opts = BatchOptions {
         modified_newton,
         ..Default::default()
     };
     let stats = run_members(members, exec, opts, |r| {
         iters += r.outcome.newton_iters_total;
+        stages.add(&r.outcome.timers);
         if r.outcome.status == RunStatus::Failed {
             if failed == 0 {
                 eprintln!(
@@ -199,34 +210,52 @@ fn timed(
             failed += 1;
         }
     })?;
-    Ok((stats, iters, failed))
+    Ok(Timed {
+        stats,
+        iters,
+        failed,
+        stages,
+    })
+}
+
+/// `assembly …, factor …, solve …` of summed stage timers (thread-seconds).
+fn stages_line(t: &SolveTimers) -> String {
+    format!(
+        "assembly {:.3} s, factor {:.3} s ({} factorizations), solve {:.3} s ({} solves) [thread-s]",
+        t.assemble_s, t.factor_s, t.factorizations, t.solve_s, t.solves
+    )
+}
+
+/// The stage timers as JSON fields prefixed with `p`.
+fn stages_json(obj: &mut serde_json::Value, p: &str, t: &SolveTimers) {
+    obj[format!("{p}_assemble_s")] = t.assemble_s.into();
+    obj[format!("{p}_factor_s")] = t.factor_s.into();
+    obj[format!("{p}_solve_s")] = t.solve_s.into();
+    obj[format!("{p}_factorizations")] = t.factorizations.into();
+    obj[format!("{p}_solves")] = t.solves.into();
 }
 
 /// `cosserat bench`: the same batch on the CPU path and on the GPU path.
 pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let members = bench_members(a.rods, a.elements, a.steps);
     let work = (a.rods * a.elements * a.steps) as f64;
-    let (cpu, cpu_iters, cpu_failed) = timed(&members, &Executor::Cpu, a.modified_newton)?;
-    let cpu_rate = work / cpu.wall_s;
+    let rod_steps = (a.rods * a.steps) as f64;
+    let cpu = timed(&members, &Executor::Cpu, a.modified_newton)?;
+    let cpu_rate = work / cpu.stats.wall_s;
     let gpu_exec = if a.cpu_only {
         Ok((Executor::Cpu, None))
     } else {
         Executor::resolve(BackendChoice::Gpu, a.adapter.as_deref())
     };
     let (adapter, f64_ok, gpu) = match &gpu_exec {
-        Ok((Executor::Gpu(ctx), _)) => {
-            let r = timed(
-                &members,
-                &gpu_exec.as_ref().map(|e| e.0.clone()).unwrap(),
-                a.modified_newton,
-            )
-            .context("GPU batch")?;
+        Ok((exec @ Executor::Gpu(ctx), _)) => {
+            let r = timed(&members, exec, a.modified_newton).context("GPU batch")?;
             (ctx.describe(), ctx.is_f64(), Some(r))
         }
         Ok((Executor::Cpu, _)) => ("none".into(), false, None),
         Err(e) => (format!("none ({e})"), false, None),
     };
-    let gpu_rate = gpu.as_ref().map(|g| work / g.0.wall_s);
+    let gpu_rate = gpu.as_ref().map(|g| work / g.stats.wall_s);
     if a.json {
         let mut obj = serde_json::json!({
             "rods": a.rods,
@@ -234,26 +263,31 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             "steps": a.steps,
             "cpu_element_steps_per_s": cpu_rate,
             "gpu_element_steps_per_s": gpu_rate,
+            "cpu_rod_steps_per_s": rod_steps / cpu.stats.wall_s,
+            "gpu_rod_steps_per_s": gpu.as_ref().map(|g| rod_steps / g.stats.wall_s),
             "ratio": gpu_rate.map(|g| g / cpu_rate),
             "adapter": adapter,
             "f64": f64_ok,
             "cpu_threads": rayon::current_num_threads(),
             "modified_newton": a.modified_newton,
-            "cpu_wall_s": cpu.wall_s,
-            "cpu_newton_iters": cpu_iters,
-            "cpu_failed": cpu_failed,
+            "cpu_wall_s": cpu.stats.wall_s,
+            "cpu_newton_iters": cpu.iters,
+            "cpu_failed": cpu.failed,
         });
-        if let Some((g, it, f)) = &gpu {
-            obj["gpu_wall_s"] = g.wall_s.into();
-            obj["gpu_newton_iters"] = (*it).into();
-            obj["gpu_failed"] = (*f).into();
-            obj["gpu_setup_s"] = g.setup_s.into();
-            obj["gpu_upload_s"] = g.gpu.upload_s.into();
-            obj["gpu_kernel_s"] = g.gpu.kernel_s.into();
-            obj["gpu_readback_s"] = g.gpu.readback_s.into();
-            obj["gpu_dispatches"] = g.gpu.dispatches.into();
-            obj["gpu_bytes_up"] = g.gpu.bytes_up.into();
-            obj["gpu_bytes_down"] = g.gpu.bytes_down.into();
+        stages_json(&mut obj, "cpu", &cpu.stages);
+        if let Some(g) = &gpu {
+            let k = &g.stats.gpu;
+            obj["gpu_wall_s"] = g.stats.wall_s.into();
+            obj["gpu_newton_iters"] = g.iters.into();
+            obj["gpu_failed"] = g.failed.into();
+            obj["gpu_setup_s"] = g.stats.setup_s.into();
+            obj["gpu_upload_s"] = k.upload_s.into();
+            obj["gpu_kernel_s"] = k.kernel_s.into();
+            obj["gpu_readback_s"] = k.readback_s.into();
+            obj["gpu_dispatches"] = k.dispatches.into();
+            obj["gpu_bytes_up"] = k.bytes_up.into();
+            obj["gpu_bytes_down"] = k.bytes_down.into();
+            stages_json(&mut obj, "gpu", &g.stages);
         }
         println!("{obj}");
     } else {
@@ -269,31 +303,37 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             }
         );
         println!(
-            "cpu ({} threads): {:.3} s, {:.0} element-steps/s, {} Newton iterations, {} failed",
+            "cpu ({} threads): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed",
             rayon::current_num_threads(),
-            cpu.wall_s,
+            cpu.stats.wall_s,
             cpu_rate,
-            cpu_iters,
-            cpu_failed
+            rod_steps / cpu.stats.wall_s,
+            cpu.iters,
+            cpu.failed
         );
+        println!("cpu stages: {}", stages_line(&cpu.stages));
         match (&gpu, gpu_rate) {
-            (Some((g, it, f)), Some(rate)) => {
+            (Some(g), Some(rate)) => {
+                let (w, k) = (&g.stats, &g.stats.gpu);
                 println!(
-                    "gpu ({adapter}): {:.3} s, {:.0} element-steps/s, {} Newton iterations, {} failed; ratio gpu/cpu {:.2}",
-                    g.wall_s, rate, it, f, rate / cpu_rate
+                    "gpu ({adapter}): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed; ratio gpu/cpu {:.2}",
+                    w.wall_s, rate, rod_steps / w.wall_s, g.iters, g.failed, rate / cpu_rate
                 );
-                let other =
-                    g.wall_s - g.setup_s - g.gpu.upload_s - g.gpu.kernel_s - g.gpu.readback_s;
+                let other = w.wall_s - w.setup_s - k.upload_s - k.kernel_s - k.readback_s;
                 println!(
                     "gpu time: pipeline setup {:.3} s, upload {:.3} s, kernel+copy {:.3} s, readback {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down); host gather+assembly+solve+barrier {:.3} s",
-                    g.setup_s,
-                    g.gpu.upload_s,
-                    g.gpu.kernel_s,
-                    g.gpu.readback_s,
-                    g.gpu.dispatches,
-                    g.gpu.bytes_up as f64 / 1e6,
-                    g.gpu.bytes_down as f64 / 1e6,
+                    w.setup_s,
+                    k.upload_s,
+                    k.kernel_s,
+                    k.readback_s,
+                    k.dispatches,
+                    k.bytes_up as f64 / 1e6,
+                    k.bytes_down as f64 / 1e6,
                     other
+                );
+                println!(
+                    "gpu stages (assembly includes the wait at the batch barrier): {}",
+                    stages_line(&g.stages)
                 );
             }
             _ => println!("gpu: not run ({adapter})"),
