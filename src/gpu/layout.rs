@@ -62,3 +62,49 @@ pub const O_K: usize = 36;
 pub const O_S: usize = 360;
 /// Number of output fields.
 pub const NO: usize = 364;
+
+/// Node-local unknowns (`u0..2 θ0..2 g0..2`) of the assembled system.
+pub const A_NODE: usize = 9;
+/// Entries of one 9×9 block (row-major).
+pub const A_BLOCK: usize = A_NODE * A_NODE;
+
+/// Layout of the assembled buffer written by `shaders/assemble.wgsl` (field-major, field
+/// `f` of slot `j` at `offset + f * slots + j`). The node residuals and member scales lead
+/// and are contiguous, so a residual-only iteration reads back one range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AsmLayout {
+    /// Node slots.
+    pub nodes: usize,
+    /// Member slots.
+    pub members: usize,
+    /// Element slots.
+    pub elements: usize,
+}
+
+impl AsmLayout {
+    /// Node residuals (`A_NODE` fields per node slot) start at 0; the member scales (3
+    /// fields per member slot: u, θ, g) start here.
+    pub fn scales(&self) -> usize {
+        A_NODE * self.nodes
+    }
+    /// Scalars of the residual-only readback (node residuals and member scales).
+    pub fn residual_len(&self) -> usize {
+        self.scales() + 3 * self.members
+    }
+    /// Node diagonal blocks (`A_BLOCK` fields per node slot).
+    pub fn node_blocks(&self) -> usize {
+        self.residual_len()
+    }
+    /// Element off-diagonal blocks (0,1) then (1,0) (`2 A_BLOCK` fields per element slot).
+    pub fn off_blocks(&self) -> usize {
+        self.node_blocks() + A_BLOCK * self.nodes
+    }
+    /// Scalars of the whole buffer.
+    pub fn len(&self) -> usize {
+        self.off_blocks() + 2 * A_BLOCK * self.elements
+    }
+    /// Always false (a layout has at least one slot of each kind); for clippy's `len`.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}

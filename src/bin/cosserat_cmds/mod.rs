@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use cosserat::batch::{
     bench_members, run_members, BackendChoice, BatchOptions, BatchStats, Executor, GpuBatcher,
 };
+use cosserat::gpu::kernel::KernelTimers;
 use cosserat::integrator::Simulation;
 use cosserat::observe::record::RunStatus;
 use cosserat::sweep::{load_sweep, run_sweep, SweepOptions};
@@ -69,8 +70,13 @@ pub fn attach(
                 );
                 return Ok(None);
             }
-            let b = Arc::new(GpuBatcher::new(&ctx, 1, sim.model().elements.len())?);
-            b.register(0, sim);
+            let b = Arc::new(GpuBatcher::new(
+                &ctx,
+                1,
+                sim.model().elements.len(),
+                sim.model().n_nodes(),
+            )?);
+            b.register(0, sim)?;
             let _ = sim.set_backend(b.clone(), 0);
             Ok(Some(b))
         }
@@ -202,6 +208,13 @@ fn timed(
     Ok((stats, iters, failed))
 }
 
+/// Bytes uploaded and read back per element slot per dispatch (`elements` slots: every
+/// member in flight at once).
+fn per_element_dispatch(t: &KernelTimers, elements: usize) -> (f64, f64) {
+    let n = (t.dispatches as f64 * elements as f64).max(1.0);
+    (t.bytes_up as f64 / n, t.bytes_down as f64 / n)
+}
+
 /// `cosserat bench`: the same batch on the CPU path and on the GPU path.
 pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let members = bench_members(a.rods, a.elements, a.steps);
@@ -254,6 +267,10 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             obj["gpu_dispatches"] = g.gpu.dispatches.into();
             obj["gpu_bytes_up"] = g.gpu.bytes_up.into();
             obj["gpu_bytes_down"] = g.gpu.bytes_down.into();
+            obj["gpu_unpack_s"] = g.gpu.unpack_s.into();
+            let (up, down) = per_element_dispatch(&g.gpu, a.rods * a.elements);
+            obj["gpu_bytes_up_per_element_dispatch"] = up.into();
+            obj["gpu_bytes_down_per_element_dispatch"] = down.into();
         }
         println!("{obj}");
     } else {
@@ -282,17 +299,25 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
                     "gpu ({adapter}): {:.3} s, {:.0} element-steps/s, {} Newton iterations, {} failed; ratio gpu/cpu {:.2}",
                     g.wall_s, rate, it, f, rate / cpu_rate
                 );
-                let other =
-                    g.wall_s - g.setup_s - g.gpu.upload_s - g.gpu.kernel_s - g.gpu.readback_s;
+                let other = g.wall_s
+                    - g.setup_s
+                    - g.gpu.upload_s
+                    - g.gpu.kernel_s
+                    - g.gpu.readback_s
+                    - g.gpu.unpack_s;
+                let (up, down) = per_element_dispatch(&g.gpu, a.rods * a.elements);
                 println!(
-                    "gpu time: pipeline setup {:.3} s, upload {:.3} s, kernel+copy {:.3} s, readback {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down); host gather+assembly+solve+barrier {:.3} s",
+                    "gpu time: pipeline setup {:.3} s, upload {:.3} s, kernel+assembly+copy {:.3} s, readback {:.3} s, unpack {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down; per element per dispatch {:.0} B up, {:.0} B down); host gather+scatter+solve+barrier {:.3} s",
                     g.setup_s,
                     g.gpu.upload_s,
                     g.gpu.kernel_s,
                     g.gpu.readback_s,
+                    g.gpu.unpack_s,
                     g.gpu.dispatches,
                     g.gpu.bytes_up as f64 / 1e6,
                     g.gpu.bytes_down as f64 / 1e6,
+                    up,
+                    down,
                     other
                 );
             }

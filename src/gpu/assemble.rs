@@ -1,0 +1,337 @@
+//! The assembly pass on the GPU: right after the element pass, in the same command
+//! buffer, `shaders/assemble.wgsl` sums each member's element blocks into per-node
+//! diagonal blocks and residuals, compacts the element off-diagonal blocks and reduces the
+//! row scales per member. Only that assembled system crosses the bus, and without the
+//! tangent only the nodal residuals and three scales per member.
+
+use super::context::{GpuContext, Precision};
+use super::kernel::{shader_precision, ElementKernel, KernelMode, KernelTimers, Readback};
+use super::layout::{AsmLayout, A_BLOCK};
+use super::GpuError;
+use crate::integrator::backend::AssembledSystem;
+
+/// The WGSL source of the assembly pass (f64 version).
+pub const ASSEMBLE_WGSL: &str = include_str!("../../shaders/assemble.wgsl");
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    n_elem: u32,
+    n_node: u32,
+    n_member: u32,
+    per_slot: u32,
+    want_tangent: u32,
+    a_sc: u32,
+    a_k: u32,
+    a_off: u32,
+}
+
+/// Topology buffers (u32) of the assembly pass, in binding order.
+const NODE_INC: usize = 0;
+const INC: usize = 1;
+const ROW_MASK: usize = 2;
+const MEMBER_N: usize = 3;
+
+/// Assembly of `members` member slots of at most `per_slot` elements and `nodes_per_slot`
+/// nodes each, over the element slots of one [`ElementKernel`] (member `m`'s element `e`
+/// in kernel slot `m * per_slot + e`).
+pub struct Assembler {
+    layout: AsmLayout,
+    per_slot: usize,
+    nodes_per_slot: usize,
+    precision: Precision,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    topo: [wgpu::Buffer; 4],
+    /// Host mirrors of the topology buffers.
+    topo_host: [Vec<u32>; 4],
+    asm: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    params: wgpu::Buffer,
+    /// What came back from the last run (the residual-only range or everything).
+    out: Vec<f64>,
+}
+
+impl Assembler {
+    /// Scalars of the assembled buffer per member slot.
+    fn scalars_per_member(per_slot: usize, nodes_per_slot: usize) -> u64 {
+        let one = AsmLayout {
+            nodes: nodes_per_slot,
+            members: 1,
+            elements: per_slot,
+        };
+        one.len() as u64
+    }
+
+    /// The largest number of member slots whose assembled buffer fits the device.
+    pub fn max_members(ctx: &GpuContext, per_slot: usize, nodes_per_slot: usize) -> usize {
+        let per = Self::scalars_per_member(per_slot, nodes_per_slot)
+            * ElementKernel::width(ctx.precision) as u64;
+        let lim = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
+        (lim / per.max(1)) as usize
+    }
+
+    /// Builds the pass reading `kernel`'s output (whose capacity must be
+    /// `members * per_slot`); every member slot starts empty (no elements).
+    pub fn new(
+        ctx: &GpuContext,
+        kernel: &ElementKernel,
+        members: usize,
+        per_slot: usize,
+        nodes_per_slot: usize,
+    ) -> Result<Self, GpuError> {
+        let max = Self::max_members(ctx, per_slot, nodes_per_slot);
+        if members > max {
+            return Err(GpuError::TooLarge {
+                elements: members * per_slot,
+                max: max * per_slot,
+            });
+        }
+        let layout = AsmLayout {
+            nodes: (members * nodes_per_slot).max(1),
+            members: members.max(1),
+            elements: kernel.capacity(),
+        };
+        let device = ctx.device.clone();
+        let w = ElementKernel::width(ctx.precision) as u64;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("assemble.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shader_precision(ASSEMBLE_WGSL, ctx.precision).into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("assemble"),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let topo_host = [
+            vec![0u32; 2 * layout.nodes],
+            vec![0u32; 2 * layout.elements],
+            vec![0u32; layout.elements],
+            vec![0u32; layout.members],
+        ];
+        let names = ["node_inc", "inc", "row_mask", "member_n"];
+        let topo = std::array::from_fn(|b| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(names[b]),
+                size: 4 * topo_host[b].len() as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        for (buf, host) in topo.iter().zip(&topo_host) {
+            ctx.queue
+                .write_buffer(buf, 0, bytemuck::cast_slice(host.as_slice()));
+        }
+        let mk = |label: &str, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: layout.len() as u64 * w,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let asm = mk(
+            "assembled",
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
+        let staging = mk(
+            "assembled staging",
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("assemble params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bgl = pipeline.get_bind_group_layout(0);
+        let resources: Vec<&wgpu::Buffer> = std::iter::once(kernel.output_buffer())
+            .chain(topo.iter())
+            .chain([&asm, &params])
+            .collect();
+        let entries: Vec<wgpu::BindGroupEntry> = resources
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("assemble"),
+            layout: &bgl,
+            entries: &entries,
+        });
+        Ok(Self {
+            layout,
+            per_slot,
+            nodes_per_slot,
+            precision: ctx.precision,
+            device,
+            queue: ctx.queue.clone(),
+            pipeline,
+            bind_group,
+            topo,
+            topo_host,
+            asm,
+            staging,
+            params,
+            out: vec![0.0; layout.len()],
+        })
+    }
+
+    /// The buffer layout.
+    pub fn layout(&self) -> AsmLayout {
+        self.layout
+    }
+
+    /// Registers member slot `m`: `ends[e]` are the member-local nodes of its element `e`,
+    /// `row_masks[e]` has bit `i` set when element-local row `i` is an unknown. Builds the
+    /// node incidence lists (increasing element order, the CPU scatter's summation order)
+    /// and uploads the member's ranges of the topology buffers.
+    pub fn set_member(
+        &mut self,
+        m: usize,
+        n_nodes: usize,
+        ends: &[[usize; 2]],
+        row_masks: &[u32],
+    ) -> Result<(), GpuError> {
+        if n_nodes > self.nodes_per_slot || ends.len() > self.per_slot {
+            return Err(GpuError::TooLarge {
+                elements: ends.len().max(n_nodes),
+                max: self.per_slot.min(self.nodes_per_slot),
+            });
+        }
+        let (nb, eb) = (m * self.nodes_per_slot, m * self.per_slot);
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); n_nodes];
+        for (e, nodes) in ends.iter().enumerate() {
+            for (l, &a) in nodes.iter().enumerate() {
+                lists[a].push((2 * (eb + e) + l) as u32);
+            }
+        }
+        let mut next = 2 * eb;
+        for j in 0..self.nodes_per_slot {
+            let list = lists.get(j).map(Vec::as_slice).unwrap_or(&[]);
+            self.topo_host[NODE_INC][2 * (nb + j)] = next as u32;
+            self.topo_host[NODE_INC][2 * (nb + j) + 1] = list.len() as u32;
+            self.topo_host[INC][next..next + list.len()].copy_from_slice(list);
+            next += list.len();
+        }
+        self.topo_host[ROW_MASK][eb..eb + row_masks.len()].copy_from_slice(row_masks);
+        self.topo_host[MEMBER_N][m] = ends.len() as u32;
+        let ranges = [
+            (NODE_INC, 2 * nb, 2 * (nb + self.nodes_per_slot)),
+            (INC, 2 * eb, next),
+            (ROW_MASK, eb, eb + row_masks.len()),
+            (MEMBER_N, m, m + 1),
+        ];
+        for (b, lo, hi) in ranges {
+            if hi > lo {
+                self.queue.write_buffer(
+                    &self.topo[b],
+                    4 * lo as u64,
+                    bytemuck::cast_slice(&self.topo_host[b][lo..hi]),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs the element pass of `kernel` (frozen scalars) and the assembly pass in one
+    /// command buffer and reads back the assembled system: everything with the tangent,
+    /// else only the node residuals and member scales. Traffic and time go to
+    /// `kernel`'s timers.
+    pub fn run(&mut self, kernel: &mut ElementKernel, want_tangent: bool) -> Result<(), GpuError> {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        kernel.encode(&mut enc, KernelMode::Frozen, want_tangent);
+        let l = self.layout;
+        let prm = Params {
+            n_elem: l.elements as u32,
+            n_node: l.nodes as u32,
+            n_member: l.members as u32,
+            per_slot: self.per_slot as u32,
+            want_tangent: want_tangent as u32,
+            a_sc: l.scales() as u32,
+            a_k: l.node_blocks() as u32,
+            a_off: l.off_blocks() as u32,
+        };
+        self.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("assemble"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            let threads = l.nodes.max(l.elements).max(l.members);
+            pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
+        }
+        let w = ElementKernel::width(self.precision) as u64;
+        let len = if want_tangent {
+            l.len()
+        } else {
+            l.residual_len()
+        };
+        let rb = Readback {
+            device: &self.device,
+            queue: &self.queue,
+            src: &self.asm,
+            staging: &self.staging,
+            precision: self.precision,
+        };
+        let timers: &mut KernelTimers = &mut kernel.timers;
+        rb.run(enc, &[(0, len as u64 * w)], &mut self.out, timers)
+    }
+
+    /// Member `m`'s assembled system from the last [`Self::run`] (`n_nodes` nodes,
+    /// `n_elems` elements; the blocks are left empty without the tangent).
+    pub fn system(
+        &self,
+        m: usize,
+        n_nodes: usize,
+        n_elems: usize,
+        with_tangent: bool,
+    ) -> AssembledSystem {
+        let l = self.layout;
+        let (nb, eb) = (m * self.nodes_per_slot, m * self.per_slot);
+        let o = &self.out;
+        let node_r = (nb..nb + n_nodes)
+            .map(|j| std::array::from_fn(|k| o[k * l.nodes + j]))
+            .collect();
+        let scale = std::array::from_fn(|k| o[l.scales() + k * l.members + m]);
+        let (node_k, off_k) = if with_tangent {
+            let a_k = l.node_blocks();
+            let a_off = l.off_blocks();
+            let node_k = (nb..nb + n_nodes)
+                .map(|j| std::array::from_fn(|f| o[a_k + f * l.nodes + j]))
+                .collect();
+            let off_k = (eb..eb + n_elems)
+                .map(|e| {
+                    std::array::from_fn(|h| {
+                        std::array::from_fn(|f| o[a_off + (h * A_BLOCK + f) * l.elements + e])
+                    })
+                })
+                .collect();
+            (node_k, off_k)
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        AssembledSystem {
+            node_r,
+            node_k,
+            off_k,
+            scale,
+        }
+    }
+}
