@@ -151,7 +151,7 @@ fn check_scene(
             cpu.set_frozen(s);
             gpu.set_frozen(s);
         }
-        let amp = 10f64.powi(-(trial as i32) - 2);
+        let amp = 10f64.powi(-trial - 2);
         let q: Vec<f64> = (0..n).map(|_| amp * rng.next()).collect();
         for tangent in [true, false] {
             let (rc, sc, kc) = cpu.frozen_system_at(&q, tangent);
