@@ -47,8 +47,8 @@ impl GpuBatcher {
         per_slot: usize,
         nodes_per_slot: usize,
     ) -> Result<Self, GpuError> {
-        let kernel = ElementKernel::new(ctx, slots * per_slot)?;
-        let assembler = Assembler::new(ctx, &kernel, slots, per_slot, nodes_per_slot)?;
+        let mut kernel = ElementKernel::new(ctx, slots * per_slot)?;
+        let assembler = Assembler::new(ctx, &mut kernel, slots, per_slot, nodes_per_slot)?;
         Ok(Self {
             inner: Mutex::new(Inner {
                 kernel,
@@ -163,21 +163,24 @@ impl ElementBackend for GpuBatcher {
         &self,
         slot: usize,
         inputs: &[ElementInput],
+        increments: &[[f64; 9]],
         tangent: bool,
     ) -> Result<AssembledSystem, String> {
         let mut g = self.lock();
-        if inputs.len() != g.sizes[slot].0 {
+        if (inputs.len(), increments.len()) != g.sizes[slot] {
             return Err(format!(
-                "GPU slot {slot} holds {} elements, {} submitted",
-                g.sizes[slot].0,
-                inputs.len()
+                "GPU slot {slot} holds (elements, nodes) {:?}, ({}, {}) submitted",
+                g.sizes[slot],
+                inputs.len(),
+                increments.len()
             ));
         }
         let base = slot * self.per_slot;
         for (e, inp) in inputs.iter().enumerate() {
             g.kernel.set_state(base + e, &inp.st, &inp.eps_n);
-            g.kernel.set_iter(base + e, &inp.inc, &inp.s);
+            g.kernel.set_scalars(base + e, &inp.s);
         }
+        g.assembler.set_increments(slot, increments);
         g.pending.push(slot);
         g.want_tangent |= tangent;
         if g.pending.len() == g.live {

@@ -3,15 +3,31 @@
 //! diagonal blocks and residuals, compacts the element off-diagonal blocks and reduces the
 //! row scales per member. Only that assembled system crosses the bus, and without the
 //! tangent only the nodal residuals and three scales per member.
+//!
+//! The increments go up once per node: a gather pass (`shaders/gather.wgsl`) before the
+//! element pass copies each element's two node increments into the element kernel's
+//! increment fields.
 
 use super::context::{GpuContext, Precision};
-use super::kernel::{shader_precision, ElementKernel, KernelMode, KernelTimers, Readback};
-use super::layout::{AsmLayout, A_BLOCK};
+use super::kernel::{
+    shader_precision, take_runs, write_scalars, ElementKernel, KernelMode, KernelTimers, Readback,
+};
+use super::layout::{AsmLayout, A_BLOCK, A_NODE};
 use super::GpuError;
 use crate::integrator::backend::AssembledSystem;
 
 /// The WGSL source of the assembly pass (f64 version).
 pub const ASSEMBLE_WGSL: &str = include_str!("../../shaders/assemble.wgsl");
+/// The WGSL source of the increment gather pass (f64 version).
+pub const GATHER_WGSL: &str = include_str!("../../shaders/gather.wgsl");
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GatherParams {
+    n_elem: u32,
+    n_node: u32,
+    pad: [u32; 2],
+}
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -31,6 +47,7 @@ const NODE_INC: usize = 0;
 const INC: usize = 1;
 const ROW_MASK: usize = 2;
 const MEMBER_N: usize = 3;
+const ELEM_NODES: usize = 4;
 
 /// Assembly of `members` member slots of at most `per_slot` elements and `nodes_per_slot`
 /// nodes each, over the element slots of one [`ElementKernel`] (member `m`'s element `e`
@@ -44,9 +61,18 @@ pub struct Assembler {
     queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
-    topo: [wgpu::Buffer; 4],
+    /// Topology buffers (the assembly pass binds the first four, the gather pass the
+    /// last).
+    topo: [wgpu::Buffer; 5],
     /// Host mirrors of the topology buffers.
-    topo_host: [Vec<u32>; 4],
+    topo_host: [Vec<u32>; 5],
+    gather_pipeline: wgpu::ComputePipeline,
+    gather_group: wgpu::BindGroup,
+    /// Node increments (9 per node slot, field-major) on the device, their host mirror
+    /// and which node slots changed since the last upload.
+    node_x: wgpu::Buffer,
+    node_x_host: Vec<f64>,
+    node_x_dirty: Vec<bool>,
     asm: wgpu::Buffer,
     staging: wgpu::Buffer,
     params: wgpu::Buffer,
@@ -76,11 +102,12 @@ impl Assembler {
         (lim / per.max(1)) as usize
     }
 
-    /// Builds the pass reading `kernel`'s output (whose capacity must be
-    /// `members * per_slot`); every member slot starts empty (no elements).
+    /// Builds the passes around `kernel` (whose capacity must be `members * per_slot`):
+    /// from now on `kernel`'s increments come from the gather pass. Every member slot
+    /// starts empty (no elements).
     pub fn new(
         ctx: &GpuContext,
-        kernel: &ElementKernel,
+        kernel: &mut ElementKernel,
         members: usize,
         per_slot: usize,
         nodes_per_slot: usize,
@@ -99,25 +126,16 @@ impl Assembler {
         };
         let device = ctx.device.clone();
         let w = ElementKernel::width(ctx.precision) as u64;
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("assemble.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shader_precision(ASSEMBLE_WGSL, ctx.precision).into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("assemble"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = compute_pipeline(&device, "assemble", ASSEMBLE_WGSL, ctx.precision);
+        let gather_pipeline = compute_pipeline(&device, "gather", GATHER_WGSL, ctx.precision);
         let topo_host = [
             vec![0u32; 2 * layout.nodes],
             vec![0u32; 2 * layout.elements],
             vec![0u32; layout.elements],
             vec![0u32; layout.members],
+            vec![0u32; 2 * layout.elements],
         ];
-        let names = ["node_inc", "inc", "row_mask", "member_n"];
+        let names = ["node_inc", "inc", "row_mask", "member_n", "elem_nodes"];
         let topo = std::array::from_fn(|b| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(names[b]),
@@ -152,24 +170,51 @@ impl Assembler {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bgl = pipeline.get_bind_group_layout(0);
-        let resources: Vec<&wgpu::Buffer> = std::iter::once(kernel.output_buffer())
-            .chain(topo.iter())
-            .chain([&asm, &params])
-            .collect();
-        let entries: Vec<wgpu::BindGroupEntry> = resources
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("assemble"),
-            layout: &bgl,
-            entries: &entries,
+        let bind_group = make_bind_group(
+            &device,
+            &pipeline,
+            "assemble",
+            &[
+                kernel.output_buffer(),
+                &topo[NODE_INC],
+                &topo[INC],
+                &topo[ROW_MASK],
+                &topo[MEMBER_N],
+                &asm,
+                &params,
+            ],
+        );
+        let node_x = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("node increments"),
+            size: (A_NODE * layout.nodes) as u64 * w,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
         });
+        let gather_params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("gather params"),
+            size: std::mem::size_of::<GatherParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let gp = GatherParams {
+            n_elem: layout.elements as u32,
+            n_node: layout.nodes as u32,
+            pad: [0; 2],
+        };
+        ctx.queue
+            .write_buffer(&gather_params, 0, bytemuck::bytes_of(&gp));
+        let gather_group = make_bind_group(
+            &device,
+            &gather_pipeline,
+            "gather",
+            &[
+                &node_x,
+                &topo[ELEM_NODES],
+                kernel.iter_buffer(),
+                &gather_params,
+            ],
+        );
+        kernel.gather_increments_on_device();
         Ok(Self {
             layout,
             per_slot,
@@ -181,6 +226,11 @@ impl Assembler {
             bind_group,
             topo,
             topo_host,
+            gather_pipeline,
+            gather_group,
+            node_x,
+            node_x_host: vec![0.0; A_NODE * layout.nodes],
+            node_x_dirty: vec![false; layout.nodes],
             asm,
             staging,
             params,
@@ -227,7 +277,13 @@ impl Assembler {
         }
         self.topo_host[ROW_MASK][eb..eb + row_masks.len()].copy_from_slice(row_masks);
         self.topo_host[MEMBER_N][m] = ends.len() as u32;
+        for (e, nodes) in ends.iter().enumerate() {
+            for (l, &a) in nodes.iter().enumerate() {
+                self.topo_host[ELEM_NODES][2 * (eb + e) + l] = (nb + a) as u32;
+            }
+        }
         let ranges = [
+            (ELEM_NODES, 2 * eb, 2 * (eb + ends.len())),
             (NODE_INC, 2 * nb, 2 * (nb + self.nodes_per_slot)),
             (INC, 2 * eb, next),
             (ROW_MASK, eb, eb + row_masks.len()),
@@ -245,16 +301,55 @@ impl Assembler {
         Ok(())
     }
 
-    /// Runs the element pass of `kernel` (frozen scalars) and the assembly pass in one
-    /// command buffer and reads back the assembled system: everything with the tangent,
+    /// Writes member `m`'s node increments (node-local order, zero for removed unknowns);
+    /// only changed node slots are uploaded at the next run.
+    pub fn set_increments(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
+        let nn = self.layout.nodes;
+        for (j, x) in nodes.iter().enumerate() {
+            let slot = m * self.nodes_per_slot + j;
+            for (k, &v) in x.iter().enumerate() {
+                let h = &mut self.node_x_host[k * nn + slot];
+                if *h != v {
+                    *h = v;
+                    self.node_x_dirty[slot] = true;
+                }
+            }
+        }
+    }
+
+    /// Runs the gather pass, the element pass of `kernel` (frozen scalars) and the
+    /// assembly pass in one command buffer and reads back the assembled system: everything with the tangent,
     /// else only the node residuals and member scales. Traffic and time go to
     /// `kernel`'s timers.
     pub fn run(&mut self, kernel: &mut ElementKernel, want_tangent: bool) -> Result<(), GpuError> {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        kernel.encode(&mut enc, KernelMode::Frozen, want_tangent);
         let l = self.layout;
+        let t0 = std::time::Instant::now();
+        let nn = l.nodes;
+        for (lo, hi) in take_runs(&mut self.node_x_dirty) {
+            for k in 0..A_NODE {
+                kernel.timers.bytes_up += write_scalars(
+                    &self.queue,
+                    &self.node_x,
+                    k * nn + lo,
+                    &self.node_x_host[k * nn + lo..k * nn + hi],
+                    self.precision,
+                );
+            }
+        }
+        kernel.timers.upload_s += t0.elapsed().as_secs_f64();
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("gather"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.gather_pipeline);
+            pass.set_bind_group(0, &self.gather_group, &[]);
+            pass.dispatch_workgroups(l.elements.div_ceil(64) as u32, 1, 1);
+        }
+        kernel.encode(&mut enc, KernelMode::Frozen, want_tangent);
         let prm = Params {
             n_elem: l.elements as u32,
             n_node: l.nodes as u32,
@@ -334,4 +429,46 @@ impl Assembler {
             scale,
         }
     }
+}
+
+fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    src: &str,
+    precision: Precision,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(shader_precision(src, precision).into()),
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// A bind group of `pipeline`'s group 0 with `buffers` at bindings 0, 1, ….
+fn make_bind_group(
+    device: &wgpu::Device,
+    pipeline: &wgpu::ComputePipeline,
+    label: &str,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
 }

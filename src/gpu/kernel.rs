@@ -93,6 +93,10 @@ pub struct ElementKernel {
     /// Per buffer and slot: the slot's fields changed since the last upload (only the
     /// changed slots' ranges are uploaded).
     dirty: [Vec<bool>; 3],
+    /// First iteration field uploaded from the host: [`I_X`], or [`I_S`] when a pass
+    /// before the element pass writes the increments on the device
+    /// ([`crate::gpu::Assembler`] gathers them from per-node increments).
+    iter_from: usize,
     out: Vec<f64>,
     /// Stage timers.
     pub timers: KernelTimers,
@@ -202,6 +206,7 @@ impl ElementKernel {
                 vec![0.0; NI * cap],
             ],
             dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
+            iter_from: I_X,
             out: vec![0.0; NO * cap],
             timers: KernelTimers::default(),
         })
@@ -322,6 +327,12 @@ impl ElementKernel {
         for c in 0..NDOF {
             self.put(2, I_X + c, i, x[c]);
         }
+        self.set_scalars(i, s);
+    }
+
+    /// Writes the frozen scalars of slot `i` and marks it active (its increment is written
+    /// on the device, see [`Self::gather_increments_on_device`]).
+    pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {
         for (c, v) in [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu]
             .iter()
             .enumerate()
@@ -330,6 +341,17 @@ impl ElementKernel {
         }
         self.put(2, I_ACTIVE, i, 1.0);
         self.dirty[2][i] = true;
+    }
+
+    /// From now on the increments ([`I_X`] fields) are written by a pass on the device
+    /// before the element pass; uploads of the iteration buffer skip them.
+    pub(crate) fn gather_increments_on_device(&mut self) {
+        self.iter_from = I_S;
+    }
+
+    /// The iteration buffer (the increment gather pass writes its [`I_X`] fields).
+    pub(crate) fn iter_buffer(&self) -> &wgpu::Buffer {
+        &self.bufs[2]
     }
 
     /// Marks slot `i` inactive (the kernel skips it).
@@ -344,38 +366,24 @@ impl ElementKernel {
     /// slots, one copy per field (a slot's fields are `capacity` apart); one copy of the
     /// whole buffer when every slot changed.
     fn upload(&mut self) {
-        const FIELDS: [usize; 3] = [NE, NS, NI];
-        for (b, fields) in FIELDS.into_iter().enumerate() {
+        let fields = [0..NE, 0..NS, self.iter_from..NI];
+        for (b, fields) in fields.into_iter().enumerate() {
             let runs = take_runs(&mut self.dirty[b]);
+            let (host, buf) = (&self.host[b], &self.bufs[b]);
+            let mut put = |lo: usize, hi: usize| {
+                self.timers.bytes_up +=
+                    write_scalars(&self.queue, buf, lo, &host[lo..hi], self.precision);
+            };
             if runs == [(0, self.cap)] {
-                self.write(b, 0, fields * self.cap);
+                put(fields.start * self.cap, fields.end * self.cap);
                 continue;
             }
             for &(lo, hi) in &runs {
-                for f in 0..fields {
-                    self.write(b, f * self.cap + lo, f * self.cap + hi);
+                for f in fields.clone() {
+                    put(f * self.cap + lo, f * self.cap + hi);
                 }
             }
         }
-    }
-
-    /// Copies host mirror `b`, scalars `start..end`, to the device.
-    fn write(&mut self, b: usize, start: usize, end: usize) {
-        let src = &self.host[b][start..end];
-        let w = Self::width(self.precision);
-        let off = (start * w) as u64;
-        match self.precision {
-            Precision::F64 => {
-                self.queue
-                    .write_buffer(&self.bufs[b], off, bytemuck::cast_slice(src))
-            }
-            Precision::F32 => {
-                let v: Vec<f32> = src.iter().map(|&x| x as f32).collect();
-                self.queue
-                    .write_buffer(&self.bufs[b], off, bytemuck::cast_slice(&v));
-            }
-        }
-        self.timers.bytes_up += (src.len() * w) as u64;
     }
 
     /// The element output buffer (read by the assembly pass).
@@ -473,8 +481,29 @@ impl ElementKernel {
     }
 }
 
+/// Writes `src` into `buf` from scalar `at` on (converted to f32 for
+/// [`Precision::F32`]); returns the bytes written.
+pub(crate) fn write_scalars(
+    queue: &wgpu::Queue,
+    buf: &wgpu::Buffer,
+    at: usize,
+    src: &[f64],
+    precision: Precision,
+) -> u64 {
+    let w = ElementKernel::width(precision);
+    let off = (at * w) as u64;
+    match precision {
+        Precision::F64 => queue.write_buffer(buf, off, bytemuck::cast_slice(src)),
+        Precision::F32 => {
+            let v: Vec<f32> = src.iter().map(|&x| x as f32).collect();
+            queue.write_buffer(buf, off, bytemuck::cast_slice(&v));
+        }
+    }
+    (src.len() * w) as u64
+}
+
 /// The runs `(lo, hi)` of set flags, clearing them.
-fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
+pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
     let mut runs = Vec::new();
     let mut i = 0;
     while i < flags.len() {

@@ -6,17 +6,16 @@
 
 use nalgebra::Vector6;
 
-use crate::element::{ElementState, FrozenScalars, Increment};
+use crate::element::{ElementState, FrozenScalars};
 
-/// What the kernel needs per element besides the run constants registered beforehand.
+/// What the kernel needs per element besides the run constants registered beforehand
+/// (the Newton increment comes per node).
 #[derive(Clone, Copy, Debug)]
 pub struct ElementInput {
     /// State at `n`.
     pub st: ElementState,
     /// Raw strains at `n`.
     pub eps_n: Vector6<f64>,
-    /// Current Newton increment.
-    pub inc: Increment,
     /// Frozen dissipation scalars.
     pub s: FrozenScalars,
 }
@@ -40,12 +39,14 @@ pub struct AssembledSystem {
 /// Evaluates all elements of one simulation at once (frozen scalars) and sums them.
 pub trait ElementBackend: Send + Sync {
     /// Assembled residual, row scales and (if `tangent`) blocks of the elements of the
-    /// simulation in `slot` (inputs in element order). An error fails the Newton solve
-    /// (the step is rejected).
+    /// simulation in `slot` (`inputs` in element order; `increments`: the current Newton
+    /// increment per node, node-local order, zero for removed unknowns). An error fails
+    /// the Newton solve (the step is rejected).
     fn evaluate_assembled(
         &self,
         slot: usize,
         inputs: &[ElementInput],
+        increments: &[[f64; 9]],
         tangent: bool,
     ) -> Result<AssembledSystem, String>;
 }

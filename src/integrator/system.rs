@@ -395,11 +395,16 @@ impl Simulation {
                 .map(|e| ElementInput {
                     st: self.state.element(&self.model, e),
                     eps_n: self.state.eps[e],
-                    inc: self.gather(e, q),
                     s: self.frozen[e],
                 })
                 .collect();
-            match b.evaluate_assembled(slot, &inputs, tangent) {
+            let increments: Vec<[f64; 9]> = self
+                .dofs
+                .nodes
+                .iter()
+                .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { q[i] }))
+                .collect();
+            match b.evaluate_assembled(slot, &inputs, &increments, tangent) {
                 Ok(sys) => self.scatter_assembled(&sys, tangent, r, &mut scale),
                 Err(_) => return f64::NAN,
             }
