@@ -502,9 +502,15 @@ pub(crate) fn write_scalars(
     (src.len() * w) as u64
 }
 
-/// The runs `(lo, hi)` of set flags, clearing them.
+/// Clean slots between two changed ones up to which both go up in one copy: each copy
+/// has a fixed cost (a staging allocation and a command) worth a few hundred bytes, and
+/// the host mirrors of clean slots are current, so re-sending them is harmless.
+const MERGE_GAP: usize = 32;
+
+/// The runs `(lo, hi)` of set flags, clearing them; runs closer than [`MERGE_GAP`] are
+/// merged.
 pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
-    let mut runs = Vec::new();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
     let mut i = 0;
     while i < flags.len() {
         if flags[i] {
@@ -513,7 +519,10 @@ pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
                 flags[i] = false;
                 i += 1;
             }
-            runs.push((lo, i));
+            match runs.last_mut() {
+                Some(last) if lo - last.1 <= MERGE_GAP => last.1 = i,
+                _ => runs.push((lo, i)),
+            }
         } else {
             i += 1;
         }
