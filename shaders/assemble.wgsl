@@ -3,14 +3,17 @@
 // residuals and the per-member row-scale maxima) crosses the bus. Bookkeeping only, no
 // physics: the element math stays in `element.wgsl`.
 //
-// Field-major like the element buffers. The assembled buffer (binding 5) holds, with
-// NN = node slots, M = member slots, NE = element slots (offsets in `Params`, Rust twin in
-// `src/gpu/layout.rs`, `A_*`):
-//   [0, 9 NN)            node residual, node-local row k (u0..2 θ0..2 g0..2) of node j at k·NN + j
-//   [a_sc, a_sc + 3 M)   per-member max row scale of kind u, θ, g at kind·M + m
-//   [a_k, a_k + 81 NN)   node diagonal block (row-major 9×9), entry f of node j at a_k + f·NN + j
-//   [a_off, +162 NE)     element off-diagonal blocks (0,1) then (1,0), entry f at a_off + f·NE + e
-// The first two ranges are contiguous: a residual-only iteration reads back one range.
+// The assembled buffer (binding 5) is member-major, so that the waiting members of a
+// dispatch come back as a few contiguous ranges (Rust twin: `AsmLayout` in
+// `src/gpu/layout.rs`). With NPN node slots and PS element slots per member:
+//   residual region, member m at m·RPM, RPM = 9 NPN + 3:
+//     node j's residual (node-local u0..2 θ0..2 g0..2) at 9 j, then the max row scale of
+//     kind u, θ, g at 9 NPN + kind;
+//   tangent region from k_start, member m at k_start + m·KPM, KPM = 81 (NPN + 2 PS):
+//     node j's diagonal block (row-major 9×9) at 81 j, then element e's off-diagonal
+//     blocks (0,1) and (1,0) at 81 NPN + 81 (2 e + h).
+// Node slot i is node i % NPN of member i / NPN; element slot i is element i % PS of
+// member i / PS (the element kernel's slots).
 //
 // Summation order is the CPU scatter's (incidences in increasing element order, starting
 // from zero), so the assembled values equal a CPU scatter of the same element blocks
@@ -32,10 +35,12 @@ struct Params {
     n_member: u32,
     // Element slots per member.
     per_slot: u32,
+    // Node slots per member.
+    nodes_per_slot: u32,
     want_tangent: u32,
-    a_sc: u32,
-    a_k: u32,
-    a_off: u32,
+    // Start of the tangent region.
+    k_start: u32,
+    pad: u32,
 }
 
 @group(0) @binding(0) var<storage, read> outp: array<Real>;
@@ -65,11 +70,17 @@ fn kind_of(i: u32) -> u32 {
 }
 
 fn ld(f: u32, e: u32) -> Real { return outp[f * prm.n_elem + e]; }
+fn rpm() -> u32 { return 9u * prm.nodes_per_slot + 3u; }
+fn kpm() -> u32 { return 81u * (prm.nodes_per_slot + 2u * prm.per_slot); }
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
     if i < prm.n_node {
+        let m = i / prm.nodes_per_slot;
+        let j = i % prm.nodes_per_slot;
+        let r0 = m * rpm() + 9u * j;
+        let k0 = prm.k_start + m * kpm() + 81u * j;
         let start = node_inc[2u * i];
         let count = node_inc[2u * i + 1u];
         for (var k = 0u; k < 9u; k++) {
@@ -78,7 +89,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let p = inc[start + c];
                 acc += ld(O_R + loc_idx(p & 1u, k), p >> 1u);
             }
-            asm_out[k * prm.n_node + i] = acc;
+            asm_out[r0 + k] = acc;
         }
         if prm.want_tangent != 0u {
             for (var a = 0u; a < 9u; a++) {
@@ -89,17 +100,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         let l = p & 1u;
                         acc += ld(O_K + 18u * loc_idx(l, a) + loc_idx(l, b), p >> 1u);
                     }
-                    asm_out[prm.a_k + (9u * a + b) * prm.n_node + i] = acc;
+                    asm_out[k0 + 9u * a + b] = acc;
                 }
             }
         }
     }
     if prm.want_tangent != 0u && i < prm.n_elem {
+        let m = i / prm.per_slot;
+        let e = i % prm.per_slot;
+        let k0 = prm.k_start + m * kpm() + 81u * (prm.nodes_per_slot + 2u * e);
         for (var a = 0u; a < 9u; a++) {
             for (var b = 0u; b < 9u; b++) {
                 let f = 9u * a + b;
-                asm_out[prm.a_off + f * prm.n_elem + i] = ld(O_K + 18u * loc_idx(0u, a) + loc_idx(1u, b), i);
-                asm_out[prm.a_off + (81u + f) * prm.n_elem + i] = ld(O_K + 18u * loc_idx(1u, a) + loc_idx(0u, b), i);
+                asm_out[k0 + f] = ld(O_K + 18u * loc_idx(0u, a) + loc_idx(1u, b), i);
+                asm_out[k0 + 81u + f] = ld(O_K + 18u * loc_idx(1u, a) + loc_idx(0u, b), i);
             }
         }
     }
@@ -116,7 +130,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
         for (var k = 0u; k < 3u; k++) {
-            asm_out[prm.a_sc + k * prm.n_member + i] = sc[k];
+            asm_out[i * rpm() + 9u * prm.nodes_per_slot + k] = sc[k];
         }
     }
 }

@@ -206,7 +206,7 @@ fn readback_and_upload_bytes_follow_the_layout() {
     let (_cpu, mut gpu, b) = twins(m, p, 1, &ctx);
     let (ne, nn) = (gpu.model().elements.len(), gpu.model().n_nodes());
     let l = b.layout();
-    assert_eq!((l.nodes, l.members, l.elements), (nn, 1, ne));
+    assert_eq!((l.nodes_per_slot, l.members, l.per_slot), (nn, 1, ne));
     let (q1, q2) = (vec![1e-4; gpu.n_dofs()], vec![2e-4; gpu.n_dofs()]);
     let t0 = b.timers();
     gpu.frozen_system_at(&q1, true);

@@ -134,7 +134,7 @@ impl GpuBatcher {
         let Inner {
             kernel, assembler, ..
         } = g;
-        let res = assembler.run(kernel, tangent);
+        let res = assembler.run(kernel, tangent, &g.pending);
         let t0 = std::time::Instant::now();
         let pending = std::mem::take(&mut g.pending);
         for &slot in &pending {

@@ -12,7 +12,7 @@ use super::context::{GpuContext, Precision};
 use super::kernel::{
     shader_precision, take_runs, write_scalars, ElementKernel, KernelMode, KernelTimers, Readback,
 };
-use super::layout::{AsmLayout, A_BLOCK, A_NODE};
+use super::layout::{AsmLayout, A_NODE};
 use super::GpuError;
 use crate::integrator::backend::AssembledSystem;
 
@@ -36,10 +36,10 @@ struct Params {
     n_node: u32,
     n_member: u32,
     per_slot: u32,
+    nodes_per_slot: u32,
     want_tangent: u32,
-    a_sc: u32,
-    a_k: u32,
-    a_off: u32,
+    k_start: u32,
+    pad: u32,
 }
 
 /// Topology buffers (u32) of the assembly pass, in binding order.
@@ -54,6 +54,10 @@ const ELEM_NODES: usize = 4;
 /// in kernel slot `m * per_slot + e`).
 pub struct Assembler {
     layout: AsmLayout,
+    /// Node slots (`members × nodes_per_slot`).
+    n_nodes: usize,
+    /// Element slots (the kernel's capacity).
+    n_elems: usize,
     per_slot: usize,
     nodes_per_slot: usize,
     precision: Precision,
@@ -84,9 +88,9 @@ impl Assembler {
     /// Scalars of the assembled buffer per member slot.
     fn scalars_per_member(per_slot: usize, nodes_per_slot: usize) -> u64 {
         let one = AsmLayout {
-            nodes: nodes_per_slot,
             members: 1,
-            elements: per_slot,
+            nodes_per_slot,
+            per_slot,
         };
         one.len() as u64
     }
@@ -120,20 +124,22 @@ impl Assembler {
             });
         }
         let layout = AsmLayout {
-            nodes: (members * nodes_per_slot).max(1),
             members: members.max(1),
-            elements: kernel.capacity(),
+            nodes_per_slot: nodes_per_slot.max(1),
+            per_slot: per_slot.max(1),
         };
+        let n_nodes = layout.members * layout.nodes_per_slot;
+        let n_elems = kernel.capacity();
         let device = ctx.device.clone();
         let w = ElementKernel::width(ctx.precision) as u64;
         let pipeline = compute_pipeline(&device, "assemble", ASSEMBLE_WGSL, ctx.precision);
         let gather_pipeline = compute_pipeline(&device, "gather", GATHER_WGSL, ctx.precision);
         let topo_host = [
-            vec![0u32; 2 * layout.nodes],
-            vec![0u32; 2 * layout.elements],
-            vec![0u32; layout.elements],
+            vec![0u32; 2 * n_nodes],
+            vec![0u32; 2 * n_elems],
+            vec![0u32; n_elems],
             vec![0u32; layout.members],
-            vec![0u32; 2 * layout.elements],
+            vec![0u32; 2 * n_elems],
         ];
         let names = ["node_inc", "inc", "row_mask", "member_n", "elem_nodes"];
         let topo = std::array::from_fn(|b| {
@@ -186,7 +192,7 @@ impl Assembler {
         );
         let node_x = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("node increments"),
-            size: (A_NODE * layout.nodes) as u64 * w,
+            size: (A_NODE * n_nodes) as u64 * w,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -197,8 +203,8 @@ impl Assembler {
             mapped_at_creation: false,
         });
         let gp = GatherParams {
-            n_elem: layout.elements as u32,
-            n_node: layout.nodes as u32,
+            n_elem: n_elems as u32,
+            n_node: n_nodes as u32,
             pad: [0; 2],
         };
         ctx.queue
@@ -217,6 +223,8 @@ impl Assembler {
         kernel.gather_increments_on_device();
         Ok(Self {
             layout,
+            n_nodes,
+            n_elems,
             per_slot,
             nodes_per_slot,
             precision: ctx.precision,
@@ -229,8 +237,8 @@ impl Assembler {
             gather_pipeline,
             gather_group,
             node_x,
-            node_x_host: vec![0.0; A_NODE * layout.nodes],
-            node_x_dirty: vec![false; layout.nodes],
+            node_x_host: vec![0.0; A_NODE * n_nodes],
+            node_x_dirty: vec![false; n_nodes],
             asm,
             staging,
             params,
@@ -304,7 +312,7 @@ impl Assembler {
     /// Writes member `m`'s node increments (node-local order, zero for removed unknowns);
     /// only changed node slots are uploaded at the next run.
     pub fn set_increments(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
-        let nn = self.layout.nodes;
+        let nn = self.n_nodes;
         for (j, x) in nodes.iter().enumerate() {
             let slot = m * self.nodes_per_slot + j;
             for (k, &v) in x.iter().enumerate() {
@@ -321,13 +329,18 @@ impl Assembler {
     /// assembly pass in one command buffer and reads back the assembled system: everything with the tangent,
     /// else only the node residuals and member scales. Traffic and time go to
     /// `kernel`'s timers.
-    pub fn run(&mut self, kernel: &mut ElementKernel, want_tangent: bool) -> Result<(), GpuError> {
+    pub fn run(
+        &mut self,
+        kernel: &mut ElementKernel,
+        want_tangent: bool,
+        pending: &[usize],
+    ) -> Result<(), GpuError> {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let l = self.layout;
         let t0 = std::time::Instant::now();
-        let nn = l.nodes;
+        let nn = self.n_nodes;
         for (lo, hi) in take_runs(&mut self.node_x_dirty) {
             for k in 0..A_NODE {
                 kernel.timers.bytes_up += write_scalars(
@@ -347,18 +360,18 @@ impl Assembler {
             });
             pass.set_pipeline(&self.gather_pipeline);
             pass.set_bind_group(0, &self.gather_group, &[]);
-            pass.dispatch_workgroups(l.elements.div_ceil(64) as u32, 1, 1);
+            pass.dispatch_workgroups(self.n_elems.div_ceil(64) as u32, 1, 1);
         }
         kernel.encode(&mut enc, KernelMode::Frozen, want_tangent);
         let prm = Params {
-            n_elem: l.elements as u32,
-            n_node: l.nodes as u32,
+            n_elem: self.n_elems as u32,
+            n_node: self.n_nodes as u32,
             n_member: l.members as u32,
-            per_slot: self.per_slot as u32,
+            per_slot: l.per_slot as u32,
+            nodes_per_slot: l.nodes_per_slot as u32,
             want_tangent: want_tangent as u32,
-            a_sc: l.scales() as u32,
-            a_k: l.node_blocks() as u32,
-            a_off: l.off_blocks() as u32,
+            k_start: l.tangent_start() as u32,
+            pad: 0,
         };
         self.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
@@ -369,15 +382,33 @@ impl Assembler {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_group, &[]);
-            let threads = l.nodes.max(l.elements).max(l.members);
+            let threads = self.n_nodes.max(self.n_elems).max(l.members);
             pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
         }
+        // The waiting members' residual regions, and their tangent regions when the
+        // tangent is wanted: one range per run of adjacent waiting members.
         let w = ElementKernel::width(self.precision) as u64;
-        let len = if want_tangent {
-            l.len()
-        } else {
-            l.residual_len()
-        };
+        let mut members = pending.to_vec();
+        members.sort_unstable();
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        for m in members {
+            match runs.last_mut() {
+                Some(last) if last.1 == m => last.1 = m + 1,
+                _ => runs.push((m, m + 1)),
+            }
+        }
+        let mut ranges: Vec<(u64, u64)> = Vec::new();
+        for &(lo, hi) in &runs {
+            let r = l.residual_per_member();
+            ranges.push(((lo * r) as u64 * w, ((hi - lo) * r) as u64 * w));
+        }
+        if want_tangent {
+            for &(lo, hi) in &runs {
+                let k = l.tangent_per_member();
+                let at = l.tangent_start() + lo * k;
+                ranges.push((at as u64 * w, ((hi - lo) * k) as u64 * w));
+            }
+        }
         let rb = Readback {
             device: &self.device,
             queue: &self.queue,
@@ -386,7 +417,7 @@ impl Assembler {
             precision: self.precision,
         };
         let timers: &mut KernelTimers = &mut kernel.timers;
-        rb.run(enc, &[(0, len as u64 * w)], &mut self.out, timers)
+        rb.run(enc, &ranges, &mut self.out, timers)
     }
 
     /// Member `m`'s assembled system from the last [`Self::run`] (`n_nodes` nodes,
@@ -398,24 +429,18 @@ impl Assembler {
         n_elems: usize,
         with_tangent: bool,
     ) -> AssembledSystem {
-        let l = self.layout;
-        let (nb, eb) = (m * self.nodes_per_slot, m * self.per_slot);
-        let o = &self.out;
-        let node_r = (nb..nb + n_nodes)
-            .map(|j| std::array::from_fn(|k| o[k * l.nodes + j]))
+        let (l, o) = (self.layout, &self.out);
+        let node_r = (0..n_nodes)
+            .map(|j| std::array::from_fn(|k| o[l.node_residual(m, j) + k]))
             .collect();
-        let scale = std::array::from_fn(|k| o[l.scales() + k * l.members + m]);
+        let scale = std::array::from_fn(|k| o[l.scales(m) + k]);
         let (node_k, off_k) = if with_tangent {
-            let a_k = l.node_blocks();
-            let a_off = l.off_blocks();
-            let node_k = (nb..nb + n_nodes)
-                .map(|j| std::array::from_fn(|f| o[a_k + f * l.nodes + j]))
+            let node_k = (0..n_nodes)
+                .map(|j| std::array::from_fn(|f| o[l.node_block(m, j) + f]))
                 .collect();
-            let off_k = (eb..eb + n_elems)
+            let off_k = (0..n_elems)
                 .map(|e| {
-                    std::array::from_fn(|h| {
-                        std::array::from_fn(|f| o[a_off + (h * A_BLOCK + f) * l.elements + e])
-                    })
+                    std::array::from_fn(|h| std::array::from_fn(|f| o[l.off_block(m, e, h) + f]))
                 })
                 .collect();
             (node_k, off_k)

@@ -68,43 +68,64 @@ pub const A_NODE: usize = 9;
 /// Entries of one 9×9 block (row-major).
 pub const A_BLOCK: usize = A_NODE * A_NODE;
 
-/// Layout of the assembled buffer written by `shaders/assemble.wgsl` (field-major, field
-/// `f` of slot `j` at `offset + f * slots + j`). The node residuals and member scales lead
-/// and are contiguous, so a residual-only iteration reads back one range.
+/// Layout of the assembled buffer written by `shaders/assemble.wgsl`, member-major so
+/// that the members of one dispatch come back as a few contiguous ranges:
+///
+/// * residual region: per member slot `m`, at `m * residual_per_member()`, its node
+///   residuals (`A_NODE` per node slot, node after node) then its three row-scale maxima
+///   (u, θ, g);
+/// * tangent region, from `tangent_start()`: per member slot, at
+///   `tangent_start() + m * tangent_per_member()`, its node diagonal blocks (`A_BLOCK`
+///   per node slot, row-major) then its element off-diagonal blocks ((0,1) then (1,0),
+///   `A_BLOCK` each).
+///
+/// A residual-only iteration reads back the residual region of the waiting members only.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct AsmLayout {
-    /// Node slots.
-    pub nodes: usize,
     /// Member slots.
     pub members: usize,
-    /// Element slots.
-    pub elements: usize,
+    /// Node slots per member.
+    pub nodes_per_slot: usize,
+    /// Element slots per member.
+    pub per_slot: usize,
 }
 
 impl AsmLayout {
-    /// Node residuals (`A_NODE` fields per node slot) start at 0; the member scales (3
-    /// fields per member slot: u, θ, g) start here.
-    pub fn scales(&self) -> usize {
-        A_NODE * self.nodes
+    /// Scalars of one member's residual region (node residuals and scales).
+    pub fn residual_per_member(&self) -> usize {
+        A_NODE * self.nodes_per_slot + 3
     }
-    /// Scalars of the residual-only readback (node residuals and member scales).
-    pub fn residual_len(&self) -> usize {
-        self.scales() + 3 * self.members
+    /// Scalars of one member's tangent region (node and off-diagonal blocks).
+    pub fn tangent_per_member(&self) -> usize {
+        A_BLOCK * (self.nodes_per_slot + 2 * self.per_slot)
     }
-    /// Node diagonal blocks (`A_BLOCK` fields per node slot).
-    pub fn node_blocks(&self) -> usize {
-        self.residual_len()
-    }
-    /// Element off-diagonal blocks (0,1) then (1,0) (`2 A_BLOCK` fields per element slot).
-    pub fn off_blocks(&self) -> usize {
-        self.node_blocks() + A_BLOCK * self.nodes
+    /// Start of the tangent region.
+    pub fn tangent_start(&self) -> usize {
+        self.members * self.residual_per_member()
     }
     /// Scalars of the whole buffer.
     pub fn len(&self) -> usize {
-        self.off_blocks() + 2 * A_BLOCK * self.elements
+        self.tangent_start() + self.members * self.tangent_per_member()
     }
     /// Always false (a layout has at least one slot of each kind); for clippy's `len`.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+    /// First of the `A_NODE` residual rows of node `j` of member `m`.
+    pub fn node_residual(&self, m: usize, j: usize) -> usize {
+        m * self.residual_per_member() + A_NODE * j
+    }
+    /// First of the three row-scale maxima of member `m`.
+    pub fn scales(&self, m: usize) -> usize {
+        m * self.residual_per_member() + A_NODE * self.nodes_per_slot
+    }
+    /// First entry of the diagonal block of node `j` of member `m`.
+    pub fn node_block(&self, m: usize, j: usize) -> usize {
+        self.tangent_start() + m * self.tangent_per_member() + A_BLOCK * j
+    }
+    /// First entry of off-diagonal block `h` (0: (0,1), 1: (1,0)) of element `e` of
+    /// member `m`.
+    pub fn off_block(&self, m: usize, e: usize, h: usize) -> usize {
+        self.node_block(m, self.nodes_per_slot) + A_BLOCK * (2 * e + h)
     }
 }
