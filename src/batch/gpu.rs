@@ -20,9 +20,8 @@ struct Inner {
     assembler: Assembler,
     /// Workers that may still submit.
     live: usize,
-    /// Slots waiting for the next dispatch.
-    pending: Vec<usize>,
-    want_tangent: bool,
+    /// Slots waiting for the next dispatch, and whether each wants the tangent.
+    pending: Vec<(usize, bool)>,
     generation: u64,
     results: Vec<Option<Result<AssembledSystem, String>>>,
     /// Per slot: elements and nodes of the registered member.
@@ -55,7 +54,6 @@ impl GpuBatcher {
                 assembler,
                 live: slots,
                 pending: Vec::with_capacity(slots),
-                want_tangent: false,
                 generation: 0,
                 results: (0..slots).map(|_| None).collect(),
                 sizes: vec![(0, 0); slots],
@@ -130,14 +128,10 @@ impl GpuBatcher {
     }
 
     fn dispatch(&self, g: &mut Inner) {
-        let tangent = g.want_tangent;
-        let Inner {
-            kernel, assembler, ..
-        } = g;
-        let res = assembler.run(kernel, tangent, &g.pending);
-        let t0 = std::time::Instant::now();
         let pending = std::mem::take(&mut g.pending);
-        for &slot in &pending {
+        let res = g.assembler.run(&mut g.kernel, &pending);
+        let t0 = std::time::Instant::now();
+        for &(slot, tangent) in &pending {
             let (n_elems, n_nodes) = g.sizes[slot];
             let out = match &res {
                 Ok(()) => Ok(g.assembler.system(slot, n_nodes, n_elems, tangent)),
@@ -152,7 +146,6 @@ impl GpuBatcher {
         g.kernel.timers.unpack_s += t0.elapsed().as_secs_f64();
         g.pending = pending;
         g.pending.clear();
-        g.want_tangent = false;
         g.generation += 1;
         self.cv.notify_all();
     }
@@ -181,8 +174,7 @@ impl ElementBackend for GpuBatcher {
             g.kernel.set_scalars(base + e, &inp.s);
         }
         g.assembler.set_increments(slot, increments);
-        g.pending.push(slot);
-        g.want_tangent |= tangent;
+        g.pending.push((slot, tangent));
         if g.pending.len() == g.live {
             self.dispatch(&mut g);
         } else {

@@ -326,15 +326,15 @@ impl Assembler {
     }
 
     /// Runs the gather pass, the element pass of `kernel` (frozen scalars) and the
-    /// assembly pass in one command buffer and reads back the assembled system: everything with the tangent,
-    /// else only the node residuals and member scales. Traffic and time go to
-    /// `kernel`'s timers.
+    /// assembly pass in one command buffer and reads back the assembled systems of the
+    /// `pending` member slots: each one's node residuals and scales, and its blocks when it
+    /// asked for the tangent (`pending[i].1`). Traffic and time go to `kernel`'s timers.
     pub fn run(
         &mut self,
         kernel: &mut ElementKernel,
-        want_tangent: bool,
-        pending: &[usize],
+        pending: &[(usize, bool)],
     ) -> Result<(), GpuError> {
+        let want_tangent = pending.iter().any(|p| p.1);
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
@@ -385,30 +385,20 @@ impl Assembler {
             let threads = self.n_nodes.max(self.n_elems).max(l.members);
             pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
         }
-        // The waiting members' residual regions, and their tangent regions when the
-        // tangent is wanted: one range per run of adjacent waiting members.
+        // The waiting members' residual regions, and the tangent regions of those that
+        // asked for it: one range per run of adjacent such members.
         let w = ElementKernel::width(self.precision) as u64;
-        let mut members = pending.to_vec();
-        members.sort_unstable();
-        let mut runs: Vec<(usize, usize)> = Vec::new();
-        for m in members {
-            match runs.last_mut() {
-                Some(last) if last.1 == m => last.1 = m + 1,
-                _ => runs.push((m, m + 1)),
-            }
-        }
-        let mut ranges: Vec<(u64, u64)> = Vec::new();
-        for &(lo, hi) in &runs {
-            let r = l.residual_per_member();
-            ranges.push(((lo * r) as u64 * w, ((hi - lo) * r) as u64 * w));
-        }
-        if want_tangent {
-            for &(lo, hi) in &runs {
-                let k = l.tangent_per_member();
+        let (r, k) = (l.residual_per_member(), l.tangent_per_member());
+        let residual = member_runs(pending.iter().map(|p| p.0))
+            .into_iter()
+            .map(|(lo, hi)| ((lo * r) as u64 * w, ((hi - lo) * r) as u64 * w));
+        let tangent = member_runs(pending.iter().filter(|p| p.1).map(|p| p.0))
+            .into_iter()
+            .map(|(lo, hi)| {
                 let at = l.tangent_start() + lo * k;
-                ranges.push((at as u64 * w, ((hi - lo) * k) as u64 * w));
-            }
-        }
+                (at as u64 * w, ((hi - lo) * k) as u64 * w)
+            });
+        let ranges: Vec<(u64, u64)> = residual.chain(tangent).collect();
         let rb = Readback {
             device: &self.device,
             queue: &self.queue,
@@ -454,6 +444,20 @@ impl Assembler {
             scale,
         }
     }
+}
+
+/// Runs `(lo, hi)` of adjacent member slots among `members`.
+fn member_runs(members: impl Iterator<Item = usize>) -> Vec<(usize, usize)> {
+    let mut sorted: Vec<usize> = members.collect();
+    sorted.sort_unstable();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for m in sorted {
+        match runs.last_mut() {
+            Some(last) if last.1 == m => last.1 = m + 1,
+            _ => runs.push((m, m + 1)),
+        }
+    }
+    runs
 }
 
 fn compute_pipeline(
