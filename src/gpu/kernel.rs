@@ -87,7 +87,10 @@ pub struct ElementKernel {
     bind_group: wgpu::BindGroup,
     bufs: [wgpu::Buffer; 4],
     params: wgpu::Buffer,
-    staging: wgpu::Buffer,
+    /// Mappable twin of the output buffer and host copy of the output, created by the
+    /// first [`Self::run`] (the batch path reads assembled systems instead and never
+    /// allocates them).
+    staging: Option<wgpu::Buffer>,
     /// Host mirrors (f64) of the element, state and iteration buffers.
     host: [Vec<f64>; 3],
     /// Per buffer and slot: the slot's fields changed since the last upload (only the
@@ -164,11 +167,6 @@ impl ElementKernel {
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             ),
         ];
-        let staging = mk(
-            "staging",
-            NO,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("params"),
             size: std::mem::size_of::<Params>() as u64,
@@ -199,7 +197,7 @@ impl ElementKernel {
             bind_group,
             bufs,
             params,
-            staging,
+            staging: None,
             host: [
                 vec![0.0; NE * cap],
                 vec![0.0; NS * cap],
@@ -207,7 +205,7 @@ impl ElementKernel {
             ],
             dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
             iter_from: I_X,
-            out: vec![0.0; NO * cap],
+            out: Vec::new(),
             timers: KernelTimers::default(),
         })
     }
@@ -442,11 +440,20 @@ impl ElementKernel {
                 (O_S as u64 * cap * w, 4 * cap * w),
             ]
         };
+        let staging = self.staging.get_or_insert_with(|| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("staging"),
+                size: NO as u64 * cap * w,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        self.out.resize(NO * self.cap, 0.0);
         let rb = Readback {
             device: &self.device,
             queue: &self.queue,
             src: &self.bufs[3],
-            staging: &self.staging,
+            staging,
             precision: self.precision,
         };
         rb.run(enc, &ranges, &mut self.out, &mut self.timers)
