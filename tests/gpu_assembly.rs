@@ -8,9 +8,9 @@
 //!   CPU-assembled ones to `ASSEMBLY_RTOL` (residual relative to the largest row scale,
 //!   i.e. the largest element force, as the kernel parity of `tests/gpu_kernel.rs`;
 //!   scales and matrix relative to their largest entry), with and without the tangent.
-//! * A residual-only iteration reads back exactly the node residuals and member scales of
-//!   the assembled layout (8 bytes each), an iteration with the tangent the whole
-//!   assembled buffer; an iteration at an unchanged state uploads only the frozen scalars
+//! * A residual-only iteration reads back exactly the waiting member's node residuals and
+//!   row scales (8 bytes each), an iteration with the tangent also its node and
+//!   off-diagonal blocks, nothing of the other member slots; an iteration at an unchanged state uploads only the frozen scalars
 //!   per element and the increments of the nodes that moved.
 //!
 //! Without an adapter the tests print `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
@@ -96,13 +96,14 @@ fn scene(name: &str, scheme: Option<Scheme>) -> (Model, IntegratorParams) {
     (s.model, p)
 }
 
-/// A simulation at the state `steps` CPU steps from the scene's start, and a one-slot GPU
-/// batch attached to a twin of it.
+/// A simulation at the state `steps` CPU steps from the scene's start, and a twin of it
+/// in slot `slot` of a GPU batch of `slots` slots (the other slots' workers have left).
 fn twins(
     model: Model,
     params: IntegratorParams,
     steps: usize,
     ctx: &cosserat::gpu::GpuContext,
+    (slot, slots): (usize, usize),
 ) -> (Simulation, Simulation, Arc<GpuBatcher>) {
     let mut base = Simulation::new(model.clone(), params).unwrap();
     for _ in 0..steps {
@@ -113,10 +114,17 @@ fn twins(
     cpu.set_state(base.state().clone());
     gpu.set_state(base.state().clone());
     let b = Arc::new(
-        GpuBatcher::new(ctx, 1, gpu.model().elements.len(), gpu.model().n_nodes()).unwrap(),
+        GpuBatcher::new(
+            ctx,
+            slots,
+            gpu.model().elements.len(),
+            gpu.model().n_nodes(),
+        )
+        .unwrap(),
     );
-    b.register(0, &gpu).unwrap();
-    assert!(gpu.set_backend(b.clone(), 0));
+    (1..slots).for_each(|_| b.leave());
+    b.register(slot, &gpu).unwrap();
+    assert!(gpu.set_backend(b.clone(), slot));
     (cpu, gpu, b)
 }
 
@@ -137,7 +145,7 @@ fn check_scene(
     steps: usize,
     ctx: &cosserat::gpu::GpuContext,
 ) {
-    let (mut cpu, mut gpu, _b) = twins(model, params, steps, ctx);
+    let (mut cpu, mut gpu, _b) = twins(model, params, steps, ctx, (0, 1));
     let n = cpu.n_dofs();
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ n as u64);
     let mut worst = [0.0f64; 3];
@@ -203,10 +211,11 @@ fn gpu_assembly_matches_cpu_scatter() {
 fn readback_and_upload_bytes_follow_the_layout() {
     let Some(ctx) = gpu() else { return };
     let (m, p) = scene("cantilever", Some(Scheme::edmc2(0.5)));
-    let (_cpu, mut gpu, b) = twins(m, p, 1, &ctx);
+    // Slot 1 of 3: only the waiting member's ranges come back.
+    let (_cpu, mut gpu, b) = twins(m, p, 1, &ctx, (1, 3));
     let (ne, nn) = (gpu.model().elements.len(), gpu.model().n_nodes());
     let l = b.layout();
-    assert_eq!((l.nodes_per_slot, l.members, l.per_slot), (nn, 1, ne));
+    assert_eq!((l.nodes_per_slot, l.members, l.per_slot), (nn, 3, ne));
     let (q1, q2) = (vec![1e-4; gpu.n_dofs()], vec![2e-4; gpu.n_dofs()]);
     let t0 = b.timers();
     gpu.frozen_system_at(&q1, true);
@@ -215,7 +224,11 @@ fn readback_and_upload_bytes_follow_the_layout() {
     let t2 = b.timers();
     let with = t1.bytes_down - t0.bytes_down;
     let without = t2.bytes_down - t1.bytes_down;
-    assert_eq!(with, 8 * l.len() as u64);
+    assert_eq!(
+        with,
+        8 * (l.residual_per_member() + l.tangent_per_member()) as u64
+    );
+    assert_eq!(l.tangent_per_member(), 81 * (nn + 2 * ne));
     assert_eq!(without, 8 * (9 * nn + 3) as u64);
     println!(
         "cantilever ({ne} elements): bytes down per element per iteration {:.1} with the tangent, {:.1} without (raw element output: {} / {})",
