@@ -58,15 +58,13 @@ pub struct Assembler {
     n_nodes: usize,
     /// Element slots (the kernel's capacity).
     n_elems: usize,
-    per_slot: usize,
-    nodes_per_slot: usize,
     precision: Precision,
     device: wgpu::Device,
     queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     /// Topology buffers (the assembly pass binds the first four, the gather pass the
-    /// last).
+    /// last: per element slot, the node slots of its ends).
     topo: [wgpu::Buffer; 5],
     /// Host mirrors of the topology buffers.
     topo_host: [Vec<u32>; 5],
@@ -80,7 +78,8 @@ pub struct Assembler {
     asm: wgpu::Buffer,
     staging: wgpu::Buffer,
     params: wgpu::Buffer,
-    /// What came back from the last run (the residual-only range or everything).
+    /// Host copy of the assembled buffer; the last run filled the waiting members'
+    /// ranges.
     out: Vec<f64>,
 }
 
@@ -225,8 +224,6 @@ impl Assembler {
             layout,
             n_nodes,
             n_elems,
-            per_slot,
-            nodes_per_slot,
             precision: ctx.precision,
             device,
             queue: ctx.queue.clone(),
@@ -262,13 +259,16 @@ impl Assembler {
         ends: &[[usize; 2]],
         row_masks: &[u32],
     ) -> Result<(), GpuError> {
-        if n_nodes > self.nodes_per_slot || ends.len() > self.per_slot {
-            return Err(GpuError::TooLarge {
-                elements: ends.len().max(n_nodes),
-                max: self.per_slot.min(self.nodes_per_slot),
+        let l = self.layout;
+        if n_nodes > l.nodes_per_slot || ends.len() > l.per_slot || row_masks.len() != ends.len() {
+            return Err(GpuError::SlotTooSmall {
+                elements: ends.len(),
+                nodes: n_nodes,
+                per_slot: l.per_slot,
+                nodes_per_slot: l.nodes_per_slot,
             });
         }
-        let (nb, eb) = (m * self.nodes_per_slot, m * self.per_slot);
+        let (nb, eb) = (m * l.nodes_per_slot, m * l.per_slot);
         let mut lists: Vec<Vec<u32>> = vec![Vec::new(); n_nodes];
         for (e, nodes) in ends.iter().enumerate() {
             for (l, &a) in nodes.iter().enumerate() {
@@ -276,7 +276,7 @@ impl Assembler {
             }
         }
         let mut next = 2 * eb;
-        for j in 0..self.nodes_per_slot {
+        for j in 0..l.nodes_per_slot {
             let list = lists.get(j).map(Vec::as_slice).unwrap_or(&[]);
             self.topo_host[NODE_INC][2 * (nb + j)] = next as u32;
             self.topo_host[NODE_INC][2 * (nb + j) + 1] = list.len() as u32;
@@ -292,7 +292,7 @@ impl Assembler {
         }
         let ranges = [
             (ELEM_NODES, 2 * eb, 2 * (eb + ends.len())),
-            (NODE_INC, 2 * nb, 2 * (nb + self.nodes_per_slot)),
+            (NODE_INC, 2 * nb, 2 * (nb + l.nodes_per_slot)),
             (INC, 2 * eb, next),
             (ROW_MASK, eb, eb + row_masks.len()),
             (MEMBER_N, m, m + 1),
@@ -314,7 +314,7 @@ impl Assembler {
     pub fn set_increments(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
         let nn = self.n_nodes;
         for (j, x) in nodes.iter().enumerate() {
-            let slot = m * self.nodes_per_slot + j;
+            let slot = m * self.layout.nodes_per_slot + j;
             for (k, &v) in x.iter().enumerate() {
                 let h = &mut self.node_x_host[k * nn + slot];
                 if *h != v {

@@ -568,6 +568,12 @@ impl Readback<'_> {
         self.queue.submit(Some(enc.finish()));
         // One mapping covering every copied range (a buffer admits one pending map).
         let end = ranges.iter().map(|&(o, l)| o + l).max().unwrap_or(0);
+        if end == 0 {
+            // Nothing to read (an empty mapping is an error in wgpu).
+            timers.kernel_s += t1.elapsed().as_secs_f64();
+            timers.dispatches += 1;
+            return Ok(());
+        }
         let (tx, rx) = std::sync::mpsc::channel();
         self.staging
             .slice(0..end)

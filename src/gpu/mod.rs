@@ -46,6 +46,18 @@ pub enum GpuError {
     /// A validation, mapping or polling error while running a kernel.
     #[error("GPU kernel failed: {0}")]
     Kernel(String),
+    /// A member has more elements or nodes than a batch slot holds.
+    #[error("a member of {elements} elements and {nodes} nodes does not fit a batch slot of {per_slot} elements and {nodes_per_slot} nodes")]
+    SlotTooSmall {
+        /// The member's elements.
+        elements: usize,
+        /// The member's nodes.
+        nodes: usize,
+        /// Elements per slot.
+        per_slot: usize,
+        /// Nodes per slot.
+        nodes_per_slot: usize,
+    },
     /// The requested batch does not fit the adapter's buffer limits.
     #[error(
         "batch of {elements} elements exceeds the adapter's storage-buffer limit ({max} elements)"
