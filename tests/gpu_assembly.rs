@@ -10,8 +10,10 @@
 //!   scales and matrix relative to their largest entry), with and without the tangent.
 //! * A residual-only iteration reads back exactly the waiting member's node residuals and
 //!   row scales (8 bytes each), an iteration with the tangent also its node and
-//!   off-diagonal blocks, nothing of the other member slots; an iteration at an unchanged state uploads only the frozen scalars
-//!   per element and the increments of the nodes that moved.
+//!   off-diagonal blocks, nothing of the other member slots; an iteration at an unchanged
+//!   state uploads only the frozen scalars per element and the increments of the nodes
+//!   that moved.
+//! * The field offsets of the bookkeeping shaders match `src/gpu/layout.rs`.
 //!
 //! Without an adapter the tests print `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case they fail.
@@ -255,4 +257,21 @@ fn readback_and_upload_bytes_follow_the_layout() {
         up as f64 / ne as f64,
         8 * NI
     );
+}
+
+/// The element-output and iteration field offsets the bookkeeping shaders read or write
+/// are those of `src/gpu/layout.rs` (no adapter needed).
+#[test]
+fn bookkeeping_shaders_match_rust_layout() {
+    use cosserat::gpu::assemble::{ASSEMBLE_WGSL, GATHER_WGSL};
+    use cosserat::gpu::layout::{I_X, O_K, O_R, O_SC};
+    for (src, name, val) in [
+        (ASSEMBLE_WGSL, "O_R", O_R),
+        (ASSEMBLE_WGSL, "O_SC", O_SC),
+        (ASSEMBLE_WGSL, "O_K", O_K),
+        (GATHER_WGSL, "I_X", I_X),
+    ] {
+        let needle = format!("const {name}: u32 = {val}u;");
+        assert!(src.contains(&needle), "shader lacks `{needle}`");
+    }
 }
