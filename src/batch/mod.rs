@@ -9,9 +9,12 @@
 //!
 //! GPU path, per Newton iteration of the batch: each member gathers its element inputs
 //! (state at `n`, increment, frozen scalars), one dispatch evaluates every element of
-//! every waiting member, each member scatters its element blocks into its own sparse
-//! system and solves it on its own worker thread (CPU). The state buffer is uploaded only
-//! when a member's state changed (once per step); the increments every iteration.
+//! every waiting member and a second pass sums them into each member's block system (node
+//! diagonal blocks, element off-diagonal blocks, nodal residuals, row-scale maxima); only
+//! that comes back (without the tangent: residuals and scales only). Each member scatters
+//! its blocks into its own sparse system and solves it on its own worker thread (CPU). A
+//! member's state is uploaded only when it changed (once per step, that member's ranges
+//! only); the increments of the waiting members every iteration.
 
 pub mod gpu;
 
@@ -174,7 +177,13 @@ fn run_member(
     // Baseline schemes have no GPU kernel: such a member runs on the CPU kernel and never
     // joins the batcher (whose barrier waits only for registered members).
     if let Some((b, slot)) = gpu.filter(|_| m.params.scheme.has_gpu_kernel()) {
-        b.register(slot, &sim);
+        if let Err(e) = b.register(slot, &sim) {
+            return MemberResult {
+                index,
+                outcome: setup_failure(e),
+                history: vec![],
+            };
+        }
         let _ = sim.set_backend(b.clone(), slot);
     }
     let mut history = Vec::new();
@@ -232,7 +241,13 @@ pub fn run_members(
                 .max()
                 .unwrap_or(1)
                 .max(1);
-            let cap = GpuBatcher::max_slots(ctx, per_slot).clamp(1, 4096);
+            let nodes_per_slot = members
+                .iter()
+                .map(|m| m.model.n_nodes())
+                .max()
+                .unwrap_or(1)
+                .max(1);
+            let cap = GpuBatcher::max_slots(ctx, per_slot, nodes_per_slot).clamp(1, 4096);
             let want = if opts.workers == 0 {
                 members.len()
             } else {
@@ -240,7 +255,7 @@ pub fn run_members(
             };
             let workers = want.min(cap).min(members.len()).max(1);
             let t0 = Instant::now();
-            let batcher = Arc::new(GpuBatcher::new(ctx, workers, per_slot)?);
+            let batcher = Arc::new(GpuBatcher::new(ctx, workers, per_slot, nodes_per_slot)?);
             stats.setup_s = t0.elapsed().as_secs_f64();
             let next = AtomicUsize::new(0);
             std::thread::scope(|sc| {

@@ -21,9 +21,15 @@ pub const ELEMENT_WGSL: &str = include_str!("../../shaders/element.wgsl");
 /// The shader text for a precision: the f32 variant rewrites `Real` and the two constants
 /// that do not fit an f32.
 pub fn shader_source(p: Precision) -> String {
+    shader_precision(ELEMENT_WGSL, p)
+}
+
+/// `src` for precision `p` (the f32 variant rewrites `Real` and, where present, the two
+/// element-kernel constants that do not fit an f32).
+pub(crate) fn shader_precision(src: &str, p: Precision) -> String {
     match p {
-        Precision::F64 => ELEMENT_WGSL.to_string(),
-        Precision::F32 => ELEMENT_WGSL
+        Precision::F64 => src.to_string(),
+        Precision::F32 => src
             .replace("alias Real = f64;", "alias Real = f32;")
             .replace("const TINY: Real = 1e-300;", "const TINY: Real = 1e-30;")
             .replace(
@@ -52,6 +58,8 @@ pub struct KernelTimers {
     pub kernel_s: f64,
     /// Map + copy out of the staging buffer.
     pub readback_s: f64,
+    /// Host time splitting the read-back assembled buffer into per-member systems.
+    pub unpack_s: f64,
     /// Dispatches.
     pub dispatches: u64,
     /// Bytes uploaded.
@@ -79,10 +87,19 @@ pub struct ElementKernel {
     bind_group: wgpu::BindGroup,
     bufs: [wgpu::Buffer; 4],
     params: wgpu::Buffer,
-    staging: wgpu::Buffer,
+    /// Mappable twin of the output buffer and host copy of the output, created by the
+    /// first [`Self::run`] (the batch path reads assembled systems instead and never
+    /// allocates them).
+    staging: Option<wgpu::Buffer>,
     /// Host mirrors (f64) of the element, state and iteration buffers.
     host: [Vec<f64>; 3],
-    dirty: [bool; 3],
+    /// Per buffer and slot: the slot's fields changed since the last upload (only the
+    /// changed slots' ranges are uploaded).
+    dirty: [Vec<bool>; 3],
+    /// First iteration field uploaded from the host: [`I_X`], or [`I_S`] when a pass
+    /// before the element pass writes the increments on the device
+    /// ([`crate::gpu::Assembler`] gathers them from per-node increments).
+    iter_from: usize,
     out: Vec<f64>,
     /// Stage timers.
     pub timers: KernelTimers,
@@ -90,7 +107,7 @@ pub struct ElementKernel {
 
 impl ElementKernel {
     /// Bytes per scalar.
-    fn width(p: Precision) -> usize {
+    pub(crate) fn width(p: Precision) -> usize {
         match p {
             Precision::F64 => 8,
             Precision::F32 => 4,
@@ -150,11 +167,6 @@ impl ElementKernel {
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             ),
         ];
-        let staging = mk(
-            "staging",
-            NO,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("params"),
             size: std::mem::size_of::<Params>() as u64,
@@ -185,14 +197,15 @@ impl ElementKernel {
             bind_group,
             bufs,
             params,
-            staging,
+            staging: None,
             host: [
                 vec![0.0; NE * cap],
                 vec![0.0; NS * cap],
                 vec![0.0; NI * cap],
             ],
-            dirty: [true; 3],
-            out: vec![0.0; NO * cap],
+            dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
+            iter_from: I_X,
+            out: Vec::new(),
             timers: KernelTimers::default(),
         })
     }
@@ -273,18 +286,16 @@ impl ElementKernel {
             0.0
         };
         self.put(0, E_DIRDISS, i, dd);
-        self.dirty[0] = true;
+        self.dirty[0][i] = true;
     }
 
-    /// Writes the state at `n` of slot `i` (and its cached strains). The state buffer is
-    /// uploaded again only when some slot's state changed (once per step, not per Newton
-    /// iteration).
+    /// Writes the state at `n` of slot `i` (and its cached strains). The slot is uploaded
+    /// again only when its state changed (once per step, not per Newton iteration).
     pub fn set_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
-        let before = self.dirty[1];
         let old: [f64; NS] = std::array::from_fn(|f| self.host[1][f * self.cap + i]);
         self.write_state(i, st, eps_n);
         let changed = (0..NS).any(|f| self.host[1][f * self.cap + i] != old[f]);
-        self.dirty[1] = before || changed;
+        self.dirty[1][i] |= changed;
     }
 
     fn write_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
@@ -314,6 +325,12 @@ impl ElementKernel {
         for c in 0..NDOF {
             self.put(2, I_X + c, i, x[c]);
         }
+        self.set_scalars(i, s);
+    }
+
+    /// Writes the frozen scalars of slot `i` and marks it active (its increment is written
+    /// on the device, see [`Self::gather_increments_on_device`]).
+    pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {
         for (c, v) in [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu]
             .iter()
             .enumerate()
@@ -321,43 +338,65 @@ impl ElementKernel {
             self.put(2, I_S + c, i, *v);
         }
         self.put(2, I_ACTIVE, i, 1.0);
-        self.dirty[2] = true;
+        self.dirty[2][i] = true;
+    }
+
+    /// From now on the increments ([`I_X`] fields) are written by a pass on the device
+    /// before the element pass; uploads of the iteration buffer skip them.
+    pub(crate) fn gather_increments_on_device(&mut self) {
+        self.iter_from = I_S;
+    }
+
+    /// The iteration buffer (the increment gather pass writes its [`I_X`] fields).
+    pub(crate) fn iter_buffer(&self) -> &wgpu::Buffer {
+        &self.bufs[2]
     }
 
     /// Marks slot `i` inactive (the kernel skips it).
     pub fn set_inactive(&mut self, i: usize) {
         if self.host[2][I_ACTIVE * self.cap + i] != 0.0 {
             self.put(2, I_ACTIVE, i, 0.0);
-            self.dirty[2] = true;
+            self.dirty[2][i] = true;
         }
     }
 
+    /// Uploads the changed slots of every input buffer: per run of adjacent changed
+    /// slots, one copy per field (a slot's fields are `capacity` apart); one copy of the
+    /// whole buffer when every slot changed.
     fn upload(&mut self) {
-        for b in 0..3 {
-            if !self.dirty[b] {
+        let fields = [0..NE, 0..NS, self.iter_from..NI];
+        for (b, fields) in fields.into_iter().enumerate() {
+            let runs = take_runs(&mut self.dirty[b]);
+            let (host, buf) = (&self.host[b], &self.bufs[b]);
+            let mut put = |lo: usize, hi: usize| {
+                self.timers.bytes_up +=
+                    write_scalars(&self.queue, buf, lo, &host[lo..hi], self.precision);
+            };
+            if runs == [(0, self.cap)] {
+                put(fields.start * self.cap, fields.end * self.cap);
                 continue;
             }
-            let bytes = match self.precision {
-                Precision::F64 => {
-                    self.queue
-                        .write_buffer(&self.bufs[b], 0, bytemuck::cast_slice(&self.host[b]));
-                    self.host[b].len() * 8
+            for &(lo, hi) in &runs {
+                for f in fields.clone() {
+                    put(f * self.cap + lo, f * self.cap + hi);
                 }
-                Precision::F32 => {
-                    let v: Vec<f32> = self.host[b].iter().map(|&x| x as f32).collect();
-                    self.queue
-                        .write_buffer(&self.bufs[b], 0, bytemuck::cast_slice(&v));
-                    v.len() * 4
-                }
-            };
-            self.timers.bytes_up += bytes as u64;
-            self.dirty[b] = false;
+            }
         }
     }
 
-    /// Evaluates every active slot. Without the tangent only the residual, scales and
-    /// scalars come back.
-    pub fn run(&mut self, mode: KernelMode, want_tangent: bool) -> Result<(), GpuError> {
+    /// The element output buffer (read by the assembly pass).
+    pub(crate) fn output_buffer(&self) -> &wgpu::Buffer {
+        &self.bufs[3]
+    }
+
+    /// Uploads what changed and records the element pass into `enc` (counted as upload
+    /// time).
+    pub(crate) fn encode(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        mode: KernelMode,
+        want_tangent: bool,
+    ) {
         let t0 = Instant::now();
         self.upload();
         let prm = Params {
@@ -371,7 +410,24 @@ impl ElementKernel {
         };
         self.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
-        let t1 = Instant::now();
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("element"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.dispatch_workgroups(self.cap.div_ceil(64) as u32, 1, 1);
+        drop(pass);
+        self.timers.upload_s += t0.elapsed().as_secs_f64();
+    }
+
+    /// Evaluates every active slot and reads the raw element output back. Without the
+    /// tangent only the residual, scales and scalars come back.
+    pub fn run(&mut self, mode: KernelMode, want_tangent: bool) -> Result<(), GpuError> {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.encode(&mut enc, mode, want_tangent);
         let w = Self::width(self.precision) as u64;
         let cap = self.cap as u64;
         // Field-major: the residual and scales are one leading range, the scalars a
@@ -384,63 +440,24 @@ impl ElementKernel {
                 (O_S as u64 * cap * w, 4 * cap * w),
             ]
         };
-        let mut enc = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("element"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.dispatch_workgroups(self.cap.div_ceil(64) as u32, 1, 1);
-        }
-        for &(off, len) in &ranges {
-            enc.copy_buffer_to_buffer(&self.bufs[3], off, &self.staging, off, len);
-        }
-        self.queue.submit(Some(enc.finish()));
-        // One mapping covering every copied range (a buffer admits one pending map).
-        let end = ranges.iter().map(|&(o, l)| o + l).max().unwrap_or(0);
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.staging
-            .slice(0..end)
-            .map_async(wgpu::MapMode::Read, move |r| {
-                let _ = tx.send(r);
-            });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Kernel(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Kernel(e.to_string()))?
-            .map_err(|e| GpuError::Kernel(e.to_string()))?;
-        let t2 = Instant::now();
-        for &(off, len) in &ranges {
-            let view = self
-                .staging
-                .get_mapped_range(off..off + len)
-                .map_err(|e| GpuError::Kernel(e.to_string()))?;
-            let dst = &mut self.out[(off / w) as usize..((off + len) / w) as usize];
-            match self.precision {
-                Precision::F64 => dst.copy_from_slice(bytemuck::cast_slice(&view)),
-                Precision::F32 => {
-                    let src: &[f32] = bytemuck::cast_slice(&view);
-                    for (d, s) in dst.iter_mut().zip(src) {
-                        *d = *s as f64;
-                    }
-                }
-            }
-            self.timers.bytes_down += len;
-        }
-        self.staging.unmap();
-        let t3 = Instant::now();
-        self.timers.upload_s += (t1 - t0).as_secs_f64();
-        self.timers.kernel_s += (t2 - t1).as_secs_f64();
-        self.timers.readback_s += (t3 - t2).as_secs_f64();
-        self.timers.dispatches += 1;
-        Ok(())
+        let staging = self.staging.get_or_insert_with(|| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("staging"),
+                size: NO as u64 * cap * w,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        self.out.resize(NO * self.cap, 0.0);
+        let rb = Readback {
+            device: &self.device,
+            queue: &self.queue,
+            src: &self.bufs[3],
+            staging,
+            precision: self.precision,
+        };
+        rb.run(enc, &ranges, &mut self.out, &mut self.timers)
     }
-
     #[inline]
     fn get(&self, f: usize, i: usize) -> f64 {
         self.out[f * self.cap + i]
@@ -468,5 +485,129 @@ impl ElementKernel {
             c_v: self.get(O_S + 2, i),
             c_nu: self.get(O_S + 3, i),
         }
+    }
+}
+
+/// Writes `src` into `buf` from scalar `at` on (converted to f32 for
+/// [`Precision::F32`]); returns the bytes written.
+pub(crate) fn write_scalars(
+    queue: &wgpu::Queue,
+    buf: &wgpu::Buffer,
+    at: usize,
+    src: &[f64],
+    precision: Precision,
+) -> u64 {
+    let w = ElementKernel::width(precision);
+    let off = (at * w) as u64;
+    match precision {
+        Precision::F64 => queue.write_buffer(buf, off, bytemuck::cast_slice(src)),
+        Precision::F32 => {
+            let v: Vec<f32> = src.iter().map(|&x| x as f32).collect();
+            queue.write_buffer(buf, off, bytemuck::cast_slice(&v));
+        }
+    }
+    (src.len() * w) as u64
+}
+
+/// Clean slots between two changed ones up to which both go up in one copy: each copy
+/// has a fixed cost (a staging allocation and a command) worth a few hundred bytes, and
+/// the host mirrors of clean slots are current, so re-sending them is harmless.
+const MERGE_GAP: usize = 32;
+
+/// The runs `(lo, hi)` of set flags, clearing them; runs closer than [`MERGE_GAP`] are
+/// merged.
+pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut i = 0;
+    while i < flags.len() {
+        if flags[i] {
+            let lo = i;
+            while i < flags.len() && flags[i] {
+                flags[i] = false;
+                i += 1;
+            }
+            match runs.last_mut() {
+                Some(last) if lo - last.1 <= MERGE_GAP => last.1 = i,
+                _ => runs.push((lo, i)),
+            }
+        } else {
+            i += 1;
+        }
+    }
+    runs
+}
+
+/// Submission of an encoded command buffer followed by the readback of byte ranges of one
+/// storage buffer through a staging buffer of the same layout.
+pub(crate) struct Readback<'a> {
+    pub device: &'a wgpu::Device,
+    pub queue: &'a wgpu::Queue,
+    /// Buffer the ranges are read from.
+    pub src: &'a wgpu::Buffer,
+    /// Mappable twin of `src`.
+    pub staging: &'a wgpu::Buffer,
+    pub precision: Precision,
+}
+
+impl Readback<'_> {
+    /// Copies `ranges` (byte offset, length) of `src` at the end of `enc`, submits, waits,
+    /// and converts them into `dst` (scalar index = byte offset / width). Counts the
+    /// dispatch, its kernel and readback time and the bytes read.
+    pub fn run(
+        &self,
+        mut enc: wgpu::CommandEncoder,
+        ranges: &[(u64, u64)],
+        dst: &mut [f64],
+        timers: &mut KernelTimers,
+    ) -> Result<(), GpuError> {
+        let t1 = Instant::now();
+        let w = ElementKernel::width(self.precision) as u64;
+        for &(off, len) in ranges {
+            enc.copy_buffer_to_buffer(self.src, off, self.staging, off, len);
+        }
+        self.queue.submit(Some(enc.finish()));
+        // One mapping covering every copied range (a buffer admits one pending map).
+        let end = ranges.iter().map(|&(o, l)| o + l).max().unwrap_or(0);
+        if end == 0 {
+            // Nothing to read (an empty mapping is an error in wgpu).
+            timers.kernel_s += t1.elapsed().as_secs_f64();
+            timers.dispatches += 1;
+            return Ok(());
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.staging
+            .slice(0..end)
+            .map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Kernel(e.to_string()))?
+            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        let t2 = Instant::now();
+        for &(off, len) in ranges {
+            let view = self
+                .staging
+                .get_mapped_range(off..off + len)
+                .map_err(|e| GpuError::Kernel(e.to_string()))?;
+            let out = &mut dst[(off / w) as usize..((off + len) / w) as usize];
+            match self.precision {
+                Precision::F64 => out.copy_from_slice(bytemuck::cast_slice(&view)),
+                Precision::F32 => {
+                    let src: &[f32] = bytemuck::cast_slice(&view);
+                    for (d, s) in out.iter_mut().zip(src) {
+                        *d = *s as f64;
+                    }
+                }
+            }
+            timers.bytes_down += len;
+        }
+        self.staging.unmap();
+        timers.kernel_s += (t2 - t1).as_secs_f64();
+        timers.readback_s += t2.elapsed().as_secs_f64();
+        timers.dispatches += 1;
+        Ok(())
     }
 }

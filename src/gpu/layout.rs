@@ -62,3 +62,70 @@ pub const O_K: usize = 36;
 pub const O_S: usize = 360;
 /// Number of output fields.
 pub const NO: usize = 364;
+
+/// Node-local unknowns (`u0..2 θ0..2 g0..2`) of the assembled system.
+pub const A_NODE: usize = 9;
+/// Entries of one 9×9 block (row-major).
+pub const A_BLOCK: usize = A_NODE * A_NODE;
+
+/// Layout of the assembled buffer written by `shaders/assemble.wgsl`, member-major so
+/// that the members of one dispatch come back as a few contiguous ranges:
+///
+/// * residual region: per member slot `m`, at `m * residual_per_member()`, its node
+///   residuals (`A_NODE` per node slot, node after node) then its three row-scale maxima
+///   (u, θ, g);
+/// * tangent region, from `tangent_start()`: per member slot, at
+///   `tangent_start() + m * tangent_per_member()`, its node diagonal blocks (`A_BLOCK`
+///   per node slot, row-major) then its element off-diagonal blocks ((0,1) then (1,0),
+///   `A_BLOCK` each).
+///
+/// A residual-only iteration reads back the residual region of the waiting members only.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AsmLayout {
+    /// Member slots.
+    pub members: usize,
+    /// Node slots per member.
+    pub nodes_per_slot: usize,
+    /// Element slots per member.
+    pub per_slot: usize,
+}
+
+impl AsmLayout {
+    /// Scalars of one member's residual region (node residuals and scales).
+    pub fn residual_per_member(&self) -> usize {
+        A_NODE * self.nodes_per_slot + 3
+    }
+    /// Scalars of one member's tangent region (node and off-diagonal blocks).
+    pub fn tangent_per_member(&self) -> usize {
+        A_BLOCK * (self.nodes_per_slot + 2 * self.per_slot)
+    }
+    /// Start of the tangent region.
+    pub fn tangent_start(&self) -> usize {
+        self.members * self.residual_per_member()
+    }
+    /// Scalars of the whole buffer.
+    pub fn len(&self) -> usize {
+        self.tangent_start() + self.members * self.tangent_per_member()
+    }
+    /// Always false (a layout has at least one slot of each kind); for clippy's `len`.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// First of the `A_NODE` residual rows of node `j` of member `m`.
+    pub fn node_residual(&self, m: usize, j: usize) -> usize {
+        m * self.residual_per_member() + A_NODE * j
+    }
+    /// First of the three row-scale maxima of member `m`.
+    pub fn scales(&self, m: usize) -> usize {
+        m * self.residual_per_member() + A_NODE * self.nodes_per_slot
+    }
+    /// First entry of the diagonal block of node `j` of member `m`.
+    pub fn node_block(&self, m: usize, j: usize) -> usize {
+        self.tangent_start() + m * self.tangent_per_member() + A_BLOCK * j
+    }
+    /// First entry of off-diagonal block `h` (0: (0,1), 1: (1,0)) of element `e` of
+    /// member `m`.
+    pub fn off_block(&self, m: usize, e: usize, h: usize) -> usize {
+        self.node_block(m, self.nodes_per_slot) + A_BLOCK * (2 * e + h)
+    }
+}

@@ -5,17 +5,22 @@
 //!   adapter's own limits, `SHADER_F64` detection, a one-line adapter description.
 //! * [`layout`]: the struct-of-arrays buffer layout (field offsets), twin of the constants
 //!   at the top of `shaders/element.wgsl`.
-//! * [`kernel`]: the compute pipeline built once, host mirrors of the buffers, upload,
-//!   dispatch and readback of a batch of elements.
+//! * [`kernel`]: the compute pipeline built once, host mirrors of the buffers, upload of
+//!   the changed slots, dispatch and readback of a batch of elements.
+//! * [`assemble`]: the assembly pass run right after the element pass (node blocks,
+//!   residuals, off-diagonal blocks, per-member row scales), so that only assembled
+//!   systems are read back.
 //!
 //! f64 is used whenever the adapter offers `SHADER_F64`; otherwise the same shader runs in
 //! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (README,
 //! "GPU precision"); callers are told which precision they got, never silently.
 
+pub mod assemble;
 pub mod context;
 pub mod kernel;
 pub mod layout;
 
+pub use assemble::Assembler;
 pub use context::{GpuContext, Precision};
 pub use kernel::ElementKernel;
 
@@ -41,6 +46,18 @@ pub enum GpuError {
     /// A validation, mapping or polling error while running a kernel.
     #[error("GPU kernel failed: {0}")]
     Kernel(String),
+    /// A member has more elements or nodes than a batch slot holds.
+    #[error("a member of {elements} elements and {nodes} nodes does not fit a batch slot of {per_slot} elements and {nodes_per_slot} nodes")]
+    SlotTooSmall {
+        /// The member's elements.
+        elements: usize,
+        /// The member's nodes.
+        nodes: usize,
+        /// Elements per slot.
+        per_slot: usize,
+        /// Nodes per slot.
+        nodes_per_slot: usize,
+    },
     /// The requested batch does not fit the adapter's buffer limits.
     #[error(
         "batch of {elements} elements exceeds the adapter's storage-buffer limit ({max} elements)"

@@ -11,8 +11,8 @@ use crate::element::{
     consistent_scalars, g_idx, kinematics, monolithic_correction, residual_tangent, strains6,
     th_idx, u_idx, ElementData, ElementEval, FrozenScalars, Increment, StepConsts, NDOF,
 };
-use crate::integrator::backend::{ElementBackend, ElementInput};
-use crate::integrator::dofs::{DofMap, NONE};
+use crate::integrator::backend::{AssembledSystem, ElementBackend, ElementInput};
+use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
 use crate::integrator::gen_alpha::GenAlpha;
 use crate::integrator::links;
 use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
@@ -104,6 +104,15 @@ pub struct Simulation {
     slots: Vec<Vec<usize>>,
     /// Per node: slots of the diagonal entries of the (u,u), (u,g), (g,u), (g,g) blocks.
     node_slots: Vec<[[usize; 3]; 4]>,
+    /// Per node: solver slot of each entry of its node-local 9×9 diagonal block
+    /// (`u0..2 θ0..2 g0..2`, row-major), [`NONE`] if inactive (a backend's assembled
+    /// blocks are scattered through it).
+    node_block_slots: Vec<[usize; 81]>,
+    /// Per element: solver slots of its node-local off-diagonal blocks (end 0, end 1) and
+    /// (end 1, end 0), [`NONE`] if inactive.
+    off_block_slots: Vec<[[usize; 81]; 2]>,
+    /// Per-kind row scales (u, θ, g) of the last assembly.
+    last_scale: [f64; 3],
     /// Residual of the last converged Newton solve (for the residual work in `check`).
     last_residual: Vec<f64>,
     /// Per rigid link: slots of its node's (u, u) block.
@@ -210,6 +219,7 @@ impl Simulation {
                 ]
             })
             .collect();
+        let (node_block_slots, off_block_slots) = Self::block_slots(&model, &dofs, &solver);
         let link_slots = link_dofs
             .iter()
             .map(|ix| {
@@ -250,6 +260,9 @@ impl Simulation {
             solver,
             slots,
             node_slots,
+            node_block_slots,
+            off_block_slots,
+            last_scale: [0.0; 3],
             link_slots,
             state,
             inv,
@@ -316,6 +329,60 @@ impl Simulation {
     pub fn n_dofs(&self) -> usize {
         self.dofs.n
     }
+    /// The numbering of the Newton unknowns.
+    pub fn dof_map(&self) -> &DofMap {
+        &self.dofs
+    }
+
+    /// Solver slots of the node-local blocks: each node's 9×9 diagonal block (entries
+    /// exist only where the node has an element) and each element's two off-diagonal
+    /// blocks.
+    #[allow(clippy::type_complexity)]
+    fn block_slots(
+        model: &Model,
+        dofs: &DofMap,
+        solver: &SparseSolver,
+    ) -> (Vec<[usize; 81]>, Vec<[[usize; 81]; 2]>) {
+        let table = |a: &[usize; 9], b: &[usize; 9]| -> [usize; 81] {
+            std::array::from_fn(|f| {
+                let (i, j) = (a[f / 9], b[f % 9]);
+                if i == NONE || j == NONE {
+                    NONE
+                } else {
+                    solver.slot(i, j)
+                }
+            })
+        };
+        let mut has_element = vec![false; dofs.nodes.len()];
+        for e in &model.elements {
+            e.nodes.iter().for_each(|&a| has_element[a] = true);
+        }
+        let node = dofs
+            .nodes
+            .iter()
+            .zip(&has_element)
+            .map(|(nd, &has)| {
+                if has {
+                    let ix = node_local(nd);
+                    table(&ix, &ix)
+                } else {
+                    [NONE; 81]
+                }
+            })
+            .collect();
+        let off = model
+            .elements
+            .iter()
+            .map(|e| {
+                let (a, b) = (
+                    node_local(&dofs.nodes[e.nodes[0]]),
+                    node_local(&dofs.nodes[e.nodes[1]]),
+                );
+                [table(&a, &b), table(&b, &a)]
+            })
+            .collect();
+        (node, off)
+    }
 
     /// Replaces the current state (e.g. to start from a prescribed motion in tests).
     /// Not supported for [`Scheme::GenAlpha`], whose nodal rotations, velocities and
@@ -357,28 +424,37 @@ impl Simulation {
         if tangent {
             self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
         }
-        let mut batch = match (&self.backend, mode) {
-            (Some((b, slot)), Mode::Frozen) => {
-                let inputs: Vec<ElementInput> = (0..self.model.elements.len())
-                    .map(|e| ElementInput {
-                        st: self.state.element(&self.model, e),
-                        eps_n: self.state.eps[e],
-                        inc: self.gather(e, q),
-                        s: self.frozen[e],
-                    })
-                    .collect();
-                match b.evaluate(*slot, &inputs, tangent) {
-                    Ok(v) => Some(v.into_iter()),
-                    Err(_) => return f64::NAN,
-                }
-            }
+        let backend = match (&self.backend, mode) {
+            (Some((b, slot)), Mode::Frozen) => Some((b.clone(), *slot)),
             _ => None,
         };
-        for e in 0..self.model.elements.len() {
-            if let Some(ev) = batch.as_mut().and_then(|b| b.next()) {
-                self.scatter(e, &ev, tangent, r, &mut scale);
-                continue;
+        // With a backend the elements arrive already summed per node; the CPU kernel
+        // loop below is skipped.
+        let n_cpu = if backend.is_some() {
+            0
+        } else {
+            self.model.elements.len()
+        };
+        if let Some((b, slot)) = backend {
+            let inputs: Vec<ElementInput> = (0..self.model.elements.len())
+                .map(|e| ElementInput {
+                    st: self.state.element(&self.model, e),
+                    eps_n: self.state.eps[e],
+                    s: self.frozen[e],
+                })
+                .collect();
+            let increments: Vec<[f64; 9]> = self
+                .dofs
+                .nodes
+                .iter()
+                .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { q[i] }))
+                .collect();
+            match b.evaluate_assembled(slot, &inputs, &increments, tangent) {
+                Ok(sys) => self.scatter_assembled(&sys, tangent, r, &mut scale),
+                Err(_) => return f64::NAN,
             }
+        }
+        for e in 0..n_cpu {
             let inc = self.gather(e, q);
             let st = self.state.element(&self.model, e);
             let eps_n = self.state.eps[e];
@@ -466,6 +542,7 @@ impl Simulation {
                 }
             }
         }
+        self.last_scale = scale;
         let mut worst: f64 = 0.0;
         for (i, &ri) in r.iter().enumerate() {
             let s = scale[self.row_kinds[i]].max(1e-300);
@@ -505,6 +582,45 @@ impl Simulation {
                     }
                 }
             }
+        }
+    }
+
+    /// Adds a backend's assembled system (node blocks, off-diagonal blocks, residual rows
+    /// and per-kind scales) into the global system.
+    fn scatter_assembled(
+        &mut self,
+        sys: &AssembledSystem,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        for (nd, nr) in self.dofs.nodes.iter().zip(&sys.node_r) {
+            for (&i, &x) in node_local(nd).iter().zip(nr) {
+                if i != NONE {
+                    r[i] += x;
+                }
+            }
+        }
+        for (s, &x) in scale.iter_mut().zip(&sys.scale) {
+            *s = s.max(x);
+        }
+        if !tangent {
+            return;
+        }
+        let vals = self.solver.values_mut();
+        let add = |vals: &mut [f64], slots: &[usize; 81], block: &[f64; 81]| {
+            for (&s, &x) in slots.iter().zip(block) {
+                if s != NONE {
+                    vals[s] += x;
+                }
+            }
+        };
+        for (slots, block) in self.node_block_slots.iter().zip(&sys.node_k) {
+            add(vals, slots, block);
+        }
+        for (slots, blocks) in self.off_block_slots.iter().zip(&sys.off_k) {
+            add(vals, &slots[0], &blocks[0]);
+            add(vals, &slots[1], &blocks[1]);
         }
     }
 
@@ -884,14 +1000,7 @@ impl Simulation {
     /// (for tests of the tangent).
     pub fn residual_at(&mut self, q: &[f64], consistent: bool) -> Vec<f64> {
         let mut r = vec![0.0; self.dofs.n];
-        let t_mid = self.state.t + 0.5 * self.params.dt;
-        let (mut f, mut m) = (
-            std::mem::take(&mut self.force),
-            std::mem::take(&mut self.moment),
-        );
-        self.model.external_loads(t_mid, &mut f, &mut m);
-        self.force = f;
-        self.moment = m;
+        self.mid_step_loads();
         let mode = if consistent {
             Mode::Consistent
         } else {
@@ -920,6 +1029,34 @@ impl Simulation {
         dense
     }
 
+    /// Residual, per-kind row scales (u, θ, g) and matrix values (pattern order)
+    /// assembled at `q` with the frozen scalars: through the backend when one is attached,
+    /// else on the CPU kernel (tests compare the two).
+    /// Without `tangent` the values are left out (empty).
+    pub fn frozen_system_at(&mut self, q: &[f64], tangent: bool) -> (Vec<f64>, [f64; 3], Vec<f64>) {
+        let mut r = vec![0.0; self.dofs.n];
+        self.mid_step_loads();
+        self.assemble(q, Mode::Frozen, tangent, &mut r);
+        let values = if tangent {
+            self.solver.values().to_vec()
+        } else {
+            Vec::new()
+        };
+        (r, self.last_scale, values)
+    }
+
+    /// The external loads at the middle of the coming step (for the test helpers).
+    fn mid_step_loads(&mut self) {
+        let t_mid = self.state.t + 0.5 * self.params.dt;
+        let (mut f, mut m) = (
+            std::mem::take(&mut self.force),
+            std::mem::take(&mut self.moment),
+        );
+        self.model.external_loads(t_mid, &mut f, &mut m);
+        self.force = f;
+        self.moment = m;
+    }
+
     /// Sets the frozen dissipation scalars of every element (tests of the staggered
     /// tangent).
     pub fn set_frozen(&mut self, s: FrozenScalars) {
@@ -935,6 +1072,16 @@ pub(crate) const ROUNDOFF_RESIDUAL: f64 = 1e5;
 #[inline]
 fn gather3(q: &[f64], idx: &[usize; 3]) -> Vec3 {
     Vec3::from_fn(|c, _| if idx[c] == NONE { 0.0 } else { q[idx[c]] })
+}
+
+/// The global unknowns of a node in node-local order `u0..2 θ0..2 g0..2`.
+#[inline]
+fn node_local(nd: &NodeDofs) -> [usize; 9] {
+    std::array::from_fn(|k| match k / 3 {
+        0 => nd.u[k % 3],
+        1 => nd.th[k % 3],
+        _ => nd.g[k % 3],
+    })
 }
 
 /// Kind of an element-local row: 0 = u, 1 = θ, 2 = g.

@@ -12,6 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use cosserat::batch::{
     bench_members, run_members, BackendChoice, BatchOptions, BatchStats, Executor, GpuBatcher,
 };
+use cosserat::gpu::kernel::KernelTimers;
 use cosserat::integrator::{Simulation, SolveTimers};
 use cosserat::observe::record::RunStatus;
 use cosserat::sweep::{load_sweep, run_sweep, SweepOptions};
@@ -69,8 +70,13 @@ pub fn attach(
                 );
                 return Ok(None);
             }
-            let b = Arc::new(GpuBatcher::new(&ctx, 1, sim.model().elements.len())?);
-            b.register(0, sim);
+            let b = Arc::new(GpuBatcher::new(
+                &ctx,
+                1,
+                sim.model().elements.len(),
+                sim.model().n_nodes(),
+            )?);
+            b.register(0, sim)?;
             let _ = sim.set_backend(b.clone(), 0);
             Ok(Some(b))
         }
@@ -235,6 +241,13 @@ fn stages_json(obj: &mut serde_json::Value, p: &str, t: &SolveTimers) {
     obj[format!("{p}_solves")] = t.solves.into();
 }
 
+/// Bytes uploaded and read back per element slot per dispatch (`elements` slots: every
+/// member in flight at once).
+fn per_element_dispatch(t: &KernelTimers, elements: usize) -> (f64, f64) {
+    let n = (t.dispatches as f64 * elements as f64).max(1.0);
+    (t.bytes_up as f64 / n, t.bytes_down as f64 / n)
+}
+
 /// `cosserat bench`: the same batch on the CPU path and on the GPU path.
 pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let members = bench_members(a.rods, a.elements, a.steps);
@@ -287,6 +300,10 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             obj["gpu_dispatches"] = k.dispatches.into();
             obj["gpu_bytes_up"] = k.bytes_up.into();
             obj["gpu_bytes_down"] = k.bytes_down.into();
+            obj["gpu_unpack_s"] = k.unpack_s.into();
+            let (up, down) = per_element_dispatch(k, a.rods * a.elements);
+            obj["gpu_bytes_up_per_element_dispatch"] = up.into();
+            obj["gpu_bytes_down_per_element_dispatch"] = down.into();
             stages_json(&mut obj, "gpu", &g.stages);
         }
         println!("{obj}");
@@ -319,16 +336,21 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
                     "gpu ({adapter}): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed; ratio gpu/cpu {:.2}",
                     w.wall_s, rate, rod_steps / w.wall_s, g.iters, g.failed, rate / cpu_rate
                 );
-                let other = w.wall_s - w.setup_s - k.upload_s - k.kernel_s - k.readback_s;
+                let other =
+                    w.wall_s - w.setup_s - k.upload_s - k.kernel_s - k.readback_s - k.unpack_s;
+                let (up, down) = per_element_dispatch(k, a.rods * a.elements);
                 println!(
-                    "gpu time: pipeline setup {:.3} s, upload {:.3} s, kernel+copy {:.3} s, readback {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down); host gather+assembly+solve+barrier {:.3} s",
+                    "gpu time: pipeline setup {:.3} s, upload {:.3} s, kernel+assembly+copy {:.3} s, readback {:.3} s, unpack {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down; per element per dispatch {:.0} B up, {:.0} B down); host gather+scatter+solve+barrier {:.3} s",
                     w.setup_s,
                     k.upload_s,
                     k.kernel_s,
                     k.readback_s,
+                    k.unpack_s,
                     k.dispatches,
                     k.bytes_up as f64 / 1e6,
                     k.bytes_down as f64 / 1e6,
+                    up,
+                    down,
                     other
                 );
                 println!(

@@ -1,0 +1,503 @@
+//! The assembly pass on the GPU: right after the element pass, in the same command
+//! buffer, `shaders/assemble.wgsl` sums each member's element blocks into per-node
+//! diagonal blocks and residuals, compacts the element off-diagonal blocks and reduces the
+//! row scales per member. Only that assembled system crosses the bus, and without the
+//! tangent only the nodal residuals and three scales per member.
+//!
+//! The increments go up once per node: a gather pass (`shaders/gather.wgsl`) before the
+//! element pass copies each element's two node increments into the element kernel's
+//! increment fields.
+
+use super::context::{GpuContext, Precision};
+use super::kernel::{
+    shader_precision, take_runs, write_scalars, ElementKernel, KernelMode, KernelTimers, Readback,
+};
+use super::layout::{AsmLayout, A_NODE};
+use super::GpuError;
+use crate::integrator::backend::AssembledSystem;
+
+/// The WGSL source of the assembly pass (f64 version).
+pub const ASSEMBLE_WGSL: &str = include_str!("../../shaders/assemble.wgsl");
+/// The WGSL source of the increment gather pass (f64 version).
+pub const GATHER_WGSL: &str = include_str!("../../shaders/gather.wgsl");
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GatherParams {
+    n_elem: u32,
+    n_node: u32,
+    pad: [u32; 2],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    n_elem: u32,
+    n_node: u32,
+    n_member: u32,
+    per_slot: u32,
+    nodes_per_slot: u32,
+    want_tangent: u32,
+    k_start: u32,
+    pad: u32,
+}
+
+/// Topology buffers (u32) of the assembly pass, in binding order.
+const NODE_INC: usize = 0;
+const INC: usize = 1;
+const ROW_MASK: usize = 2;
+const MEMBER_N: usize = 3;
+const ELEM_NODES: usize = 4;
+
+/// Assembly of `members` member slots of at most `per_slot` elements and `nodes_per_slot`
+/// nodes each, over the element slots of one [`ElementKernel`] (member `m`'s element `e`
+/// in kernel slot `m * per_slot + e`).
+pub struct Assembler {
+    layout: AsmLayout,
+    /// Node slots (`members × nodes_per_slot`).
+    n_nodes: usize,
+    /// Element slots (the kernel's capacity).
+    n_elems: usize,
+    precision: Precision,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    /// Topology buffers (the assembly pass binds the first four, the gather pass the
+    /// last: per element slot, the node slots of its ends).
+    topo: [wgpu::Buffer; 5],
+    /// Host mirrors of the topology buffers.
+    topo_host: [Vec<u32>; 5],
+    gather_pipeline: wgpu::ComputePipeline,
+    gather_group: wgpu::BindGroup,
+    /// Node increments (9 per node slot, field-major) on the device, their host mirror
+    /// and which node slots changed since the last upload.
+    node_x: wgpu::Buffer,
+    node_x_host: Vec<f64>,
+    node_x_dirty: Vec<bool>,
+    asm: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    params: wgpu::Buffer,
+    /// Host copy of the assembled buffer; the last run filled the waiting members'
+    /// ranges.
+    out: Vec<f64>,
+}
+
+impl Assembler {
+    /// Scalars of the assembled buffer per member slot.
+    fn scalars_per_member(per_slot: usize, nodes_per_slot: usize) -> u64 {
+        let one = AsmLayout {
+            members: 1,
+            nodes_per_slot,
+            per_slot,
+        };
+        one.len() as u64
+    }
+
+    /// The largest number of member slots whose assembled buffer fits the device.
+    pub fn max_members(ctx: &GpuContext, per_slot: usize, nodes_per_slot: usize) -> usize {
+        let per = Self::scalars_per_member(per_slot, nodes_per_slot)
+            * ElementKernel::width(ctx.precision) as u64;
+        let lim = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
+        (lim / per.max(1)) as usize
+    }
+
+    /// Builds the passes around `kernel` (whose capacity must be `members * per_slot`):
+    /// from now on `kernel`'s increments come from the gather pass. Every member slot
+    /// starts empty (no elements).
+    pub fn new(
+        ctx: &GpuContext,
+        kernel: &mut ElementKernel,
+        members: usize,
+        per_slot: usize,
+        nodes_per_slot: usize,
+    ) -> Result<Self, GpuError> {
+        let max = Self::max_members(ctx, per_slot, nodes_per_slot);
+        if members > max {
+            return Err(GpuError::TooLarge {
+                elements: members * per_slot,
+                max: max * per_slot,
+            });
+        }
+        let layout = AsmLayout {
+            members: members.max(1),
+            nodes_per_slot: nodes_per_slot.max(1),
+            per_slot: per_slot.max(1),
+        };
+        let n_nodes = layout.members * layout.nodes_per_slot;
+        let n_elems = kernel.capacity();
+        let device = ctx.device.clone();
+        let w = ElementKernel::width(ctx.precision) as u64;
+        let pipeline = compute_pipeline(&device, "assemble", ASSEMBLE_WGSL, ctx.precision);
+        let gather_pipeline = compute_pipeline(&device, "gather", GATHER_WGSL, ctx.precision);
+        let topo_host = [
+            vec![0u32; 2 * n_nodes],
+            vec![0u32; 2 * n_elems],
+            vec![0u32; n_elems],
+            vec![0u32; layout.members],
+            vec![0u32; 2 * n_elems],
+        ];
+        let names = ["node_inc", "inc", "row_mask", "member_n", "elem_nodes"];
+        let topo = std::array::from_fn(|b| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(names[b]),
+                size: 4 * topo_host[b].len() as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        for (buf, host) in topo.iter().zip(&topo_host) {
+            ctx.queue
+                .write_buffer(buf, 0, bytemuck::cast_slice(host.as_slice()));
+        }
+        let mk = |label: &str, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: layout.len() as u64 * w,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let asm = mk(
+            "assembled",
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
+        let staging = mk(
+            "assembled staging",
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("assemble params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = make_bind_group(
+            &device,
+            &pipeline,
+            "assemble",
+            &[
+                kernel.output_buffer(),
+                &topo[NODE_INC],
+                &topo[INC],
+                &topo[ROW_MASK],
+                &topo[MEMBER_N],
+                &asm,
+                &params,
+            ],
+        );
+        let node_x = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("node increments"),
+            size: (A_NODE * n_nodes) as u64 * w,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let gather_params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("gather params"),
+            size: std::mem::size_of::<GatherParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let gp = GatherParams {
+            n_elem: n_elems as u32,
+            n_node: n_nodes as u32,
+            pad: [0; 2],
+        };
+        ctx.queue
+            .write_buffer(&gather_params, 0, bytemuck::bytes_of(&gp));
+        let gather_group = make_bind_group(
+            &device,
+            &gather_pipeline,
+            "gather",
+            &[
+                &node_x,
+                &topo[ELEM_NODES],
+                kernel.iter_buffer(),
+                &gather_params,
+            ],
+        );
+        kernel.gather_increments_on_device();
+        Ok(Self {
+            layout,
+            n_nodes,
+            n_elems,
+            precision: ctx.precision,
+            device,
+            queue: ctx.queue.clone(),
+            pipeline,
+            bind_group,
+            topo,
+            topo_host,
+            gather_pipeline,
+            gather_group,
+            node_x,
+            node_x_host: vec![0.0; A_NODE * n_nodes],
+            node_x_dirty: vec![false; n_nodes],
+            asm,
+            staging,
+            params,
+            out: vec![0.0; layout.len()],
+        })
+    }
+
+    /// The buffer layout.
+    pub fn layout(&self) -> AsmLayout {
+        self.layout
+    }
+
+    /// Registers member slot `m`: `ends[e]` are the member-local nodes of its element `e`,
+    /// `row_masks[e]` has bit `i` set when element-local row `i` is an unknown. Builds the
+    /// node incidence lists (increasing element order, the CPU scatter's summation order)
+    /// and uploads the member's ranges of the topology buffers.
+    pub fn set_member(
+        &mut self,
+        m: usize,
+        n_nodes: usize,
+        ends: &[[usize; 2]],
+        row_masks: &[u32],
+    ) -> Result<(), GpuError> {
+        let l = self.layout;
+        if n_nodes > l.nodes_per_slot || ends.len() > l.per_slot || row_masks.len() != ends.len() {
+            return Err(GpuError::SlotTooSmall {
+                elements: ends.len(),
+                nodes: n_nodes,
+                per_slot: l.per_slot,
+                nodes_per_slot: l.nodes_per_slot,
+            });
+        }
+        let (nb, eb) = (m * l.nodes_per_slot, m * l.per_slot);
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); n_nodes];
+        for (e, nodes) in ends.iter().enumerate() {
+            for (l, &a) in nodes.iter().enumerate() {
+                lists[a].push((2 * (eb + e) + l) as u32);
+            }
+        }
+        let mut next = 2 * eb;
+        for j in 0..l.nodes_per_slot {
+            let list = lists.get(j).map(Vec::as_slice).unwrap_or(&[]);
+            self.topo_host[NODE_INC][2 * (nb + j)] = next as u32;
+            self.topo_host[NODE_INC][2 * (nb + j) + 1] = list.len() as u32;
+            self.topo_host[INC][next..next + list.len()].copy_from_slice(list);
+            next += list.len();
+        }
+        self.topo_host[ROW_MASK][eb..eb + row_masks.len()].copy_from_slice(row_masks);
+        self.topo_host[MEMBER_N][m] = ends.len() as u32;
+        for (e, nodes) in ends.iter().enumerate() {
+            for (l, &a) in nodes.iter().enumerate() {
+                self.topo_host[ELEM_NODES][2 * (eb + e) + l] = (nb + a) as u32;
+            }
+        }
+        let ranges = [
+            (ELEM_NODES, 2 * eb, 2 * (eb + ends.len())),
+            (NODE_INC, 2 * nb, 2 * (nb + l.nodes_per_slot)),
+            (INC, 2 * eb, next),
+            (ROW_MASK, eb, eb + row_masks.len()),
+            (MEMBER_N, m, m + 1),
+        ];
+        for (b, lo, hi) in ranges {
+            if hi > lo {
+                self.queue.write_buffer(
+                    &self.topo[b],
+                    4 * lo as u64,
+                    bytemuck::cast_slice(&self.topo_host[b][lo..hi]),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes member `m`'s node increments (node-local order, zero for removed unknowns);
+    /// only changed node slots are uploaded at the next run.
+    pub fn set_increments(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
+        let nn = self.n_nodes;
+        for (j, x) in nodes.iter().enumerate() {
+            let slot = m * self.layout.nodes_per_slot + j;
+            for (k, &v) in x.iter().enumerate() {
+                let h = &mut self.node_x_host[k * nn + slot];
+                if *h != v {
+                    *h = v;
+                    self.node_x_dirty[slot] = true;
+                }
+            }
+        }
+    }
+
+    /// Runs the gather pass, the element pass of `kernel` (frozen scalars) and the
+    /// assembly pass in one command buffer and reads back the assembled systems of the
+    /// `pending` member slots: each one's node residuals and scales, and its blocks when it
+    /// asked for the tangent (`pending[i].1`). Traffic and time go to `kernel`'s timers.
+    pub fn run(
+        &mut self,
+        kernel: &mut ElementKernel,
+        pending: &[(usize, bool)],
+    ) -> Result<(), GpuError> {
+        let want_tangent = pending.iter().any(|p| p.1);
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let l = self.layout;
+        let t0 = std::time::Instant::now();
+        let nn = self.n_nodes;
+        for (lo, hi) in take_runs(&mut self.node_x_dirty) {
+            for k in 0..A_NODE {
+                kernel.timers.bytes_up += write_scalars(
+                    &self.queue,
+                    &self.node_x,
+                    k * nn + lo,
+                    &self.node_x_host[k * nn + lo..k * nn + hi],
+                    self.precision,
+                );
+            }
+        }
+        kernel.timers.upload_s += t0.elapsed().as_secs_f64();
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("gather"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.gather_pipeline);
+            pass.set_bind_group(0, &self.gather_group, &[]);
+            pass.dispatch_workgroups(self.n_elems.div_ceil(64) as u32, 1, 1);
+        }
+        kernel.encode(&mut enc, KernelMode::Frozen, want_tangent);
+        let prm = Params {
+            n_elem: self.n_elems as u32,
+            n_node: self.n_nodes as u32,
+            n_member: l.members as u32,
+            per_slot: l.per_slot as u32,
+            nodes_per_slot: l.nodes_per_slot as u32,
+            want_tangent: want_tangent as u32,
+            k_start: l.tangent_start() as u32,
+            pad: 0,
+        };
+        self.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("assemble"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            let threads = self.n_nodes.max(self.n_elems).max(l.members);
+            pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
+        }
+        // The waiting members' residual regions, and the tangent regions of those that
+        // asked for it: one range per run of adjacent such members.
+        let w = ElementKernel::width(self.precision) as u64;
+        let (r, k) = (l.residual_per_member(), l.tangent_per_member());
+        let residual = member_runs(pending.iter().map(|p| p.0))
+            .into_iter()
+            .map(|(lo, hi)| ((lo * r) as u64 * w, ((hi - lo) * r) as u64 * w));
+        let tangent = member_runs(pending.iter().filter(|p| p.1).map(|p| p.0))
+            .into_iter()
+            .map(|(lo, hi)| {
+                let at = l.tangent_start() + lo * k;
+                (at as u64 * w, ((hi - lo) * k) as u64 * w)
+            });
+        let ranges: Vec<(u64, u64)> = residual.chain(tangent).collect();
+        let rb = Readback {
+            device: &self.device,
+            queue: &self.queue,
+            src: &self.asm,
+            staging: &self.staging,
+            precision: self.precision,
+        };
+        let timers: &mut KernelTimers = &mut kernel.timers;
+        rb.run(enc, &ranges, &mut self.out, timers)
+    }
+
+    /// Member `m`'s assembled system from the last [`Self::run`] (`n_nodes` nodes,
+    /// `n_elems` elements; the blocks are left empty without the tangent).
+    pub fn system(
+        &self,
+        m: usize,
+        n_nodes: usize,
+        n_elems: usize,
+        with_tangent: bool,
+    ) -> AssembledSystem {
+        let (l, o) = (self.layout, &self.out);
+        let node_r = (0..n_nodes)
+            .map(|j| std::array::from_fn(|k| o[l.node_residual(m, j) + k]))
+            .collect();
+        let scale = std::array::from_fn(|k| o[l.scales(m) + k]);
+        let (node_k, off_k) = if with_tangent {
+            let node_k = (0..n_nodes)
+                .map(|j| std::array::from_fn(|f| o[l.node_block(m, j) + f]))
+                .collect();
+            let off_k = (0..n_elems)
+                .map(|e| {
+                    std::array::from_fn(|h| std::array::from_fn(|f| o[l.off_block(m, e, h) + f]))
+                })
+                .collect();
+            (node_k, off_k)
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        AssembledSystem {
+            node_r,
+            node_k,
+            off_k,
+            scale,
+        }
+    }
+}
+
+/// Runs `(lo, hi)` of adjacent member slots among `members`.
+fn member_runs(members: impl Iterator<Item = usize>) -> Vec<(usize, usize)> {
+    let mut sorted: Vec<usize> = members.collect();
+    sorted.sort_unstable();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for m in sorted {
+        match runs.last_mut() {
+            Some(last) if last.1 == m => last.1 = m + 1,
+            _ => runs.push((m, m + 1)),
+        }
+    }
+    runs
+}
+
+fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    src: &str,
+    precision: Precision,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(shader_precision(src, precision).into()),
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// A bind group of `pipeline`'s group 0 with `buffers` at bindings 0, 1, ….
+fn make_bind_group(
+    device: &wgpu::Device,
+    pipeline: &wgpu::ComputePipeline,
+    label: &str,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
