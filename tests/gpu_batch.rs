@@ -180,6 +180,9 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
         let s: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
                 .unwrap();
+        // The summary names where the kernel ran (the adapter on the GPU path).
+        let named = s["backend"].as_str().unwrap();
+        assert!(named.starts_with(backend), "summary backend {named}");
         totals.push(s["energy_final"].as_f64().unwrap());
     }
     let rel = (totals[0] - totals[1]).abs() / totals[0].abs();

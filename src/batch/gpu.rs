@@ -34,6 +34,8 @@ pub struct GpuBatcher {
     inner: Mutex<Inner>,
     cv: Condvar,
     per_slot: usize,
+    /// `gpu: ADAPTER, PRECISION`.
+    adapter: String,
 }
 
 impl GpuBatcher {
@@ -60,6 +62,7 @@ impl GpuBatcher {
             }),
             cv: Condvar::new(),
             per_slot,
+            adapter: format!("gpu: {}", ctx.describe()),
         })
     }
 
@@ -152,6 +155,10 @@ impl GpuBatcher {
 }
 
 impl ElementBackend for GpuBatcher {
+    fn describe(&self) -> String {
+        self.adapter.clone()
+    }
+
     fn evaluate_assembled(
         &self,
         slot: usize,

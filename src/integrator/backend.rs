@@ -49,4 +49,7 @@ pub trait ElementBackend: Send + Sync {
         increments: &[[f64; 9]],
         tangent: bool,
     ) -> Result<AssembledSystem, String>;
+
+    /// Where the elements are evaluated, for every output (e.g. `gpu: ADAPTER, f64`).
+    fn describe(&self) -> String;
 }

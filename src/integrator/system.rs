@@ -278,6 +278,14 @@ impl Simulation {
         self.timers
     }
 
+    /// Where the element kernel runs: `cpu`, or the attached backend's description (the
+    /// baselines and the monolithic strategy's consistent assembly stay on the CPU kernel).
+    pub fn backend_name(&self) -> String {
+        self.backend
+            .as_ref()
+            .map_or_else(|| "cpu".to_string(), |(b, _)| b.describe())
+    }
+
     /// The linear solver chosen for this model's tangent, and how many factorizations it
     /// has handed to its pivoting fallback so far (block-tridiagonal backend only).
     pub fn linear_solver(&self) -> (SolverKind, usize) {

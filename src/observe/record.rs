@@ -89,6 +89,8 @@ pub struct RunSummary {
     pub energy_final: f64,
     /// Largest rigid-link strain `|g|` over the accepted steps (0 without links).
     pub max_link_g: f64,
+    /// Where the element kernel ran (`cpu` or `gpu: ADAPTER, f64`).
+    pub backend: String,
     /// The Newton linear solver (`dense`, `sparse`, `block-tridiagonal-B`).
     pub linear_solver: String,
     /// Factorizations the block-tridiagonal solver handed to its pivoting fallback.

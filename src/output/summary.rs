@@ -49,6 +49,7 @@ mod tests {
             max_rel_dl: 1e-15,
             max_rel_dj: 2e-15,
             max_link_g: 0.0,
+            backend: "cpu".into(),
             linear_solver: "block-tridiagonal-6".into(),
             linear_solver_fallbacks: 0,
             timers: Default::default(),
