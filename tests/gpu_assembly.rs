@@ -26,6 +26,7 @@ use cosserat::gpu::gpu_required;
 use cosserat::gpu::layout::{I_S, NI, NS};
 use cosserat::integrator::dofs::NONE;
 use cosserat::integrator::{IntegratorParams, Scheme, Simulation};
+use cosserat::math::rng::Rng;
 use cosserat::model::Model;
 use cosserat::scene::{builtin_scenes, load_scene, parse_scene};
 
@@ -41,17 +42,6 @@ fn gpu() -> Option<Arc<cosserat::gpu::GpuContext>> {
             None
         }
         Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no usable adapter: {e}"),
-    }
-}
-
-/// Deterministic uniform numbers in [-1, 1) (xorshift).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
     }
 }
 
@@ -149,21 +139,21 @@ fn check_scene(
 ) {
     let (mut cpu, mut gpu, _b) = twins(model, params, steps, ctx, (0, 1));
     let n = cpu.n_dofs();
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ n as u64);
+    let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15 ^ n as u64);
     let mut worst = [0.0f64; 3];
     for trial in 0..4 {
         if params.scheme.is_dissipative() {
             let s = FrozenScalars {
-                beta_gamma: 0.3 * (1.0 + rng.next()),
-                beta_omega: 0.3 * (1.0 + rng.next()),
-                c_v: 0.2 * (1.0 + rng.next()),
-                c_nu: 0.2 * (1.0 + rng.next()),
+                beta_gamma: 0.3 * (1.0 + rng.symmetric()),
+                beta_omega: 0.3 * (1.0 + rng.symmetric()),
+                c_v: 0.2 * (1.0 + rng.symmetric()),
+                c_nu: 0.2 * (1.0 + rng.symmetric()),
             };
             cpu.set_frozen(s);
             gpu.set_frozen(s);
         }
         let amp = 10f64.powi(-trial - 2);
-        let q: Vec<f64> = (0..n).map(|_| amp * rng.next()).collect();
+        let q: Vec<f64> = (0..n).map(|_| amp * rng.symmetric()).collect();
         for tangent in [true, false] {
             let (rc, sc, kc) = cpu.frozen_system_at(&q, tangent);
             let (rg, sg, kg) = gpu.frozen_system_at(&q, tangent);

@@ -111,8 +111,6 @@ pub struct Simulation {
     /// Per element: solver slots of its node-local off-diagonal blocks (end 0, end 1) and
     /// (end 1, end 0), [`NONE`] if inactive.
     off_block_slots: Vec<[[usize; 81]; 2]>,
-    /// Per-kind row scales (u, θ, g) of the last assembly.
-    last_scale: [f64; 3],
     /// Residual of the last converged Newton solve (for the residual work in `check`).
     last_residual: Vec<f64>,
     /// Per rigid link: slots of its node's (u, u) block.
@@ -262,7 +260,6 @@ impl Simulation {
             node_slots,
             node_block_slots,
             off_block_slots,
-            last_scale: [0.0; 3],
             link_slots,
             state,
             inv,
@@ -423,8 +420,9 @@ impl Simulation {
     }
 
     /// Assembles residual `r`, the row scales and (if `tangent`) the matrix values.
-    /// Returns the relative residual `max_i |R_i| / scale(kind of i)`.
-    fn assemble(&mut self, q: &[f64], mode: Mode, tangent: bool, r: &mut [f64]) -> f64 {
+    /// Returns the relative residual `max_i |R_i| / scale(kind of i)` and the per-kind
+    /// scales (u, θ, g).
+    fn assemble(&mut self, q: &[f64], mode: Mode, tangent: bool, r: &mut [f64]) -> (f64, [f64; 3]) {
         let k = self.consts();
         let dt = k.dt;
         r.iter_mut().for_each(|x| *x = 0.0);
@@ -459,7 +457,7 @@ impl Simulation {
                 .collect();
             match b.evaluate_assembled(slot, &inputs, &increments, tangent) {
                 Ok(sys) => self.scatter_assembled(&sys, tangent, r, &mut scale),
-                Err(_) => return f64::NAN,
+                Err(_) => return (f64::NAN, scale),
             }
         }
         for e in 0..n_cpu {
@@ -550,17 +548,16 @@ impl Simulation {
                 }
             }
         }
-        self.last_scale = scale;
         let mut worst: f64 = 0.0;
         for (i, &ri) in r.iter().enumerate() {
             let s = scale[self.row_kinds[i]].max(1e-300);
             let rel = ri.abs() / s;
             if !rel.is_finite() {
-                return f64::INFINITY;
+                return (f64::INFINITY, scale);
             }
             worst = worst.max(rel);
         }
-        worst
+        (worst, scale)
     }
 
     /// Adds one element's residual, row scales and (if `tangent`) tangent into the
@@ -657,7 +654,7 @@ impl Simulation {
                 || it < 2
                 || history[it - 1] > MODIFIED_NEWTON_RATE * history[it - 2];
             let t0 = Instant::now();
-            let res = self.assemble(q, mode, fresh, &mut r);
+            let (res, _) = self.assemble(q, mode, fresh, &mut r);
             self.timers.assemble_s += t0.elapsed().as_secs_f64();
             history.push(res);
             if !res.is_finite() {
@@ -1044,13 +1041,13 @@ impl Simulation {
     pub fn frozen_system_at(&mut self, q: &[f64], tangent: bool) -> (Vec<f64>, [f64; 3], Vec<f64>) {
         let mut r = vec![0.0; self.dofs.n];
         self.mid_step_loads();
-        self.assemble(q, Mode::Frozen, tangent, &mut r);
+        let (_, scale) = self.assemble(q, Mode::Frozen, tangent, &mut r);
         let values = if tangent {
             self.solver.values().to_vec()
         } else {
             Vec::new()
         };
-        (r, self.last_scale, values)
+        (r, scale, values)
     }
 
     /// The external loads at the middle of the coming step (for the test helpers).
