@@ -114,7 +114,6 @@ fn twins(
         )
         .unwrap(),
     );
-    (1..slots).for_each(|_| b.leave());
     b.register(slot, &gpu).unwrap();
     assert!(gpu.set_backend(b.clone(), slot));
     (cpu, gpu, b)

@@ -14,7 +14,7 @@
 
 use cosserat::batch::{run_members, BackendChoice, BatchOptions, Executor, Member, MemberResult};
 use cosserat::gpu::gpu_required;
-use cosserat::integrator::Scheme;
+use cosserat::integrator::{NewtonVariant, Scheme};
 use cosserat::observe::record::RunStatus;
 use cosserat::scene::load_scene;
 
@@ -51,17 +51,17 @@ fn members(n: usize, scheme_of: impl Fn(usize) -> Scheme, t_end: f64) -> Vec<Mem
 }
 
 fn run_all(ms: &[Member], exec: &Executor) -> Vec<MemberResult> {
-    run_opts(ms, exec, false)
+    run_opts(ms, exec, NewtonVariant::Full)
 }
 
-fn run_opts(ms: &[Member], exec: &Executor, modified_newton: bool) -> Vec<MemberResult> {
+fn run_opts(ms: &[Member], exec: &Executor, newton: NewtonVariant) -> Vec<MemberResult> {
     let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
     run_members(
         ms,
         exec,
         BatchOptions {
             keep_history: true,
-            modified_newton,
+            newton: Some(newton),
             ..Default::default()
         },
         |r| {
@@ -193,9 +193,12 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
 fn modified_newton_matches_full_newton() {
     let ms = members(8, edmc2, 1.0);
     let full = run_all(&ms, &Executor::Cpu);
-    let mut paths = vec![("cpu", run_opts(&ms, &Executor::Cpu, true))];
+    let mut paths = vec![(
+        "cpu",
+        run_opts(&ms, &Executor::Cpu, NewtonVariant::Modified),
+    )];
     if let Some(exec) = gpu() {
-        paths.push(("gpu", run_opts(&ms, &exec, true)));
+        paths.push(("gpu", run_opts(&ms, &exec, NewtonVariant::Modified)));
     }
     for (name, got) in paths {
         for (a, b) in full.iter().zip(&got) {

@@ -1,7 +1,7 @@
 //! The Newton linear solver on the built-in scenes: rods numbered node by node get the
 //! block-tridiagonal LU, and modified Newton reuses its factorization (fewer
 //! factorizations than solves) while reproducing the full-Newton trajectory.
-use cosserat::integrator::{Scheme, Simulation};
+use cosserat::integrator::{NewtonVariant, Scheme, Simulation};
 use cosserat::linsolve::SolverKind;
 use cosserat::scene::load_scene;
 
@@ -10,10 +10,15 @@ use cosserat::scene::load_scene;
 const HISTORY_RTOL: f64 = 1e-9;
 
 fn sim(name: &str, scheme: Scheme, steps: usize) -> Simulation {
+    sim_with(name, scheme, steps, NewtonVariant::Full)
+}
+
+fn sim_with(name: &str, scheme: Scheme, steps: usize, newton: NewtonVariant) -> Simulation {
     let scene = load_scene(name).unwrap();
     let mut p = scene.params;
     p.scheme = scheme;
     p.t_end = p.dt * steps as f64;
+    p.newton = newton;
     Simulation::new(scene.model, p).unwrap()
 }
 
@@ -38,8 +43,7 @@ fn rods_get_the_block_tridiagonal_solver() {
 fn modified_newton_reuses_the_factorization_and_follows_full_newton() {
     for (name, steps) in [("frame", 40), ("cantilever", 30)] {
         let mut full = sim(name, Scheme::edmc2(0.5), steps);
-        let mut modified = sim(name, Scheme::edmc2(0.5), steps);
-        modified.set_modified_newton(true);
+        let mut modified = sim_with(name, Scheme::edmc2(0.5), steps, NewtonVariant::Modified);
         for step in 0..steps {
             full.step().unwrap();
             modified.step().unwrap();

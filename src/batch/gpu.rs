@@ -1,47 +1,54 @@
-//! The GPU element evaluator shared by the workers of a batch: every live member submits
-//! its element inputs; when all live members are waiting, the last one to arrive runs one
-//! dispatch for all of them and wakes the others (a dynamic barrier: a member that
-//! converged early simply goes on to its next step or its next iteration, a member that
-//! finished leaves, and the barrier shrinks). The dispatch runs the element pass and the
-//! assembly pass ([`Assembler`]); each member gets its assembled block system back.
+//! The GPU element evaluator of a batch: slots of members on one element kernel and its
+//! assembly pass. [`GpuEvaluator`] serves every posted request of its attached members in
+//! one dispatch (the lockstep driver calls [`GpuEvaluator::serve`] once per batch
+//! iteration); [`GpuBatcher`] wraps it as a synchronous [`ElementBackend`] for one
+//! simulation at a time (`run --backend gpu`, tests).
 
-use std::sync::{Condvar, Mutex, MutexGuard};
+use std::sync::{Mutex, MutexGuard};
+use std::time::Instant;
 
 use crate::element::StepConsts;
 use crate::gpu::kernel::KernelTimers;
 use crate::gpu::layout::AsmLayout;
 use crate::gpu::{Assembler, ElementKernel, GpuContext, GpuError};
-use crate::integrator::backend::{AssembledSystem, ElementBackend, ElementInput};
 use crate::integrator::dofs::NONE;
+use crate::integrator::evaluate::{AssembledSystem, ElementBackend, EvalPort, EvalRequest};
 use crate::integrator::Simulation;
 
-struct Inner {
+/// Host-side costs of serving requests (on top of the kernel's own stage timers).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ServeTimers {
+    /// Copying the posted requests into the kernel's host buffers.
+    pub pack_s: f64,
+    /// Requests served (member evaluations).
+    pub requests: u64,
+    /// Of which wanted the tangent.
+    pub tangent_requests: u64,
+    /// Element evaluations served (elements of the served requests).
+    pub element_evals: u64,
+    /// Of which with the tangent.
+    pub element_tangent_evals: u64,
+}
+
+/// `slots` members of at most `per_slot` elements and `nodes_per_slot` nodes each on one
+/// GPU element kernel and assembly pass.
+pub struct GpuEvaluator {
     kernel: ElementKernel,
     assembler: Assembler,
-    /// Workers that may still submit.
-    live: usize,
-    /// Slots waiting for the next dispatch, and whether each wants the tangent.
-    pending: Vec<(usize, bool)>,
-    generation: u64,
-    results: Vec<Option<Result<AssembledSystem, String>>>,
+    per_slot: usize,
     /// Per slot: elements and nodes of the registered member.
     sizes: Vec<(usize, usize)>,
-}
-
-/// A batch of `slots` simulations of at most `per_slot` elements and `nodes_per_slot`
-/// nodes each on one GPU kernel.
-pub struct GpuBatcher {
-    inner: Mutex<Inner>,
-    cv: Condvar,
-    per_slot: usize,
+    /// Per slot: the mailbox of the member attached there (lockstep driving).
+    ports: Vec<Option<EvalPort>>,
     /// `gpu: ADAPTER, PRECISION`.
     adapter: String,
+    /// Host-side serving costs.
+    pub serve_timers: ServeTimers,
 }
 
-impl GpuBatcher {
+impl GpuEvaluator {
     /// Kernel and assembly buffers for `slots` members of at most `per_slot` elements and
-    /// `nodes_per_slot` nodes; `slots` workers are counted live from the start (each must
-    /// call [`Self::leave`] when it is done).
+    /// `nodes_per_slot` nodes.
     pub fn new(
         ctx: &GpuContext,
         slots: usize,
@@ -51,18 +58,13 @@ impl GpuBatcher {
         let mut kernel = ElementKernel::new(ctx, slots * per_slot)?;
         let assembler = Assembler::new(ctx, &mut kernel, slots, per_slot, nodes_per_slot)?;
         Ok(Self {
-            inner: Mutex::new(Inner {
-                kernel,
-                assembler,
-                live: slots,
-                pending: Vec::with_capacity(slots),
-                generation: 0,
-                results: (0..slots).map(|_| None).collect(),
-                sizes: vec![(0, 0); slots],
-            }),
-            cv: Condvar::new(),
+            kernel,
+            assembler,
             per_slot,
+            sizes: vec![(0, 0); slots],
+            ports: vec![None; slots],
             adapter: format!("gpu: {}", ctx.describe()),
+            serve_timers: ServeTimers::default(),
         })
     }
 
@@ -76,13 +78,19 @@ impl GpuBatcher {
         ))
     }
 
-    fn lock(&self) -> MutexGuard<'_, Inner> {
-        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    /// Number of slots.
+    pub fn slots(&self) -> usize {
+        self.sizes.len()
+    }
+
+    /// `gpu: ADAPTER, PRECISION`.
+    pub fn describe(&self) -> &str {
+        &self.adapter
     }
 
     /// Uploads the element constants and the node incidence of `sim` into `slot` (once per
-    /// member).
-    pub fn register(&self, slot: usize, sim: &Simulation) -> Result<(), GpuError> {
+    /// member; a slot is reused by the next member after [`Self::detach`]).
+    pub fn register(&mut self, slot: usize, sim: &Simulation) -> Result<(), GpuError> {
         let k = StepConsts {
             dt: sim.params().dt,
             scheme: sim.params().scheme,
@@ -101,56 +109,174 @@ impl GpuBatcher {
             })
             .collect();
         let n_nodes = sim.model().n_nodes();
-        let mut g = self.lock();
-        g.assembler.set_member(slot, n_nodes, &ends, &masks)?;
+        self.assembler.set_member(slot, n_nodes, &ends, &masks)?;
         for (e, d) in sim.element_data().iter().enumerate() {
-            g.kernel.set_element(slot * self.per_slot + e, d, &k, trans);
+            self.kernel
+                .set_element(slot * self.per_slot + e, d, &k, trans);
         }
-        g.sizes[slot] = (ends.len(), n_nodes);
+        self.sizes[slot] = (ends.len(), n_nodes);
         Ok(())
     }
 
-    /// A worker stops submitting (its members are done).
-    pub fn leave(&self) {
-        let mut g = self.lock();
-        g.live -= 1;
-        if g.live > 0 && g.pending.len() == g.live {
-            self.dispatch(&mut g);
+    /// Registers `sim` in `slot` and connects it for lockstep driving: its step will post
+    /// its element evaluations here. Returns false (and attaches nothing) for a scheme
+    /// without a GPU kernel, which then runs on the CPU kernel.
+    pub fn attach(&mut self, slot: usize, sim: &mut Simulation) -> Result<bool, GpuError> {
+        if !sim.params().scheme.has_gpu_kernel() {
+            return Ok(false);
         }
+        self.register(slot, sim)?;
+        let port = EvalPort::new(&self.adapter);
+        sim.set_port(port.clone());
+        self.ports[slot] = Some(port);
+        Ok(true)
     }
 
-    /// Layout of the assembled buffer (what a dispatch reads back: its residual range
-    /// without the tangent, all of it with).
-    pub fn layout(&self) -> AsmLayout {
-        self.lock().assembler.layout()
+    /// Frees `slot` (its member finished).
+    pub fn detach(&mut self, slot: usize) {
+        self.ports[slot] = None;
     }
 
     /// Stage timers and traffic so far.
     pub fn timers(&self) -> KernelTimers {
-        self.lock().kernel.timers
+        self.kernel.timers
     }
 
-    fn dispatch(&self, g: &mut Inner) {
-        let pending = std::mem::take(&mut g.pending);
-        let res = g.assembler.run(&mut g.kernel, &pending);
-        let t0 = std::time::Instant::now();
-        for &(slot, tangent) in &pending {
-            let (n_elems, n_nodes) = g.sizes[slot];
-            let out = match &res {
-                Ok(()) => Ok(g.assembler.system(slot, n_nodes, n_elems, tangent)),
-                Err(e) => Err(e.to_string()),
-            };
-            g.results[slot] = Some(out);
-            let base = slot * self.per_slot;
-            for e in 0..n_elems {
-                g.kernel.set_inactive(base + e);
+    /// Layout of the assembled buffer.
+    pub fn layout(&self) -> AsmLayout {
+        self.assembler.layout()
+    }
+
+    /// Writes one request into `slot`'s host buffers; an error names what did not fit.
+    fn pack(&mut self, slot: usize, req: &EvalRequest) -> Result<(), String> {
+        let (n_elems, n_nodes) = self.sizes[slot];
+        let states_ok = req.states.as_ref().is_none_or(|s| s.len() == n_elems);
+        if !states_ok || req.scalars.len() != n_elems || req.increments.len() != n_nodes {
+            return Err(format!(
+                "GPU slot {slot} holds (elements, nodes) ({n_elems}, {n_nodes}), ({}, {}) submitted",
+                req.scalars.len(),
+                req.increments.len()
+            ));
+        }
+        let base = slot * self.per_slot;
+        if let Some(states) = &req.states {
+            for (e, (st, eps)) in states.iter().enumerate() {
+                self.kernel.set_state(base + e, st, eps);
             }
         }
-        g.kernel.timers.unpack_s += t0.elapsed().as_secs_f64();
-        g.pending = pending;
-        g.pending.clear();
-        g.generation += 1;
-        self.cv.notify_all();
+        for (e, s) in req.scalars.iter().enumerate() {
+            self.kernel.set_scalars(base + e, s);
+        }
+        self.assembler.set_increments(slot, &req.increments);
+        Ok(())
+    }
+
+    /// Evaluates the given (slot, request) pairs in one dispatch; one answer per pair, in
+    /// order.
+    fn evaluate(
+        &mut self,
+        reqs: Vec<(usize, EvalRequest)>,
+    ) -> Vec<(usize, Result<AssembledSystem, String>)> {
+        let t0 = Instant::now();
+        let mut answers = Vec::with_capacity(reqs.len());
+        let mut pending = Vec::with_capacity(reqs.len());
+        for (slot, req) in reqs {
+            match self.pack(slot, &req) {
+                Ok(()) => {
+                    let n = self.sizes[slot].0 as u64;
+                    let st = &mut self.serve_timers;
+                    st.requests += 1;
+                    st.element_evals += n;
+                    if req.tangent {
+                        st.tangent_requests += 1;
+                        st.element_tangent_evals += n;
+                    }
+                    pending.push((slot, req.tangent));
+                }
+                Err(e) => answers.push((slot, Err(e))),
+            }
+        }
+        self.serve_timers.pack_s += t0.elapsed().as_secs_f64();
+        if pending.is_empty() {
+            return answers;
+        }
+        let res = self.assembler.run(&mut self.kernel, &pending);
+        let t0 = Instant::now();
+        for &(slot, tangent) in &pending {
+            let (n_elems, n_nodes) = self.sizes[slot];
+            let out = match &res {
+                Ok(()) => Ok(self.assembler.system(slot, n_nodes, n_elems, tangent)),
+                Err(e) => Err(e.to_string()),
+            };
+            answers.push((slot, out));
+            let base = slot * self.per_slot;
+            for e in 0..n_elems {
+                self.kernel.set_inactive(base + e);
+            }
+        }
+        self.kernel.timers.unpack_s += t0.elapsed().as_secs_f64();
+        answers
+    }
+
+    /// Serves every request posted by the attached members in one dispatch and answers
+    /// each. Returns the number of requests served (0: nobody was waiting).
+    pub fn serve(&mut self) -> usize {
+        let reqs: Vec<(usize, EvalRequest)> = self
+            .ports
+            .iter()
+            .enumerate()
+            .filter_map(|(slot, p)| Some((slot, p.as_ref()?.take_request()?)))
+            .collect();
+        let n = reqs.len();
+        for (slot, answer) in self.evaluate(reqs) {
+            if let Some(p) = &self.ports[slot] {
+                p.respond(answer);
+            }
+        }
+        n
+    }
+}
+
+/// A [`GpuEvaluator`] behind a lock, as a synchronous [`ElementBackend`]: each call
+/// evaluates one simulation's elements in its own dispatch (one simulation on the GPU;
+/// batches use the lockstep driver, [`crate::batch::run_members`]).
+pub struct GpuBatcher {
+    inner: Mutex<GpuEvaluator>,
+    adapter: String,
+}
+
+impl GpuBatcher {
+    /// See [`GpuEvaluator::new`].
+    pub fn new(
+        ctx: &GpuContext,
+        slots: usize,
+        per_slot: usize,
+        nodes_per_slot: usize,
+    ) -> Result<Self, GpuError> {
+        let ev = GpuEvaluator::new(ctx, slots, per_slot, nodes_per_slot)?;
+        Ok(Self {
+            adapter: ev.adapter.clone(),
+            inner: Mutex::new(ev),
+        })
+    }
+
+    fn lock(&self) -> MutexGuard<'_, GpuEvaluator> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// See [`GpuEvaluator::register`].
+    pub fn register(&self, slot: usize, sim: &Simulation) -> Result<(), GpuError> {
+        self.lock().register(slot, sim)
+    }
+
+    /// Layout of the assembled buffer.
+    pub fn layout(&self) -> AsmLayout {
+        self.lock().layout()
+    }
+
+    /// Stage timers and traffic so far.
+    pub fn timers(&self) -> KernelTimers {
+        self.lock().timers()
     }
 }
 
@@ -159,39 +285,10 @@ impl ElementBackend for GpuBatcher {
         self.adapter.clone()
     }
 
-    fn evaluate_assembled(
-        &self,
-        slot: usize,
-        inputs: &[ElementInput],
-        increments: &[[f64; 9]],
-        tangent: bool,
-    ) -> Result<AssembledSystem, String> {
-        let mut g = self.lock();
-        if (inputs.len(), increments.len()) != g.sizes[slot] {
-            return Err(format!(
-                "GPU slot {slot} holds (elements, nodes) {:?}, ({}, {}) submitted",
-                g.sizes[slot],
-                inputs.len(),
-                increments.len()
-            ));
-        }
-        let base = slot * self.per_slot;
-        for (e, inp) in inputs.iter().enumerate() {
-            g.kernel.set_state(base + e, &inp.st, &inp.eps_n);
-            g.kernel.set_scalars(base + e, &inp.s);
-        }
-        g.assembler.set_increments(slot, increments);
-        g.pending.push((slot, tangent));
-        if g.pending.len() == g.live {
-            self.dispatch(&mut g);
-        } else {
-            let gen = g.generation;
-            while g.generation == gen {
-                g = self.cv.wait(g).unwrap_or_else(|p| p.into_inner());
-            }
-        }
-        g.results[slot]
-            .take()
-            .unwrap_or_else(|| Err("GPU batch lost this member's result".into()))
+    fn evaluate_assembled(&self, slot: usize, req: EvalRequest) -> Result<AssembledSystem, String> {
+        self.lock()
+            .evaluate(vec![(slot, req)])
+            .pop()
+            .map_or_else(|| Err("GPU batch lost the request".into()), |(_, r)| r)
     }
 }

@@ -1,25 +1,26 @@
 //! Batches of independent simulations ("members"): the same [`Simulation`] step
 //! (Newton, staggered/monolithic strategy, acceptance checks) per member, run either on
 //! the CPU (members in parallel with rayon) or with the element kernel of all members
-//! evaluated together on the GPU ([`gpu::GpuBatcher`]).
+//! evaluated together on the GPU ([`lockstep`]).
 //!
 //! Every member has its own Newton convergence: a member that converged stops iterating
 //! while others continue, a member whose step fails is recorded as failed and the batch
 //! goes on. Results come back member by member as they finish.
 //!
-//! GPU path, per Newton iteration of the batch: each member gathers its element inputs
-//! (state at `n`, increment, frozen scalars), one dispatch evaluates every element of
-//! every waiting member and a second pass sums them into each member's block system (node
-//! diagonal blocks, element off-diagonal blocks, nodal residuals, row-scale maxima); only
-//! that comes back (without the tangent: residuals and scales only). Each member scatters
-//! its blocks into its own sparse system and solves it on its own worker thread (CPU). A
-//! member's state is uploaded only when it changed (once per step, that member's ranges
-//! only); the increments of the waiting members every iteration.
+//! GPU path (lockstep, one host thread driving): each member's run is a future that
+//! waits wherever its step posts an element evaluation. Per batch iteration the driver
+//! polls every member in parallel (rayon: each member does its CPU work — scatter, LU
+//! solve, convergence and acceptance checks — up to its next evaluation or its end), then
+//! serves every posted request in one dispatch (element pass + assembly pass; only the
+//! node blocks, residuals and scales come back, without the tangent for members that keep
+//! theirs). Members that finish leave their slot to the next queued member (streaming),
+//! so a sweep larger than the GPU's buffers flows through one batch. No OS thread per
+//! member, no barrier.
 
 pub mod gpu;
+mod lockstep;
 
 use std::convert::Infallible;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::Instant;
 
@@ -27,11 +28,12 @@ use rayon::prelude::*;
 
 use crate::gpu::kernel::KernelTimers;
 use crate::gpu::{GpuContext, GpuError};
-use crate::integrator::run::{run, RunOutcome};
-use crate::integrator::{IntegratorParams, Simulation};
+use crate::integrator::evaluate::now;
+use crate::integrator::run::{run_async, RunOutcome};
+use crate::integrator::{IntegratorParams, NewtonVariant, Simulation};
 use crate::model::Model;
 use crate::observe::record::{RunStatus, StepRecord};
-pub use gpu::GpuBatcher;
+pub use gpu::{GpuBatcher, GpuEvaluator, ServeTimers};
 
 /// One member of a batch: a model and its integrator parameters.
 #[derive(Clone, Debug)]
@@ -64,9 +66,11 @@ pub enum Executor {
 
 impl Executor {
     /// Resolves a choice: opens the adapter (`adapter`: name substring) for `Gpu`/`Auto`.
-    /// Returns the executor and, for `Auto` falling back, a note saying why. The batch
-    /// integrator needs f64 (Newton to 1e-11): an adapter without `SHADER_F64` is an error
-    /// for `Gpu` and a fallback for `Auto`.
+    /// Returns the executor and, for `Auto`, a note saying which path it chose and why.
+    /// The batch integrator needs f64 (Newton to 1e-11): an adapter without `SHADER_F64`
+    /// is an error for `Gpu` and a fallback for `Auto`. `Auto` never picks a software
+    /// adapter (lavapipe, llvmpipe, WARP, SwiftShader: slower than the CPU path on the same
+    /// cores) unless `adapter` names it.
     pub fn resolve(
         choice: BackendChoice,
         adapter: Option<&str>,
@@ -75,16 +79,25 @@ impl Executor {
             return Ok((Executor::Cpu, None));
         }
         let ctx = GpuContext::new(adapter).and_then(|c| {
-            if c.is_f64() {
-                Ok(c)
-            } else {
+            if !c.is_f64() {
                 Err(GpuError::Device {
                     adapter: c.describe(),
                     reason: "the batch integrator needs SHADER_F64 (f32 cannot reach the Newton tolerance)".into(),
                 })
+            } else if choice == BackendChoice::Auto && adapter.is_none() && c.is_software() {
+                Err(GpuError::Device {
+                    adapter: c.describe(),
+                    reason: "a software adapter runs on the CPU's own cores and is slower than the CPU path; name it with --adapter or use --backend gpu to use it anyway".into(),
+                })
+            } else {
+                Ok(c)
             }
         });
         match (ctx, choice) {
+            (Ok(c), BackendChoice::Auto) => {
+                let note = format!("backend auto: using the GPU ({})", c.describe());
+                Ok((Executor::Gpu(Arc::new(c)), Some(note)))
+            }
             (Ok(c), _) => Ok((Executor::Gpu(Arc::new(c)), None)),
             (Err(e), BackendChoice::Auto) => Ok((
                 Executor::Cpu,
@@ -119,12 +132,17 @@ pub struct MemberResult {
 pub struct BatchOptions {
     /// Keep every member's step records in [`MemberResult::history`].
     pub keep_history: bool,
-    /// GPU path: worker threads (members in flight at once); 0 = all members, capped by
-    /// the adapter's buffer limit and 4096.
+    /// GPU path: slots (members in flight at once; the others wait in the queue and take
+    /// the slot of a member that finished); 0 = as many as the adapter's buffer limits
+    /// allow, at most [`DEFAULT_GPU_SLOTS`].
     pub workers: usize,
-    /// Modified Newton (tangent reuse, [`Simulation::set_modified_newton`]).
-    pub modified_newton: bool,
+    /// Overrides every member's Newton variant when set.
+    pub newton: Option<NewtonVariant>,
 }
+
+/// Members in flight at once on the GPU path unless [`BatchOptions::workers`] says
+/// otherwise (the adapter's buffer limits may allow fewer).
+pub const DEFAULT_GPU_SLOTS: usize = 4096;
 
 /// What the batch as a whole measured.
 #[derive(Clone, Copy, Debug, Default)]
@@ -135,6 +153,19 @@ pub struct BatchStats {
     pub setup_s: f64,
     /// GPU stage timers (zero on the CPU path).
     pub gpu: KernelTimers,
+    /// GPU path: host-side serving costs (packing requests).
+    pub serve: ServeTimers,
+    /// GPU path: wall time of the parallel member phases (every member's CPU work between
+    /// two evaluations: scatter, factorization, solve, checks, bookkeeping).
+    pub host_s: f64,
+    /// GPU path: member polls (one per member and batch iteration).
+    pub polls: u64,
+    /// GPU path: batch iterations (parallel member phase + one dispatch).
+    pub iterations: u64,
+    /// GPU path: members in flight at once (slots).
+    pub slots: usize,
+    /// Simulation set-up (linear solver analysis, GPU registration), wall time.
+    pub admit_s: f64,
 }
 
 fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
@@ -155,57 +186,31 @@ fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
     }
 }
 
-/// Runs one member to its end time, optionally on a GPU slot.
-fn run_member(
-    index: usize,
-    m: &Member,
-    opts: BatchOptions,
-    gpu: Option<(&Arc<GpuBatcher>, usize)>,
-) -> MemberResult {
-    let keep_history = opts.keep_history;
-    let mut sim = match Simulation::new(m.model.clone(), m.params) {
-        Ok(s) => s,
-        Err(e) => {
-            return MemberResult {
-                index,
-                outcome: setup_failure(e),
-                history: vec![],
-            }
-        }
-    };
-    sim.set_modified_newton(opts.modified_newton);
-    // Baseline schemes have no GPU kernel: such a member runs on the CPU kernel and never
-    // joins the batcher (whose barrier waits only for registered members).
-    if let Some((b, slot)) = gpu.filter(|_| m.params.scheme.has_gpu_kernel()) {
-        if let Err(e) = b.register(slot, &sim) {
-            return MemberResult {
-                index,
-                outcome: setup_failure(e),
-                history: vec![],
-            };
-        }
-        let _ = sim.set_backend(b.clone(), slot);
+/// A member's simulation, set up (or why it could not be).
+fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, RunOutcome> {
+    let mut params = m.params;
+    if let Some(v) = opts.newton {
+        params.newton = v;
     }
+    Simulation::new(m.model.clone(), params).map_err(setup_failure)
+}
+
+/// Runs one member's simulation to its end time (a future: on the GPU path it waits on
+/// the lockstep driver at every element evaluation).
+async fn run_member(index: usize, mut sim: Simulation, keep_history: bool) -> MemberResult {
     let mut history = Vec::new();
-    let outcome = run(&mut sim, 1, |rec: &StepRecord, _: &Simulation| {
+    let outcome = run_async(&mut sim, 1, |rec: &StepRecord, _: &Simulation| {
         if keep_history {
             history.push(rec.clone());
         }
         Ok::<(), Infallible>(())
     })
+    .await
     .unwrap_or_else(|e| match e {});
     MemberResult {
         index,
         outcome,
         history,
-    }
-}
-
-/// Decrements the batcher's live count when a worker ends (also on panic).
-struct Leave<'a>(&'a GpuBatcher);
-impl Drop for Leave<'_> {
-    fn drop(&mut self) {
-        self.0.leave();
     }
 }
 
@@ -218,73 +223,34 @@ pub fn run_members(
     mut on_done: impl FnMut(MemberResult),
 ) -> Result<BatchStats, GpuError> {
     let start = Instant::now();
-    let (tx, rx) = mpsc::channel::<MemberResult>();
-    let mut stats = BatchStats::default();
-    match exec {
-        Executor::Cpu => std::thread::scope(|sc| {
-            sc.spawn(move || {
-                members
-                    .par_iter()
-                    .enumerate()
-                    .for_each_with(tx, |tx, (i, m)| {
-                        let _ = tx.send(run_member(i, m, opts, None));
-                    });
-            });
-            for r in rx {
-                on_done(r);
-            }
-        }),
-        Executor::Gpu(ctx) => {
-            let per_slot = members
-                .iter()
-                .map(|m| m.model.elements.len())
-                .max()
-                .unwrap_or(1)
-                .max(1);
-            let nodes_per_slot = members
-                .iter()
-                .map(|m| m.model.n_nodes())
-                .max()
-                .unwrap_or(1)
-                .max(1);
-            let cap = GpuBatcher::max_slots(ctx, per_slot, nodes_per_slot).clamp(1, 4096);
-            let want = if opts.workers == 0 {
-                members.len()
-            } else {
-                opts.workers
-            };
-            let workers = want.min(cap).min(members.len()).max(1);
-            let t0 = Instant::now();
-            let batcher = Arc::new(GpuBatcher::new(ctx, workers, per_slot, nodes_per_slot)?);
-            stats.setup_s = t0.elapsed().as_secs_f64();
-            let next = AtomicUsize::new(0);
+    let mut stats = match exec {
+        Executor::Cpu => {
+            let (tx, rx) = mpsc::channel::<MemberResult>();
             std::thread::scope(|sc| {
-                for slot in 0..workers {
-                    let tx = tx.clone();
-                    let (batcher, next) = (&batcher, &next);
-                    std::thread::Builder::new()
-                        .stack_size(4 << 20)
-                        .spawn_scoped(sc, move || {
-                            let _leave = Leave(batcher);
-                            loop {
-                                let i = next.fetch_add(1, Ordering::Relaxed);
-                                if i >= members.len() {
-                                    break;
-                                }
-                                let r = run_member(i, &members[i], opts, Some((batcher, slot)));
-                                let _ = tx.send(r);
-                            }
-                        })
-                        .expect("cannot spawn a batch worker thread");
-                }
-                drop(tx);
+                sc.spawn(move || {
+                    members
+                        .par_iter()
+                        .enumerate()
+                        .for_each_with(tx, |tx, (i, m)| {
+                            let r = match setup(m, opts) {
+                                Ok(sim) => now(run_member(i, sim, opts.keep_history)),
+                                Err(outcome) => MemberResult {
+                                    index: i,
+                                    outcome,
+                                    history: vec![],
+                                },
+                            };
+                            let _ = tx.send(r);
+                        });
+                });
                 for r in rx {
                     on_done(r);
                 }
             });
-            stats.gpu = batcher.timers();
+            BatchStats::default()
         }
-    }
+        Executor::Gpu(ctx) => lockstep::run(members, ctx, opts, &mut on_done)?,
+    };
     stats.wall_s = start.elapsed().as_secs_f64();
     Ok(stats)
 }

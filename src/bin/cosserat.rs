@@ -89,6 +89,9 @@ struct StudyCommon {
     /// Parallel runs (default: the number of cores).
     #[arg(long)]
     jobs: Option<usize>,
+    /// Newton variant of every run (default: the scene's, else full).
+    #[arg(long, value_enum)]
+    newton: Option<cmds::NewtonArg>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -164,6 +167,9 @@ struct RunArgs {
     /// Dissipation strategy (default: the scene's, else staggered).
     #[arg(long, value_enum)]
     strategy: Option<StrategyArg>,
+    /// Newton variant (default: the scene's `[integrator] newton`, else full).
+    #[arg(long, value_enum)]
+    newton: Option<cmds::NewtonArg>,
     /// Output directory (default: `out/<scene name>`).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -212,6 +218,7 @@ fn main() -> ExitCode {
             t_end: None,
             rho_inf: None,
             strategy: None,
+            newton: None,
             out: Some(PathBuf::from("out/frame")),
             every: None,
             vtk: false,
@@ -323,6 +330,9 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
             StrategyArg::Monolithic => Strategy::Monolithic,
         };
     }
+    if let Some(n) = a.newton {
+        p.newton = n.variant();
+    }
     Ok(p)
 }
 
@@ -412,6 +422,9 @@ fn study_scene(c: &StudyCommon) -> Result<Scene> {
             bail!("--newton-tol: must be a finite number > 0 (got {tol})");
         }
         scene.params.newton_tol = tol;
+    }
+    if let Some(n) = c.newton {
+        scene.params.newton = n.variant();
     }
     Ok(scene)
 }

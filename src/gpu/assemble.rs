@@ -14,7 +14,7 @@ use super::kernel::{
 };
 use super::layout::{AsmLayout, A_NODE};
 use super::GpuError;
-use crate::integrator::backend::AssembledSystem;
+use crate::integrator::evaluate::AssembledSystem;
 
 /// The WGSL source of the assembly pass (f64 version).
 pub const ASSEMBLE_WGSL: &str = include_str!("../../shaders/assemble.wgsl");

@@ -117,6 +117,12 @@ impl GpuContext {
         }
     }
 
+    /// Whether the adapter is a software rasterizer running on the CPU's own cores
+    /// (lavapipe, llvmpipe, WARP, SwiftShader: wgpu reports `DeviceType::Cpu`).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// True when the kernels run in f64.
     pub fn is_f64(&self) -> bool {
         self.precision == Precision::F64

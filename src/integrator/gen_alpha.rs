@@ -41,8 +41,8 @@
 use crate::element::strain::{Config, A0, B0, R0, R1};
 use crate::element::{elastic_field_forces, elastic_field_stiffness, ElementData, M2};
 use crate::integrator::dofs::{DofMap, NONE};
+use crate::integrator::report::StepFailure;
 use crate::integrator::state::{rigid_director_velocities, State};
-use crate::integrator::system::StepFailure;
 use crate::linsolve::{LinsolveError, SparseSolver};
 use crate::math::{exp_so3, hat};
 use crate::model::{Mat3, Model, Vec3};
@@ -57,7 +57,7 @@ const FD_REL_STEP: f64 = 1e-6;
 /// A Newton iteration that no longer halves the residual is accepted once the residual
 /// is below this multiple of `newton_tol` (the round-off floor; see [`GenAlpha::step`]);
 /// the same floor as the mid-point Newton of `Simulation`.
-const STALL_FACTOR: f64 = crate::integrator::system::ROUNDOFF_RESIDUAL;
+const STALL_FACTOR: f64 = crate::integrator::report::ROUNDOFF_RESIDUAL;
 
 /// The four generalized-α coefficients.
 #[derive(Clone, Copy, Debug, PartialEq)]

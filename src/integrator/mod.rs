@@ -2,14 +2,16 @@
 //! (DESIGN §3), with the dissipation treated by the staggered or monolithic strategy
 //! (DESIGN §4).
 
-pub mod backend;
 pub mod dofs;
+pub mod evaluate;
 pub mod gen_alpha;
 mod links;
 pub mod params;
+pub mod report;
 pub mod run;
+mod simulation;
 pub mod state;
-pub mod system;
 
-pub use params::{IntegratorParams, Scheme, Strategy};
-pub use system::{Simulation, SolveTimers, StepFailure, StepReport};
+pub use params::{IntegratorParams, NewtonVariant, Scheme, Strategy};
+pub use report::{SolveTimers, StepFailure, StepReport};
+pub use simulation::Simulation;

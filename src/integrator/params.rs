@@ -145,6 +145,32 @@ pub enum Strategy {
     Monolithic,
 }
 
+/// How Newton treats the tangent within one solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NewtonVariant {
+    /// A fresh tangent (and LU factorization) every iteration.
+    #[default]
+    Full,
+    /// From the third iteration of a solve on, the last tangent *and its factorization*
+    /// are kept while each iteration cuts the relative residual by at least 5×; a slower
+    /// iteration takes a fresh one. Iterations that keep it evaluate the residual only
+    /// (on the GPU: a residual-only dispatch and readback). The acceptance checks are
+    /// unchanged; the converged state differs from full Newton's by at most the Newton
+    /// tolerance.
+    Modified,
+}
+
+impl NewtonVariant {
+    /// `full` or `modified`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            NewtonVariant::Full => "full",
+            NewtonVariant::Modified => "modified",
+        }
+    }
+}
+
 /// All parameters of a run's time integration.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct IntegratorParams {
@@ -159,6 +185,9 @@ pub struct IntegratorParams {
     pub newton_tol: f64,
     /// Newton iteration cap per solve. Default 25.
     pub max_iter: usize,
+    /// Newton variant. Default [`NewtonVariant::Full`] (docs/gpu.md, "Newton variant",
+    /// has the measurements behind the choice).
+    pub newton: NewtonVariant,
     /// Dissipative solution strategy. Default [`Strategy::Staggered`]: on the frame it
     /// converged in every case the monolithic Newton did, went further where both failed
     /// (Δt = 0.5) and took about half the wall time (README, "Dissipation strategies").
@@ -185,6 +214,7 @@ impl IntegratorParams {
             t_end,
             newton_tol: 1e-11,
             max_iter: 25,
+            newton: NewtonVariant::Full,
             strategy: Strategy::Staggered,
             outer_tol: 1e-10,
             max_outer: 30,

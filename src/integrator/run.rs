@@ -4,7 +4,8 @@
 
 use std::time::Instant;
 
-use crate::integrator::system::Simulation;
+use crate::integrator::evaluate::now;
+use crate::integrator::Simulation;
 use crate::observe::record::{RunStatus, StepRecord};
 use crate::observe::Invariants;
 
@@ -94,7 +95,20 @@ fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
 /// Runs `sim` to its end time. `observer` sees row 0 and every accepted step (its
 /// error aborts the run, e.g. a full disk); `every` thins what it sees (the last accepted
 /// step is always shown).
+///
+/// # Panics
+/// If `sim` is attached to a lockstep batch driver (see [`run_async`]).
 pub fn run<E>(
+    sim: &mut Simulation,
+    every: usize,
+    observer: impl FnMut(&StepRecord, &Simulation) -> Result<(), E>,
+) -> Result<RunOutcome, E> {
+    now(run_async(sim, every, observer))
+}
+
+/// [`run`] as a future: it waits wherever a step waits on a lockstep batch driver
+/// ([`Simulation::step_async`]); the batch driver polls it.
+pub async fn run_async<E>(
     sim: &mut Simulation,
     every: usize,
     mut observer: impl FnMut(&StepRecord, &Simulation) -> Result<(), E>,
@@ -126,7 +140,7 @@ pub fn run<E>(
     let every = every.max(1);
     let mut unshown: Option<(usize, crate::integrator::StepReport)> = None;
     for step in 1..=n_steps {
-        match sim.step() {
+        match sim.step_async().await {
             Ok(rep) => {
                 let inv = sim.invariants();
                 let (ls, js) = momentum_scales(sim, &inv);

@@ -12,7 +12,7 @@ use super::raw::{
 };
 use super::span::{Doc, KeyPath};
 use super::{fmt_num, key_name, Scene, SceneError};
-use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
+use crate::integrator::params::{IntegratorParams, NewtonVariant, Scheme, Strategy};
 use crate::model::{
     Element, ElementProps, Link, Mat3, Model, NodalLoad, Plane, RodInfo, Support, TimeTable, Vec3,
 };
@@ -610,6 +610,18 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
                     format!(
                         "unknown strategy `{other}` (expected \"monolithic\" or \"staggered\")"
                     ),
+                ))
+            }
+        };
+    }
+    if let Some(s) = r.newton.as_deref() {
+        p.newton = match s {
+            "full" => NewtonVariant::Full,
+            "modified" => NewtonVariant::Modified,
+            other => {
+                return Err(cx.err(
+                    &k("newton"),
+                    format!("unknown Newton variant `{other}` (expected \"full\" or \"modified\")"),
                 ))
             }
         };

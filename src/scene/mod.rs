@@ -422,7 +422,8 @@ impl Scene {
         );
         let _ = writeln!(
             s,
-            "  strategy {strategy}, newton_tol {:e}, max_iter {}, outer_tol {:e}, max_outer {}, energy_tol {:e}",
+            "  strategy {strategy}, newton {}, newton_tol {:e}, max_iter {}, outer_tol {:e}, max_outer {}, energy_tol {:e}",
+            p.newton.name(),
             p.newton_tol, p.max_iter, p.outer_tol, p.max_outer, p.energy_tol
         );
         s

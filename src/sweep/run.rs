@@ -35,6 +35,8 @@ pub struct SweepOptions {
     pub histories: bool,
     /// GPU path: members in flight at once (0 = all).
     pub workers: usize,
+    /// Overrides every member's Newton variant when set.
+    pub newton: Option<crate::integrator::NewtonVariant>,
 }
 
 /// One row of `members.csv`.
@@ -241,7 +243,7 @@ pub fn run_sweep(
         BatchOptions {
             keep_history: opts.histories,
             workers: opts.workers,
-            modified_newton: false,
+            newton: opts.newton,
         },
         |r: MemberResult| {
             let id = ids[r.index];

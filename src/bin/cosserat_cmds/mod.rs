@@ -12,8 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use cosserat::batch::{
     bench_members, run_members, BackendChoice, BatchOptions, BatchStats, Executor, GpuBatcher,
 };
-use cosserat::gpu::kernel::KernelTimers;
-use cosserat::integrator::{Simulation, SolveTimers};
+use cosserat::integrator::{NewtonVariant, Simulation, SolveTimers};
 use cosserat::observe::record::RunStatus;
 use cosserat::sweep::{load_sweep, run_sweep, SweepOptions};
 
@@ -35,6 +34,26 @@ impl BackendArg {
             BackendArg::Cpu => BackendChoice::Cpu,
             BackendArg::Gpu => BackendChoice::Gpu,
             BackendArg::Auto => BackendChoice::Auto,
+        }
+    }
+}
+
+/// Newton variant (`--newton`).
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum NewtonArg {
+    /// A fresh tangent and LU factorization every iteration.
+    Full,
+    /// Keep the tangent and its factorization while the residual contracts ≥ 5× per
+    /// iteration (those iterations evaluate the residual only).
+    Modified,
+}
+
+impl NewtonArg {
+    /// The integrator's variant.
+    pub fn variant(self) -> NewtonVariant {
+        match self {
+            NewtonArg::Full => NewtonVariant::Full,
+            NewtonArg::Modified => NewtonVariant::Modified,
         }
     }
 }
@@ -103,6 +122,9 @@ pub struct SweepArgs {
     /// Also write DIR/member_<i>/history.csv for every member.
     #[arg(long)]
     pub histories: bool,
+    /// Newton variant of every member (default: each member's scene, else full).
+    #[arg(long, value_enum)]
+    pub newton: Option<NewtonArg>,
 }
 
 /// `cosserat sweep`.
@@ -133,6 +155,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         resume: a.resume,
         histories: a.histories,
         workers: 0,
+        newton: a.newton.map(NewtonArg::variant),
     };
     let summary = run_sweep(&spec, &exec, &a.out, &opts, |row| {
         done += 1;
@@ -176,30 +199,38 @@ pub struct BenchArgs {
     /// Time the CPU path only (e.g. to measure its scaling with rods and threads).
     #[arg(long)]
     pub cpu_only: bool,
-    /// Modified Newton: reuse the tangent while the residual contracts by ≥ 5× per
-    /// iteration.
-    #[arg(long)]
-    pub modified_newton: bool,
+    /// Time the GPU path only.
+    #[arg(long, conflicts_with = "cpu_only")]
+    pub gpu_only: bool,
+    /// Newton variant (default: full).
+    #[arg(long, value_enum, default_value_t = NewtonArg::Full)]
+    pub newton: NewtonArg,
+    /// GPU path: members in flight at once (default: as many as fit, at most 4096).
+    #[arg(long, default_value_t = 0)]
+    pub slots: usize,
 }
 
-/// One timed batch: its stats, Newton iterations, failed members and the members' summed
-/// Newton stage timers.
+/// One timed batch: its stats, Newton iterations, failed members, the members' summed
+/// Newton stage timers and the process's peak resident memory after it.
 struct Timed {
     stats: BatchStats,
     iters: usize,
     failed: usize,
     stages: SolveTimers,
+    peak_rss: Option<u64>,
 }
 
 fn timed(
     members: &[cosserat::batch::Member],
     exec: &Executor,
-    modified_newton: bool,
+    newton: NewtonVariant,
+    slots: usize,
 ) -> Result<Timed> {
     let (mut iters, mut failed) = (0usize, 0usize);
     let mut stages = SolveTimers::default();
     let opts = BatchOptions {
-        modified_newton,
+        newton: Some(newton),
+        workers: slots,
         ..Default::default()
     };
     let stats = run_members(members, exec, opts, |r| {
@@ -221,7 +252,16 @@ fn timed(
         iters,
         failed,
         stages,
+        peak_rss: peak_rss_bytes(),
     })
+}
+
+/// The process's peak resident set size (Linux `VmHWM`), if known.
+fn peak_rss_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
 }
 
 /// `assembly …, factor …, solve …` of summed stage timers (thread-seconds).
@@ -239,13 +279,53 @@ fn stages_json(obj: &mut serde_json::Value, p: &str, t: &SolveTimers) {
     obj[format!("{p}_solve_s")] = t.solve_s.into();
     obj[format!("{p}_factorizations")] = t.factorizations.into();
     obj[format!("{p}_solves")] = t.solves.into();
+    obj[format!("{p}_factor_us_each")] =
+        (1e6 * t.factor_s / (t.factorizations.max(1) as f64)).into();
+    obj[format!("{p}_solve_us_each")] = (1e6 * t.solve_s / (t.solves.max(1) as f64)).into();
 }
 
-/// Bytes uploaded and read back per element slot per dispatch (`elements` slots: every
-/// member in flight at once).
-fn per_element_dispatch(t: &KernelTimers, elements: usize) -> (f64, f64) {
-    let n = (t.dispatches as f64 * elements as f64).max(1.0);
-    (t.bytes_up as f64 / n, t.bytes_down as f64 / n)
+/// The inputs of the batch throughput model (docs/gpu.md, "Throughput model") measured on
+/// a GPU batch: per element evaluation, per member poll, per dispatch.
+fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
+    let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
+    let evals = sv.element_evals.max(1) as f64;
+    let threads = rayon::current_num_threads() as f64;
+    let member_steps = (a.rods * a.steps) as f64;
+    obj["gpu_wall_s"] = w.wall_s.into();
+    obj["gpu_newton_iters"] = g.iters.into();
+    obj["gpu_failed"] = g.failed.into();
+    obj["gpu_setup_s"] = w.setup_s.into();
+    obj["gpu_admit_s"] = w.admit_s.into();
+    obj["gpu_slots"] = w.slots.into();
+    obj["gpu_upload_s"] = k.upload_s.into();
+    obj["gpu_kernel_s"] = k.kernel_s.into();
+    obj["gpu_readback_s"] = k.readback_s.into();
+    obj["gpu_unpack_s"] = k.unpack_s.into();
+    obj["gpu_pack_s"] = sv.pack_s.into();
+    obj["gpu_host_member_phase_s"] = w.host_s.into();
+    obj["gpu_dispatches"] = k.dispatches.into();
+    obj["gpu_batch_iterations"] = w.iterations.into();
+    obj["gpu_bytes_up"] = k.bytes_up.into();
+    obj["gpu_bytes_down"] = k.bytes_down.into();
+    obj["gpu_requests"] = sv.requests.into();
+    obj["gpu_tangent_requests"] = sv.tangent_requests.into();
+    obj["gpu_element_evals"] = sv.element_evals.into();
+    obj["gpu_element_tangent_evals"] = sv.element_tangent_evals.into();
+    // Model inputs.
+    obj["model_kernel_us_per_element_eval"] = (1e6 * k.kernel_s / evals).into();
+    obj["model_tangent_fraction"] = (sv.element_tangent_evals as f64 / evals).into();
+    obj["model_bytes_up_per_element_eval"] = (k.bytes_up as f64 / evals).into();
+    obj["model_bytes_down_per_element_eval"] = (k.bytes_down as f64 / evals).into();
+    obj["model_evals_per_member_step"] = (sv.requests as f64 / member_steps).into();
+    obj["model_dispatches_per_step"] = (k.dispatches as f64 / a.steps.max(1) as f64).into();
+    obj["model_host_thread_us_per_member_poll"] =
+        (1e6 * w.host_s * threads / (w.polls.max(1) as f64)).into();
+    obj["model_pack_us_per_request"] = (1e6 * sv.pack_s / (sv.requests.max(1) as f64)).into();
+    obj["model_unpack_us_per_request"] = (1e6 * k.unpack_s / (sv.requests.max(1) as f64)).into();
+    obj["model_dispatch_overhead_us"] =
+        (1e6 * (k.upload_s + k.readback_s) / (k.dispatches.max(1) as f64)).into();
+    obj["gpu_peak_rss_bytes"] = g.peak_rss.into();
+    stages_json(obj, "gpu", &g.stages);
 }
 
 /// `cosserat bench`: the same batch on the CPU path and on the GPU path.
@@ -253,8 +333,14 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let members = bench_members(a.rods, a.elements, a.steps);
     let work = (a.rods * a.elements * a.steps) as f64;
     let rod_steps = (a.rods * a.steps) as f64;
-    let cpu = timed(&members, &Executor::Cpu, a.modified_newton)?;
-    let cpu_rate = work / cpu.stats.wall_s;
+    let newton = a.newton.variant();
+    let rss0 = peak_rss_bytes();
+    let cpu = if a.gpu_only {
+        None
+    } else {
+        Some(timed(&members, &Executor::Cpu, newton, a.slots)?)
+    };
+    let cpu_rate = cpu.as_ref().map(|c| work / c.stats.wall_s);
     let gpu_exec = if a.cpu_only {
         Ok((Executor::Cpu, None))
     } else {
@@ -262,104 +348,92 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     };
     let (adapter, f64_ok, gpu) = match &gpu_exec {
         Ok((exec @ Executor::Gpu(ctx), _)) => {
-            let r = timed(&members, exec, a.modified_newton).context("GPU batch")?;
+            let r = timed(&members, exec, newton, a.slots).context("GPU batch")?;
             (ctx.describe(), ctx.is_f64(), Some(r))
         }
         Ok((Executor::Cpu, _)) => ("none".into(), false, None),
         Err(e) => (format!("none ({e})"), false, None),
     };
     let gpu_rate = gpu.as_ref().map(|g| work / g.stats.wall_s);
+    let ratio = gpu_rate.zip(cpu_rate).map(|(g, c)| g / c);
     if a.json {
         let mut obj = serde_json::json!({
             "rods": a.rods,
             "elements": a.elements,
             "steps": a.steps,
+            "newton": newton.name(),
             "cpu_element_steps_per_s": cpu_rate,
             "gpu_element_steps_per_s": gpu_rate,
-            "cpu_rod_steps_per_s": rod_steps / cpu.stats.wall_s,
+            "cpu_rod_steps_per_s": cpu.as_ref().map(|c| rod_steps / c.stats.wall_s),
             "gpu_rod_steps_per_s": gpu.as_ref().map(|g| rod_steps / g.stats.wall_s),
-            "ratio": gpu_rate.map(|g| g / cpu_rate),
+            "ratio": ratio,
             "adapter": adapter,
             "f64": f64_ok,
             "cpu_threads": rayon::current_num_threads(),
-            "modified_newton": a.modified_newton,
-            "cpu_wall_s": cpu.stats.wall_s,
-            "cpu_newton_iters": cpu.iters,
-            "cpu_failed": cpu.failed,
+            "peak_rss_bytes_before": rss0,
         });
-        stages_json(&mut obj, "cpu", &cpu.stages);
+        if let Some(c) = &cpu {
+            obj["cpu_wall_s"] = c.stats.wall_s.into();
+            obj["cpu_newton_iters"] = c.iters.into();
+            obj["cpu_failed"] = c.failed.into();
+            obj["cpu_peak_rss_bytes"] = c.peak_rss.into();
+            obj["cpu_thread_us_per_member_iteration"] =
+                (1e6 * c.stats.wall_s * rayon::current_num_threads() as f64
+                    / (c.iters.max(1) as f64))
+                    .into();
+            stages_json(&mut obj, "cpu", &c.stages);
+        }
         if let Some(g) = &gpu {
-            let k = &g.stats.gpu;
-            obj["gpu_wall_s"] = g.stats.wall_s.into();
-            obj["gpu_newton_iters"] = g.iters.into();
-            obj["gpu_failed"] = g.failed.into();
-            obj["gpu_setup_s"] = g.stats.setup_s.into();
-            obj["gpu_upload_s"] = k.upload_s.into();
-            obj["gpu_kernel_s"] = k.kernel_s.into();
-            obj["gpu_readback_s"] = k.readback_s.into();
-            obj["gpu_dispatches"] = k.dispatches.into();
-            obj["gpu_bytes_up"] = k.bytes_up.into();
-            obj["gpu_bytes_down"] = k.bytes_down.into();
-            obj["gpu_unpack_s"] = k.unpack_s.into();
-            let (up, down) = per_element_dispatch(k, a.rods * a.elements);
-            obj["gpu_bytes_up_per_element_dispatch"] = up.into();
-            obj["gpu_bytes_down_per_element_dispatch"] = down.into();
-            stages_json(&mut obj, "gpu", &g.stages);
+            gpu_model_json(&mut obj, g, &a);
         }
         println!("{obj}");
-    } else {
-        println!(
-            "batch: {} rods × {} elements × {} steps (EDMC-2 α = 0.5, staggered, Δt = 0.01){}",
-            a.rods,
-            a.elements,
-            a.steps,
-            if a.modified_newton {
-                ", modified Newton"
-            } else {
-                ""
-            }
-        );
+        return Ok(ExitCode::SUCCESS);
+    }
+    println!(
+        "batch: {} rods × {} elements × {} steps (EDMC-2 α = 0.5, staggered, Δt = 0.01), {} Newton",
+        a.rods,
+        a.elements,
+        a.steps,
+        newton.name()
+    );
+    if let (Some(c), Some(rate)) = (&cpu, cpu_rate) {
         println!(
             "cpu ({} threads): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed",
             rayon::current_num_threads(),
-            cpu.stats.wall_s,
-            cpu_rate,
-            rod_steps / cpu.stats.wall_s,
-            cpu.iters,
-            cpu.failed
+            c.stats.wall_s,
+            rate,
+            rod_steps / c.stats.wall_s,
+            c.iters,
+            c.failed
         );
-        println!("cpu stages: {}", stages_line(&cpu.stages));
-        match (&gpu, gpu_rate) {
-            (Some(g), Some(rate)) => {
-                let (w, k) = (&g.stats, &g.stats.gpu);
-                println!(
-                    "gpu ({adapter}): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed; ratio gpu/cpu {:.2}",
-                    w.wall_s, rate, rod_steps / w.wall_s, g.iters, g.failed, rate / cpu_rate
-                );
-                let other =
-                    w.wall_s - w.setup_s - k.upload_s - k.kernel_s - k.readback_s - k.unpack_s;
-                let (up, down) = per_element_dispatch(k, a.rods * a.elements);
-                println!(
-                    "gpu time: pipeline setup {:.3} s, upload {:.3} s, kernel+assembly+copy {:.3} s, readback {:.3} s, unpack {:.3} s ({} dispatches, {:.1} MB up, {:.1} MB down; per element per dispatch {:.0} B up, {:.0} B down); host gather+scatter+solve+barrier {:.3} s",
-                    w.setup_s,
-                    k.upload_s,
-                    k.kernel_s,
-                    k.readback_s,
-                    k.unpack_s,
-                    k.dispatches,
-                    k.bytes_up as f64 / 1e6,
-                    k.bytes_down as f64 / 1e6,
-                    up,
-                    down,
-                    other
-                );
-                println!(
-                    "gpu stages (assembly includes the wait at the batch barrier): {}",
-                    stages_line(&g.stages)
-                );
-            }
-            _ => println!("gpu: not run ({adapter})"),
+        println!("cpu stages: {}", stages_line(&c.stages));
+    }
+    match (&gpu, gpu_rate) {
+        (Some(g), Some(rate)) => {
+            let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
+            let ratio = ratio.map_or_else(String::new, |r| format!("; ratio gpu/cpu {r:.2}"));
+            println!(
+                "gpu ({adapter}): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed{ratio}",
+                w.wall_s, rate, rod_steps / w.wall_s, g.iters, g.failed
+            );
+            let evals = sv.element_evals.max(1) as f64;
+            println!(
+                "gpu time: pipeline setup {:.3} s, member set-up {:.3} s, member phases {:.3} s, pack {:.3} s, upload {:.3} s, kernel+assembly+copy {:.3} s, readback {:.3} s, unpack {:.3} s",
+                w.setup_s, w.admit_s, w.host_s, sv.pack_s, k.upload_s, k.kernel_s, k.readback_s, k.unpack_s
+            );
+            println!(
+                "gpu traffic: {} dispatches over {} slots, {} member evaluations ({} with tangent); per element evaluation {:.0} B up, {:.0} B down, kernel {:.2} µs",
+                k.dispatches,
+                w.slots,
+                sv.requests,
+                sv.tangent_requests,
+                k.bytes_up as f64 / evals,
+                k.bytes_down as f64 / evals,
+                1e6 * k.kernel_s / evals
+            );
+            println!("gpu stages: {}", stages_line(&g.stages));
         }
+        _ => println!("gpu: not run ({adapter})"),
     }
     Ok(ExitCode::SUCCESS)
 }

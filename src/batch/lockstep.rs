@@ -1,0 +1,160 @@
+//! The lockstep GPU batch driver: one host thread advances every member in flight
+//! evaluation by evaluation.
+//!
+//! Each batch iteration:
+//! 1. **admit**: free slots take the next queued members (their simulations are set up in
+//!    parallel, then registered on the GPU evaluator);
+//! 2. **member phase**: every member in flight is polled once, in parallel (rayon). A poll
+//!    runs that member's own CPU work — scatter of its last answer, factorization, solve,
+//!    convergence, staggered-loop and acceptance bookkeeping, observers — up to its next
+//!    element evaluation (posted to its mailbox) or to the end of its run;
+//! 3. **retire**: finished members report and leave their slot;
+//! 4. **serve**: every posted request goes into one dispatch (element and assembly
+//!    passes) and each member gets its answer.
+//!
+//! A member whose scheme has no GPU kernel runs on the CPU kernel within its first poll.
+
+use std::future::Future;
+use std::pin::Pin;
+use std::task::Poll;
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::gpu::GpuEvaluator;
+use super::{run_member, setup, setup_failure, BatchOptions, BatchStats, Member, MemberResult};
+use crate::gpu::{GpuContext, GpuError};
+use crate::integrator::evaluate::poll_once;
+
+type MemberFuture<'a> = Pin<Box<dyn Future<Output = MemberResult> + Send + 'a>>;
+
+/// A member in flight.
+struct InFlight<'a> {
+    /// Its GPU slot (`None`: runs on the CPU kernel, holds no slot).
+    slot: Option<usize>,
+    run: MemberFuture<'a>,
+    done: Option<MemberResult>,
+}
+
+/// Runs `members` on `ctx` in lockstep; `on_done` sees each result as its member finishes.
+pub(super) fn run(
+    members: &[Member],
+    ctx: &GpuContext,
+    opts: BatchOptions,
+    on_done: &mut dyn FnMut(MemberResult),
+) -> Result<BatchStats, GpuError> {
+    let mut stats = BatchStats::default();
+    if members.is_empty() {
+        return Ok(stats);
+    }
+    let per_slot = members
+        .iter()
+        .map(|m| m.model.elements.len())
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    let nodes_per_slot = members
+        .iter()
+        .map(|m| m.model.n_nodes())
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    let cap = GpuEvaluator::max_slots(ctx, per_slot, nodes_per_slot).max(1);
+    let want = if opts.workers == 0 {
+        super::DEFAULT_GPU_SLOTS
+    } else {
+        opts.workers
+    };
+    let slots = want.min(cap).min(members.len()).max(1);
+    let t0 = Instant::now();
+    let mut gpu = GpuEvaluator::new(ctx, slots, per_slot, nodes_per_slot)?;
+    stats.setup_s = t0.elapsed().as_secs_f64();
+    stats.slots = slots;
+
+    let mut free: Vec<usize> = (0..slots).rev().collect();
+    let mut next = 0usize;
+    let mut flight: Vec<InFlight> = Vec::with_capacity(slots);
+    loop {
+        // 1. Admit queued members into free slots.
+        let t0 = Instant::now();
+        let admit: Vec<(usize, usize)> = std::iter::from_fn(|| {
+            (next < members.len()).then_some(())?;
+            let slot = free.pop()?;
+            next += 1;
+            Some((slot, next - 1))
+        })
+        .collect();
+        let sims: Vec<_> = admit
+            .par_iter()
+            .map(|&(_, i)| setup(&members[i], opts))
+            .collect();
+        for ((slot, index), sim) in admit.into_iter().zip(sims) {
+            let attached = sim.and_then(|mut sim| match gpu.attach(slot, &mut sim) {
+                Ok(on_gpu) => Ok((sim, on_gpu)),
+                Err(e) => Err(setup_failure(e)),
+            });
+            match attached {
+                Ok((sim, on_gpu)) => {
+                    if !on_gpu {
+                        free.push(slot);
+                    }
+                    flight.push(InFlight {
+                        slot: on_gpu.then_some(slot),
+                        run: Box::pin(run_member(index, sim, opts.keep_history)),
+                        done: None,
+                    });
+                }
+                Err(outcome) => {
+                    free.push(slot);
+                    on_done(MemberResult {
+                        index,
+                        outcome,
+                        history: vec![],
+                    });
+                }
+            }
+        }
+        stats.admit_s += t0.elapsed().as_secs_f64();
+        if flight.is_empty() {
+            if next >= members.len() {
+                break;
+            }
+            continue;
+        }
+
+        // 2. Member phase: every member's CPU work up to its next evaluation.
+        let t0 = Instant::now();
+        flight.par_iter_mut().for_each(|m| {
+            if let Poll::Ready(r) = poll_once(m.run.as_mut()) {
+                m.done = Some(r);
+            }
+        });
+        stats.host_s += t0.elapsed().as_secs_f64();
+        stats.polls += flight.len() as u64;
+        stats.iterations += 1;
+
+        // 3. Retire finished members.
+        let mut i = 0;
+        while i < flight.len() {
+            if let Some(r) = flight[i].done.take() {
+                let m = flight.swap_remove(i);
+                if let Some(slot) = m.slot {
+                    gpu.detach(slot);
+                    free.push(slot);
+                }
+                on_done(r);
+            } else {
+                i += 1;
+            }
+        }
+
+        // 4. Serve every posted evaluation in one dispatch.
+        if gpu.serve() == 0 && !flight.is_empty() {
+            // Every member in flight is waiting, so each posted a request; none did.
+            unreachable!("lockstep batch: members waiting without a posted evaluation");
+        }
+    }
+    stats.gpu = gpu.timers();
+    stats.serve = gpu.serve_timers;
+    Ok(stats)
+}

@@ -1,0 +1,165 @@
+//! Where the element kernel runs for frozen-scalar assembly. By default the CPU kernel, in
+//! line. A simulation can instead hand its elements to an evaluator outside it, two ways:
+//!
+//! * **direct** ([`ElementBackend`], attached with
+//!   [`crate::integrator::Simulation::set_backend`]): the call evaluates and returns at
+//!   once (one simulation on a GPU, `run --backend gpu`);
+//! * **lockstep** ([`EvalPort`]): the simulation posts an [`EvalRequest`] and *awaits*
+//!   the answer. Its step is an `async fn`; a batch driver ([`crate::batch`]) polls every
+//!   member until each is waiting, serves all posted requests in one dispatch, and polls
+//!   again. The Newton loop, strategies and acceptance checks are the same code on every
+//!   path: only this await point differs.
+//!
+//! Either way the evaluator returns the elements already summed per node
+//! ([`AssembledSystem`]).
+
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::task::{Context, Poll, Waker};
+
+use nalgebra::Vector6;
+
+use crate::element::{ElementState, FrozenScalars};
+
+/// What the kernel needs per element besides the run constants registered beforehand
+/// (the Newton increment comes per node).
+#[derive(Clone, Copy, Debug)]
+pub struct ElementInput {
+    /// State at `n`.
+    pub st: ElementState,
+    /// Raw strains at `n`.
+    pub eps_n: Vector6<f64>,
+    /// Frozen dissipation scalars.
+    pub s: FrozenScalars,
+}
+
+/// One evaluation of a simulation's elements (frozen scalars), as posted to an evaluator.
+#[derive(Clone, Debug, Default)]
+pub struct EvalRequest {
+    /// Per element: state at `n` and raw strains at `n`. Sent only when they changed
+    /// since this simulation's last request (once per step); `None` means "as before".
+    pub states: Option<Vec<(ElementState, Vector6<f64>)>>,
+    /// Per element: the frozen dissipation scalars.
+    pub scalars: Vec<FrozenScalars>,
+    /// Per node: the Newton increment in node-local order `u0..2 θ0..2 g0..2` (zero for
+    /// removed unknowns).
+    pub increments: Vec<[f64; 9]>,
+    /// Whether the tangent blocks are wanted (else residual rows and scales only).
+    pub tangent: bool,
+}
+
+/// The element contributions of one simulation summed into its block system, in
+/// node-local order `u0..2 θ0..2 g0..2` (removed unknowns included; the caller skips them).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AssembledSystem {
+    /// Per node: the sum of its incident elements' residual rows.
+    pub node_r: Vec<[f64; 9]>,
+    /// Per node: its diagonal 9×9 block (row-major), the sum of its incident elements'
+    /// (l, l) sub-blocks. Empty without the tangent.
+    pub node_k: Vec<[f64; 81]>,
+    /// Per element: its off-diagonal blocks (end 0, end 1) and (end 1, end 0), row-major.
+    /// Empty without the tangent.
+    pub off_k: Vec<[[f64; 81]; 2]>,
+    /// Largest element row scale of each kind (u, θ, g) over the rows that are unknowns.
+    pub scale: [f64; 3],
+}
+
+/// Evaluates all elements of one simulation at once (frozen scalars), synchronously.
+pub trait ElementBackend: Send + Sync {
+    /// Assembled residual, row scales and (if `req.tangent`) blocks of the elements of
+    /// the simulation in `slot`. An error fails the Newton solve (the step is rejected).
+    fn evaluate_assembled(&self, slot: usize, req: EvalRequest) -> Result<AssembledSystem, String>;
+
+    /// Where the elements are evaluated, for every output (e.g. `gpu: ADAPTER, f64`).
+    fn describe(&self) -> String;
+}
+
+#[derive(Debug, Default)]
+struct Exchange {
+    request: Option<EvalRequest>,
+    response: Option<Result<AssembledSystem, String>>,
+}
+
+/// A simulation's mailbox at a lockstep batch driver: the simulation posts a request and
+/// awaits; the driver takes every posted request ([`Self::take_request`]), evaluates them
+/// together and answers each ([`Self::respond`]).
+#[derive(Clone, Debug)]
+pub struct EvalPort {
+    inner: Arc<Mutex<Exchange>>,
+    describe: Arc<str>,
+}
+
+impl EvalPort {
+    /// A new, empty mailbox; `describe` names the evaluator in every output.
+    pub fn new(describe: &str) -> Self {
+        Self {
+            inner: Arc::default(),
+            describe: describe.into(),
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Exchange> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The evaluator's description.
+    pub fn describe(&self) -> &str {
+        &self.describe
+    }
+
+    /// Driver side: the posted request, if the simulation is waiting on one.
+    pub fn take_request(&self) -> Option<EvalRequest> {
+        self.lock().request.take()
+    }
+
+    /// Driver side: answers the request taken last.
+    pub fn respond(&self, r: Result<AssembledSystem, String>) {
+        self.lock().response = Some(r);
+    }
+
+    /// Simulation side: posts `req` and waits until the driver has answered it.
+    pub(crate) async fn evaluate(&self, req: EvalRequest) -> Result<AssembledSystem, String> {
+        {
+            let mut g = self.lock();
+            g.response = None;
+            g.request = Some(req);
+        }
+        Answer(self).await
+    }
+}
+
+/// Ready once the driver has answered.
+struct Answer<'a>(&'a EvalPort);
+
+impl Future for Answer<'_> {
+    type Output = Result<AssembledSystem, String>;
+    fn poll(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<Self::Output> {
+        match self.0.lock().response.take() {
+            Some(r) => Poll::Ready(r),
+            None => Poll::Pending,
+        }
+    }
+}
+
+/// Polls `fut` once (a batch driver polls again after serving the posted requests; no
+/// waker is needed since the driver knows when it answered).
+pub fn poll_once<F: Future + ?Sized>(fut: Pin<&mut F>) -> Poll<F::Output> {
+    fut.poll(&mut Context::from_waker(Waker::noop()))
+}
+
+/// Runs `fut` to completion when it never waits on a lockstep driver (the CPU kernel or a
+/// direct backend).
+///
+/// # Panics
+/// If the future waits: a simulation attached to a lockstep [`EvalPort`] must be stepped
+/// by its batch driver, not through the synchronous API.
+pub fn now<F: Future>(fut: F) -> F::Output {
+    let mut fut = std::pin::pin!(fut);
+    match poll_once(fut.as_mut()) {
+        Poll::Ready(x) => x,
+        Poll::Pending => panic!(
+            "a simulation attached to a lockstep batch evaluator must be stepped by its batch driver"
+        ),
+    }
+}

@@ -1,0 +1,69 @@
+//! What a step reports: its outcome ([`StepReport`]), why it failed ([`StepFailure`]) and
+//! where a simulation's Newton time went ([`SolveTimers`]). A leaf module: the step's
+//! stages and the generalized-α baseline both report through it.
+
+/// Why a step could not be accepted.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepFailure {
+    /// Human-readable reason.
+    pub reason: String,
+    /// Residual norms (relative to the force scale) of the Newton iterations of the last
+    /// attempt.
+    pub residuals: Vec<f64>,
+}
+
+/// What an accepted step reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Newton iterations (all outer rounds and predictor retries).
+    pub newton_iters: usize,
+    /// Outer rounds (staggered), 1 otherwise.
+    pub outer_iters: usize,
+    /// Final relative residual.
+    pub residual: f64,
+    /// Dissipation predicted by DESIGN §4 at the accepted state.
+    pub dissipation: f64,
+    /// Work of the external loads over the step.
+    pub external_work: f64,
+    /// Acceleration norms over the step.
+    pub acc_trans: f64,
+    /// Director acceleration norm.
+    pub acc_rot: f64,
+    /// Largest `|g|` of the rigid links at the accepted state (0 without links).
+    pub max_link_g: f64,
+    /// Augmented-Lagrangian rounds the step took (1 without links).
+    pub link_rounds: usize,
+}
+
+/// Where a simulation's Newton time went (accumulated over its life; thread time, so a
+/// batch sums them over members). The generalized-α baseline's own Newton loop is not
+/// timed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SolveTimers {
+    /// Residual (and tangent) assembly: element kernel, scatter, nodal and link terms. On
+    /// the GPU path this includes the wait for the batch's dispatch.
+    pub assemble_s: f64,
+    /// LU factorizations.
+    pub factor_s: f64,
+    /// Triangular solves (with their backward-error checks).
+    pub solve_s: f64,
+    /// Factorizations done.
+    pub factorizations: u64,
+    /// Solves done (more than factorizations under modified Newton).
+    pub solves: u64,
+}
+
+impl SolveTimers {
+    /// Field-wise sum (a batch's total).
+    pub fn add(&mut self, o: &SolveTimers) {
+        self.assemble_s += o.assemble_s;
+        self.factor_s += o.factor_s;
+        self.solve_s += o.solve_s;
+        self.factorizations += o.factorizations;
+        self.solves += o.solves;
+    }
+}
+
+/// A Newton residual that stops falling below this multiple of the tolerance is at its
+/// round-off floor (see `newton`).
+pub(crate) const ROUNDOFF_RESIDUAL: f64 = 1e5;

@@ -1,0 +1,263 @@
+//! Stage 4 of a step: residual, row scales and tangent of the whole system at an
+//! increment. Element contributions come from the CPU kernel in line or from an
+//! evaluator (direct, or a lockstep batch driver awaited here), then the nodal terms
+//! (point masses, external loads) and the rigid links' bar forces; the relative residual
+//! is measured against per-kind (u, θ, g) force scales.
+
+use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
+use crate::element::{
+    consistent_scalars, kinematics, monolithic_correction, residual_tangent, ElementEval, NDOF,
+};
+use crate::integrator::dofs::{DofMap, NONE};
+use crate::integrator::evaluate::{AssembledSystem, EvalRequest};
+use crate::integrator::links;
+
+impl Simulation {
+    /// Assembles residual `r`, the row scales and (if `tangent`) the matrix values.
+    /// Returns the relative residual `max_i |R_i| / scale(kind of i)` and the per-kind
+    /// scales (u, θ, g).
+    ///
+    /// Frozen-scalar element evaluation goes to the attached evaluator, if any (a
+    /// lockstep driver's answer is awaited here: the one point where a step can wait).
+    /// An evaluator error makes the residual NaN (the Newton solve fails).
+    pub(super) async fn assemble(
+        &mut self,
+        q: &[f64],
+        mode: Mode,
+        tangent: bool,
+        r: &mut [f64],
+    ) -> (f64, [f64; 3]) {
+        let k = self.consts();
+        let dt = k.dt;
+        r.iter_mut().for_each(|x| *x = 0.0);
+        let mut scale = [0.0f64; 3]; // u, θ, g rows
+        if tangent {
+            self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
+        }
+        // With an evaluator the elements arrive already summed per node; the CPU kernel
+        // loop below is skipped.
+        let external = mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+        if external {
+            let req = self.eval_request(q, tangent);
+            let answer = match &self.backend {
+                Backend::Direct(b, slot) => b.evaluate_assembled(*slot, req),
+                Backend::Lockstep(port) => port.evaluate(req).await,
+                Backend::Cpu => unreachable!("external evaluation without an evaluator"),
+            };
+            match answer {
+                Ok(sys) => self.scatter_assembled(&sys, tangent, r, &mut scale),
+                Err(_) => {
+                    // The evaluator may not hold this state any more.
+                    self.sent_version = None;
+                    return (f64::NAN, scale);
+                }
+            }
+        }
+        let n_cpu = if external {
+            0
+        } else {
+            self.model.elements.len()
+        };
+        for e in 0..n_cpu {
+            let inc = self.gather(e, q);
+            let st = self.state.element(&self.model, e);
+            let eps_n = self.state.eps[e];
+            let data = &self.data[e];
+            let (s, kin) = match mode {
+                Mode::Frozen => {
+                    let s = self.frozen[e];
+                    (s, kinematics(data, &st, &eps_n, &inc, s.c_nu, dt))
+                }
+                Mode::Consistent => {
+                    let (s, _, kin) = consistent_scalars(data, &st, &eps_n, &inc, &k);
+                    (s, kin)
+                }
+            };
+            let mut ev = residual_tangent(data, &st, &kin, &s, &k, self.trans_diss, tangent);
+            let map = &self.dofs.elements[e];
+            if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() {
+                let active: [bool; NDOF] = std::array::from_fn(|i| map[i] != NONE);
+                monolithic_correction(
+                    data,
+                    &st,
+                    &eps_n,
+                    &inc,
+                    &k,
+                    self.trans_diss,
+                    &active,
+                    &mut ev.k,
+                );
+            }
+            self.scatter(e, &ev, tangent, r, &mut scale);
+        }
+        // Nodal terms: point masses and external loads.
+        for (a, nd) in self.dofs.nodes.iter().enumerate() {
+            let m = self.model.point_mass[a];
+            let u = gather3(q, &nd.u);
+            let g = gather3(q, &nd.g);
+            let inertia = m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt;
+            let s = self.node_slots[a];
+            for c in 0..3 {
+                if nd.u[c] != NONE {
+                    r[nd.u[c]] += inertia[c] - self.force[a][c];
+                    scale[0] = scale[0].max(inertia[c].abs()).max(self.force[a][c].abs());
+                    if tangent && m != 0.0 {
+                        let vals = self.solver.values_mut();
+                        vals[s[0][c]] += 2.0 * m / (dt * dt);
+                        if s[1][c] != NONE {
+                            vals[s[1][c]] += -2.0 * m / dt;
+                            vals[s[3][c]] += m;
+                        }
+                    }
+                }
+                if nd.g[c] != NONE {
+                    r[nd.g[c]] += m * g[c];
+                    scale[2] = scale[2].max((m * g[c]).abs());
+                }
+                if nd.th[c] != NONE {
+                    r[nd.th[c]] -= self.moment[a][c];
+                    scale[1] = scale[1].max(self.moment[a][c].abs());
+                }
+            }
+        }
+        // Rigid links: the mid-point bar force (exactly energy-consistent, see `Link`).
+        for (i, link) in self.model.links.iter().enumerate() {
+            let a = link.node;
+            let ix = self.dofs.nodes[a].u;
+            let bar = links::bar_terms(
+                link,
+                self.state.lambda[i],
+                &self.state.r[a],
+                &gather3(q, &ix),
+            );
+            for c in 0..3 {
+                if ix[c] == NONE {
+                    continue;
+                }
+                r[ix[c]] += bar.force[c];
+                scale[0] = scale[0].max(bar.force[c].abs());
+                if tangent {
+                    let vals = self.solver.values_mut();
+                    for d in 0..3 {
+                        if ix[d] != NONE {
+                            vals[self.link_slots[i][c][d]] += bar.stiffness[(c, d)];
+                        }
+                    }
+                }
+            }
+        }
+        let mut worst: f64 = 0.0;
+        for (i, &ri) in r.iter().enumerate() {
+            let s = scale[self.row_kinds[i]].max(1e-300);
+            let rel = ri.abs() / s;
+            if !rel.is_finite() {
+                return (f64::INFINITY, scale);
+            }
+            worst = worst.max(rel);
+        }
+        (worst, scale)
+    }
+
+    /// What an evaluator needs for this iteration: the element states only when they
+    /// changed since the last request, the frozen scalars, the increments per node.
+    pub(super) fn eval_request(&mut self, q: &[f64], tangent: bool) -> EvalRequest {
+        let states = (self.sent_version != Some(self.state_version)).then(|| {
+            (0..self.model.elements.len())
+                .map(|e| (self.state.element(&self.model, e), self.state.eps[e]))
+                .collect()
+        });
+        self.sent_version = Some(self.state_version);
+        EvalRequest {
+            states,
+            scalars: self.frozen.clone(),
+            increments: self
+                .dofs
+                .nodes
+                .iter()
+                .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { q[i] }))
+                .collect(),
+            tangent,
+        }
+    }
+
+    /// Adds one element's residual, row scales and (if `tangent`) tangent into the
+    /// global system.
+    pub(super) fn scatter(
+        &mut self,
+        e: usize,
+        ev: &ElementEval,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        let map = &self.dofs.elements[e];
+        for i in 0..NDOF {
+            if map[i] == NONE {
+                continue;
+            }
+            r[map[i]] += ev.r[i];
+            let kind = kind_of_local(i);
+            scale[kind] = scale[kind].max(ev.scale[i]);
+            if tangent {
+                let vals = self.solver.values_mut();
+                let srow = &self.slots[e][i * NDOF..(i + 1) * NDOF];
+                for j in 0..NDOF {
+                    if srow[j] != NONE {
+                        vals[srow[j]] += ev.k[(i, j)];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Adds a backend's assembled system (node blocks, off-diagonal blocks, residual rows
+    /// and per-kind scales) into the global system.
+    pub(super) fn scatter_assembled(
+        &mut self,
+        sys: &AssembledSystem,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        for (nd, nr) in self.dofs.nodes.iter().zip(&sys.node_r) {
+            for (&i, &x) in node_local(nd).iter().zip(nr) {
+                if i != NONE {
+                    r[i] += x;
+                }
+            }
+        }
+        for (s, &x) in scale.iter_mut().zip(&sys.scale) {
+            *s = s.max(x);
+        }
+        if !tangent {
+            return;
+        }
+        let vals = self.solver.values_mut();
+        let add = |vals: &mut [f64], slots: &[usize; 81], block: &[f64; 81]| {
+            for (&s, &x) in slots.iter().zip(block) {
+                if s != NONE {
+                    vals[s] += x;
+                }
+            }
+        };
+        for (slots, block) in self.node_block_slots.iter().zip(&sys.node_k) {
+            add(vals, slots, block);
+        }
+        for (slots, blocks) in self.off_block_slots.iter().zip(&sys.off_k) {
+            add(vals, &slots[0], &blocks[0]);
+            add(vals, &slots[1], &blocks[1]);
+        }
+    }
+
+    pub(super) fn row_kinds(dofs: &DofMap) -> Vec<usize> {
+        let mut k = vec![0; dofs.n];
+        for nd in &dofs.nodes {
+            for (idx, kind) in [(nd.u, 0), (nd.th, 1), (nd.g, 2)] {
+                for i in idx.into_iter().filter(|&i| i != NONE) {
+                    k[i] = kind;
+                }
+            }
+        }
+        k
+    }
+}

@@ -1,0 +1,429 @@
+//! A simulation and its time step. The step is a sequence of named stages, each in a file
+//! named for it (in the order a step runs them):
+//!
+//! 1. [`step`]: loads at the mid-step, Newton predictors, augmented-Lagrangian rounds for
+//!    rigid links (or the generalized-α baseline's own step);
+//! 2. [`strategy`]: the dissipation treatment of one checked solve — frozen scalars (EM),
+//!    the paper's staggered loop, or the monolithic Newton;
+//! 3. [`newton`]: Newton on the nodal increments, full or modified (tangent and its LU
+//!    factorization kept while the residual contracts fast);
+//! 4. [`assemble`]: residual, row scales and tangent from the element kernel (in line on
+//!    the CPU, or through an evaluator: a direct backend, or a lockstep batch driver that
+//!    the step *awaits*), nodal and link terms, scatter into the sparse system;
+//! 5. [`accept`]: the state an increment produces and the acceptance checks (energy never
+//!    grows beyond the external work; the dissipation identity).
+//!
+//! [`probe`] holds the test entry points (residual, tangent and assembled system at a
+//! given increment). The step is an `async fn` only so that a batch driver can suspend it
+//! at the element evaluation; on the CPU it never waits and [`Simulation::step`] runs it
+//! in line.
+
+mod accept;
+mod assemble;
+mod newton;
+mod probe;
+mod step;
+mod strategy;
+
+use std::sync::Arc;
+
+use crate::element::strain::Config;
+use crate::element::{
+    g_idx, strains6, th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
+};
+use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
+use crate::integrator::evaluate::{ElementBackend, EvalPort};
+use crate::integrator::gen_alpha::GenAlpha;
+use crate::integrator::params::{IntegratorParams, NewtonVariant, Scheme};
+use crate::integrator::report::SolveTimers;
+use crate::integrator::state::State;
+use crate::linsolve::{SolverKind, SparseSolver};
+use crate::model::{Model, Vec3};
+use crate::observe::{invariants, Invariants};
+
+/// How the dissipation scalars are treated in one Newton solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    /// Scalars held at `self.frozen`.
+    Frozen,
+    /// Scalars re-evaluated from the iterate and linearized (monolithic).
+    Consistent,
+}
+
+/// Where frozen-scalar element evaluation runs (monolithic assembly always stays on the
+/// CPU kernel).
+enum Backend {
+    /// The CPU kernel, in line.
+    Cpu,
+    /// A synchronous evaluator and this simulation's slot in it.
+    Direct(Arc<dyn ElementBackend>, usize),
+    /// A lockstep batch driver's mailbox (the step awaits its answer).
+    Lockstep(EvalPort),
+}
+
+/// A simulation: the model, its element constants, the unknown numbering, the linear
+/// solver (symbolic analysis done once) and the current state.
+pub struct Simulation {
+    model: Model,
+    params: IntegratorParams,
+    data: Vec<ElementData>,
+    dofs: DofMap,
+    solver: SparseSolver,
+    /// Per element: solver slot of each element-local (i, j) pair, [`NONE`] if inactive.
+    slots: Vec<Vec<usize>>,
+    /// Per node: slots of the diagonal entries of the (u,u), (u,g), (g,u), (g,g) blocks.
+    node_slots: Vec<[[usize; 3]; 4]>,
+    /// Per node: solver slot of each entry of its node-local 9×9 diagonal block
+    /// (`u0..2 θ0..2 g0..2`, row-major), [`NONE`] if inactive (a backend's assembled
+    /// blocks are scattered through it).
+    node_block_slots: Vec<[usize; 81]>,
+    /// Per element: solver slots of its node-local off-diagonal blocks (end 0, end 1) and
+    /// (end 1, end 0), [`NONE`] if inactive.
+    off_block_slots: Vec<[[usize; 81]; 2]>,
+    /// Residual of the last converged Newton solve (for the residual work in `check`).
+    last_residual: Vec<f64>,
+    /// Per rigid link: slots of its node's (u, u) block.
+    link_slots: Vec<[[usize; 3]; 3]>,
+    /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
+    row_kinds: Vec<usize>,
+    state: State,
+    inv: Invariants,
+    trans_diss: bool,
+    /// Previous step's unknowns (the Newton predictor).
+    prev: Vec<f64>,
+    /// Frozen dissipation scalars per element (staggered strategy).
+    frozen: Vec<FrozenScalars>,
+    force: Vec<Vec3>,
+    moment: Vec<Vec3>,
+    /// The generalized-α baseline's own state and Newton machinery (only for
+    /// [`Scheme::GenAlpha`], which steps through it instead of the element kernel's
+    /// mid-point residual).
+    gen_alpha: Option<GenAlpha>,
+    /// Where frozen-scalar element evaluation runs.
+    backend: Backend,
+    /// Bumped whenever the state at `n` changes (an evaluator outside the simulation is
+    /// sent the element states only when this moved since its last request).
+    state_version: u64,
+    /// The state version the attached evaluator holds (`None`: nothing sent yet).
+    sent_version: Option<u64>,
+    /// Time spent per Newton stage.
+    timers: SolveTimers,
+}
+
+impl Simulation {
+    /// Sets up a simulation of `model` with `params` (the linear solver's symbolic
+    /// analysis is done here, once).
+    pub fn new(
+        model: Model,
+        params: IntegratorParams,
+    ) -> Result<Self, crate::linsolve::LinsolveError> {
+        let data: Vec<ElementData> = model
+            .elements
+            .iter()
+            .map(|e| {
+                let cfg = Config {
+                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
+                    d: e.ref_triad,
+                };
+                ElementData {
+                    props: e.props.clone(),
+                    eps0: strains6(&cfg, e.props.h),
+                    rot_free: [
+                        !model.supports[e.nodes[0]].rotation,
+                        !model.supports[e.nodes[1]].rotation,
+                    ],
+                }
+            })
+            .collect();
+        let trans_diss = params.scheme.translational_dissipation();
+        let dofs = DofMap::new(&model, trans_diss);
+        let mut pattern = dofs.pattern();
+        for i in 0..dofs.n {
+            pattern.push((i, i));
+        }
+        let link_dofs: Vec<[usize; 3]> = model.links.iter().map(|l| dofs.nodes[l.node].u).collect();
+        for ix in &link_dofs {
+            for &i in ix.iter().filter(|&&i| i != NONE) {
+                for &j in ix.iter().filter(|&&j| j != NONE) {
+                    pattern.push((i, j));
+                }
+            }
+        }
+        let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
+        let slots = dofs
+            .elements
+            .iter()
+            .map(|m| {
+                let mut s = vec![NONE; NDOF * NDOF];
+                for i in 0..NDOF {
+                    for j in 0..NDOF {
+                        if m[i] != NONE && m[j] != NONE {
+                            s[i * NDOF + j] = solver.slot(m[i], m[j]);
+                        }
+                    }
+                }
+                s
+            })
+            .collect();
+        let node_slots = dofs
+            .nodes
+            .iter()
+            .map(|nd| {
+                let slot = |a: [usize; 3], b: [usize; 3], c: usize| {
+                    if a[c] == NONE || b[c] == NONE {
+                        NONE
+                    } else {
+                        solver.slot(a[c], b[c])
+                    }
+                };
+                [
+                    std::array::from_fn(|c| slot(nd.u, nd.u, c)),
+                    std::array::from_fn(|c| slot(nd.u, nd.g, c)),
+                    std::array::from_fn(|c| slot(nd.g, nd.u, c)),
+                    std::array::from_fn(|c| slot(nd.g, nd.g, c)),
+                ]
+            })
+            .collect();
+        let (node_block_slots, off_block_slots) = Self::block_slots(&model, &dofs, &solver);
+        let link_slots = link_dofs
+            .iter()
+            .map(|ix| {
+                std::array::from_fn(|c| {
+                    std::array::from_fn(|d| {
+                        if ix[c] == NONE || ix[d] == NONE {
+                            NONE
+                        } else {
+                            solver.slot(ix[c], ix[d])
+                        }
+                    })
+                })
+            })
+            .collect();
+        let state = State::initial(&model, &data);
+        let inv = invariants(&model, &data, &state);
+        let nn = model.n_nodes();
+        let gen_alpha = match params.scheme {
+            Scheme::GenAlpha { rho_inf } => {
+                let (mut f, mut m) = (vec![Vec3::zeros(); nn], vec![Vec3::zeros(); nn]);
+                model.external_loads(0.0, &mut f, &mut m);
+                Some(GenAlpha::new(&model, &data, &state, rho_inf, &f, &m)?)
+            }
+            _ => None,
+        };
+        Ok(Self {
+            gen_alpha,
+            row_kinds: Self::row_kinds(&dofs),
+            frozen: vec![FrozenScalars::default(); model.elements.len()],
+            prev: vec![0.0; dofs.n],
+            last_residual: vec![0.0; dofs.n],
+            force: vec![Vec3::zeros(); nn],
+            moment: vec![Vec3::zeros(); nn],
+            model,
+            params,
+            data,
+            dofs,
+            solver,
+            slots,
+            node_slots,
+            node_block_slots,
+            off_block_slots,
+            link_slots,
+            state,
+            inv,
+            trans_diss,
+            backend: Backend::Cpu,
+            state_version: 0,
+            sent_version: None,
+            timers: SolveTimers::default(),
+        })
+    }
+
+    /// Time spent so far in assembly, factorization and solves.
+    pub fn solve_timers(&self) -> SolveTimers {
+        self.timers
+    }
+
+    /// Where the element kernel runs: `cpu`, or the attached evaluator's description (the
+    /// baselines and the monolithic strategy's consistent assembly stay on the CPU kernel).
+    pub fn backend_name(&self) -> String {
+        match &self.backend {
+            Backend::Cpu => "cpu".to_string(),
+            Backend::Direct(b, _) => b.describe(),
+            Backend::Lockstep(p) => p.describe().to_string(),
+        }
+    }
+
+    /// The linear solver chosen for this model's tangent, and how many factorizations it
+    /// has handed to its pivoting fallback so far (block-tridiagonal backend only).
+    pub fn linear_solver(&self) -> (SolverKind, usize) {
+        let s = self.gen_alpha.as_ref().map_or(&self.solver, |g| g.solver());
+        (s.kind(), s.fallbacks())
+    }
+
+    /// Evaluates the elements through `backend` (slot `slot`) whenever the dissipation
+    /// scalars are frozen (EM, staggered); monolithic assembly stays on the CPU kernel.
+    /// Returns false (and attaches nothing) for schemes the GPU kernel does not implement
+    /// (the mid-point and generalized-α baselines), which then run on the CPU kernel.
+    pub fn set_backend(&mut self, backend: Arc<dyn ElementBackend>, slot: usize) -> bool {
+        self.attach(Backend::Direct(backend, slot))
+    }
+
+    /// Like [`Self::set_backend`] for a lockstep batch driver: the step posts its element
+    /// evaluations to `port` and waits for the driver's answer, so this simulation must be
+    /// stepped by that driver ([`crate::batch`]), not by [`Self::step`].
+    pub fn set_port(&mut self, port: EvalPort) -> bool {
+        self.attach(Backend::Lockstep(port))
+    }
+
+    fn attach(&mut self, backend: Backend) -> bool {
+        if !self.params.scheme.has_gpu_kernel() {
+            return false;
+        }
+        self.backend = backend;
+        self.sent_version = None;
+        true
+    }
+
+    /// The Newton variant (full, or modified: tangent and factorization reused).
+    pub fn newton_variant(&self) -> NewtonVariant {
+        self.params.newton
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+    /// Element constants (reference strains, section constants).
+    pub fn element_data(&self) -> &[ElementData] {
+        &self.data
+    }
+    /// Integrator parameters.
+    pub fn params(&self) -> &IntegratorParams {
+        &self.params
+    }
+    /// Current state.
+    pub fn state(&self) -> &State {
+        &self.state
+    }
+    /// Energies and momenta of the current state.
+    pub fn invariants(&self) -> Invariants {
+        self.inv
+    }
+    /// Number of Newton unknowns.
+    pub fn n_dofs(&self) -> usize {
+        self.dofs.n
+    }
+    /// The numbering of the Newton unknowns.
+    pub fn dof_map(&self) -> &DofMap {
+        &self.dofs
+    }
+
+    /// Solver slots of the node-local blocks: each node's 9×9 diagonal block (entries
+    /// exist only where the node has an element) and each element's two off-diagonal
+    /// blocks.
+    #[allow(clippy::type_complexity)]
+    fn block_slots(
+        model: &Model,
+        dofs: &DofMap,
+        solver: &SparseSolver,
+    ) -> (Vec<[usize; 81]>, Vec<[[usize; 81]; 2]>) {
+        let table = |a: &[usize; 9], b: &[usize; 9]| -> [usize; 81] {
+            std::array::from_fn(|f| {
+                let (i, j) = (a[f / 9], b[f % 9]);
+                if i == NONE || j == NONE {
+                    NONE
+                } else {
+                    solver.slot(i, j)
+                }
+            })
+        };
+        let mut has_element = vec![false; dofs.nodes.len()];
+        for e in &model.elements {
+            e.nodes.iter().for_each(|&a| has_element[a] = true);
+        }
+        let node = dofs
+            .nodes
+            .iter()
+            .zip(&has_element)
+            .map(|(nd, &has)| {
+                if has {
+                    let ix = node_local(nd);
+                    table(&ix, &ix)
+                } else {
+                    [NONE; 81]
+                }
+            })
+            .collect();
+        let off = model
+            .elements
+            .iter()
+            .map(|e| {
+                let (a, b) = (
+                    node_local(&dofs.nodes[e.nodes[0]]),
+                    node_local(&dofs.nodes[e.nodes[1]]),
+                );
+                [table(&a, &b), table(&b, &a)]
+            })
+            .collect();
+        (node, off)
+    }
+
+    /// Replaces the current state (e.g. to start from a prescribed motion in tests).
+    /// Not supported for [`Scheme::GenAlpha`], whose nodal rotations, velocities and
+    /// accelerations live in its own state: there it only replaces the observed state.
+    pub fn set_state(&mut self, state: State) {
+        self.state_version += 1;
+        self.inv = invariants(&self.model, &self.data, &state);
+        self.state = state;
+        self.prev.iter_mut().for_each(|x| *x = 0.0);
+        self.frozen
+            .iter_mut()
+            .for_each(|s| *s = FrozenScalars::default());
+    }
+
+    fn gather(&self, e: usize, q: &[f64]) -> Increment {
+        let m = &self.dofs.elements[e];
+        let mut x = crate::element::ElemVec::zeros();
+        for i in 0..NDOF {
+            if m[i] != NONE {
+                x[i] = q[m[i]];
+            }
+        }
+        Increment::from_local(&x)
+    }
+
+    fn consts(&self) -> StepConsts {
+        StepConsts {
+            dt: self.params.dt,
+            scheme: self.params.scheme,
+        }
+    }
+}
+
+/// The components `idx` of `q` as a vector (zero where removed).
+#[inline]
+fn gather3(q: &[f64], idx: &[usize; 3]) -> Vec3 {
+    Vec3::from_fn(|c, _| if idx[c] == NONE { 0.0 } else { q[idx[c]] })
+}
+
+/// The global unknowns of a node in node-local order `u0..2 θ0..2 g0..2`.
+#[inline]
+fn node_local(nd: &NodeDofs) -> [usize; 9] {
+    std::array::from_fn(|k| match k / 3 {
+        0 => nd.u[k % 3],
+        1 => nd.th[k % 3],
+        _ => nd.g[k % 3],
+    })
+}
+
+/// Kind of an element-local row: 0 = u, 1 = θ, 2 = g.
+#[inline]
+fn kind_of_local(i: usize) -> usize {
+    if i >= g_idx(0) {
+        2
+    } else if (i >= th_idx(0) && i < u_idx(1)) || i >= th_idx(1) {
+        1
+    } else {
+        0
+    }
+}

@@ -1,0 +1,77 @@
+//! Entry points for tests: the residual, the dense tangent and the assembled system at a
+//! given increment (with the loads of the coming mid-step), and frozen scalars set by
+//! hand.
+
+use super::{Mode, Simulation};
+use crate::element::{FrozenScalars, NDOF};
+use crate::integrator::dofs::NONE;
+use crate::integrator::evaluate::now;
+
+impl Simulation {
+    /// Position and triad updates of a global increment applied to the current state
+    /// (for tests of the tangent).
+    pub fn residual_at(&mut self, q: &[f64], consistent: bool) -> Vec<f64> {
+        let mut r = vec![0.0; self.dofs.n];
+        self.mid_step_loads();
+        let mode = if consistent {
+            Mode::Consistent
+        } else {
+            Mode::Frozen
+        };
+        now(self.assemble(q, mode, true, &mut r));
+        r
+    }
+
+    /// Dense copy of the assembled tangent at `q` (tests only; small models).
+    pub fn dense_tangent_at(&mut self, q: &[f64], consistent: bool) -> Vec<Vec<f64>> {
+        let _ = self.residual_at(q, consistent);
+        let n = self.dofs.n;
+        let mut dense = vec![vec![0.0; n]; n];
+        for e in 0..self.model.elements.len() {
+            let map = &self.dofs.elements[e];
+            for i in 0..NDOF {
+                for j in 0..NDOF {
+                    if map[i] != NONE && map[j] != NONE {
+                        let v = self.solver.values()[self.slots[e][i * NDOF + j]];
+                        dense[map[i]][map[j]] = v;
+                    }
+                }
+            }
+        }
+        dense
+    }
+
+    /// Residual, per-kind row scales (u, θ, g) and matrix values (pattern order)
+    /// assembled at `q` with the frozen scalars: through the backend when one is attached,
+    /// else on the CPU kernel (tests compare the two).
+    /// Without `tangent` the values are left out (empty).
+    pub fn frozen_system_at(&mut self, q: &[f64], tangent: bool) -> (Vec<f64>, [f64; 3], Vec<f64>) {
+        let mut r = vec![0.0; self.dofs.n];
+        self.mid_step_loads();
+        let (_, scale) = now(self.assemble(q, Mode::Frozen, tangent, &mut r));
+        let values = if tangent {
+            self.solver.values().to_vec()
+        } else {
+            Vec::new()
+        };
+        (r, scale, values)
+    }
+
+    /// The external loads at the middle of the coming step (for the test helpers).
+    pub(super) fn mid_step_loads(&mut self) {
+        let t_mid = self.state.t + 0.5 * self.params.dt;
+        let (mut f, mut m) = (
+            std::mem::take(&mut self.force),
+            std::mem::take(&mut self.moment),
+        );
+        self.model.external_loads(t_mid, &mut f, &mut m);
+        self.force = f;
+        self.moment = m;
+    }
+
+    /// Sets the frozen dissipation scalars of every element (tests of the staggered
+    /// tangent).
+    pub fn set_frozen(&mut self, s: FrozenScalars) {
+        self.frozen.iter_mut().for_each(|x| *x = s);
+    }
+}

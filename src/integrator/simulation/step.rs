@@ -1,0 +1,157 @@
+//! Stage 1 of a step: the loads at the mid-step, the Newton predictors (the previous
+//! step's increment, then zero), and the augmented-Lagrangian rounds of rigid links, each
+//! round a complete checked solve ([`super::strategy`]) with the multipliers fixed. The
+//! generalized-α baseline steps through its own Newton loop instead.
+
+use super::Simulation;
+use crate::integrator::evaluate::now;
+use crate::integrator::links;
+use crate::integrator::report::{StepFailure, StepReport};
+use crate::model::Vec3;
+use crate::observe::{acceleration_norms, invariants};
+
+impl Simulation {
+    /// Advances one step of Δt. On failure the state is left at the last accepted step.
+    ///
+    /// # Panics
+    /// If the simulation is attached to a lockstep batch driver
+    /// ([`Simulation::set_port`]): such a simulation is stepped by its driver through
+    /// [`Self::step_async`].
+    pub fn step(&mut self) -> Result<StepReport, StepFailure> {
+        now(self.step_async())
+    }
+
+    /// [`Self::step`] as a future that waits wherever the element evaluation is posted to
+    /// a lockstep batch driver (on the CPU kernel or a direct backend it never waits).
+    pub async fn step_async(&mut self) -> Result<StepReport, StepFailure> {
+        if self.gen_alpha.is_some() {
+            if !self.model.links.is_empty() {
+                // The baseline has no augmented-Lagrangian treatment of rigid links;
+                // ignoring them would simulate a different mechanism.
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support rigid links ([[link]]); use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
+            return self.step_gen_alpha();
+        }
+        let dt = self.params.dt;
+        let t_mid = self.state.t + 0.5 * dt;
+        let (mut force, mut moment) = (
+            std::mem::take(&mut self.force),
+            std::mem::take(&mut self.moment),
+        );
+        self.model.external_loads(t_mid, &mut force, &mut moment);
+        self.force = force;
+        self.moment = moment;
+
+        let mut predictors = vec![self.prev.clone()];
+        if self.prev.iter().any(|&x| x != 0.0) {
+            predictors.push(vec![0.0; self.dofs.n]);
+        }
+        let mut total_iters = 0;
+        let mut last = StepFailure {
+            reason: "no attempt".into(),
+            residuals: vec![],
+        };
+        let (lambda0, inv0) = (self.state.lambda.clone(), self.inv);
+        for pred in predictors {
+            let mut q = pred;
+            let mut multipliers = links::MultiplierIteration::default();
+            // Augmented-Lagrangian rounds (a single round without links): each round is a
+            // complete, checked solve with the multipliers fixed, so the energy identity of
+            // every round is exact; the multipliers move between rounds until every link
+            // holds its tolerance.
+            for round in 1..=self.params.max_link_rounds.max(1) {
+                let (next, inv, diss, w, outer, res, consistent) = match self
+                    .solve_with_fixed_multipliers(&mut q, &mut total_iters)
+                    .await
+                {
+                    Ok(x) => x,
+                    Err(f) => {
+                        last = f;
+                        break;
+                    }
+                };
+                let g1: Vec<f64> = self
+                    .model
+                    .links
+                    .iter()
+                    .map(|l| l.strain(&next.r[l.node]))
+                    .collect();
+                let max_link_g = g1.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+                if multipliers.update(&self.model.links, &g1, &mut self.state.lambda) {
+                    let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
+                    self.state = next;
+                    self.state_version += 1;
+                    self.inv = inv;
+                    self.prev = q;
+                    self.frozen = consistent;
+                    return Ok(StepReport {
+                        newton_iters: total_iters,
+                        outer_iters: outer,
+                        residual: res,
+                        dissipation: diss,
+                        external_work: w,
+                        acc_trans: at,
+                        acc_rot: ar,
+                        max_link_g,
+                        link_rounds: round,
+                    });
+                }
+                // H_n with the new multipliers: the next round's energy identity is
+                // measured against it.
+                self.inv = invariants(&self.model, &self.data, &self.state);
+                last = StepFailure {
+                    reason: format!(
+                        "augmented Lagrangian: links still violated after {round} rounds (max |g| = {max_link_g:.3e})"
+                    ),
+                    residuals: vec![res],
+                };
+            }
+            self.state.lambda.clone_from(&lambda0);
+            self.inv = inv0;
+        }
+        Err(last)
+    }
+
+    /// A generalized-α step (loads at `t_{n+1}`; no energy acceptance check: the scheme
+    /// does not control energy).
+    pub(super) fn step_gen_alpha(&mut self) -> Result<StepReport, StepFailure> {
+        let p = self.params;
+        let nn = self.model.n_nodes();
+        let mut loads = [(); 2].map(|_| (vec![Vec3::zeros(); nn], vec![Vec3::zeros(); nn]));
+        for (k, (f, m)) in loads.iter_mut().enumerate() {
+            self.model
+                .external_loads(self.state.t + k as f64 * p.dt, f, m);
+        }
+        let Some(ga) = self.gen_alpha.as_mut() else {
+            unreachable!("step_gen_alpha without generalized-α state");
+        };
+        let out = ga.step(
+            &self.model,
+            &self.data,
+            &self.state,
+            p.dt,
+            p.newton_tol,
+            p.max_iter,
+            (&loads[0].0, &loads[0].1),
+            (&loads[1].0, &loads[1].1),
+        )?;
+        let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &out.state);
+        self.inv = invariants(&self.model, &self.data, &out.state);
+        self.state = out.state;
+        self.state_version += 1;
+        Ok(StepReport {
+            newton_iters: out.newton_iters,
+            outer_iters: 1,
+            residual: out.residual,
+            dissipation: 0.0,
+            external_work: out.external_work,
+            acc_trans: at,
+            acc_rot: ar,
+            max_link_g: 0.0,
+            link_rounds: 1,
+        })
+    }
+}

@@ -1,0 +1,85 @@
+//! Stage 2 of a step: one checked solve with the link multipliers fixed, by the
+//! dissipation strategy — frozen scalars for the conserving schemes, the paper's
+//! staggered loop (freeze the local scalars, Newton, re-evaluate, until the dissipation
+//! identity holds), or the monolithic Newton with the scalars linearized inside it.
+
+use super::{Mode, Simulation};
+use crate::element::FrozenScalars;
+use crate::integrator::params::Strategy;
+use crate::integrator::report::StepFailure;
+use crate::integrator::state::State;
+use crate::observe::Invariants;
+
+impl Simulation {
+    /// One checked solve of the step with the link multipliers held fixed.
+    #[allow(clippy::type_complexity)]
+    pub(super) async fn solve_with_fixed_multipliers(
+        &mut self,
+        q: &mut [f64],
+        total_iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
+        if !self.params.scheme.is_dissipative() {
+            self.frozen
+                .iter_mut()
+                .for_each(|s| *s = FrozenScalars::default());
+            return self.solve_once(q, Mode::Frozen, total_iters).await;
+        }
+        match self.params.strategy {
+            Strategy::Monolithic => self.solve_once(q, Mode::Consistent, total_iters).await,
+            Strategy::Staggered => self.solve_staggered(q, total_iters).await,
+        }
+    }
+
+    #[allow(clippy::type_complexity)]
+    pub(super) async fn solve_once(
+        &mut self,
+        q: &mut [f64],
+        mode: Mode,
+        iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
+        let (it, hist) = self.newton(q, mode).await?;
+        *iters += it;
+        let res = *hist.last().unwrap_or(&0.0);
+        match self.check(q, mode) {
+            Ok((s, inv, d, w, c)) => Ok((s, inv, d, w, 1, res, c)),
+            Err(reason) => Err(StepFailure {
+                reason,
+                residuals: hist,
+            }),
+        }
+    }
+
+    #[allow(clippy::type_complexity)]
+    pub(super) async fn solve_staggered(
+        &mut self,
+        q: &mut [f64],
+        iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
+        // Start from the scalars consistent with the predictor.
+        let (_, _, c0) = self.advance(q, Mode::Consistent);
+        self.frozen = c0;
+        let mut last_reason = String::new();
+        let mut hist_all = Vec::new();
+        for outer in 1..=self.params.max_outer {
+            let (it, hist) = self.newton(q, Mode::Frozen).await?;
+            *iters += it;
+            let res = *hist.last().unwrap_or(&0.0);
+            hist_all.extend(hist);
+            match self.check(q, Mode::Frozen) {
+                Ok((s, inv, d, w, c)) => return Ok((s, inv, d, w, outer, res, c)),
+                Err(reason) => {
+                    last_reason = reason;
+                    let (_, _, c) = self.advance(q, Mode::Frozen);
+                    self.frozen = c;
+                }
+            }
+        }
+        Err(StepFailure {
+            reason: format!(
+                "staggered loop hit its cap of {} outer rounds: {last_reason}",
+                self.params.max_outer
+            ),
+            residuals: hist_all,
+        })
+    }
+}
