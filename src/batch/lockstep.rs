@@ -100,7 +100,7 @@ pub(super) fn run(
                     }
                     flight.push(InFlight {
                         slot: on_gpu.then_some(slot),
-                        run: Box::pin(run_member(index, sim, opts.keep_history)),
+                        run: Box::pin(run_member(index, sim, opts)),
                         done: None,
                     });
                 }
@@ -110,6 +110,7 @@ pub(super) fn run(
                         index,
                         outcome,
                         history: vec![],
+                        state: None,
                     });
                 }
             }

@@ -30,6 +30,7 @@ use crate::gpu::kernel::KernelTimers;
 use crate::gpu::{GpuContext, GpuError};
 use crate::integrator::evaluate::now;
 use crate::integrator::run::{run_async, RunOutcome};
+use crate::integrator::state::State;
 use crate::integrator::{IntegratorParams, NewtonVariant, Simulation};
 use crate::model::Model;
 use crate::observe::record::{RunStatus, StepRecord};
@@ -125,6 +126,9 @@ pub struct MemberResult {
     pub outcome: RunOutcome,
     /// Every accepted level (only when histories were requested).
     pub history: Vec<StepRecord>,
+    /// The state at the last accepted step (only when requested:
+    /// [`BatchOptions::keep_state`]).
+    pub state: Option<State>,
 }
 
 /// Options of a batch run.
@@ -132,6 +136,8 @@ pub struct MemberResult {
 pub struct BatchOptions {
     /// Keep every member's step records in [`MemberResult::history`].
     pub keep_history: bool,
+    /// Keep every member's final state in [`MemberResult::state`].
+    pub keep_state: bool,
     /// GPU path: slots (members in flight at once; the others wait in the queue and take
     /// the slot of a member that finished); 0 = as many as the adapter's buffer limits
     /// allow, at most [`DEFAULT_GPU_SLOTS`].
@@ -197,10 +203,10 @@ fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, RunOutcome> {
 
 /// Runs one member's simulation to its end time (a future: on the GPU path it waits on
 /// the lockstep driver at every element evaluation).
-async fn run_member(index: usize, mut sim: Simulation, keep_history: bool) -> MemberResult {
+async fn run_member(index: usize, mut sim: Simulation, opts: BatchOptions) -> MemberResult {
     let mut history = Vec::new();
     let outcome = run_async(&mut sim, 1, |rec: &StepRecord, _: &Simulation| {
-        if keep_history {
+        if opts.keep_history {
             history.push(rec.clone());
         }
         Ok::<(), Infallible>(())
@@ -211,6 +217,7 @@ async fn run_member(index: usize, mut sim: Simulation, keep_history: bool) -> Me
         index,
         outcome,
         history,
+        state: opts.keep_state.then(|| sim.state().clone()),
     }
 }
 
@@ -233,11 +240,12 @@ pub fn run_members(
                         .enumerate()
                         .for_each_with(tx, |tx, (i, m)| {
                             let r = match setup(m, opts) {
-                                Ok(sim) => now(run_member(i, sim, opts.keep_history)),
+                                Ok(sim) => now(run_member(i, sim, opts)),
                                 Err(outcome) => MemberResult {
                                     index: i,
                                     outcome,
                                     history: vec![],
+                                    state: None,
                                 },
                             };
                             let _ = tx.send(r);

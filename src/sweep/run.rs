@@ -244,6 +244,7 @@ pub fn run_sweep(
             keep_history: opts.histories,
             workers: opts.workers,
             newton: opts.newton,
+            ..Default::default()
         },
         |r: MemberResult| {
             let id = ids[r.index];
