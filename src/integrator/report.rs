@@ -40,9 +40,13 @@ pub struct StepReport {
 /// timed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct SolveTimers {
-    /// Residual (and tangent) assembly: element kernel, scatter, nodal and link terms. On
-    /// the GPU path this includes the wait for the batch's dispatch.
+    /// Residual (and tangent) assembly on this simulation's own thread: element kernel (on
+    /// the CPU), request packing, scatter, nodal and link terms.
     pub assemble_s: f64,
+    /// Waiting for an element evaluator outside the simulation (GPU: the dispatch; in a
+    /// lockstep batch also the other members' work before it), not counted in
+    /// `assemble_s`.
+    pub evaluate_wait_s: f64,
     /// LU factorizations.
     pub factor_s: f64,
     /// Triangular solves (with their backward-error checks).
@@ -57,6 +61,7 @@ impl SolveTimers {
     /// Field-wise sum (a batch's total).
     pub fn add(&mut self, o: &SolveTimers) {
         self.assemble_s += o.assemble_s;
+        self.evaluate_wait_s += o.evaluate_wait_s;
         self.factor_s += o.factor_s;
         self.solve_s += o.solve_s;
         self.factorizations += o.factorizations;

@@ -275,6 +275,7 @@ fn stages_line(t: &SolveTimers) -> String {
 /// The stage timers as JSON fields prefixed with `p`.
 fn stages_json(obj: &mut serde_json::Value, p: &str, t: &SolveTimers) {
     obj[format!("{p}_assemble_s")] = t.assemble_s.into();
+    obj[format!("{p}_evaluate_wait_s")] = t.evaluate_wait_s.into();
     obj[format!("{p}_factor_s")] = t.factor_s.into();
     obj[format!("{p}_solve_s")] = t.solve_s.into();
     obj[format!("{p}_factorizations")] = t.factorizations.into();

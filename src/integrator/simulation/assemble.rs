@@ -4,6 +4,8 @@
 //! (point masses, external loads) and the rigid links' bar forces; the relative residual
 //! is measured against per-kind (u, θ, g) force scales.
 
+use std::time::Instant;
+
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::{
     consistent_scalars, kinematics, monolithic_correction, residual_tangent, ElementEval, NDOF,
@@ -39,11 +41,13 @@ impl Simulation {
         let external = mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
         if external {
             let req = self.eval_request(q, tangent);
+            let t0 = Instant::now();
             let answer = match &self.backend {
                 Backend::Direct(b, slot) => b.evaluate_assembled(*slot, req),
                 Backend::Lockstep(port) => port.evaluate(req).await,
                 Backend::Cpu => unreachable!("external evaluation without an evaluator"),
             };
+            self.timers.evaluate_wait_s += t0.elapsed().as_secs_f64();
             match answer {
                 Ok(sys) => self.scatter_assembled(&sys, tangent, r, &mut scale),
                 Err(_) => {
