@@ -4,12 +4,13 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 
 use cosserat::driver::{run_sim_to_dir, RunOptions};
 use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, RunSummary};
+use cosserat::output::OutputTimes;
 use cosserat::reproduce::reproduce;
 use cosserat::scene::{builtin_scenes, load_scene, Scene};
 use cosserat::study;
@@ -176,6 +177,23 @@ struct RunArgs {
     /// Draw `snapshots.png` with the deformed rods every N steps.
     #[arg(long, value_name = "N")]
     snapshots: Option<usize>,
+    /// Write `trajectory.npz`: node positions, directors and velocities at the output times
+    /// (default: every `--every`-th step; always the last accepted step).
+    #[arg(long)]
+    trajectory: bool,
+    /// Trajectory output interval, a whole multiple of Δt (implies `--trajectory`).
+    #[arg(long, value_name = "DT", conflicts_with = "times")]
+    output_dt: Option<f64>,
+    /// Trajectory output times, comma-separated, each on a step (implies `--trajectory`).
+    #[arg(long, value_name = "T,T,...", value_delimiter = ',')]
+    times: Option<Vec<f64>>,
+    /// Also write `cosseratbench/trajectory.npz` and `cosseratbench/result.json` in the
+    /// layout of the cosseratbench suite (implies `--trajectory`).
+    #[arg(long)]
+    cosseratbench: bool,
+    /// cosseratbench's digest of the matching scenario, written to its `result.json`.
+    #[arg(long, value_name = "HEX", requires = "cosseratbench")]
+    scenario_digest: Option<String>,
     /// Where the element kernel runs (`auto`: the GPU when an f64 adapter exists).
     #[arg(long, value_enum, default_value_t = cmds::BackendArg::Cpu)]
     backend: cmds::BackendArg,
@@ -216,6 +234,11 @@ fn main() -> ExitCode {
             every: None,
             vtk: false,
             snapshots: Some(10),
+            trajectory: false,
+            output_dt: None,
+            times: None,
+            cosseratbench: false,
+            scenario_digest: None,
             backend: cmds::BackendArg::Cpu,
             adapter: None,
         }),
@@ -334,12 +357,24 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         .clone()
         .unwrap_or_else(|| Path::new("out").join(&scene.name));
     let every = a.every.unwrap_or(scene.output_every).max(1);
+    let trajectory = if let Some(dt) = a.output_dt {
+        Some(OutputTimes::from_dt(dt, params.dt).map_err(|e| anyhow!("--output-dt: {e}"))?)
+    } else if let Some(times) = &a.times {
+        Some(
+            OutputTimes::from_times(times, params.dt, params.n_steps())
+                .map_err(|e| anyhow!("--times: {e}"))?,
+        )
+    } else {
+        (a.trajectory || a.cosseratbench).then_some(OutputTimes::Every(every))
+    };
     let opts = RunOptions {
         every,
         vtk_every: a.vtk.then_some(every),
         snapshot_every: a.snapshots,
         label: scene.name.clone(),
         length_unit: "m".into(),
+        trajectory,
+        cosseratbench: a.cosseratbench.then(|| a.scenario_digest.clone()),
     };
     let mut sim =
         Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
@@ -377,9 +412,18 @@ fn print_summary(s: &RunSummary, out: &Path) {
         RunStatus::Completed => "completed".to_string(),
         RunStatus::Failed => format!("FAILED ({})", s.reason.as_deref().unwrap_or("")),
     };
+    let (e, i) = (&s.energy_balance, &s.impulse_balance);
+    let momenta = if i.reactions {
+        "L, J balance includes support/link reactions".to_string()
+    } else {
+        format!(
+            "L, J minus applied impulse: {:.1e}, {:.1e} (relative)",
+            i.max_rel_residual_l, i.max_rel_residual_j
+        )
+    };
     println!(
-        "{}: scheme {} Δt = {} — {status}; reached t = {:.6} in {} steps, {} Newton iterations, {:.3} s. \
-         H {:.9e} → {:.9e} (change {:+.3e}); max per-step drift |ΔL| {:.1e}, |ΔJ| {:.1e} (relative). \
+        "{}: scheme {} Δt = {} — {status}; reached t = {} in {} steps, {} Newton iterations, {:.3} s. \
+         H {:.9e} → {:.9e} (work {:+.3e}, dissipation {:.3e}, balance residual {:.1e}); {momenta}. \
          Outputs in {}.",
         s.scene,
         s.scheme,
@@ -388,11 +432,11 @@ fn print_summary(s: &RunSummary, out: &Path) {
         s.steps,
         s.newton_iters_total,
         s.wall_s,
-        s.energy_initial,
-        s.energy_final,
-        s.energy_final - s.energy_initial,
-        s.max_rel_dl,
-        s.max_rel_dj,
+        e.energy_initial,
+        e.energy_final,
+        e.work_total,
+        e.dissipation_total,
+        e.max_abs_residual,
         out.display()
     );
 }

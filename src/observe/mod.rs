@@ -4,6 +4,7 @@
 //! these products); the stored energy uses the one-point rule, as the stresses do
 //! (DESIGN §2).
 
+pub mod balance;
 pub mod record;
 
 use crate::element::{ElementData, M2};
