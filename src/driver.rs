@@ -12,7 +12,7 @@ use crate::observe::balance::BalanceObserver;
 use crate::observe::record::{LastAccepted, RunStatus, RunSummary, StepRecord};
 use crate::output::{
     plot_accelerations, plot_energy, plot_momenta, plot_snapshots, write_summary,
-    CosseratBenchResult, HistoryWriter, OutputError, OutputTimes, Progress, Snapshot,
+    CosseratBenchResult, HistoryWriter, OutputError, OutputTimes, ProbeWriter, Progress, Snapshot,
     TrajectoryRecorder, VtkSeries,
 };
 use crate::scene::Scene;
@@ -117,6 +117,16 @@ pub fn run_sim_to_dir(
         .trajectory
         .as_ref()
         .map(|_| TrajectoryRecorder::new(sim.model()));
+    let mut probes = if scene.probes.is_empty() {
+        None
+    } else {
+        written.push("probes.csv".into());
+        Some(ProbeWriter::create(
+            &out.join("probes.csv"),
+            sim.model(),
+            &scene.probes,
+        )?)
+    };
     let mut records: Vec<StepRecord> = Vec::new();
     let mut last_seen: Option<StepRecord> = None;
     let mut last_vtk: Option<usize> = None;
@@ -150,6 +160,9 @@ pub fn run_sim_to_dir(
                 rec.work_total,
                 rec.dissipation_total,
             ),
+        }
+        if let Some(p) = probes.as_mut() {
+            p.push(rec.step, rec.t, s.model(), s.state())?;
         }
         if rec.step.is_multiple_of(every) || last {
             history.push(rec)?;

@@ -375,3 +375,94 @@ fn failed_run_ends_every_output_at_the_last_accepted_step() {
         .iter()
         .any(|f| f.as_str().unwrap().starts_with("trajectory.npz")));
 }
+
+fn with_probes(probes: &str) -> Result<Scene, String> {
+    let text = builtin("frame")
+        .replace("t_end = 10.0", "t_end = 1.0")
+        .replace("[integrator]", &format!("{probes}\n[integrator]"));
+    parse_scene(&text, "probed.toml").map_err(|e| e.to_string())
+}
+
+#[test]
+fn probes_csv_reads_back_every_step() {
+    let scene = with_probes(
+        r#"[[probe]]
+name = "tip"
+rod = "rod3"
+node = -1
+
+[[probe]]
+rod = "rod2"
+s = 4.0
+
+[[probe]]
+name = "corner"
+at = [10, 10, 0]"#,
+    )
+    .unwrap();
+    let tip = scene.probes[0].node;
+    assert_eq!(scene.probes[1].name, "probe1");
+    let dir = tempfile::tempdir().unwrap();
+    // Thinned history: probes still come every step.
+    let opts = RunOptions {
+        every: 3,
+        ..RunOptions::default()
+    };
+    let (_, sim) = run(&scene, dir.path(), &opts);
+    let text = std::fs::read_to_string(dir.path().join("probes.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header.len(), 2 + 3 * 12);
+    assert_eq!(&header[..5], &["step", "t", "tip_x", "tip_y", "tip_z"]);
+    assert!(header.contains(&"probe1_rz") && header.contains(&"corner_vx"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 6, "steps 0..=5");
+    let dt = scene.params.dt;
+    for (k, r) in rows.iter().enumerate() {
+        assert_eq!(r[0], k as f64);
+        assert_eq!(r[1], k as f64 * dt, "t = n·Δt exactly");
+    }
+    let (model, st) = (sim.model(), sim.state());
+    let last = rows.last().unwrap();
+    for c in 0..3 {
+        assert!((last[2 + c] - st.r[tip][c]).abs() <= 1e-12);
+        assert!((last[5 + c] - (st.r[tip][c] - model.nodes[tip][c])).abs() <= 1e-12);
+        assert!((last[11 + c] - st.v[tip][c]).abs() <= 1e-12);
+    }
+    // The rotation vector maps the tip's reference triad onto its current one.
+    let rv = nalgebra::Vector3::new(last[8], last[9], last[10]);
+    let rot = nalgebra::Rotation3::from_scaled_axis(rv);
+    let e = model.elements.len() - 1;
+    let err = (rot.matrix() * model.elements[e].ref_triad[1] - st.d[e][1])
+        .abs()
+        .max();
+    assert!(err < 1e-12, "rotation vector off by {err:e}");
+    assert!(rv.norm() > 1e-3, "the tip turned");
+}
+
+#[test]
+fn bad_probes_are_refused_naming_the_key() {
+    for (probe, want) in [
+        ("rod = \"rodX\"\nnode = 0", "probe[0].rod: no rod named `rodX`"),
+        ("rod = \"rod1\"\nnode = 6", "probe[0].node: rod `rod1` has nodes 0..5"),
+        (
+            "rod = \"rod1\"\ns = 3.0",
+            "probe[0].s: s = 3 is not at a node of rod `rod1` (length 10; nearest nodes at s = 2 and 4)",
+        ),
+        ("at = [10, 0, 0]\nrod = \"rod1\"", "give `at` or `rod`, not both"),
+        ("at = [1, 0, 0]", "probe[0].at: (1, 0, 0) is not a node"),
+        ("rod = \"rod1\"", "required key missing (give `node` or `s` with `rod`)"),
+        ("name = \"a,b\"\nat = [0, 0, 0]", "probe[0].name: must be a non-empty name"),
+        ("at = [0, 0, 0]\ncolour = 1", "unknown field `colour`"),
+    ] {
+        let e = with_probes(&format!("[[probe]]\n{probe}")).unwrap_err();
+        assert!(e.contains(want), "{probe}: {e}");
+    }
+    let e = with_probes(
+        "[[probe]]\nname = \"p\"\nat = [0, 0, 0]\n[[probe]]\nname = \"p\"\nat = [10, 0, 0]",
+    )
+    .unwrap_err();
+    assert!(e.contains("probe[1].name: duplicate probe name `p`"), "{e}");
+}

@@ -5,6 +5,7 @@
 //! (DESIGN §2).
 
 pub mod balance;
+pub mod probe;
 pub mod record;
 
 use crate::element::{ElementData, M2};

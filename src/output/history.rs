@@ -84,7 +84,7 @@ impl HistoryWriter {
 
 /// Shortest decimal text that parses back to the identical `f64`: plain notation for
 /// moderate magnitudes, scientific otherwise (`NaN`, `inf`, `-inf` for non-finite values).
-fn fmt_f64(v: f64, out: &mut String) {
+pub(crate) fn fmt_f64(v: f64, out: &mut String) {
     use std::fmt::Write as _;
     let a = v.abs();
     // Both `{}` and `{:e}` print the shortest round-trip representation.

@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 mod history;
 mod plot;
+mod probes;
 mod progress;
 mod snapshot;
 mod summary;
@@ -17,6 +18,7 @@ mod vtk;
 pub use history::{read_history, HistoryWriter, HISTORY_COLUMNS};
 pub(crate) use plot::{ensure_font, FONT};
 pub use plot::{plot_accelerations, plot_comparison, plot_energy, plot_momenta, LabelledHistory};
+pub use probes::ProbeWriter;
 pub use progress::Progress;
 pub use snapshot::{plot_snapshots, Snapshot};
 pub use summary::write_summary;

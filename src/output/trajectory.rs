@@ -26,6 +26,7 @@ use ndarray_npy::NpzWriter;
 use super::OutputError;
 use crate::integrator::state::State;
 use crate::model::Model;
+use crate::observe::probe::node_director_ends;
 
 /// When output frames are taken: every `k`-th step or at listed steps (the initial level
 /// and the last accepted step are always included).
@@ -117,24 +118,6 @@ fn rod_chains(model: &Model) -> Vec<Vec<usize>> {
             nodes
         })
         .collect()
-}
-
-/// Per node: the (element, end) whose director triad is the node's (the lowest-numbered
-/// element touching it; `(usize::MAX, 0)` for a node without elements) and that element's
-/// rod (`-1` without elements).
-pub(crate) fn node_director_ends(model: &Model) -> (Vec<(usize, usize)>, Vec<i64>) {
-    let n = model.n_nodes();
-    let mut node_end = vec![(usize::MAX, 0); n];
-    let mut rod_of_node = vec![-1i64; n];
-    for (e, el) in model.elements.iter().enumerate() {
-        for (l, &a) in el.nodes.iter().enumerate() {
-            if node_end[a].0 == usize::MAX {
-                node_end[a] = (e, l);
-                rod_of_node[a] = el.rod as i64;
-            }
-        }
-    }
-    (node_end, rod_of_node)
 }
 
 /// Collects output frames during a run and writes them at the end.

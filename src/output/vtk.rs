@@ -22,10 +22,10 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use super::trajectory::node_director_ends;
 use super::OutputError;
 use crate::integrator::Simulation;
 use crate::model::Vec3;
+use crate::observe::probe::node_director_ends;
 
 /// The collection file is rewritten after this many frames (an interrupted run keeps a
 /// valid collection of most of its frames without rewriting it after every frame).
