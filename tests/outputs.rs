@@ -466,3 +466,53 @@ fn bad_probes_are_refused_naming_the_key() {
     .unwrap_err();
     assert!(e.contains("probe[1].name: duplicate probe name `p`"), "{e}");
 }
+
+#[test]
+fn set_overrides_scene_keys_with_sweep_validation() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let cosserat = || std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"));
+    let st = cosserat()
+        .args([
+            "run",
+            "frame",
+            "--set",
+            "integrator.t_end=0.4",
+            "--set",
+            "rod.rod1.elements=8",
+            "--set",
+            "rod[2].elements=2",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["elements"], 8 + 5 + 2);
+    assert_eq!(s["steps"], 2);
+    for (set, want) in [
+        (
+            "rod.rodX.elements=3",
+            "no entry named `rodX` here (named entries: rod1, rod2, rod3)",
+        ),
+        ("integrator.dt=-1", "integrator.dt: must be > 0 (got -1)"),
+        ("integrator.alfa=1", "integrator.alfa: unknown field `alfa`"),
+        ("integrator.dt=abc", "integrator.dt: `abc` is not a number"),
+        ("rod[7].elements=3", "index 7 out of range"),
+    ] {
+        let st = cosserat()
+            .args(["run", "frame", "--set", set, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert_eq!(st.status.code(), Some(2), "{set}");
+        let err = String::from_utf8_lossy(&st.stderr);
+        assert!(err.contains(want), "{set}: {err}");
+    }
+}

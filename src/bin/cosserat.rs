@@ -194,12 +194,31 @@ struct RunArgs {
     /// cosseratbench's digest of the matching scenario, written to its `result.json`.
     #[arg(long, value_name = "HEX", requires = "cosseratbench")]
     scenario_digest: Option<String>,
+    /// Override a numeric scene key before the run, with the key paths and checks of sweep
+    /// files (`--set integrator.dt=0.1`, `--set rod.beam.elements=100`); repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE", value_parser = parse_set)]
+    sets: Vec<(String, f64)>,
     /// Where the element kernel runs (`auto`: the GPU when an f64 adapter exists).
     #[arg(long, value_enum, default_value_t = cmds::BackendArg::Cpu)]
     backend: cmds::BackendArg,
     /// GPU adapter: first adapter whose name contains this (case-insensitive).
     #[arg(long)]
     adapter: Option<String>,
+}
+
+/// `KEY=VALUE` of `--set`: VALUE must be a finite number.
+fn parse_set(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}` is not KEY=VALUE"))?;
+    let x: f64 = v
+        .trim()
+        .parse()
+        .map_err(|_| format!("{}: `{}` is not a number", k.trim(), v.trim()))?;
+    if !x.is_finite() {
+        return Err(format!("{}: must be finite (got {x})", k.trim()));
+    }
+    Ok((k.trim().to_string(), x))
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -239,6 +258,7 @@ fn main() -> ExitCode {
             times: None,
             cosseratbench: false,
             scenario_digest: None,
+            sets: vec![],
             backend: cmds::BackendArg::Cpu,
             adapter: None,
         }),
@@ -350,7 +370,12 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
 }
 
 fn run_command(a: RunArgs) -> Result<ExitCode> {
-    let scene = load_scene(&a.scene)?;
+    let scene = if a.sets.is_empty() {
+        load_scene(&a.scene)?
+    } else {
+        cosserat::sweep::scene_with_overrides(&a.scene, &a.sets)
+            .map_err(|e| anyhow!("--set: {e}"))?
+    };
     let params = resolve_params(&scene, &a)?;
     let out = a
         .out
