@@ -516,3 +516,26 @@ fn set_overrides_scene_keys_with_sweep_validation() {
         assert!(err.contains(want), "{set}: {err}");
     }
 }
+
+#[test]
+fn check_reports_unknowns_frequency_and_costs() {
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["check", "frame"])
+        .output()
+        .unwrap();
+    assert!(st.status.success());
+    let text = String::from_utf8_lossy(&st.stdout);
+    for want in [
+        "nodes: 16",
+        "Newton unknowns per step: 144",
+        "mass 7.500000e1, centre of mass (8.333333, 5.000000, 1.666667)",
+        "EDMC-2 α_Γv = 0.5",
+        // The frame's highest mode is ≈ 310 rad/s (shear–rotation); the estimate 315.
+        "highest frequency (estimate): 3.1489e2 rad/s",
+        "ω_max·Δt = 62.977",
+        "time estimate:",
+        "for 50 steps",
+    ] {
+        assert!(text.contains(want), "missing `{want}` in\n{text}");
+    }
+}

@@ -288,6 +288,46 @@ fn main() -> ExitCode {
 fn check_command(spec: &str) -> Result<ExitCode> {
     let scene = load_scene(spec)?;
     print!("{}", scene.describe());
+    let mut sim = Simulation::new(scene.model.clone(), scene.params)
+        .context("cannot set up the linear solver")?;
+    let report = cosserat::observe::report::model_report(
+        &scene.model,
+        &scene.params,
+        sim.n_dofs(),
+        &sim.linear_solver().0.to_string(),
+    );
+    print!("{report}");
+    // Time estimate: a few trial steps of the real run (debug builds are ≈ 50× slower).
+    let trial = scene.params.n_steps().min(5);
+    let start = std::time::Instant::now();
+    let mut done = 0;
+    let mut failed = None;
+    for _ in 0..trial {
+        match sim.step() {
+            Ok(_) => done += 1,
+            Err(f) => {
+                failed = Some(f.reason);
+                break;
+            }
+        }
+    }
+    let per_step = start.elapsed().as_secs_f64() / done.max(1) as f64;
+    match failed {
+        Some(reason) if done == 0 => {
+            println!("  time estimate: the first step already fails: {reason}")
+        }
+        _ => println!(
+            "  time estimate: {:.3e} s per step from {done} trial step(s) → ≈ {:.3} s for {} steps{}",
+            per_step,
+            per_step * scene.params.n_steps() as f64,
+            scene.params.n_steps(),
+            if cfg!(debug_assertions) {
+                " (debug build)"
+            } else {
+                ""
+            }
+        ),
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -7,6 +7,7 @@
 pub mod balance;
 pub mod probe;
 pub mod record;
+pub mod report;
 
 use crate::element::{ElementData, M2};
 use crate::integrator::state::State;
