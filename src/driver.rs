@@ -8,10 +8,12 @@ use std::path::{Path, PathBuf};
 
 use crate::integrator::run::{run, RunOutcome};
 use crate::integrator::{IntegratorParams, Simulation};
-use crate::observe::record::{RunSummary, StepRecord};
+use crate::observe::balance::BalanceObserver;
+use crate::observe::record::{LastAccepted, RunStatus, RunSummary, StepRecord};
 use crate::output::{
-    plot_accelerations, plot_energy, plot_momenta, plot_snapshots, write_summary, HistoryWriter,
-    OutputError, Progress, Snapshot, VtkSeries,
+    plot_accelerations, plot_energy, plot_momenta, plot_snapshots, write_summary,
+    CosseratBenchResult, HistoryWriter, OutputError, OutputTimes, ProbeWriter, Progress, Snapshot,
+    TrajectoryRecorder, VtkSeries,
 };
 use crate::scene::Scene;
 
@@ -29,6 +31,26 @@ pub struct RunOptions {
     pub label: String,
     /// Unit of length on snapshot axes.
     pub length_unit: String,
+    /// Write `trajectory.npz` with frames at these steps (`None`: no trajectory).
+    pub trajectory: Option<OutputTimes>,
+    /// Also write the `cosseratbench` layout into `cosseratbench/` (needs `trajectory`),
+    /// with this scenario digest in its `result.json` (`None`: `null`).
+    pub cosseratbench: Option<Option<String>>,
+}
+
+impl Default for RunOptions {
+    /// Every step to `history.csv`, no VTK, snapshots or trajectory.
+    fn default() -> Self {
+        Self {
+            every: 1,
+            vtk_every: None,
+            snapshot_every: None,
+            label: String::new(),
+            length_unit: "m".into(),
+            trajectory: None,
+            cosseratbench: None,
+        }
+    }
 }
 
 /// Errors that stop a run before it could finish writing (not a failed step).
@@ -85,25 +107,63 @@ pub fn run_sim_to_dir(
         path: out.to_path_buf(),
         error,
     })?;
+    let mut written: Vec<String> = vec!["history.csv".into()];
     let mut history = HistoryWriter::create(&out.join("history.csv"))?;
     let mut vtk = match opts.vtk_every {
         Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.name)?),
         None => None,
     };
+    let mut trajectory = opts
+        .trajectory
+        .as_ref()
+        .map(|_| TrajectoryRecorder::new(sim.model()));
+    let mut probes = if scene.probes.is_empty() {
+        None
+    } else {
+        written.push("probes.csv".into());
+        Some(ProbeWriter::create(
+            &out.join("probes.csv"),
+            sim.model(),
+            &scene.probes,
+        )?)
+    };
     let mut records: Vec<StepRecord> = Vec::new();
     let mut last_seen: Option<StepRecord> = None;
+    let mut last_vtk: Option<usize> = None;
     let mut snapshots: Vec<Snapshot> = Vec::new();
     let progress = Progress::new(sim.params().n_steps() as u64, &opts.label);
     let every = opts.every.max(1);
-    // The observer sees row 0 and every `every`-th step; snapshots and VTK frames are
-    // taken on their own strides, so the loop shows the observer every step they need.
-    let stride = [Some(every), opts.vtk_every, opts.snapshot_every]
-        .into_iter()
-        .flatten()
-        .fold(every, gcd);
-    let outcome: RunOutcome = run(sim, stride, |rec: &StepRecord, s: &Simulation| {
+    let mut balance: Option<BalanceObserver> = None;
+    // The observer sees every accepted step (the balances need consecutive levels); each
+    // output thins on its own stride, and every output gets the last accepted level.
+    let outcome: RunOutcome = run(sim, 1, |rec: &StepRecord, s: &Simulation| {
         let on = |k: Option<usize>| k.is_some_and(|k| rec.step.is_multiple_of(k.max(1)));
         let last = rec.step == s.params().n_steps();
+        match balance.as_mut() {
+            None => {
+                balance = Some(BalanceObserver::new(
+                    s.model(),
+                    s.state(),
+                    s.params().dt,
+                    rec.l,
+                    rec.j,
+                    rec.total,
+                ))
+            }
+            Some(b) => b.step(
+                s.model(),
+                s.state(),
+                rec.step,
+                rec.l,
+                rec.j,
+                rec.total,
+                rec.work_total,
+                rec.dissipation_total,
+            ),
+        }
+        if let Some(p) = probes.as_mut() {
+            p.push(rec.step, rec.t, s.model(), s.state())?;
+        }
         if rec.step.is_multiple_of(every) || last {
             history.push(rec)?;
             records.push(rec.clone());
@@ -112,28 +172,51 @@ pub fn run_sim_to_dir(
             snapshots.push(Snapshot::of(s));
         }
         if let (Some(v), true) = (vtk.as_mut(), on(opts.vtk_every) || last) {
-            v.write_frame(s, rec.step)?;
+            v.write_frame(s, rec.step, rec.t)?;
+            last_vtk = Some(rec.step);
+        }
+        if let (Some(tr), Some(times)) = (trajectory.as_mut(), opts.trajectory.as_ref()) {
+            if times.contains(rec.step) || last {
+                tr.push(rec.step, rec.t, s.state());
+            }
         }
         progress.step(rec.t, rec.newton_iters);
         last_seen = Some(rec.clone());
         Ok::<(), DriverError>(())
     })?;
     progress.finish();
+    // A failed run: the simulation is left at the last accepted level; make it the last
+    // entry of every output.
+    if let Some(rec) = &last_seen {
+        if records.last().map(|r| r.step) != Some(rec.step) {
+            history.push(rec)?;
+            records.push(rec.clone());
+        }
+        if let Some(v) = vtk.as_mut() {
+            if last_vtk != Some(rec.step) {
+                v.write_frame(sim, rec.step, rec.t)?;
+            }
+        }
+        if let Some(tr) = trajectory.as_mut() {
+            if tr.last_step() != Some(rec.step) {
+                tr.push(rec.step, rec.t, sim.state());
+            }
+        }
+    }
     if let Some(v) = &vtk {
         v.finish()?;
-    }
-    // A failed run: `run` shows the last accepted level even off-stride; keep it in the
-    // history too.
-    if let Some(rec) = last_seen {
-        if records.last().map(|r| r.step) != Some(rec.step) {
-            history.push(&rec)?;
-            records.push(rec);
-        }
+        written.push(format!("vtk/{}", v.pvd_file_name()));
+        written.push(format!(
+            "vtk/{}_STEP.vtu ({} frames)",
+            scene.name,
+            v.frames()
+        ));
     }
     let title = format!("{}: {}", opts.label, sim.params().scheme.name());
     plot_energy(&out.join("energy.png"), &records, &title)?;
     plot_momenta(&out.join("momenta.png"), &records, &title)?;
     plot_accelerations(&out.join("accelerations.png"), &records, &title)?;
+    written.extend(["energy.png", "momenta.png", "accelerations.png"].map(String::from));
     if opts.snapshot_every.is_some() {
         if snapshots.last().map(|s| s.t) != Some(sim.state().t) {
             snapshots.push(Snapshot::of(sim));
@@ -145,8 +228,39 @@ pub fn run_sim_to_dir(
             sim.model().planar,
             &opts.length_unit,
         )?;
+        written.push("snapshots.png".into());
     }
-    let summary = summarize(scene, sim, &outcome);
+    if let Some(tr) = &trajectory {
+        tr.write(&out.join("trajectory.npz"))?;
+        written.push(format!("trajectory.npz ({} frames)", tr.len()));
+        if let Some(digest) = &opts.cosseratbench {
+            let cb = cosseratbench_result(scene, sim, &outcome, digest.clone());
+            tr.write_cosseratbench(sim.model(), &out.join("cosseratbench"), &cb)?;
+            written.push("cosseratbench/trajectory.npz".into());
+            written.push("cosseratbench/result.json".into());
+        }
+    }
+    written.push("summary.json".into());
+    let mut summary = summarize(scene, sim, &outcome);
+    if let Some(b) = &balance {
+        summary.energy_balance = b.energy().clone();
+        summary.impulse_balance = b.impulse().clone();
+    }
+    let last = last_seen.as_ref().map_or(0, |r| r.step);
+    summary.last_accepted = LastAccepted {
+        step: last,
+        t: last_seen.as_ref().map_or(0.0, |r| r.t),
+        note: match outcome.status {
+            RunStatus::Completed => "the run completed; every output ends at its last step".into(),
+            RunStatus::Failed => format!(
+                "step {} failed; every output (history.csv, charts{}{}) ends at step {last}, the last accepted level",
+                last + 1,
+                if vtk.is_some() { ", vtk/" } else { "" },
+                if trajectory.is_some() { ", trajectory.npz" } else { "" },
+            ),
+        },
+    };
+    summary.outputs = written;
     write_summary(&out.join("summary.json"), &summary)?;
     Ok(RunResult {
         summary,
@@ -155,11 +269,35 @@ pub fn run_sim_to_dir(
     })
 }
 
-fn gcd(a: usize, b: usize) -> usize {
-    if b == 0 {
-        a
-    } else {
-        gcd(b, a % b)
+fn cosseratbench_result(
+    scene: &Scene,
+    sim: &Simulation,
+    o: &RunOutcome,
+    digest: Option<String>,
+) -> CosseratBenchResult {
+    let failed = o.status == RunStatus::Failed;
+    CosseratBenchResult {
+        experiment: scene.name.clone(),
+        solver: "cosserat".into(),
+        outcome: if failed { "diverged" } else { "completed" }.into(),
+        n_elements: sim.model().elements.len(),
+        values: Default::default(),
+        options: serde_json::json!({
+            "scheme": sim.params().scheme,
+            "dt": sim.params().dt,
+            "strategy": sim.params().strategy,
+        }),
+        missing: vec![],
+        failure: o.reason.clone(),
+        diverged_at: failed.then(|| o.t_reached + sim.params().dt),
+        wall_time: o.wall_s,
+        metrics: Default::default(),
+        observations: Default::default(),
+        provenance: serde_json::json!({
+            "scenario": digest,
+            "code": null,
+            "solver_version": format!("cosserat {}", env!("CARGO_PKG_VERSION")),
+        }),
     }
 }
 
@@ -180,6 +318,10 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         newton_iters_total: o.newton_iters_total,
         max_rel_dl: o.max_rel_dl,
         max_rel_dj: o.max_rel_dj,
+        energy_balance: Default::default(),
+        impulse_balance: Default::default(),
+        last_accepted: Default::default(),
+        outputs: vec![],
         energy_initial: o.energy_initial,
         energy_final: o.energy_final,
         max_link_g: o.max_link_g,

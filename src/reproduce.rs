@@ -202,6 +202,7 @@ pub fn reproduce(
             snapshot_every: Some(run.snapshot_every),
             label: format!("{} {}", run.scene, run.folder),
             length_unit: "m".into(),
+            ..RunOptions::default()
         };
         let result = run_to_dir(&scene, params, &dir, &opts)?;
         let f = Finished { run, dir, result };

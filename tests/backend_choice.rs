@@ -15,14 +15,24 @@ fn auto_skips_software_adapters_unless_named() {
     let ctx = match GpuContext::new(None) {
         Ok(c) => c,
         Err(e) => {
-            assert!(!gpu_required(), "COSSERAT_REQUIRE_GPU is set but no adapter: {e}");
-            assert!(matches!(exec, Executor::Cpu), "no adapter: auto must use the CPU");
+            assert!(
+                !gpu_required(),
+                "COSSERAT_REQUIRE_GPU is set but no adapter: {e}"
+            );
+            assert!(
+                matches!(exec, Executor::Cpu),
+                "no adapter: auto must use the CPU"
+            );
             println!("skipped: no adapter ({e})");
             return;
         }
     };
     if ctx.is_software() {
-        assert!(matches!(exec, Executor::Cpu), "auto picked {}", exec.describe());
+        assert!(
+            matches!(exec, Executor::Cpu),
+            "auto picked {}",
+            exec.describe()
+        );
         assert!(note.contains("software adapter"), "note: {note}");
         // Named, the same adapter is used.
         let name = ctx.info.name.clone();
@@ -34,7 +44,11 @@ fn auto_skips_software_adapters_unless_named() {
         let (gpu, _) = Executor::resolve(BackendChoice::Gpu, None).unwrap();
         assert!(matches!(gpu, Executor::Gpu(_)), "--backend gpu must use it");
     } else if ctx.is_f64() {
-        assert!(matches!(exec, Executor::Gpu(_)), "auto skipped {}", ctx.describe());
+        assert!(
+            matches!(exec, Executor::Gpu(_)),
+            "auto skipped {}",
+            ctx.describe()
+        );
         assert!(note.contains("using the GPU"), "note: {note}");
     }
 }

@@ -45,24 +45,21 @@ fn modified_newton_reaches_the_full_newton_states() {
         let full = run(name, scheme, steps, NewtonVariant::Full);
         let modified = run(name, scheme, steps, NewtonVariant::Modified);
         let (a, b) = (full.state(), modified.state());
-        let size = a
-            .r
-            .iter()
-            .flat_map(|x| x.iter())
-            .fold(0.0f64, |m, x| m.max(x.abs()))
-            .max(1.0);
-        let dr = a
-            .r
-            .iter()
-            .zip(&b.r)
-            .fold(0.0f64, |m, (x, y)| m.max((x - y).amax()))
-            / size;
-        let dd = a
-            .d
-            .iter()
-            .zip(&b.d)
-            .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).amax()))
-            .fold(0.0f64, f64::max);
+        let size =
+            a.r.iter()
+                .flat_map(|x| x.iter())
+                .fold(0.0f64, |m, x| m.max(x.abs()))
+                .max(1.0);
+        let dr =
+            a.r.iter()
+                .zip(&b.r)
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).amax()))
+                / size;
+        let dd =
+            a.d.iter()
+                .zip(&b.d)
+                .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).amax()))
+                .fold(0.0f64, f64::max);
         let (ha, hb) = (full.invariants().total(), modified.invariants().total());
         let dh = (ha - hb).abs() / ha.abs().max(1e-300);
         assert!(

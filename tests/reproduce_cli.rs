@@ -45,7 +45,9 @@ fn reproduce_quick_writes_every_run_figures_vtk_and_report() {
             .nth(1)
             .unwrap()
             .trim_end_matches("\"/>");
-        let vtu = std::fs::read_to_string(d.join("vtk").join(first)).unwrap();
+        // Binary appended data: the tags are in the XML head.
+        let vtu = String::from_utf8_lossy(&std::fs::read(d.join("vtk").join(first)).unwrap())
+            .into_owned();
         for tag in [
             "<Points>",
             "Name=\"velocity\"",

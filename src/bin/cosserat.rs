@@ -4,12 +4,13 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 
 use cosserat::driver::{run_sim_to_dir, RunOptions};
 use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, RunSummary};
+use cosserat::output::OutputTimes;
 use cosserat::reproduce::reproduce;
 use cosserat::scene::{builtin_scenes, load_scene, Scene};
 use cosserat::study;
@@ -182,12 +183,48 @@ struct RunArgs {
     /// Draw `snapshots.png` with the deformed rods every N steps.
     #[arg(long, value_name = "N")]
     snapshots: Option<usize>,
+    /// Write `trajectory.npz`: node positions, directors and velocities at the output times
+    /// (default: every `--every`-th step; always the last accepted step).
+    #[arg(long)]
+    trajectory: bool,
+    /// Trajectory output interval, a whole multiple of Δt (implies `--trajectory`).
+    #[arg(long, value_name = "DT", conflicts_with = "times")]
+    output_dt: Option<f64>,
+    /// Trajectory output times, comma-separated, each on a step (implies `--trajectory`).
+    #[arg(long, value_name = "T,T,...", value_delimiter = ',')]
+    times: Option<Vec<f64>>,
+    /// Also write `cosseratbench/trajectory.npz` and `cosseratbench/result.json` in the
+    /// layout of the cosseratbench suite (implies `--trajectory`).
+    #[arg(long)]
+    cosseratbench: bool,
+    /// cosseratbench's digest of the matching scenario, written to its `result.json`.
+    #[arg(long, value_name = "HEX", requires = "cosseratbench")]
+    scenario_digest: Option<String>,
+    /// Override a numeric scene key before the run, with the key paths and checks of sweep
+    /// files (`--set integrator.dt=0.1`, `--set rod.beam.elements=100`); repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE", value_parser = parse_set)]
+    sets: Vec<(String, f64)>,
     /// Where the element kernel runs (`auto`: the GPU when an f64 adapter exists).
     #[arg(long, value_enum, default_value_t = cmds::BackendArg::Cpu)]
     backend: cmds::BackendArg,
     /// GPU adapter: first adapter whose name contains this (case-insensitive).
     #[arg(long)]
     adapter: Option<String>,
+}
+
+/// `KEY=VALUE` of `--set`: VALUE must be a finite number.
+fn parse_set(s: &str) -> Result<(String, f64), String> {
+    let (k, v) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}` is not KEY=VALUE"))?;
+    let x: f64 = v
+        .trim()
+        .parse()
+        .map_err(|_| format!("{}: `{}` is not a number", k.trim(), v.trim()))?;
+    if !x.is_finite() {
+        return Err(format!("{}: must be finite (got {x})", k.trim()));
+    }
+    Ok((k.trim().to_string(), x))
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -223,6 +260,12 @@ fn main() -> ExitCode {
             every: None,
             vtk: false,
             snapshots: Some(10),
+            trajectory: false,
+            output_dt: None,
+            times: None,
+            cosseratbench: false,
+            scenario_digest: None,
+            sets: vec![],
             backend: cmds::BackendArg::Cpu,
             adapter: None,
         }),
@@ -252,6 +295,46 @@ fn main() -> ExitCode {
 fn check_command(spec: &str) -> Result<ExitCode> {
     let scene = load_scene(spec)?;
     print!("{}", scene.describe());
+    let mut sim = Simulation::new(scene.model.clone(), scene.params)
+        .context("cannot set up the linear solver")?;
+    let report = cosserat::observe::report::model_report(
+        &scene.model,
+        &scene.params,
+        sim.n_dofs(),
+        &sim.linear_solver().0.to_string(),
+    );
+    print!("{report}");
+    // Time estimate: a few trial steps of the real run (debug builds are ≈ 50× slower).
+    let trial = scene.params.n_steps().min(5);
+    let start = std::time::Instant::now();
+    let mut done = 0;
+    let mut failed = None;
+    for _ in 0..trial {
+        match sim.step() {
+            Ok(_) => done += 1,
+            Err(f) => {
+                failed = Some(f.reason);
+                break;
+            }
+        }
+    }
+    let per_step = start.elapsed().as_secs_f64() / done.max(1) as f64;
+    match failed {
+        Some(reason) if done == 0 => {
+            println!("  time estimate: the first step already fails: {reason}")
+        }
+        _ => println!(
+            "  time estimate: {:.3e} s per step from {done} trial step(s) → ≈ {:.3} s for {} steps{}",
+            per_step,
+            per_step * scene.params.n_steps() as f64,
+            scene.params.n_steps(),
+            if cfg!(debug_assertions) {
+                " (debug build)"
+            } else {
+                ""
+            }
+        ),
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -337,19 +420,36 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
 }
 
 fn run_command(a: RunArgs) -> Result<ExitCode> {
-    let scene = load_scene(&a.scene)?;
+    let scene = if a.sets.is_empty() {
+        load_scene(&a.scene)?
+    } else {
+        cosserat::sweep::scene_with_overrides(&a.scene, &a.sets)
+            .map_err(|e| anyhow!("--set: {e}"))?
+    };
     let params = resolve_params(&scene, &a)?;
     let out = a
         .out
         .clone()
         .unwrap_or_else(|| Path::new("out").join(&scene.name));
     let every = a.every.unwrap_or(scene.output_every).max(1);
+    let trajectory = if let Some(dt) = a.output_dt {
+        Some(OutputTimes::from_dt(dt, params.dt).map_err(|e| anyhow!("--output-dt: {e}"))?)
+    } else if let Some(times) = &a.times {
+        Some(
+            OutputTimes::from_times(times, params.dt, params.n_steps())
+                .map_err(|e| anyhow!("--times: {e}"))?,
+        )
+    } else {
+        (a.trajectory || a.cosseratbench).then_some(OutputTimes::Every(every))
+    };
     let opts = RunOptions {
         every,
         vtk_every: a.vtk.then_some(every),
         snapshot_every: a.snapshots,
         label: scene.name.clone(),
         length_unit: "m".into(),
+        trajectory,
+        cosseratbench: a.cosseratbench.then(|| a.scenario_digest.clone()),
     };
     let mut sim =
         Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
@@ -387,9 +487,18 @@ fn print_summary(s: &RunSummary, out: &Path) {
         RunStatus::Completed => "completed".to_string(),
         RunStatus::Failed => format!("FAILED ({})", s.reason.as_deref().unwrap_or("")),
     };
+    let (e, i) = (&s.energy_balance, &s.impulse_balance);
+    let momenta = if i.reactions {
+        "L, J balance includes support/link reactions".to_string()
+    } else {
+        format!(
+            "L, J minus applied impulse: {:.1e}, {:.1e} (relative)",
+            i.max_rel_residual_l, i.max_rel_residual_j
+        )
+    };
     println!(
-        "{}: scheme {} Δt = {} — {status}; reached t = {:.6} in {} steps, {} Newton iterations, {:.3} s. \
-         H {:.9e} → {:.9e} (change {:+.3e}); max per-step drift |ΔL| {:.1e}, |ΔJ| {:.1e} (relative). \
+        "{}: scheme {} Δt = {} — {status}; reached t = {} in {} steps, {} Newton iterations, {:.3} s. \
+         H {:.9e} → {:.9e} (work {:+.3e}, dissipation {:.3e}, balance residual {:.1e}); {momenta}. \
          Outputs in {}.",
         s.scene,
         s.scheme,
@@ -398,11 +507,11 @@ fn print_summary(s: &RunSummary, out: &Path) {
         s.steps,
         s.newton_iters_total,
         s.wall_s,
-        s.energy_initial,
-        s.energy_final,
-        s.energy_final - s.energy_initial,
-        s.max_rel_dl,
-        s.max_rel_dj,
+        e.energy_initial,
+        e.energy_final,
+        e.work_total,
+        e.dissipation_total,
+        e.max_abs_residual,
         out.display()
     );
 }

@@ -40,7 +40,8 @@ pub struct RunOutcome {
     pub timers: crate::integrator::SolveTimers,
 }
 
-/// The record of the current level of `sim`.
+/// The record of the current level of `sim` (its `t` is the state's; the running totals are
+/// left at 0: [`run`] fills both).
 pub fn record_of(
     sim: &Simulation,
     step: usize,
@@ -58,6 +59,8 @@ pub fn record_of(
         j: inv.j,
         dissipation: rep.dissipation,
         external_work: rep.external_work,
+        work_total: 0.0,
+        dissipation_total: 0.0,
         acc_trans: rep.acc_trans,
         acc_rot: rep.acc_rot,
         newton_iters: rep.newton_iters,
@@ -94,7 +97,9 @@ fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
 
 /// Runs `sim` to its end time. `observer` sees row 0 and every accepted step (its
 /// error aborts the run, e.g. a full disk); `every` thins what it sees (the last accepted
-/// step is always shown).
+/// step is always shown). Records carry `t = t_0 + step·Δt` (not the accumulated state
+/// time) and the running totals of external work and dissipation over *every* accepted
+/// step, so a thinned record stream still closes the energy balance.
 ///
 /// # Panics
 /// If `sim` is attached to a lockstep batch driver (see [`run_async`]).
@@ -120,7 +125,15 @@ pub async fn run_async<E>(
     // structure starts at rest: its initial scale is zero).
     let (mut l_ref, mut j_ref) = momentum_scales(sim, &inv0);
     let (mut max_dl, mut max_dj) = (0.0f64, 0.0f64);
-    observer(&record_of(sim, 0, None), sim)?;
+    let (t0, dt) = (sim.state().t, sim.params().dt);
+    let (mut work_total, mut dissipation_total) = (0.0f64, 0.0f64);
+    let exact = |mut rec: StepRecord, w: f64, d: f64| {
+        rec.t = t0 + rec.step as f64 * dt;
+        rec.work_total = w;
+        rec.dissipation_total = d;
+        rec
+    };
+    observer(&exact(record_of(sim, 0, None), 0.0, 0.0), sim)?;
     let mut out = RunOutcome {
         status: RunStatus::Completed,
         t_reached: sim.state().t,
@@ -138,7 +151,7 @@ pub async fn run_async<E>(
     };
     let mut prev = inv0;
     let every = every.max(1);
-    let mut unshown: Option<(usize, crate::integrator::StepReport)> = None;
+    let mut unshown: Option<(usize, crate::integrator::StepReport, f64, f64)> = None;
     for step in 1..=n_steps {
         match sim.step_async().await {
             Ok(rep) => {
@@ -152,26 +165,29 @@ pub async fn run_async<E>(
                 out.newton_iters_total += rep.newton_iters;
                 out.max_link_g = out.max_link_g.max(rep.max_link_g);
                 out.steps = step;
-                out.t_reached = sim.state().t;
+                out.t_reached = t0 + step as f64 * dt;
+                work_total += rep.external_work;
+                dissipation_total += rep.dissipation;
                 out.energy_final = inv.total();
                 prev = inv;
                 if step % every == 0 || step == n_steps {
-                    observer(&record_of(sim, step, Some(&rep)), sim)?;
+                    let rec = record_of(sim, step, Some(&rep));
+                    observer(&exact(rec, work_total, dissipation_total), sim)?;
                     unshown = None;
                 } else {
-                    unshown = Some((step, rep));
+                    unshown = Some((step, rep, work_total, dissipation_total));
                 }
             }
             Err(f) => {
                 // Keep the last accepted level in the output even when thinning.
-                if let Some((k, rep)) = unshown.take() {
-                    observer(&record_of(sim, k, Some(&rep)), sim)?;
+                if let Some((k, rep, w, d)) = unshown.take() {
+                    observer(&exact(record_of(sim, k, Some(&rep)), w, d), sim)?;
                 }
                 out.status = RunStatus::Failed;
                 out.reason = Some(format!(
                     "step {step} (t = {:.6} → {:.6}) failed: {}",
-                    sim.state().t,
-                    sim.state().t + sim.params().dt,
+                    t0 + (step - 1) as f64 * dt,
+                    t0 + step as f64 * dt,
                     f.reason
                 ));
                 out.failed_step_residuals = f.residuals;

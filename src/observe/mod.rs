@@ -4,7 +4,10 @@
 //! these products); the stored energy uses the one-point rule, as the stresses do
 //! (DESIGN §2).
 
+pub mod balance;
+pub mod probe;
 pub mod record;
+pub mod report;
 
 use crate::element::{ElementData, M2};
 use crate::integrator::state::State;

@@ -10,7 +10,7 @@ use crate::model::Vec3;
 pub struct StepRecord {
     /// Step index (0 = initial state).
     pub step: usize,
-    /// Time.
+    /// Time `t_0 + step·Δt`, computed from the step index (never accumulated).
     pub t: f64,
     /// Kinetic energy K.
     pub kinetic: f64,
@@ -26,6 +26,11 @@ pub struct StepRecord {
     pub dissipation: f64,
     /// Work of the external loads over the step that ended here.
     pub external_work: f64,
+    /// Work of the external loads from row 0 to here (sum of `external_work` over every
+    /// accepted step, thinned or not).
+    pub work_total: f64,
+    /// Dissipation from row 0 to here (sum of `dissipation` over every accepted step).
+    pub dissipation_total: f64,
     /// L2 norm over the rods of the translational acceleration (v_{n+1} − v_n)/Δt.
     pub acc_trans: f64,
     /// L2 norm over the rods of the director acceleration (director analogue).
@@ -79,10 +84,22 @@ pub struct RunSummary {
     pub dofs: usize,
     /// Total Newton iterations over the run.
     pub newton_iters_total: usize,
-    /// Largest relative per-step change of |L| (relative to max(|L|, scale)).
+    /// Largest per-step change of L relative to the run's momentum scale (not written to
+    /// `summary.json`: on a loaded or supported run it is the applied impulse, not an
+    /// error; see [`impulse_balance`](Self::impulse_balance)).
+    #[serde(skip)]
     pub max_rel_dl: f64,
-    /// Largest relative per-step change of |J|.
+    /// Largest per-step change of J (relative; not written, like `max_rel_dl`).
+    #[serde(skip)]
     pub max_rel_dj: f64,
+    /// Energy balance `H_n − H_0 = W − D` over the accepted steps.
+    pub energy_balance: EnergyBalance,
+    /// Momentum balance against the applied impulse over the accepted steps.
+    pub impulse_balance: ImpulseBalance,
+    /// The last accepted level: every output of the run ends there.
+    pub last_accepted: LastAccepted,
+    /// The files this run wrote into its output folder (relative paths).
+    pub outputs: Vec<String>,
     /// H at the start and at the last accepted step.
     pub energy_initial: f64,
     /// H at the last accepted step.
@@ -97,4 +114,73 @@ pub struct RunSummary {
     pub linear_solver_fallbacks: usize,
     /// Where the Newton time went (assembly, factorizations, solves).
     pub timers: crate::integrator::SolveTimers,
+}
+
+/// `H_n − H_0 = W_n − D_n`: the energy balance of the accepted steps.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct EnergyBalance {
+    /// `H_0`.
+    pub energy_initial: f64,
+    /// `H` at the last accepted step.
+    pub energy_final: f64,
+    /// External work over the run, `W`.
+    pub work_total: f64,
+    /// Dissipation over the run, `D` (0 for EM; not reported by the baselines).
+    pub dissipation_total: f64,
+    /// `H_n − H_0 − W + D` at the last accepted step.
+    pub residual: f64,
+    /// Largest `|H_k − H_0 − W_k + D_k|` over the accepted steps.
+    pub max_abs_residual: f64,
+    /// Step where it was reached.
+    pub max_abs_residual_step: usize,
+    /// Largest residual relative to `max(|H_0|, |H_k|, |W_k|, |D_k|)`.
+    pub max_rel_residual: f64,
+}
+
+/// Momenta against the applied impulse (loads at `t_{n+½}`) over the accepted steps.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ImpulseBalance {
+    /// The discrete impulse rule used.
+    pub rule: String,
+    /// True when supports or rigid links act on the model: their reactions' impulse is
+    /// then part of the residual (which is then not an error).
+    pub reactions: bool,
+    /// Accepted steps summed.
+    pub steps: usize,
+    /// `L_n − L_0`.
+    pub change_l: [f64; 3],
+    /// `J_n − J_0` (about the origin).
+    pub change_j: [f64; 3],
+    /// Impulse of the loads, `Σ Δt F(t_{n+½})`.
+    pub applied_impulse_l: [f64; 3],
+    /// Angular impulse of the loads, `Σ Δt (r_{n+½} × F + M)`.
+    pub applied_impulse_j: [f64; 3],
+    /// `L_n − L_0 − I_L` at the last accepted step.
+    pub residual_l: [f64; 3],
+    /// `J_n − J_0 − I_J` at the last accepted step.
+    pub residual_j: [f64; 3],
+    /// Largest `|L_k − L_0 − I_L,k|` over the steps.
+    pub max_residual_l: f64,
+    /// Step where it was reached.
+    pub max_residual_l_step: usize,
+    /// Largest `|J_k − J_0 − I_J,k|`.
+    pub max_residual_j: f64,
+    /// Step where it was reached.
+    pub max_residual_j_step: usize,
+    /// `max_residual_l` relative to the largest `|L|` or `|I_L|` of the run.
+    pub max_rel_residual_l: f64,
+    /// `max_residual_j` relative to the largest `|J|` or `|I_J|` of the run.
+    pub max_rel_residual_j: f64,
+}
+
+/// Where the outputs of a run end.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct LastAccepted {
+    /// Step index of the last accepted level (the run's end when completed).
+    pub step: usize,
+    /// Its time `t_0 + step·Δt`.
+    pub t: f64,
+    /// What the outputs hold, in words (e.g. for a failed run: every file ends at this
+    /// level; the failing step is not in any output).
+    pub note: String,
 }

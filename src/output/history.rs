@@ -1,4 +1,8 @@
 //! `history.csv`: one row per time level, streamed while the run goes on.
+//!
+//! `t` is `t_0 + step·Δt` exactly; `work_total` and `dissipation_total` are running sums
+//! over every accepted step, so even a thinned history (`--every k`) closes the energy
+//! balance `total − total₀ = work_total − dissipation_total` row by row.
 
 use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
@@ -29,6 +33,8 @@ pub const HISTORY_COLUMNS: &[&str] = &[
     "outer_iters",
     "residual",
     "max_link_g",
+    "work_total",
+    "dissipation_total",
 ];
 
 /// Streams `history.csv`: the header is written on [`create`](Self::create), one row per
@@ -78,7 +84,7 @@ impl HistoryWriter {
 
 /// Shortest decimal text that parses back to the identical `f64`: plain notation for
 /// moderate magnitudes, scientific otherwise (`NaN`, `inf`, `-inf` for non-finite values).
-fn fmt_f64(v: f64, out: &mut String) {
+pub(crate) fn fmt_f64(v: f64, out: &mut String) {
     use std::fmt::Write as _;
     let a = v.abs();
     // Both `{}` and `{:e}` print the shortest round-trip representation.
@@ -116,6 +122,10 @@ fn format_row(r: &StepRecord, out: &mut String) {
     fmt_f64(r.residual, out);
     out.push(',');
     fmt_f64(r.max_link_g, out);
+    for v in [r.work_total, r.dissipation_total] {
+        out.push(',');
+        fmt_f64(v, out);
+    }
     out.push('\n');
 }
 
@@ -204,6 +214,8 @@ fn parse_row(line: &str) -> Result<StepRecord, String> {
         outer_iters: int(16)?,
         residual: flt(17)?,
         max_link_g: flt(18)?,
+        work_total: flt(19)?,
+        dissipation_total: flt(20)?,
     })
 }
 
@@ -222,6 +234,8 @@ mod tests {
             j: Vec3::new(f64::MIN_POSITIVE, f64::MAX, -seed / 7.0),
             dissipation: 5e-324,
             external_work: -1.0e-5 * seed,
+            work_total: -3.0e-5 * seed * seed,
+            dissipation_total: 0.1 * step as f64 + 1e-17,
             acc_trans: 0.1 + 0.2,
             acc_rot: 1e16 + seed,
             newton_iters: 3 + step,
@@ -249,6 +263,8 @@ mod tests {
             r.acc_rot,
             r.residual,
             r.max_link_g,
+            r.work_total,
+            r.dissipation_total,
         ]
         .iter()
         .map(|v| v.to_bits())
@@ -299,7 +315,7 @@ mod tests {
         drop(HistoryWriter::create(&path).unwrap());
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text, format!("{}\n", HISTORY_COLUMNS.join(",")));
-        assert_eq!(HISTORY_COLUMNS.len(), 19);
+        assert_eq!(HISTORY_COLUMNS.len(), 21);
         assert!(read_history(&path).unwrap().is_empty());
     }
 
@@ -338,7 +354,7 @@ mod tests {
         let msg = read_history(&missing).unwrap_err().to_string();
         assert!(msg.contains("nope.csv"), "{msg}");
 
-        let bad_field = "1,0.1,abc".to_string() + &",0".repeat(16);
+        let bad_field = "1,0.1,abc".to_string() + &",0".repeat(HISTORY_COLUMNS.len() - 3);
         std::fs::write(
             &path,
             format!("{}\n{bad_field}\n", HISTORY_COLUMNS.join(",")),

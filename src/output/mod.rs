@@ -1,5 +1,6 @@
-//! Output writers: `history.csv` (streamed row by row), `summary.json`, the energy and
-//! momentum charts, and the terminal progress bar of the time loop.
+//! Output writers: `history.csv` (streamed row by row), `summary.json`, `trajectory.npz`,
+//! VTK frames, the energy and momentum charts, and the terminal progress bar of the time
+//! loop.
 //!
 //! Every fallible function returns [`OutputError`], which always names the file involved.
 
@@ -7,17 +8,21 @@ use std::path::PathBuf;
 
 mod history;
 mod plot;
+mod probes;
 mod progress;
 mod snapshot;
 mod summary;
+mod trajectory;
 mod vtk;
 
 pub use history::{read_history, HistoryWriter, HISTORY_COLUMNS};
 pub(crate) use plot::{ensure_font, FONT};
 pub use plot::{plot_accelerations, plot_comparison, plot_energy, plot_momenta, LabelledHistory};
+pub use probes::ProbeWriter;
 pub use progress::Progress;
 pub use snapshot::{plot_snapshots, Snapshot};
 pub use summary::write_summary;
+pub use trajectory::{CosseratBenchResult, OutputTimes, TrajectoryRecorder};
 pub use vtk::VtkSeries;
 
 /// Errors of the output writers. Every variant names the file it concerns.
@@ -48,6 +53,14 @@ pub enum OutputError {
         path: PathBuf,
         /// The underlying serde error.
         error: serde_json::Error,
+    },
+    /// Writing a `.npz` archive failed.
+    #[error("{}: cannot write npz: {message}", path.display())]
+    Npz {
+        /// The file.
+        path: PathBuf,
+        /// What the npz writer reported.
+        message: String,
     },
     /// Drawing or encoding a chart failed.
     #[error("{}: cannot draw chart: {message}", path.display())]

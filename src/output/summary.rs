@@ -48,6 +48,10 @@ mod tests {
             newton_iters_total: 400,
             max_rel_dl: 1e-15,
             max_rel_dj: 2e-15,
+            energy_balance: Default::default(),
+            impulse_balance: Default::default(),
+            last_accepted: Default::default(),
+            outputs: vec!["history.csv".into()],
             max_link_g: 0.0,
             backend: "cpu".into(),
             linear_solver: "block-tridiagonal-6".into(),
@@ -74,6 +78,10 @@ mod tests {
             "wall_s",
             "scheme",
             "params",
+            "energy_balance",
+            "impulse_balance",
+            "last_accepted",
+            "outputs",
         ] {
             assert!(v.get(key).is_some(), "missing key {key}");
         }

@@ -42,6 +42,17 @@ pub struct Scene {
     pub params: IntegratorParams,
     /// Record every `output_every`-th step (≥ 1, default 1).
     pub output_every: usize,
+    /// `[[probe]]` nodes whose state goes to `probes.csv` every step.
+    pub probes: Vec<Probe>,
+}
+
+/// A `[[probe]]`: a named node observed every step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probe {
+    /// Column prefix in `probes.csv` (`probe{i}` by default).
+    pub name: String,
+    /// The node.
+    pub node: usize,
 }
 
 /// A scene shipped inside the binary.

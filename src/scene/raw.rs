@@ -32,7 +32,20 @@ pub(crate) struct RawScene {
     pub link: Vec<RawLink>,
     #[serde(default)]
     pub initial_velocity: Vec<RawInitialVelocity>,
+    #[serde(default)]
+    pub probe: Vec<RawProbe>,
     pub integrator: Option<RawIntegrator>,
+}
+
+/// `[[probe]]`: a node whose state goes to `probes.csv` every step.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawProbe {
+    pub name: Option<String>,
+    pub at: Option<Vec<f64>>,
+    pub rod: Option<String>,
+    pub node: Option<i64>,
+    pub s: Option<f64>,
 }
 
 /// `[material.NAME]`.

@@ -200,6 +200,27 @@ fn set_in(root: &mut toml::Value, key: &str, x: f64) -> Result<(), String> {
     for (i, st) in steps.iter().enumerate() {
         let last = i + 1 == steps.len();
         match st {
+            Step::Key(k) if cur.is_array() && !last => {
+                // An array of tables by name: `rod.beam.elements` is the rod named `beam`.
+                let a = cur.as_array_mut().unwrap_or_else(|| unreachable!());
+                let names: Vec<String> = a
+                    .iter()
+                    .filter_map(|v| v.get("name").and_then(|n| n.as_str()).map(String::from))
+                    .collect();
+                cur = a
+                    .iter_mut()
+                    .find(|v| v.get("name").and_then(|n| n.as_str()) == Some(k.as_str()))
+                    .ok_or_else(|| {
+                        format!(
+                            "no entry named `{k}` here (named entries: {})",
+                            if names.is_empty() {
+                                "none".to_string()
+                            } else {
+                                names.join(", ")
+                            }
+                        )
+                    })?;
+            }
             Step::Key(k) => {
                 let t = cur
                     .as_table_mut()
@@ -303,6 +324,30 @@ fn set_value_table(doc: &mut toml::Table, key: &str, x: f64) -> Result<(), Strin
         *doc = t;
     }
     r
+}
+
+/// The scene `spec` (a file path or a built-in name, as for
+/// [`load_scene`](crate::scene::load_scene)) with numbers written at scene key paths
+/// (`integrator.dt`, `rod[0].elements`, `rod.beam.elements` for the rod named `beam`),
+/// exactly as a sweep file's `[[vary]]` keys are written into its base scene, then
+/// validated by the scene parser. Errors name the key (`KEY: reason`) or are the scene
+/// parser's (file, key and reason).
+pub fn scene_with_overrides(spec: &str, sets: &[(String, f64)]) -> Result<Scene, String> {
+    let path = Path::new(spec);
+    let (text, source) = if path.exists() {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{spec}: {e}"))?;
+        (text, spec.to_string())
+    } else if let Some(b) = builtin_scenes().iter().find(|b| b.name == spec) {
+        (b.toml.to_string(), format!("builtin:{}", b.name))
+    } else {
+        return crate::scene::load_scene(spec).map_err(|e| e.to_string());
+    };
+    let mut doc: toml::Table = text.parse().map_err(|e| format!("{source}: {e}"))?;
+    for (key, x) in sets {
+        set_value_table(&mut doc, key, *x).map_err(|e| format!("{key}: {e}"))?;
+    }
+    let text = toml::to_string(&doc).map_err(|e| e.to_string())?;
+    parse_scene(&text, &source).map_err(|e| e.to_string())
 }
 
 /// Reads and validates a sweep file: syntax, keys, modes, ranges, and that the base scene
