@@ -55,7 +55,8 @@ pub enum DriverError {
 pub struct RunResult {
     /// The summary also written to `summary.json`.
     pub summary: RunSummary,
-    /// Every record written to `history.csv`.
+    /// The records written to `history.csv` (all of them up to [`MAX_CHART_RECORDS`],
+    /// thinned evenly beyond).
     pub records: Vec<StepRecord>,
     /// Whether the model flies freely (momenta are then conserved and their drift means
     /// something).
@@ -85,12 +86,21 @@ pub fn run_sim_to_dir(
         path: out.to_path_buf(),
         error,
     })?;
+    let removed = remove_previous_outputs(out)?;
+    if !removed.is_empty() {
+        eprintln!(
+            "note: {}: removed the previous run's files ({}) so that the folder holds only this run",
+            out.display(),
+            removed.join(", ")
+        );
+    }
     let mut history = HistoryWriter::create(&out.join("history.csv"))?;
     let mut vtk = match opts.vtk_every {
-        Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.name)?),
+        Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.file_stem())?),
         None => None,
     };
-    let mut records: Vec<StepRecord> = Vec::new();
+    let mut records = ChartRecords::new(MAX_CHART_RECORDS);
+    let mut last_written: Option<usize> = None;
     let mut last_seen: Option<StepRecord> = None;
     let mut snapshots: Vec<Snapshot> = Vec::new();
     let progress = Progress::new(sim.params().n_steps() as u64, &opts.label);
@@ -106,7 +116,8 @@ pub fn run_sim_to_dir(
         let last = rec.step == s.params().n_steps();
         if rec.step.is_multiple_of(every) || last {
             history.push(rec)?;
-            records.push(rec.clone());
+            records.push(rec);
+            last_written = Some(rec.step);
         }
         if on(opts.snapshot_every) {
             snapshots.push(Snapshot::of(s));
@@ -125,11 +136,12 @@ pub fn run_sim_to_dir(
     // A failed run: `run` shows the last accepted level even off-stride; keep it in the
     // history too.
     if let Some(rec) = last_seen {
-        if records.last().map(|r| r.step) != Some(rec.step) {
+        if last_written != Some(rec.step) {
             history.push(&rec)?;
-            records.push(rec);
         }
+        records.keep_last(rec);
     }
+    let records = records.into_vec();
     let title = format!("{}: {}", opts.label, sim.params().scheme.name());
     plot_energy(&out.join("energy.png"), &records, &title)?;
     plot_momenta(&out.join("momenta.png"), &records, &title)?;
@@ -147,12 +159,139 @@ pub fn run_sim_to_dir(
         )?;
     }
     let summary = summarize(scene, sim, &outcome);
-    write_summary(&out.join("summary.json"), &summary)?;
+    // Written last and renamed into place: a summary.json in the folder means this run
+    // finished writing (completed or failed), and it is whole.
+    let tmp = out.join("summary.json.tmp");
+    write_summary(&tmp, &summary)?;
+    let path = out.join("summary.json");
+    std::fs::rename(&tmp, &path).map_err(|e| OutputError::Io { path, error: e })?;
     Ok(RunResult {
         summary,
         records,
         free_flight: scene.model.is_free_flight(),
     })
+}
+
+/// Most step records a run keeps in memory for its charts (and [`RunResult::records`]);
+/// beyond it every second one is dropped and only every second one is kept from then on,
+/// so a run of any length holds between half and all of this many (first and last kept).
+/// `history.csv` always gets every row.
+pub const MAX_CHART_RECORDS: usize = 200_000;
+
+/// The records of a run kept for its charts, thinned to at most `cap`.
+#[derive(Debug)]
+pub struct ChartRecords {
+    recs: Vec<StepRecord>,
+    cap: usize,
+    stride: usize,
+    offered: usize,
+}
+
+impl ChartRecords {
+    /// An empty buffer of at most `cap` (≥ 2) records.
+    pub fn new(cap: usize) -> Self {
+        Self {
+            recs: Vec::new(),
+            cap: cap.max(2),
+            stride: 1,
+            offered: 0,
+        }
+    }
+
+    /// Offers the next record (kept when it falls on the current stride).
+    pub fn push(&mut self, rec: &StepRecord) {
+        if self.offered.is_multiple_of(self.stride) {
+            if self.recs.len() == self.cap {
+                // Keep the even-indexed ones (the first included); double the stride.
+                let mut i = 0;
+                self.recs.retain(|_| {
+                    i += 1;
+                    (i - 1) % 2 == 0
+                });
+                self.stride *= 2;
+            }
+            if self.offered.is_multiple_of(self.stride) {
+                self.recs.push(rec.clone());
+            }
+        }
+        self.offered += 1;
+    }
+
+    /// Makes `rec` the last record (the final level of a run is always charted).
+    pub fn keep_last(&mut self, rec: StepRecord) {
+        if self.recs.last().map(|r| r.step) != Some(rec.step) {
+            if self.recs.len() == self.cap {
+                self.recs.pop();
+            }
+            self.recs.push(rec);
+        }
+    }
+
+    /// Records kept so far.
+    pub fn len(&self) -> usize {
+        self.recs.len()
+    }
+
+    /// True when none is kept.
+    pub fn is_empty(&self) -> bool {
+        self.recs.is_empty()
+    }
+
+    /// The kept records, in order.
+    pub fn into_vec(self) -> Vec<StepRecord> {
+        self.recs
+    }
+}
+
+/// Files a run writes at the top of its folder (and `vtk/*.vtu`, `vtk/*.pvd`).
+pub const RUN_FILES: [&str; 8] = [
+    "history.csv",
+    "summary.json",
+    "summary.json.tmp",
+    "energy.png",
+    "momenta.png",
+    "accelerations.png",
+    "snapshots.png",
+    "trajectory.npz",
+];
+
+/// Removes a previous run's files from `out` (only the names a run writes, and only
+/// `.vtu`/`.pvd` files in `out/vtk`), so that a reused folder never mixes two runs.
+/// Returns what it removed, for the message.
+pub fn remove_previous_outputs(out: &Path) -> Result<Vec<String>, OutputError> {
+    let mut removed = Vec::new();
+    let rm = |p: &Path| match std::fs::remove_file(p) {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        Err(e) => Err(OutputError::Io {
+            path: p.to_path_buf(),
+            error: e,
+        }),
+    };
+    for f in RUN_FILES {
+        if rm(&out.join(f))? {
+            removed.push(f.to_string());
+        }
+    }
+    let vtk = out.join("vtk");
+    if vtk.is_dir() {
+        let mut n = 0;
+        let entries = std::fs::read_dir(&vtk).map_err(|e| OutputError::Io {
+            path: vtk.clone(),
+            error: e,
+        })?;
+        for entry in entries.flatten() {
+            let p = entry.path();
+            let ext = p.extension().and_then(|e| e.to_str());
+            if matches!(ext, Some("vtu" | "pvd")) && rm(&p)? {
+                n += 1;
+            }
+        }
+        if n > 0 {
+            removed.push(format!("vtk/: {n} files"));
+        }
+    }
+    Ok(removed)
 }
 
 fn gcd(a: usize, b: usize) -> usize {

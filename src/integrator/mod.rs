@@ -4,6 +4,7 @@
 
 pub mod backend;
 pub mod dofs;
+pub mod finite;
 pub mod gen_alpha;
 mod links;
 pub mod params;

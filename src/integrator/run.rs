@@ -106,7 +106,6 @@ pub fn run<E>(
     // structure starts at rest: its initial scale is zero).
     let (mut l_ref, mut j_ref) = momentum_scales(sim, &inv0);
     let (mut max_dl, mut max_dj) = (0.0f64, 0.0f64);
-    observer(&record_of(sim, 0, None), sim)?;
     let mut out = RunOutcome {
         status: RunStatus::Completed,
         t_reached: sim.state().t,
@@ -122,6 +121,15 @@ pub fn run<E>(
         max_link_g: 0.0,
         timers: Default::default(),
     };
+    if let Some(field) = crate::integrator::finite::record_non_finite(&record_of(sim, 0, None)) {
+        out.status = RunStatus::Failed;
+        out.reason = Some(format!(
+            "the initial state has a non-finite {field}: the inputs' magnitudes overflow f64"
+        ));
+        out.wall_s = start.elapsed().as_secs_f64();
+        return Ok(out);
+    }
+    observer(&record_of(sim, 0, None), sim)?;
     let mut prev = inv0;
     let every = every.max(1);
     let mut unshown: Option<(usize, crate::integrator::StepReport)> = None;

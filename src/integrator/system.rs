@@ -858,11 +858,7 @@ impl Simulation {
                 let max_link_g = g1.iter().fold(0.0f64, |m, g| m.max(g.abs()));
                 if multipliers.update(&self.model.links, &g1, &mut self.state.lambda) {
                     let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
-                    self.state = next;
-                    self.inv = inv;
-                    self.prev = q;
-                    self.frozen = consistent;
-                    return Ok(StepReport {
+                    let report = StepReport {
                         newton_iters: total_iters,
                         outer_iters: outer,
                         residual: res,
@@ -872,7 +868,17 @@ impl Simulation {
                         acc_rot: ar,
                         max_link_g,
                         link_rounds: round,
-                    });
+                    };
+                    if let Err(f) = super::finite::check_step(&next, &inv, &report) {
+                        self.state.lambda.clone_from(&lambda0);
+                        self.inv = inv0;
+                        return Err(f);
+                    }
+                    self.state = next;
+                    self.inv = inv;
+                    self.prev = q;
+                    self.frozen = consistent;
+                    return Ok(report);
                 }
                 // H_n with the new multipliers: the next round's energy identity is
                 // measured against it.
@@ -933,9 +939,8 @@ impl Simulation {
             (&loads[1].0, &loads[1].1),
         )?;
         let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &out.state);
-        self.inv = invariants(&self.model, &self.data, &out.state);
-        self.state = out.state;
-        Ok(StepReport {
+        let inv = invariants(&self.model, &self.data, &out.state);
+        let report = StepReport {
             newton_iters: out.newton_iters,
             outer_iters: 1,
             residual: out.residual,
@@ -945,7 +950,11 @@ impl Simulation {
             acc_rot: ar,
             max_link_g: 0.0,
             link_rounds: 1,
-        })
+        };
+        super::finite::check_step(&out.state, &inv, &report)?;
+        self.inv = inv;
+        self.state = out.state;
+        Ok(report)
     }
 
     #[allow(clippy::type_complexity)]
