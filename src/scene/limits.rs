@@ -10,9 +10,9 @@ pub const MAX_SCENE_ELEMENTS: usize = 1_000_000;
 pub const MAX_MEMBERS: u64 = 10_000_000;
 
 /// Memory a running member needs per element, in bytes (element data, state, the block
-/// sparse tangent and its factorization, history buffers), measured as peak RSS over
-/// elements of `cosserat run` on a 10⁵-element cantilever (≈ 3.1 kB) with a 2× margin.
-pub const BYTES_PER_ELEMENT: u64 = 6_000;
+/// sparse tangent and its factorization, records): the peak RSS of `cosserat run` on the
+/// cantilever with 10⁵ elements less that with 10³, per element, measured 11.7 kB.
+pub const BYTES_PER_ELEMENT: u64 = 12_000;
 
 /// Memory a member needs besides its elements (its scene, solver set-up, records).
 pub const BYTES_PER_MEMBER: u64 = 200_000;
