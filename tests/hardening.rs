@@ -202,7 +202,7 @@ fn a_second_sweep_on_a_running_folder_exits_2_and_the_first_finishes_intact() {
     let sp = write(
         dir.path(),
         "s.toml",
-        &SWEEP.replace("values = [0.4]", "values = [6.0]"),
+        &SWEEP.replace("values = [0.4]", "values = [100.0]"),
     );
     let out = dir.path().join("o");
     let mut first = cosserat()
