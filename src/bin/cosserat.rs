@@ -325,6 +325,13 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
             p.t_end
         );
     }
+    if p.t_end / p.dt > cosserat::scene::limits::MAX_STEPS {
+        bail!(
+            "--dt/--t-end: t_end / Δt = {:e} steps, above the limit of {:e} steps per run",
+            p.t_end / p.dt,
+            cosserat::scene::limits::MAX_STEPS
+        );
+    }
     if matches!(p.scheme, Scheme::GenAlpha { .. }) && !scene.model.links.is_empty() {
         bail!(
             "{}: gen-alpha does not support rigid links ([[link]]); use em, edmc1, edmc2 or midpoint",
@@ -356,7 +363,12 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         length_unit: "m".into(),
     };
     let mut sim =
-        Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
+        Simulation::new(scene.model.clone(), params).with_context(|| {
+            format!(
+                "{}: (model): cannot set up the linear solver for this scene (material and section values too small or too large for f64?)",
+                scene.source
+            )
+        })?;
     // Keeps the GPU batch (if any) alive for the run.
     let _gpu = cmds::attach(&mut sim, a.backend, a.adapter.as_deref())?;
     let result = run_sim_to_dir(&scene, &mut sim, &out, &opts)?;

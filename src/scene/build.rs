@@ -610,6 +610,16 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
             ),
         ));
     }
+    if t_end / dt > super::limits::MAX_STEPS {
+        return Err(cx.err(
+            &k("dt"),
+            format!(
+                "t_end / dt = {:e} steps, above the limit of {:e} steps per run",
+                t_end / dt,
+                super::limits::MAX_STEPS
+            ),
+        ));
+    }
     let mut p = IntegratorParams::new(scheme, dt, t_end);
     if let Some(s) = r.strategy.as_deref() {
         p.strategy = match s {

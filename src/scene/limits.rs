@@ -6,6 +6,9 @@
 /// Most elements in one scene (all rods together), and in one segment.
 pub const MAX_SCENE_ELEMENTS: usize = 1_000_000;
 
+/// Most time steps of one run (`t_end / dt`).
+pub const MAX_STEPS: f64 = 1e9;
+
 /// Most members in one sweep (or rods in one bench batch).
 pub const MAX_MEMBERS: u64 = 10_000_000;
 
