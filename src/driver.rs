@@ -328,3 +328,33 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         timers: o.timers,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(step: usize) -> StepRecord {
+        StepRecord {
+            step,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn chart_records_stay_under_their_cap_evenly_with_first_and_last() {
+        let mut c = ChartRecords::new(100);
+        for s in 0..10_000 {
+            c.push(&rec(s));
+            assert!(c.len() <= 100);
+        }
+        c.keep_last(rec(10_000));
+        let v = c.into_vec();
+        assert!(v.len() > 50 && v.len() <= 100, "{}", v.len());
+        assert_eq!(v[0].step, 0);
+        assert_eq!(v.last().unwrap().step, 10_000);
+        // Evenly thinned: one stride between all kept records but the last.
+        let stride = v[1].step - v[0].step;
+        assert!(v[..v.len() - 1].windows(2).all(|w| w[1].step - w[0].step == stride));
+        assert_eq!(stride, 128);
+    }
+}
