@@ -354,7 +354,9 @@ mod tests {
         assert_eq!(v.last().unwrap().step, 10_000);
         // Evenly thinned: one stride between all kept records but the last.
         let stride = v[1].step - v[0].step;
-        assert!(v[..v.len() - 1].windows(2).all(|w| w[1].step - w[0].step == stride));
+        assert!(v[..v.len() - 1]
+            .windows(2)
+            .all(|w| w[1].step - w[0].step == stride));
         assert_eq!(stride, 128);
     }
 }

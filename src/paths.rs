@@ -75,9 +75,7 @@ pub fn join_under(out: &Path, rel: impl AsRef<Path>) -> Result<PathBuf, PathEsca
             Component::Normal(_) => n += 1,
             Component::CurDir => {}
             Component::ParentDir => return Err(err("it contains `..`")),
-            Component::RootDir | Component::Prefix(_) => {
-                return Err(err("it is an absolute path"))
-            }
+            Component::RootDir | Component::Prefix(_) => return Err(err("it is an absolute path")),
         }
     }
     if n == 0 {

@@ -146,7 +146,11 @@ fn resume_from_an_empty_or_header_only_members_csv_runs_everything() {
         .next()
         .unwrap()
         .to_string();
-    for content in [String::new(), format!("{header}\n"), header[..10].to_string()] {
+    for content in [
+        String::new(),
+        format!("{header}\n"),
+        header[..10].to_string(),
+    ] {
         std::fs::write(out.join("members.csv"), &content).unwrap();
         let s = sweep_into(&sp, &out, true);
         assert_eq!((s.skipped, s.completed), (0, 3), "from {content:?}");
@@ -216,7 +220,10 @@ fn a_second_sweep_on_a_running_folder_exits_2_and_the_first_finishes_intact() {
         .unwrap();
     let t0 = Instant::now();
     while !out.join("members.csv").exists() {
-        assert!(t0.elapsed() < Duration::from_secs(30), "first sweep never started");
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "first sweep never started"
+        );
         std::thread::sleep(Duration::from_millis(10));
     }
     let o = cosserat()
@@ -310,7 +317,10 @@ fn oversized_inputs_are_refused_before_allocating() {
     );
     let grid_values = format!(
         "values = [{}]",
-        (0..1000).map(|i| i.to_string()).collect::<Vec<_>>().join(",")
+        (0..1000)
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
     );
     let grid = write(
         dir.path(),
@@ -331,7 +341,9 @@ fn oversized_inputs_are_refused_before_allocating() {
         "m.toml",
         "base = \"frame\"\nmode = \"random\"\nsamples = 1000\n[[vary]]\nkey = \"integrator.alpha\"\nrange = [0, 1]\n",
     );
-    let cases: Vec<(Vec<String>, Vec<(&str, &str)>, &str)> = vec![
+    // (arguments, environment, expected error)
+    type Case<'a> = (Vec<String>, Vec<(&'a str, &'a str)>, &'a str);
+    let cases: Vec<Case> = vec![
         (
             vec!["sweep".into(), random.display().to_string()],
             vec![],
@@ -435,7 +447,11 @@ fn huge_masses_give_finite_outputs_or_a_failed_step() {
         }
         if sum["status"] == "completed" {
             for k in ["energy_initial", "energy_final", "max_rel_dl", "max_rel_dj"] {
-                assert!(sum[k].as_f64().is_some_and(f64::is_finite), "{to}: {k} = {}", sum[k]);
+                assert!(
+                    sum[k].as_f64().is_some_and(f64::is_finite),
+                    "{to}: {k} = {}",
+                    sum[k]
+                );
             }
         } else {
             let r = sum["reason"].as_str().unwrap();
@@ -477,10 +493,7 @@ fn negative_and_zero_arguments_get_their_own_errors() {
             &["run", "frame", "--every", "-3"],
             "must be an integer ≥ 1 (got -3)",
         ),
-        (
-            &["bench", "--rods", "0"],
-            "must be an integer ≥ 1 (got 0)",
-        ),
+        (&["bench", "--rods", "0"], "must be an integer ≥ 1 (got 0)"),
         (
             &["run", "mechanism", "--scheme", "gen-alpha"],
             "gen-alpha does not support rigid links",
@@ -516,21 +529,24 @@ fn check_refuses_what_run_cannot_do_and_escapes_control_characters() {
             .replace("scheme = \"edmc2\"", "scheme = \"gen-alpha\""),
     );
     let o = cosserat().arg("check").arg(&ga).output().unwrap();
-    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stdout));
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     assert!(
         stderr(&o).contains("integrator.scheme: gen-alpha does not support rigid links"),
         "{}",
         stderr(&o)
     );
-    let dt = write(
-        dir.path(),
-        "dt.toml",
-        &frame_with("dt = 0.2", "dt = 20.0"),
-    );
+    let dt = write(dir.path(), "dt.toml", &frame_with("dt = 0.2", "dt = 20.0"));
     let o = cosserat().arg("check").arg(&dt).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("integrator.dt: must not exceed t_end = 10 (got 20): the run would take no step"),
+        stderr(&o).contains(
+            "integrator.dt: must not exceed t_end = 10 (got 20): the run would take no step"
+        ),
         "{}",
         stderr(&o)
     );
@@ -576,7 +592,12 @@ fn a_reused_folder_holds_only_the_new_run() {
     vtk.sort();
     assert_eq!(
         vtk,
-        ["frame.pvd", "frame_000000.vtu", "frame_000001.vtu", "frame_000002.vtu"]
+        [
+            "frame.pvd",
+            "frame_000000.vtu",
+            "frame_000001.vtu",
+            "frame_000002.vtu"
+        ]
     );
     // A run killed before it ends leaves no summary.json (of this or the previous run).
     let mut child = cosserat()
@@ -587,9 +608,8 @@ fn a_reused_folder_holds_only_the_new_run() {
         .spawn()
         .unwrap();
     let t0 = Instant::now();
-    while std::fs::read_to_string(out.join("history.csv"))
-        .map_or(0, |h| h.lines().count())
-        < 6 // the previous run's history has 4 lines
+    while std::fs::read_to_string(out.join("history.csv")).map_or(0, |h| h.lines().count()) < 6
+    // the previous run's history has 4 lines
     {
         assert!(t0.elapsed() < Duration::from_secs(60));
         std::thread::sleep(Duration::from_millis(20));

@@ -91,12 +91,12 @@ fn all_finite(v: &serde_json::Value, path: &str, bad: &mut Vec<String>) {
 /// Checks a finished run's folder: history rows finite; a completed run's summary finite.
 fn check_run_outputs(out: &Path) {
     let sum: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
-            .unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let hist = std::fs::read_to_string(out.join("history.csv")).unwrap();
     for l in hist.lines().skip(1) {
         assert!(
-            l.split(',').all(|x| x.parse::<f64>().is_ok_and(f64::is_finite)),
+            l.split(',')
+                .all(|x| x.parse::<f64>().is_ok_and(f64::is_finite)),
             "non-finite history row {l}"
         );
     }
@@ -113,8 +113,12 @@ const NUMBERS: &[&str] = &[
     "1", "0", "-1", "5e-324", "1e-310", "1e-300", "1e300", "1.7e308", "nan", "inf", "-inf",
     "\"1\"", "1e20", "1e-3",
 ];
-const STIFF: &[&str] = &["1e6", "1e6", "1e6", "0", "-1", "5e-324", "1e300", "nan", "1e20", "1e-3"];
-const DT: &[&str] = &["0.01", "0.01", "0.005", "0", "-0.1", "5e-324", "1e300", "nan", "inf"];
+const STIFF: &[&str] = &[
+    "1e6", "1e6", "1e6", "0", "-1", "5e-324", "1e300", "nan", "1e20", "1e-3",
+];
+const DT: &[&str] = &[
+    "0.01", "0.01", "0.005", "0", "-0.1", "5e-324", "1e300", "nan", "inf",
+];
 const T_END: &[&str] = &["0.02", "0.02", "0.01", "1e300", "-1", "0"];
 const COUNTS: &[&str] = &["2", "2", "3", "0", "-1", "10000000000", "1e3", "2000000"];
 const NAMES: &[&str] = &[
@@ -127,7 +131,13 @@ const NAMES: &[&str] = &[
     "\"/etc/passwd\"",
     "\".\"",
 ];
-const SCHEMES: &[&str] = &["\"em\"", "\"edmc2\"", "\"gen-alpha\"", "\"midpoint\"", "\"nope\""];
+const SCHEMES: &[&str] = &[
+    "\"em\"",
+    "\"edmc2\"",
+    "\"gen-alpha\"",
+    "\"midpoint\"",
+    "\"nope\"",
+];
 
 #[allow(clippy::too_many_arguments)]
 fn scene(
@@ -153,7 +163,10 @@ fn pick(pool: &'static [&'static str]) -> impl Strategy<Value = &'static str> {
 
 /// Mostly the ordinary value, sometimes one from the boundary pool: most cases then
 /// change one or two keys, so that accepted inputs really run.
-fn mostly(ordinary: &'static str, pool: &'static [&'static str]) -> impl Strategy<Value = &'static str> {
+fn mostly(
+    ordinary: &'static str,
+    pool: &'static [&'static str],
+) -> impl Strategy<Value = &'static str> {
     prop_oneof![5 => Just(ordinary), 1 => proptest::sample::select(pool)]
 }
 

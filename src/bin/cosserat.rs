@@ -123,10 +123,20 @@ struct StabilityArgs {
     )]
     schemes: Vec<String>,
     /// Dissipation parameters of edmc1 (χ_Γ = χ_Ω) and edmc2 (α_Γv).
-    #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2", allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.5,1,2",
+        allow_negative_numbers = true
+    )]
     params: Vec<f64>,
     /// ρ∞ values of gen-alpha.
-    #[arg(long, value_delimiter = ',', default_value = "0,0.5,0.8,1", allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.5,0.8,1",
+        allow_negative_numbers = true
+    )]
     rho_inf: Vec<f64>,
     /// Time steps (default: the scene's Δt times ¼, ½, 1, 2, 4).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]

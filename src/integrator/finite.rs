@@ -45,11 +45,7 @@ pub fn first_non_finite(state: &State, inv: &Invariants, rep: &StepReport) -> Op
     {
         return Some(format!("directors of element {e}"));
     }
-    if let Some(e) = state
-        .vd
-        .iter()
-        .position(|vd| vd.iter().flatten().any(|v| bad3(v)))
-    {
+    if let Some(e) = state.vd.iter().position(|vd| vd.iter().flatten().any(bad3)) {
         return Some(format!("director velocities of element {e}"));
     }
     if let Some(e) = state

@@ -150,6 +150,9 @@ mod tests {
             limit: 1 << 30,
         }
         .to_string();
-        assert!(e.contains("3.0 GiB") && e.contains("COSSERAT_MAX_MEMORY"), "{e}");
+        assert!(
+            e.contains("3.0 GiB") && e.contains("COSSERAT_MAX_MEMORY"),
+            "{e}"
+        );
     }
 }

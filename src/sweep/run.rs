@@ -195,7 +195,9 @@ fn recorded(path: &Path, head: &str, spec: &SweepSpec) -> Result<Recorded, Sweep
                     file,
                     location: Some((1, 1)),
                     key: "(header)".into(),
-                    reason: format!("--resume: `{torn}` is not the start of this sweep's header `{head}`"),
+                    reason: format!(
+                        "--resume: `{torn}` is not the start of this sweep's header `{head}`"
+                    ),
                 });
             }
             rec.torn_bytes = 0;
@@ -223,7 +225,13 @@ fn recorded(path: &Path, head: &str, spec: &SweepSpec) -> Result<Recorded, Sweep
             .parse()
             .ok()
             .filter(|&i| i < spec.len())
-            .ok_or_else(|| bad(format!("member `{}` is not one of this sweep's 0..{}", f[0], spec.len())))?;
+            .ok_or_else(|| {
+                bad(format!(
+                    "member `{}` is not one of this sweep's 0..{}",
+                    f[0],
+                    spec.len()
+                ))
+            })?;
         for (j, p) in spec.params.iter().enumerate() {
             let got: Option<f64> = f[CSV_COLUMNS.len() + j].parse().ok();
             let want = spec.values[i][j];
@@ -430,8 +438,10 @@ pub fn run_sweep(
     if !resuming {
         // A fresh start: the identity first, then a members.csv holding only the header
         // (renamed into place: a kill leaves either no file or a whole header).
-        write_atomic(&out.join(IDENTITY_FILE), &identity_text(spec))
-            .map_err(ctx(format!("cannot write {}", out.join(IDENTITY_FILE).display())))?;
+        write_atomic(&out.join(IDENTITY_FILE), &identity_text(spec)).map_err(ctx(format!(
+            "cannot write {}",
+            out.join(IDENTITY_FILE).display()
+        )))?;
         write_atomic(&csv_path, &format!("{head}\n"))
             .map_err(ctx(format!("cannot write {}", csv_path.display())))?;
     }

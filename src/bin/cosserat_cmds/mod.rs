@@ -292,7 +292,10 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         .context("--rods × --elements")?;
     let members = bench_members(a.rods, a.elements, a.steps);
     // Fail loudly rather than time another size than asked.
-    if let Some(m) = members.iter().find(|m| m.model.elements.len() != a.elements) {
+    if let Some(m) = members
+        .iter()
+        .find(|m| m.model.elements.len() != a.elements)
+    {
         bail!(
             "bench: the cantilever was built with {} elements, not the {} asked for",
             m.model.elements.len(),
