@@ -9,6 +9,7 @@ pub mod gen_alpha;
 mod links;
 pub mod params;
 pub mod run;
+pub mod scaling;
 pub mod state;
 pub mod system;
 

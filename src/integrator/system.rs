@@ -668,7 +668,7 @@ impl Simulation {
             // (stiff members under small loads: the arch at t ≈ 0), so accept it; the energy
             // checks that follow still apply.
             let stalled = it >= 2 && res <= ROUNDOFF_RESIDUAL * tol && res >= 0.5 * history[it - 1];
-            if res <= tol || stalled {
+            if (res <= tol && super::scaling::may_accept(it)) || stalled {
                 self.last_residual.clone_from(&r);
                 return Ok((it, history));
             }
@@ -779,6 +779,7 @@ impl Simulation {
             .map(|(r, x)| (r * x).abs())
             .sum::<f64>();
         let growth = h1 - h0 - w;
+        super::scaling::check_resolved(residual_work, href)?;
         if self.params.scheme.controls_energy()
             && growth > self.params.energy_tol * href + residual_work
         {
