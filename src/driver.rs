@@ -77,7 +77,8 @@ pub enum DriverError {
 pub struct RunResult {
     /// The summary also written to `summary.json`.
     pub summary: RunSummary,
-    /// Every record written to `history.csv`.
+    /// The records written to `history.csv` (all of them up to [`MAX_CHART_RECORDS`],
+    /// thinned evenly beyond).
     pub records: Vec<StepRecord>,
     /// Whether the model flies freely (momenta are then conserved and their drift means
     /// something).
@@ -108,9 +109,17 @@ pub fn run_sim_to_dir(
         error,
     })?;
     let mut written: Vec<String> = vec!["history.csv".into()];
+    let removed = remove_previous_outputs(out)?;
+    if !removed.is_empty() {
+        eprintln!(
+            "note: {}: removed the previous run's files ({}) so that the folder holds only this run",
+            out.display(),
+            removed.join(", ")
+        );
+    }
     let mut history = HistoryWriter::create(&out.join("history.csv"))?;
     let mut vtk = match opts.vtk_every {
-        Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.name)?),
+        Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.file_stem())?),
         None => None,
     };
     let mut trajectory = opts
@@ -127,7 +136,8 @@ pub fn run_sim_to_dir(
             &scene.probes,
         )?)
     };
-    let mut records: Vec<StepRecord> = Vec::new();
+    let mut records = ChartRecords::new(MAX_CHART_RECORDS);
+    let mut last_written: Option<usize> = None;
     let mut last_seen: Option<StepRecord> = None;
     let mut last_vtk: Option<usize> = None;
     let mut snapshots: Vec<Snapshot> = Vec::new();
@@ -166,7 +176,8 @@ pub fn run_sim_to_dir(
         }
         if rec.step.is_multiple_of(every) || last {
             history.push(rec)?;
-            records.push(rec.clone());
+            records.push(rec);
+            last_written = Some(rec.step);
         }
         if on(opts.snapshot_every) {
             snapshots.push(Snapshot::of(s));
@@ -188,10 +199,10 @@ pub fn run_sim_to_dir(
     // A failed run: the simulation is left at the last accepted level; make it the last
     // entry of every output.
     if let Some(rec) = &last_seen {
-        if records.last().map(|r| r.step) != Some(rec.step) {
+        if last_written != Some(rec.step) {
             history.push(rec)?;
-            records.push(rec.clone());
         }
+        records.keep_last(rec.clone());
         if let Some(v) = vtk.as_mut() {
             if last_vtk != Some(rec.step) {
                 v.write_frame(sim, rec.step, rec.t)?;
@@ -212,6 +223,7 @@ pub fn run_sim_to_dir(
             v.frames()
         ));
     }
+    let records = records.into_vec();
     let title = format!("{}: {}", opts.label, sim.params().scheme.name());
     plot_energy(&out.join("energy.png"), &records, &title)?;
     plot_momenta(&out.join("momenta.png"), &records, &title)?;
@@ -261,7 +273,12 @@ pub fn run_sim_to_dir(
         },
     };
     summary.outputs = written;
-    write_summary(&out.join("summary.json"), &summary)?;
+    // Written last and renamed into place: a summary.json in the folder means this run
+    // finished writing (completed or failed), and it is whole.
+    let tmp = out.join("summary.json.tmp");
+    write_summary(&tmp, &summary)?;
+    let path = out.join("summary.json");
+    std::fs::rename(&tmp, &path).map_err(|e| OutputError::Io { path, error: e })?;
     Ok(RunResult {
         summary,
         records,
@@ -301,6 +318,132 @@ fn cosseratbench_result(
     }
 }
 
+/// Most step records a run keeps in memory for its charts (and [`RunResult::records`]);
+/// beyond it every second one is dropped and only every second one is kept from then on,
+/// so a run of any length holds between half and all of this many (first and last kept).
+/// `history.csv` always gets every row.
+pub const MAX_CHART_RECORDS: usize = 200_000;
+
+/// The records of a run kept for its charts, thinned to at most `cap`.
+#[derive(Debug)]
+pub struct ChartRecords {
+    recs: Vec<StepRecord>,
+    cap: usize,
+    stride: usize,
+    offered: usize,
+}
+
+impl ChartRecords {
+    /// An empty buffer of at most `cap` (≥ 2) records.
+    pub fn new(cap: usize) -> Self {
+        Self {
+            recs: Vec::new(),
+            cap: cap.max(2),
+            stride: 1,
+            offered: 0,
+        }
+    }
+
+    /// Offers the next record (kept when it falls on the current stride).
+    pub fn push(&mut self, rec: &StepRecord) {
+        if self.offered.is_multiple_of(self.stride) {
+            if self.recs.len() == self.cap {
+                // Keep the even-indexed ones (the first included); double the stride.
+                let mut i = 0;
+                self.recs.retain(|_| {
+                    i += 1;
+                    (i - 1) % 2 == 0
+                });
+                self.stride *= 2;
+            }
+            if self.offered.is_multiple_of(self.stride) {
+                self.recs.push(rec.clone());
+            }
+        }
+        self.offered += 1;
+    }
+
+    /// Makes `rec` the last record (the final level of a run is always charted).
+    pub fn keep_last(&mut self, rec: StepRecord) {
+        if self.recs.last().map(|r| r.step) != Some(rec.step) {
+            if self.recs.len() == self.cap {
+                self.recs.pop();
+            }
+            self.recs.push(rec);
+        }
+    }
+
+    /// Records kept so far.
+    pub fn len(&self) -> usize {
+        self.recs.len()
+    }
+
+    /// True when none is kept.
+    pub fn is_empty(&self) -> bool {
+        self.recs.is_empty()
+    }
+
+    /// The kept records, in order.
+    pub fn into_vec(self) -> Vec<StepRecord> {
+        self.recs
+    }
+}
+
+/// Files a run writes in its folder (and `vtk/*.vtu`, `vtk/*.pvd`).
+pub const RUN_FILES: &[&str] = &[
+    "history.csv",
+    "summary.json",
+    "summary.json.tmp",
+    "energy.png",
+    "momenta.png",
+    "accelerations.png",
+    "snapshots.png",
+    "trajectory.npz",
+    "probes.csv",
+    "animation.gif",
+    "cosseratbench/trajectory.npz",
+    "cosseratbench/result.json",
+];
+
+/// Removes a previous run's files from `out` (only the names a run writes, and only
+/// `.vtu`/`.pvd` files in `out/vtk`), so that a reused folder never mixes two runs.
+/// Returns what it removed, for the message.
+pub fn remove_previous_outputs(out: &Path) -> Result<Vec<String>, OutputError> {
+    let mut removed = Vec::new();
+    let rm = |p: &Path| match std::fs::remove_file(p) {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        Err(e) => Err(OutputError::Io {
+            path: p.to_path_buf(),
+            error: e,
+        }),
+    };
+    for f in RUN_FILES {
+        if rm(&out.join(f))? {
+            removed.push(f.to_string());
+        }
+    }
+    let vtk = out.join("vtk");
+    if vtk.is_dir() {
+        let mut n = 0;
+        let entries = std::fs::read_dir(&vtk).map_err(|e| OutputError::Io {
+            path: vtk.clone(),
+            error: e,
+        })?;
+        for entry in entries.flatten() {
+            let p = entry.path();
+            let ext = p.extension().and_then(|e| e.to_str());
+            if matches!(ext, Some("vtu" | "pvd")) && rm(&p)? {
+                n += 1;
+            }
+        }
+        if n > 0 {
+            removed.push(format!("vtk/: {n} files"));
+        }
+    }
+    Ok(removed)
+}
+
 fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
     RunSummary {
         scene: scene.source.clone(),
@@ -329,5 +472,37 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         linear_solver: sim.linear_solver().0.to_string(),
         linear_solver_fallbacks: sim.linear_solver().1,
         timers: o.timers,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(step: usize) -> StepRecord {
+        StepRecord {
+            step,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn chart_records_stay_under_their_cap_evenly_with_first_and_last() {
+        let mut c = ChartRecords::new(100);
+        for s in 0..10_000 {
+            c.push(&rec(s));
+            assert!(c.len() <= 100);
+        }
+        c.keep_last(rec(10_000));
+        let v = c.into_vec();
+        assert!(v.len() > 50 && v.len() <= 100, "{}", v.len());
+        assert_eq!(v[0].step, 0);
+        assert_eq!(v.last().unwrap().step, 10_000);
+        // Evenly thinned: one stride between all kept records but the last.
+        let stride = v[1].step - v[0].step;
+        assert!(v[..v.len() - 1]
+            .windows(2)
+            .all(|w| w[1].step - w[0].step == stride));
+        assert_eq!(stride, 128);
     }
 }

@@ -39,6 +39,7 @@ pub mod math;
 pub mod model;
 pub mod observe;
 pub mod output;
+pub mod paths;
 pub mod reproduce;
 pub mod scene;
 pub mod study;

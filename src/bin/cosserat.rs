@@ -12,7 +12,7 @@ use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, RunSummary};
 use cosserat::output::OutputTimes;
 use cosserat::reproduce::reproduce;
-use cosserat::scene::{builtin_scenes, load_scene, Scene};
+use cosserat::scene::{builtin_scenes, load_scene, printable, Scene};
 use cosserat::study;
 
 #[path = "cosserat_cmds/mod.rs"]
@@ -82,10 +82,10 @@ struct StudyCommon {
     #[arg(long)]
     out: PathBuf,
     /// End time (default: the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     t_end: Option<f64>,
     /// Relative Newton tolerance of every run (default: the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     newton_tol: Option<f64>,
     /// Parallel runs (default: the number of cores).
     #[arg(long)]
@@ -108,10 +108,10 @@ struct WorkPrecisionArgs {
     )]
     schemes: Vec<String>,
     /// Time steps (default: the scene's Δt times 1, ½, ¼, ⅛).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     dts: Option<Vec<f64>>,
     /// Δt of the EM reference run (default: the smallest Δt / 8).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     reference_dt: Option<f64>,
 }
 
@@ -127,13 +127,23 @@ struct StabilityArgs {
     )]
     schemes: Vec<String>,
     /// Dissipation parameters of edmc1 (χ_Γ = χ_Ω) and edmc2 (α_Γv).
-    #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.5,1,2",
+        allow_negative_numbers = true
+    )]
     params: Vec<f64>,
     /// ρ∞ values of gen-alpha.
-    #[arg(long, value_delimiter = ',', default_value = "0,0.5,0.8,1")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0,0.5,0.8,1",
+        allow_negative_numbers = true
+    )]
     rho_inf: Vec<f64>,
     /// Time steps (default: the scene's Δt times ¼, ½, 1, 2, 4).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     dts: Option<Vec<f64>>,
     /// Where the grid runs: `gpu`/`auto` run it as one batch whose EM/EDMC members share
     /// each GPU element dispatch (baselines use the CPU kernel inside the batch).
@@ -153,17 +163,17 @@ struct RunArgs {
     scheme: Option<SchemeArg>,
     /// EDMC-2 dissipation α_Γv (the paper's single parameter); implies `--scheme edmc2`
     /// when the scene's scheme is not EDMC-2 and no `--scheme` is given.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     alpha: Option<f64>,
     /// Time step Δt (default: the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     dt: Option<f64>,
     /// End time (default: the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     t_end: Option<f64>,
     /// Generalized-α spectral radius ρ∞ ∈ [0, 1]; implies `--scheme gen-alpha` when no
     /// `--scheme` is given.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     rho_inf: Option<f64>,
     /// Dissipation strategy (default: the scene's, else staggered).
     #[arg(long, value_enum)]
@@ -175,13 +185,13 @@ struct RunArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Write every N-th step to history.csv (default: the scene's `output_every`).
-    #[arg(long)]
+    #[arg(long, value_parser = cmds::at_least_one, allow_negative_numbers = true)]
     every: Option<usize>,
     /// Also write ParaView files: `vtk/NAME_STEP.vtu` at every saved step and `vtk/NAME.pvd`.
     #[arg(long)]
     vtk: bool,
     /// Draw `snapshots.png` with the deformed rods every N steps.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = cmds::at_least_one, allow_negative_numbers = true)]
     snapshots: Option<usize>,
     /// Write `trajectory.npz`: node positions, directors and velocities at the output times
     /// (default: every `--every`-th step; always the last accepted step).
@@ -286,7 +296,8 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // Names and values echoed from a scene file cannot drive the terminal.
+            eprintln!("error: {}", printable(&format!("{e:#}")));
             ExitCode::from(2)
         }
     }
@@ -407,6 +418,26 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
         }
         p.t_end = t;
     }
+    if p.dt > p.t_end {
+        bail!(
+            "--dt: Δt = {} exceeds t_end = {}: the run would take no step",
+            p.dt,
+            p.t_end
+        );
+    }
+    if p.t_end / p.dt > cosserat::scene::limits::MAX_STEPS {
+        bail!(
+            "--dt/--t-end: t_end / Δt = {:e} steps, above the limit of {:e} steps per run",
+            p.t_end / p.dt,
+            cosserat::scene::limits::MAX_STEPS
+        );
+    }
+    if matches!(p.scheme, Scheme::GenAlpha { .. }) && !scene.model.links.is_empty() {
+        bail!(
+            "{}: gen-alpha does not support rigid links ([[link]]); use em, edmc1, edmc2 or midpoint",
+            scene.source
+        );
+    }
     if let Some(s) = a.strategy {
         p.strategy = match s {
             StrategyArg::Staggered => Strategy::Staggered,
@@ -430,7 +461,7 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
     let out = a
         .out
         .clone()
-        .unwrap_or_else(|| Path::new("out").join(&scene.name));
+        .unwrap_or_else(|| Path::new("out").join(scene.file_stem()));
     let every = a.every.unwrap_or(scene.output_every).max(1);
     let trajectory = if let Some(dt) = a.output_dt {
         Some(OutputTimes::from_dt(dt, params.dt).map_err(|e| anyhow!("--output-dt: {e}"))?)
@@ -452,7 +483,12 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         cosseratbench: a.cosseratbench.then(|| a.scenario_digest.clone()),
     };
     let mut sim =
-        Simulation::new(scene.model.clone(), params).context("cannot set up the linear solver")?;
+        Simulation::new(scene.model.clone(), params).with_context(|| {
+            format!(
+                "{}: (model): cannot set up the linear solver for this scene (material and section values too small or too large for f64?)",
+                scene.source
+            )
+        })?;
     // Keeps the GPU batch (if any) alive for the run.
     let _gpu = cmds::attach(&mut sim, a.backend, a.adapter.as_deref())?;
     let result = run_sim_to_dir(&scene, &mut sim, &out, &opts)?;

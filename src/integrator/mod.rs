@@ -4,11 +4,13 @@
 
 pub mod dofs;
 pub mod evaluate;
+pub mod finite;
 pub mod gen_alpha;
 mod links;
 pub mod params;
 pub mod report;
 pub mod run;
+pub mod scaling;
 mod simulation;
 pub mod state;
 

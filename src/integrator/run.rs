@@ -70,6 +70,11 @@ pub fn record_of(
     }
 }
 
+/// Euclidean norm without overflow of the squares (finite for every finite vector).
+fn norm(v: &crate::model::Vec3) -> f64 {
+    crate::integrator::finite::scaled_norm(v)
+}
+
 /// Scales against which momentum drifts are measured: `|L|` or, if the body is nearly
 /// at rest in the mean, `sqrt(2 K m)`; `J` likewise times the model's size.
 fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
@@ -87,11 +92,12 @@ fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
         ),
         |(lo, hi), x| (lo.inf(x), hi.sup(x)),
     );
-    let size = (hi - lo).norm().max(1e-300);
-    let p = (2.0 * inv.kinetic.max(0.0) * mass).sqrt();
+    let size = norm(&(hi - lo)).max(1e-300);
+    // sqrt(2 K m) as a product of roots: K·m alone overflows for masses near 1e300.
+    let p = (2.0 * inv.kinetic.max(0.0)).sqrt() * mass.sqrt();
     (
-        inv.l.norm().max(p).max(1e-300),
-        inv.j.norm().max(p * size).max(1e-300),
+        norm(&inv.l).max(p).max(1e-300),
+        norm(&inv.j).max(p * size).max(1e-300),
     )
 }
 
@@ -133,7 +139,6 @@ pub async fn run_async<E>(
         rec.dissipation_total = d;
         rec
     };
-    observer(&exact(record_of(sim, 0, None), 0.0, 0.0), sim)?;
     let mut out = RunOutcome {
         status: RunStatus::Completed,
         t_reached: sim.state().t,
@@ -149,6 +154,15 @@ pub async fn run_async<E>(
         max_link_g: 0.0,
         timers: Default::default(),
     };
+    if let Some(field) = crate::integrator::finite::record_non_finite(&record_of(sim, 0, None)) {
+        out.status = RunStatus::Failed;
+        out.reason = Some(format!(
+            "the initial state has a non-finite {field}: the inputs' magnitudes overflow f64"
+        ));
+        out.wall_s = start.elapsed().as_secs_f64();
+        return Ok(out);
+    }
+    observer(&exact(record_of(sim, 0, None), 0.0, 0.0), sim)?;
     let mut prev = inv0;
     let every = every.max(1);
     let mut unshown: Option<(usize, crate::integrator::StepReport, f64, f64)> = None;
@@ -158,8 +172,8 @@ pub async fn run_async<E>(
                 let inv = sim.invariants();
                 let (ls, js) = momentum_scales(sim, &inv);
                 (l_ref, j_ref) = (l_ref.max(ls), j_ref.max(js));
-                max_dl = max_dl.max((inv.l - prev.l).norm());
-                max_dj = max_dj.max((inv.j - prev.j).norm());
+                max_dl = max_dl.max(norm(&(inv.l - prev.l)));
+                max_dj = max_dj.max(norm(&(inv.j - prev.j)));
                 out.max_rel_dl = max_dl / l_ref;
                 out.max_rel_dj = max_dj / j_ref;
                 out.newton_iters_total += rep.newton_iters;

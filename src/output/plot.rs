@@ -25,6 +25,9 @@ const MOMENTA_SIZE: (u32, u32) = (1000, 900);
 /// The smallest y range drawn, relative to the largest magnitude on the axis.
 pub const REL_MIN_SPAN: f64 = 1e-6;
 
+/// Data of magnitude below this are charted as zero (see `Axis::new`).
+const TINY_MAGNITUDE: f64 = 1e-290;
+
 /// Family name of the embedded chart font (registered by [`ensure_font`]).
 pub(crate) const FONT: &str = "sans-serif";
 const TITLE_PX: u32 = 28;
@@ -121,6 +124,12 @@ impl Axis {
     /// fraction of the span added on either side.
     fn new(range: Option<(f64, f64)>, pad: f64) -> Self {
         let (mut lo, mut hi) = range.unwrap_or((-1.0, 1.0));
+        // Data this small (subnormals included) are zero at any chart resolution, and
+        // 10^-k or a relative span of them would overflow or underflow f64 (an axis
+        // without extent: plotters' tick loop never ends). Chart them as zero.
+        if lo.abs().max(hi.abs()) < TINY_MAGNITUDE {
+            (lo, hi) = (0.0, 0.0);
+        }
         let mag = lo.abs().max(hi.abs());
         let min_span = if mag > 0.0 { REL_MIN_SPAN * mag } else { 2.0 };
         if hi - lo < min_span {
@@ -140,6 +149,10 @@ impl Axis {
         let exp = if (-2..4).contains(&k) { 0 } else { k };
         let scale = pow10(-exp);
         let (lo, hi) = (lo * scale, hi * scale);
+        if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+            // Never hand plotters an empty or non-finite range.
+            return Self::new(None, pad);
+        }
         let decimals = tick_decimals(lo, hi);
         Self {
             lo,

@@ -24,8 +24,9 @@ type Result<T> = std::result::Result<T, SceneError>;
 const MERGE_TOL: f64 = 1e-9;
 /// Below this `|sin|` of the angle between `d1` and a segment, `d1` counts as parallel.
 const PARALLEL_TOL: f64 = 1e-6;
-/// Cap on elements per segment (guards against a typo allocating the machine away).
-const MAX_ELEMENTS: i64 = 1_000_000;
+/// Cap on elements per segment (guards against a typo allocating the machine away); the
+/// scene as a whole has the same cap ([`super::limits::MAX_SCENE_ELEMENTS`]).
+const MAX_ELEMENTS: i64 = super::limits::MAX_SCENE_ELEMENTS as i64;
 
 /// Error factory: knows the file name and the document for spans.
 struct Ctx<'a, 'i> {
@@ -600,6 +601,26 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
     };
     let dt = cx.req_positive(&k("dt"), r.dt)?;
     let t_end = cx.req_positive(&k("t_end"), r.t_end)?;
+    if dt > t_end {
+        return Err(cx.err(
+            &k("dt"),
+            format!(
+                "must not exceed t_end = {} (got {}): the run would take no step",
+                fmt_num(t_end),
+                fmt_num(dt)
+            ),
+        ));
+    }
+    if t_end / dt > super::limits::MAX_STEPS {
+        return Err(cx.err(
+            &k("dt"),
+            format!(
+                "t_end / dt = {:e} steps, above the limit of {:e} steps per run",
+                t_end / dt,
+                super::limits::MAX_STEPS
+            ),
+        ));
+    }
     let mut p = IntegratorParams::new(scheme, dt, t_end);
     if let Some(s) = r.strategy.as_deref() {
         p.strategy = match s {
@@ -1073,6 +1094,20 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         names.insert(plan.name.clone(), i);
         plans.push(plan);
     }
+    // The whole scene's size, before meshing allocates anything per element.
+    let mut total = 0usize;
+    for (i, plan) in plans.iter().enumerate() {
+        total = total.saturating_add(plan.counts.iter().sum::<usize>());
+        if total > super::limits::MAX_SCENE_ELEMENTS {
+            return Err(cx.err(
+                &root.key("rod").idx(i).key("elements"),
+                format!(
+                    "the scene would have {total} or more elements, above the limit of {} for a whole scene",
+                    super::limits::MAX_SCENE_ELEMENTS
+                ),
+            ));
+        }
+    }
 
     // Model size and merge tolerance from the bounding box of all rod points.
     let mut lo = Vec3::repeat(f64::INFINITY);
@@ -1126,6 +1161,13 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         .enumerate()
         .map(|(i, l)| link(&cx, &nodes, &root.key("link").idx(i), l))
         .collect::<Result<Vec<_>>>()?;
+    if !links.is_empty() && matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        // The baseline has no treatment of rigid links; `run` would fail at step 1.
+        return Err(cx.err(
+            &ip.key("scheme"),
+            "gen-alpha does not support rigid links ([[link]]); use em, edmc1, edmc2 or midpoint",
+        ));
+    }
     let planar = match &raw.planar {
         None => None,
         Some(name) => {

@@ -16,6 +16,7 @@
 //! `scenes/bad.toml:12:7: integrator.dt: must be > 0 (got -0.1)`.
 
 mod build;
+pub mod limits;
 mod raw;
 mod span;
 
@@ -437,8 +438,28 @@ impl Scene {
             p.newton.name(),
             p.newton_tol, p.max_iter, p.outer_tol, p.max_outer, p.energy_tol
         );
-        s
+        printable(&s)
     }
+
+    /// The scene name as a file stem that cannot leave an output folder
+    /// ([`crate::paths::safe_stem`]): what `run` names its default folder and VTK files by.
+    pub fn file_stem(&self) -> String {
+        crate::paths::safe_stem(&self.name)
+    }
+}
+
+/// `text` with every control character except newline shown as an escape (`\u{1b}`),
+/// so a scene's name or description cannot drive the terminal.
+pub fn printable(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_control() && c != '\n' {
+                c.escape_unicode().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
 }
 
 /// Seven significant digits, printed shortest; scientific notation outside [1e-4, 1e9)

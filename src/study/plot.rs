@@ -37,6 +37,9 @@ fn decades(lo: f64, hi: f64) -> (f64, f64) {
     } else {
         (1e-3, 1.0)
     };
+    // Keep 10^k a normal f64: below 1e-300 (subnormals) it underflows to 0 and a log axis
+    // from 0 never ends its tick loop.
+    let (lo, hi) = (lo.clamp(1e-300, 1e300), hi.clamp(1e-300, 1e300));
     let a = 10f64.powf(lo.log10().floor());
     let mut b = 10f64.powf(hi.log10().ceil());
     if b <= a {

@@ -33,7 +33,9 @@ use toml::Spanned;
 
 use crate::math::rng::Rng;
 use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
-pub use run::{run_sweep, MemberRow, SweepOptions, SweepSummary, CSV_COLUMNS};
+pub use run::{
+    run_sweep, MemberRow, SweepOptions, SweepSummary, CSV_COLUMNS, IDENTITY_FILE, LOCK_FILE,
+};
 
 /// Everything that can go wrong reading a sweep file (or its output directory).
 #[derive(Debug, thiserror::Error)]
@@ -77,6 +79,12 @@ pub enum SweepError {
         /// The underlying error.
         #[source]
         error: std::io::Error,
+    },
+    /// Another sweep holds the folder's lock.
+    #[error("{dir}: another `cosserat sweep` is running in this folder (it holds {dir}/.sweep.lock); wait for it to finish or use another --out")]
+    Locked {
+        /// The output folder.
+        dir: String,
     },
     /// The GPU backend failed as a whole.
     #[error(transparent)]
@@ -123,6 +131,8 @@ pub struct SweepSpec {
     pub params: Vec<VaryParam>,
     /// Per member, one value per parameter.
     pub values: Vec<Vec<f64>>,
+    /// Elements of the base scene (for the memory estimate).
+    base_elements: usize,
 }
 
 #[derive(Deserialize)]
@@ -294,6 +304,36 @@ impl SweepSpec {
         self.values.is_empty()
     }
 
+    /// Elements of the base scene.
+    pub fn base_elements(&self) -> usize {
+        self.base_elements
+    }
+
+    /// The sweep's identity: a hash of what determines its results — the base scene
+    /// (normalized: parsed and re-serialized, so comments and layout do not count), the
+    /// varied keys and every member's values (bit for bit). Recorded in `sweep.id` and
+    /// checked by `--resume`.
+    pub fn identity(&self) -> String {
+        let base = self
+            .base_text
+            .parse::<toml::Table>()
+            .map(|t| toml::to_string(&t).unwrap_or_default())
+            .unwrap_or_else(|_| self.base_text.clone());
+        let mut h = Fnv1a::default();
+        h.write(b"cosserat-sweep-v1\0");
+        h.write(base.as_bytes());
+        h.write(b"\0");
+        for p in &self.params {
+            h.write(p.key.as_bytes());
+            h.write(b"\0");
+        }
+        h.write(&(self.values.len() as u64).to_le_bytes());
+        for v in self.values.iter().flatten() {
+            h.write(&v.to_bits().to_le_bytes());
+        }
+        format!("{:016x}", h.0)
+    }
+
     /// The scene of member `i` (the base scene with the member's values written in).
     pub fn member_scene(&self, i: usize) -> Result<Scene, SceneError> {
         let text = self
@@ -313,6 +353,25 @@ impl SweepSpec {
             set_value_table(&mut doc, &p.key, x)?;
         }
         toml::to_string(&doc).map_err(|e| e.to_string())
+    }
+}
+
+/// 64-bit FNV-1a: a stable hash (unlike `std`'s `DefaultHasher`, whose output may change
+/// between Rust releases) for the sweep identity; not a defence against forgery.
+struct Fnv1a(u64);
+
+impl Default for Fnv1a {
+    fn default() -> Self {
+        Fnv1a(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv1a {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
     }
 }
 
@@ -514,6 +573,41 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
             }
         }
     }
+    // The number of members and their memory, before allocating anything per member.
+    let (count, count_key, count_span) = match mode {
+        SweepMode::Grid => (
+            lists
+                .iter()
+                .fold(1u64, |a, l| a.saturating_mul(l.len() as u64)),
+            "vary",
+            None,
+        ),
+        SweepMode::List => (lists[0].len() as u64, "vary", None),
+        SweepMode::Random => match &raw.samples {
+            Some(s) => (
+                u64::try_from(*s.get_ref()).unwrap_or(0),
+                "samples",
+                Some(s.span()),
+            ),
+            None => (0, "samples", None),
+        },
+    };
+    if count > crate::scene::limits::MAX_MEMBERS {
+        return Err(invalid(
+            count_span.clone(),
+            count_key,
+            format!(
+                "{count} members, above the limit of {} members per sweep",
+                crate::scene::limits::MAX_MEMBERS
+            ),
+        ));
+    }
+    let base_scene = parse_scene(&base_text, &base_source)
+        .map_err(|e| invalid(Some(raw.base.span()), "base", format!("base scene: {e}")))?;
+    let base_elements = base_scene.model.elements.len();
+    drop(base_scene);
+    crate::scene::limits::check_memory("this sweep", count, base_elements as u64)
+        .map_err(|e| invalid(count_span, count_key, e.to_string()))?;
     let values: Vec<Vec<f64>> = match mode {
         SweepMode::Grid => {
             let mut out = vec![vec![]];
@@ -591,6 +685,7 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
         mode,
         params,
         values,
+        base_elements,
     };
     // Every key must be accepted by the base scene: try each parameter alone on the first
     // member, so the error names the parameter.

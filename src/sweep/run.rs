@@ -3,7 +3,7 @@
 
 use std::collections::HashSet;
 use std::fs::OpenOptions;
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::path::Path;
 
 use super::{SweepError, SweepSpec};
@@ -75,6 +75,10 @@ pub struct SweepSummary {
     pub completed: usize,
     /// Members failed in this invocation.
     pub failed: usize,
+    /// Bytes of a torn last row cut from `members.csv` on `--resume` (0: none).
+    pub repaired_bytes: usize,
+    /// `member_<i>/history.csv` files of a previous sweep removed by a fresh start.
+    pub stale_histories: usize,
     /// Wall time.
     pub wall_s: f64,
     /// GPU stage timers (zero on the CPU).
@@ -127,41 +131,284 @@ fn header(spec: &SweepSpec) -> String {
     cols.join(",")
 }
 
-/// Member indices already recorded in `path` (whose header must be this sweep's).
-fn recorded(path: &Path, head: &str) -> Result<HashSet<usize>, SweepError> {
+/// What `--resume` found in `members.csv`.
+#[derive(Debug, Default)]
+struct Recorded {
+    /// Members with a complete row.
+    done: HashSet<usize>,
+    /// Bytes of a torn last row removed (0: none).
+    torn_bytes: usize,
+    /// Whether the file needs its header written (it was empty or held a torn header).
+    needs_header: bool,
+}
+
+/// Splits a CSV row into fields (double-quoted fields may hold commas and `""`).
+fn split_csv(line: &str) -> Vec<String> {
+    let mut out = vec![String::new()];
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                chars.next();
+                out.last_mut().unwrap().push('"');
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => out.push(String::new()),
+            (c, _) => out.last_mut().unwrap().push(c),
+        }
+    }
+    out
+}
+
+/// Reads `members.csv` for `--resume`: the header must be this sweep's, every complete
+/// row must name a member of this sweep with this sweep's values, and a torn last row
+/// (a kill between the start of a row and its newline) is cut off the file so that its
+/// member runs again.
+fn recorded(path: &Path, head: &str, spec: &SweepSpec) -> Result<Recorded, SweepError> {
+    let file = path.display().to_string();
     let io = |error| SweepError::Output {
-        context: format!("cannot read {}", path.display()),
+        context: format!("cannot read {file}"),
         error,
     };
-    let f = std::fs::File::open(path).map_err(io)?;
-    let mut lines = BufReader::new(f).lines();
+    let bytes = std::fs::read(path).map_err(io)?;
+    let complete = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+    let mut rec = Recorded {
+        torn_bytes: bytes.len() - complete,
+        ..Default::default()
+    };
+    let text = String::from_utf8_lossy(&bytes[..complete]);
+    let mut lines = text.lines();
     match lines.next() {
-        Some(Ok(h)) if h == head => {}
-        Some(Ok(h)) => {
+        Some(h) if h == head => {}
+        Some(h) => {
             return Err(SweepError::Invalid {
-                file: path.display().to_string(),
+                file,
                 location: Some((1, 1)),
                 key: "(header)".into(),
                 reason: format!("--resume: columns `{h}` are not this sweep's `{head}`"),
             })
         }
-        Some(Err(e)) => return Err(io(e)),
-        None => return Ok(HashSet::new()),
-    }
-    let mut done = HashSet::new();
-    for l in lines {
-        let l = l.map_err(io)?;
-        if let Some(Ok(i)) = l.split(',').next().map(|x| x.parse::<usize>()) {
-            done.insert(i);
+        None => {
+            // Zero bytes, or a header cut short by a kill: nothing recorded yet.
+            let torn = String::from_utf8_lossy(&bytes);
+            if !head.starts_with(torn.as_ref()) {
+                return Err(SweepError::Invalid {
+                    file,
+                    location: Some((1, 1)),
+                    key: "(header)".into(),
+                    reason: format!(
+                        "--resume: `{torn}` is not the start of this sweep's header `{head}`"
+                    ),
+                });
+            }
+            rec.torn_bytes = 0;
+            rec.needs_header = true;
         }
     }
-    Ok(done)
+    let n_params = spec.params.len();
+    for (k, l) in lines.enumerate() {
+        let line_no = k + 2;
+        let bad = |reason: String| SweepError::Invalid {
+            file: file.clone(),
+            location: Some((line_no, 1)),
+            key: "(row)".into(),
+            reason: format!("--resume: {reason}"),
+        };
+        let f = split_csv(l);
+        if f.len() != CSV_COLUMNS.len() + n_params + 1 {
+            return Err(bad(format!(
+                "{} fields, expected {} (the file was edited or is not this sweep's)",
+                f.len(),
+                CSV_COLUMNS.len() + n_params + 1
+            )));
+        }
+        let i: usize = f[0]
+            .parse()
+            .ok()
+            .filter(|&i| i < spec.len())
+            .ok_or_else(|| {
+                bad(format!(
+                    "member `{}` is not one of this sweep's 0..{}",
+                    f[0],
+                    spec.len()
+                ))
+            })?;
+        for (j, p) in spec.params.iter().enumerate() {
+            let got: Option<f64> = f[CSV_COLUMNS.len() + j].parse().ok();
+            let want = spec.values[i][j];
+            if got.map(f64::to_bits) != Some(want.to_bits()) {
+                return Err(bad(format!(
+                    "member {i} has {} = {} here but {} in this sweep: the folder holds another sweep's results",
+                    p.key,
+                    f[CSV_COLUMNS.len() + j],
+                    num(want)
+                )));
+            }
+        }
+        if !rec.done.insert(i) {
+            return Err(bad(format!("member {i} is recorded twice")));
+        }
+    }
+    Ok(rec)
+}
+
+/// Name of the file that records which sweep a folder holds.
+pub const IDENTITY_FILE: &str = "sweep.id";
+
+/// Name of the lock file a running sweep holds exclusively.
+pub const LOCK_FILE: &str = ".sweep.lock";
+
+/// Takes the folder's exclusive lock (held until the returned file is dropped, and
+/// released by the system when the process dies, however it dies).
+fn lock(out: &Path) -> Result<std::fs::File, SweepError> {
+    let path = out.join(LOCK_FILE);
+    let f = OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|error| SweepError::Output {
+            context: format!("cannot open {}", path.display()),
+            error,
+        })?;
+    match f.try_lock() {
+        Ok(()) => Ok(f),
+        Err(std::fs::TryLockError::WouldBlock) => Err(SweepError::Locked {
+            dir: out.display().to_string(),
+        }),
+        Err(std::fs::TryLockError::Error(error)) => Err(SweepError::Output {
+            context: format!("cannot lock {}", path.display()),
+            error,
+        }),
+    }
+}
+
+/// Writes `text` to `path` through a temporary file renamed over it, synced, so the file
+/// is either the old one or the whole new one.
+fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
+    let tmp = path.with_extension("tmp");
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(text.as_bytes())?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)
+}
+
+/// The identity text of a sweep as recorded in [`IDENTITY_FILE`].
+fn identity_text(spec: &SweepSpec) -> String {
+    format!(
+        "id {}\nmembers {}\nparameters {}\nsweep {}\n",
+        spec.identity(),
+        spec.len(),
+        spec.params
+            .iter()
+            .map(|p| p.key.as_str())
+            .collect::<Vec<_>>()
+            .join(","),
+        spec.source
+    )
+}
+
+/// On `--resume`: the folder must hold this sweep (same identity).
+fn check_identity(out: &Path, spec: &SweepSpec) -> Result<(), SweepError> {
+    let path = out.join(IDENTITY_FILE);
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(&path).map_err(|e| SweepError::Invalid {
+        file: file.clone(),
+        location: None,
+        key: "id".into(),
+        reason: format!(
+            "--resume: cannot read the folder's sweep identity ({e}); the folder was not written by `cosserat sweep`, or by an older version: run without --resume or use another --out"
+        ),
+    })?;
+    let recorded = text
+        .lines()
+        .find_map(|l| l.strip_prefix("id "))
+        .unwrap_or("")
+        .trim();
+    let want = spec.identity();
+    if recorded != want {
+        let line = |k: &str| {
+            text.lines()
+                .find_map(|l| l.strip_prefix(k))
+                .unwrap_or("?")
+                .trim()
+                .to_string()
+        };
+        return Err(SweepError::Invalid {
+            file,
+            location: None,
+            key: "id".into(),
+            reason: format!(
+                "--resume: the folder holds another sweep (id {recorded}: {} members over {}, from {}); {} is id {want} ({} members over {}): its base scene or member values differ. Run it into another --out, or without --resume to start afresh",
+                line("members "),
+                line("parameters "),
+                line("sweep "),
+                spec.source,
+                spec.len(),
+                spec.params.iter().map(|p| p.key.as_str()).collect::<Vec<_>>().join(",")
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// A fresh start removes the previous sweep's `member_<i>/history.csv` (and their
+/// temporary files and then-empty folders), so the folder never mixes two sweeps.
+fn remove_stale_histories(out: &Path) -> std::io::Result<usize> {
+    let mut n = 0;
+    for entry in std::fs::read_dir(out)? {
+        let entry = entry?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let is_member = name
+            .strip_prefix("member_")
+            .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()));
+        if !is_member || !entry.file_type()?.is_dir() {
+            continue;
+        }
+        for f in ["history.csv", "history.csv.tmp"] {
+            match std::fs::remove_file(entry.path().join(f)) {
+                Ok(()) => n += usize::from(f == "history.csv"),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            }
+        }
+        let _ = std::fs::remove_dir(entry.path()); // only if now empty
+    }
+    Ok(n)
+}
+
+/// Writes one member's history to `dir/history.csv` through a temporary file, so a
+/// history file that exists is complete.
+fn write_history(dir: &Path, history: &[crate::observe::record::StepRecord]) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
+    let tmp = dir.join("history.csv.tmp");
+    {
+        let mut h = HistoryWriter::create(&tmp).map_err(|e| e.to_string())?;
+        history
+            .iter()
+            .try_for_each(|rec| h.push(rec))
+            .map_err(|e| e.to_string())?;
+    }
+    std::fs::File::open(&tmp)
+        .and_then(|f| f.sync_all())
+        .and_then(|_| std::fs::rename(&tmp, dir.join("history.csv")))
+        .map_err(|e| e.to_string())
 }
 
 /// Runs every member of `spec` not yet recorded, appending one row per finished member
-/// to `out/members.csv` (flushed at once, so an interrupted sweep loses nothing), then
-/// writes `out/sweep.json` (counts of this invocation, backend and adapter).
-/// `on_row` sees each row (progress display).
+/// to `out/members.csv`, then writes `out/sweep.json` (counts of this invocation, backend
+/// and adapter). `on_row` sees each row (progress display).
+///
+/// What survives a kill (`docs/guarantees.md`): the folder is locked exclusively while a
+/// sweep runs (a second one is refused); each row is one `write` of a whole line, synced
+/// before the next member is recorded; a member's history file (`--histories`) is
+/// complete before its row is written; `--resume` checks the folder's identity
+/// (`sweep.id`) and every recorded row's values against this sweep and cuts a torn last
+/// row, whose member then runs again.
 pub fn run_sweep(
     spec: &SweepSpec,
     exec: &Executor,
@@ -177,40 +424,98 @@ pub fn run_sweep(
         }
     };
     std::fs::create_dir_all(out).map_err(ctx(format!("cannot create {}", out.display())))?;
+    let _lock = lock(out)?;
     let csv_path = out.join("members.csv");
     let head = header(spec);
-    let done = if opts.resume && csv_path.exists() {
-        recorded(&csv_path, &head)?
+    let resuming = opts.resume && csv_path.exists();
+    let rec = if resuming {
+        check_identity(out, spec)?;
+        recorded(&csv_path, &head, spec)?
     } else {
-        HashSet::new()
+        Recorded {
+            needs_header: true,
+            ..Default::default()
+        }
     };
-    let fresh = !(opts.resume && csv_path.exists());
+    if !resuming {
+        // A fresh start: the identity first, then a members.csv holding only the header
+        // (renamed into place: a kill leaves either no file or a whole header).
+        write_atomic(&out.join(IDENTITY_FILE), &identity_text(spec)).map_err(ctx(format!(
+            "cannot write {}",
+            out.join(IDENTITY_FILE).display()
+        )))?;
+        write_atomic(&csv_path, &format!("{head}\n"))
+            .map_err(ctx(format!("cannot write {}", csv_path.display())))?;
+    }
+    let stale_histories = if resuming {
+        0
+    } else {
+        remove_stale_histories(out).map_err(ctx(format!("cannot clean {}", out.display())))?
+    };
     let mut csv = OpenOptions::new()
-        .create(true)
-        .append(!fresh)
-        .write(true)
-        .truncate(fresh)
+        .append(true)
         .open(&csv_path)
         .map_err(ctx(format!("cannot open {}", csv_path.display())))?;
+    if resuming && rec.torn_bytes > 0 {
+        let keep = csv
+            .metadata()
+            .map_err(ctx(format!("cannot read {}", csv_path.display())))?
+            .len()
+            - rec.torn_bytes as u64;
+        csv.set_len(keep)
+            .and_then(|_| csv.sync_all())
+            .map_err(ctx(format!("cannot repair {}", csv_path.display())))?;
+    }
+    // One row = one write of a whole line, synced before the next member is recorded.
     let wr = |csv: &mut std::fs::File, line: &str| {
-        writeln!(csv, "{line}")
-            .and_then(|_| csv.flush())
+        csv.write_all(format!("{line}\n").as_bytes())
+            .and_then(|_| csv.sync_data())
             .map_err(ctx(format!("cannot write {}", csv_path.display())))
     };
-    if fresh {
+    if resuming && rec.needs_header {
+        csv.set_len(0)
+            .map_err(ctx(format!("cannot repair {}", csv_path.display())))?;
         wr(&mut csv, &head)?;
     }
+    let done = rec.done;
     let mut summary = SweepSummary {
         members: spec.len(),
         skipped: done.len(),
+        repaired_bytes: rec.torn_bytes,
+        stale_histories,
         ..Default::default()
     };
+    // Memory of the members this invocation will hold at once, before building them.
+    let todo = (spec.len() - done.len()) as u64;
+    if todo > 0 {
+        let elements = spec.base_elements() as u64;
+        crate::scene::limits::check_memory("this sweep", todo, elements).map_err(|e| {
+            SweepError::Invalid {
+                file: spec.source.clone(),
+                location: None,
+                key: "(members)".into(),
+                reason: e.to_string(),
+            }
+        })?;
+    }
     // Build the members; a member whose values the scene rejects is a failed row.
     let mut members = Vec::new();
     let mut ids = Vec::new();
+    let mut elements_total = 0u64;
     for i in (0..spec.len()).filter(|i| !done.contains(i)) {
         match spec.member_scene(i) {
             Ok(scene) => {
+                // Members may differ in size (a varied element count): count what is built.
+                elements_total += scene.model.elements.len() as u64;
+                let per = elements_total / (members.len() as u64 + 1);
+                crate::scene::limits::check_memory("this sweep", todo, per).map_err(|e| {
+                    SweepError::Invalid {
+                        file: spec.source.clone(),
+                        location: None,
+                        key: "(members)".into(),
+                        reason: e.to_string(),
+                    }
+                })?;
                 members.push(Member {
                     model: scene.model,
                     params: scene.params,
@@ -247,6 +552,9 @@ pub fn run_sweep(
             ..Default::default()
         },
         |r: MemberResult| {
+            if write_err.is_some() {
+                return;
+            }
             let id = ids[r.index];
             let o = &r.outcome;
             let row = MemberRow {
@@ -261,33 +569,24 @@ pub fn run_sweep(
                 values: spec.values[id].clone(),
                 reason: o.reason.clone(),
             };
-            match o.status {
-                RunStatus::Completed => summary.completed += 1,
-                RunStatus::Failed => summary.failed += 1,
-            }
-            if write_err.is_none() {
-                if let Err(e) = wr(&mut csv, &row.csv()) {
-                    write_err = Some(e);
-                }
-            }
-            if opts.histories && write_err.is_none() {
+            // Every file of a member is complete before its row says it is done.
+            if opts.histories {
                 let dir = out.join(format!("member_{id}"));
-                let res = std::fs::create_dir_all(&dir)
-                    .map_err(|e| e.to_string())
-                    .and_then(|_| {
-                        let mut h = HistoryWriter::create(&dir.join("history.csv"))
-                            .map_err(|e| e.to_string())?;
-                        r.history
-                            .iter()
-                            .try_for_each(|rec| h.push(rec))
-                            .map_err(|e| e.to_string())
-                    });
-                if let Err(e) = res {
+                if let Err(e) = write_history(&dir, &r.history) {
                     write_err = Some(SweepError::Output {
                         context: format!("cannot write {}", dir.display()),
                         error: std::io::Error::other(e),
                     });
+                    return;
                 }
+            }
+            if let Err(e) = wr(&mut csv, &row.csv()) {
+                write_err = Some(e);
+                return;
+            }
+            match o.status {
+                RunStatus::Completed => summary.completed += 1,
+                RunStatus::Failed => summary.failed += 1,
             }
             on_row(&row);
         },
@@ -299,6 +598,7 @@ pub fn run_sweep(
     summary.wall_s = start.elapsed().as_secs_f64();
     let info = serde_json::json!({
         "sweep": spec.source,
+        "id": spec.identity(),
         "base": spec.base,
         "mode": format!("{:?}", spec.mode).to_lowercase(),
         "parameters": spec.params.iter().map(|p| p.key.clone()).collect::<Vec<_>>(),
@@ -306,11 +606,12 @@ pub fn run_sweep(
         "completed": summary.completed,
         "failed": summary.failed,
         "skipped": summary.skipped,
+        "repaired_bytes": summary.repaired_bytes,
         "backend": exec.describe(),
         "wall_s": summary.wall_s,
     });
     let path = out.join("sweep.json");
-    std::fs::write(&path, format!("{info:#}\n"))
+    write_atomic(&path, &format!("{info:#}\n"))
         .map_err(ctx(format!("cannot write {}", path.display())))?;
     Ok(summary)
 }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -102,6 +102,15 @@ pub fn attach(
     }
 }
 
+/// A count that must be ≥ 1 (`--every`, `--snapshots`, `--rods`, …).
+pub fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<i128>() {
+        Ok(n) if n >= 1 && n <= usize::MAX as i128 => Ok(n as usize),
+        Ok(n) => Err(format!("must be an integer ≥ 1 (got {n})")),
+        Err(_) => Err(format!("must be an integer ≥ 1 (got `{s}`)")),
+    }
+}
+
 /// Arguments of `cosserat sweep`.
 #[derive(clap::Args, Debug)]
 pub struct SweepArgs {
@@ -166,6 +175,20 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         bar.set_message(format!("done {done}, failed {failed}"));
     })?;
     bar.finish_and_clear();
+    if summary.repaired_bytes > 0 {
+        eprintln!(
+            "note: {}: cut a torn last row ({} bytes, a member being recorded when the sweep was stopped); that member ran again",
+            a.out.join("members.csv").display(),
+            summary.repaired_bytes
+        );
+    }
+    if summary.stale_histories > 0 {
+        eprintln!(
+            "note: {}: removed {} member history file(s) of the previous sweep in this folder",
+            a.out.display(),
+            summary.stale_histories
+        );
+    }
     println!(
         "{} members: {} completed, {} failed, {} skipped (already recorded) in {:.2} s. Results in {}",
         summary.members,
@@ -182,13 +205,13 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     /// Rods (batch members).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, value_parser = at_least_one, allow_negative_numbers = true)]
     pub rods: usize,
-    /// Elements per rod.
-    #[arg(long, default_value_t = 30)]
+    /// Elements per rod (at most 1 000 000).
+    #[arg(long, default_value_t = 30, value_parser = at_least_one, allow_negative_numbers = true)]
     pub elements: usize,
     /// Time steps.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, value_parser = at_least_one, allow_negative_numbers = true)]
     pub steps: usize,
     /// GPU adapter: first adapter whose name contains this.
     #[arg(long)]
@@ -331,7 +354,35 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
 
 /// `cosserat bench`: the same batch on the CPU path and on the GPU path.
 pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
+    use cosserat::scene::limits;
+    if a.elements > limits::MAX_SCENE_ELEMENTS {
+        bail!(
+            "--elements: {} elements per rod, above the limit of {} for one scene",
+            a.elements,
+            limits::MAX_SCENE_ELEMENTS
+        );
+    }
+    if a.rods as u64 > limits::MAX_MEMBERS {
+        bail!(
+            "--rods: {} rods, above the limit of {} members per batch",
+            a.rods,
+            limits::MAX_MEMBERS
+        );
+    }
+    limits::check_memory("bench", a.rods as u64, a.elements as u64)
+        .context("--rods × --elements")?;
     let members = bench_members(a.rods, a.elements, a.steps);
+    // Fail loudly rather than time another size than asked.
+    if let Some(m) = members
+        .iter()
+        .find(|m| m.model.elements.len() != a.elements)
+    {
+        bail!(
+            "bench: the cantilever was built with {} elements, not the {} asked for",
+            m.model.elements.len(),
+            a.elements
+        );
+    }
     let work = (a.rods * a.elements * a.steps) as f64;
     let rod_steps = (a.rods * a.steps) as f64;
     let newton = a.newton.variant();

@@ -77,6 +77,7 @@ impl Simulation {
             .map(|(r, x)| (r * x).abs())
             .sum::<f64>();
         let growth = h1 - h0 - w;
+        crate::integrator::scaling::check_resolved(residual_work, href)?;
         if self.params.scheme.controls_energy()
             && growth > self.params.energy_tol * href + residual_work
         {

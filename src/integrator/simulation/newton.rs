@@ -8,6 +8,7 @@ use std::time::Instant;
 use super::{Mode, Simulation};
 use crate::integrator::params::NewtonVariant;
 use crate::integrator::report::{StepFailure, ROUNDOFF_RESIDUAL};
+use crate::integrator::scaling;
 
 /// Modified Newton takes a fresh tangent when the last iteration reduced the residual by
 /// less than this factor.
@@ -46,7 +47,7 @@ impl Simulation {
             // (stiff members under small loads: the arch at t ≈ 0), so accept it; the energy
             // checks that follow still apply.
             let stalled = it >= 2 && res <= ROUNDOFF_RESIDUAL * tol && res >= 0.5 * history[it - 1];
-            if res <= tol || stalled {
+            if (res <= tol && scaling::may_accept(it)) || stalled {
                 self.last_residual.clone_from(&r);
                 return Ok((it, history));
             }

@@ -5,8 +5,8 @@
 
 use super::Simulation;
 use crate::integrator::evaluate::now;
-use crate::integrator::links;
 use crate::integrator::report::{StepFailure, StepReport};
+use crate::integrator::{finite, links};
 use crate::model::Vec3;
 use crate::observe::{acceleration_norms, invariants};
 
@@ -82,12 +82,7 @@ impl Simulation {
                 let max_link_g = g1.iter().fold(0.0f64, |m, g| m.max(g.abs()));
                 if multipliers.update(&self.model.links, &g1, &mut self.state.lambda) {
                     let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
-                    self.state = next;
-                    self.state_version += 1;
-                    self.inv = inv;
-                    self.prev = q;
-                    self.frozen = consistent;
-                    return Ok(StepReport {
+                    let report = StepReport {
                         newton_iters: total_iters,
                         outer_iters: outer,
                         residual: res,
@@ -97,7 +92,18 @@ impl Simulation {
                         acc_rot: ar,
                         max_link_g,
                         link_rounds: round,
-                    });
+                    };
+                    if let Err(f) = finite::check_step(&next, &inv, &report) {
+                        self.state.lambda.clone_from(&lambda0);
+                        self.inv = inv0;
+                        return Err(f);
+                    }
+                    self.state = next;
+                    self.state_version += 1;
+                    self.inv = inv;
+                    self.prev = q;
+                    self.frozen = consistent;
+                    return Ok(report);
                 }
                 // H_n with the new multipliers: the next round's energy identity is
                 // measured against it.
@@ -139,10 +145,8 @@ impl Simulation {
             (&loads[1].0, &loads[1].1),
         )?;
         let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &out.state);
-        self.inv = invariants(&self.model, &self.data, &out.state);
-        self.state = out.state;
-        self.state_version += 1;
-        Ok(StepReport {
+        let inv = invariants(&self.model, &self.data, &out.state);
+        let report = StepReport {
             newton_iters: out.newton_iters,
             outer_iters: 1,
             residual: out.residual,
@@ -152,6 +156,11 @@ impl Simulation {
             acc_rot: ar,
             max_link_g: 0.0,
             link_rounds: 1,
-        })
+        };
+        finite::check_step(&out.state, &inv, &report)?;
+        self.inv = inv;
+        self.state = out.state;
+        self.state_version += 1;
+        Ok(report)
     }
 }
