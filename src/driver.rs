@@ -11,9 +11,9 @@ use crate::integrator::{IntegratorParams, Simulation};
 use crate::observe::balance::BalanceObserver;
 use crate::observe::record::{LastAccepted, RunStatus, RunSummary, StepRecord};
 use crate::output::{
-    plot_accelerations, plot_energy, plot_momenta, plot_snapshots, write_summary,
-    CosseratBenchResult, HistoryWriter, OutputError, OutputTimes, ProbeWriter, Progress, Snapshot,
-    TrajectoryRecorder, VtkSeries,
+    animate_snapshots, plot_accelerations, plot_energy, plot_momenta, plot_snapshots,
+    write_summary, CosseratBenchResult, HistoryWriter, OutputError, OutputTimes, ProbeWriter,
+    Progress, Snapshot, TrajectoryRecorder, VtkSeries,
 };
 use crate::scene::Scene;
 
@@ -33,6 +33,8 @@ pub struct RunOptions {
     pub length_unit: String,
     /// Write `trajectory.npz` with frames at these steps (`None`: no trajectory).
     pub trajectory: Option<OutputTimes>,
+    /// Write `animation.gif` from the levels at every this many steps (`None`: none).
+    pub animate_every: Option<usize>,
     /// Also write the `cosseratbench` layout into `cosseratbench/` (needs `trajectory`),
     /// with this scenario digest in its `result.json` (`None`: `null`).
     pub cosseratbench: Option<Option<String>>,
@@ -48,6 +50,7 @@ impl Default for RunOptions {
             label: String::new(),
             length_unit: "m".into(),
             trajectory: None,
+            animate_every: None,
             cosseratbench: None,
         }
     }
@@ -141,6 +144,7 @@ pub fn run_sim_to_dir(
     let mut last_seen: Option<StepRecord> = None;
     let mut last_vtk: Option<usize> = None;
     let mut snapshots: Vec<Snapshot> = Vec::new();
+    let mut frames: Vec<Snapshot> = Vec::new();
     let progress = Progress::new(sim.params().n_steps() as u64, &opts.label);
     let every = opts.every.max(1);
     let mut balance: Option<BalanceObserver> = None;
@@ -181,6 +185,9 @@ pub fn run_sim_to_dir(
         }
         if on(opts.snapshot_every) {
             snapshots.push(Snapshot::of(s));
+        }
+        if on(opts.animate_every) {
+            frames.push(Snapshot::of(s));
         }
         if let (Some(v), true) = (vtk.as_mut(), on(opts.vtk_every) || last) {
             v.write_frame(s, rec.step, rec.t)?;
@@ -241,6 +248,19 @@ pub fn run_sim_to_dir(
             &opts.length_unit,
         )?;
         written.push("snapshots.png".into());
+    }
+    if opts.animate_every.is_some() {
+        if frames.last().map(|s| s.t) != Some(sim.state().t) {
+            frames.push(Snapshot::of(sim));
+        }
+        animate_snapshots(
+            &out.join("animation.gif"),
+            &title,
+            &frames,
+            sim.model().planar,
+            &opts.length_unit,
+        )?;
+        written.push(format!("animation.gif ({} frames)", frames.len()));
     }
     if let Some(tr) = &trajectory {
         tr.write(&out.join("trajectory.npz"))?;

@@ -539,3 +539,49 @@ fn check_reports_unknowns_frequency_and_costs() {
         assert!(text.contains(want), "missing `{want}` in\n{text}");
     }
 }
+
+#[test]
+fn animation_gif_has_one_moving_frame_per_sample() {
+    let mut scene = parse_scene(builtin("frame"), "frame.toml").unwrap();
+    scene.params.t_end = 4.0;
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        animate_every: Some(5),
+        ..RunOptions::default()
+    };
+    run(&scene, dir.path(), &opts);
+    let mut options = gif::DecodeOptions::new();
+    options.set_color_output(gif::ColorOutput::RGBA);
+    let file = std::fs::File::open(dir.path().join("animation.gif")).unwrap();
+    let mut dec = options.read_info(file).unwrap();
+    let mut frames: Vec<Vec<u8>> = Vec::new();
+    while let Some(f) = dec.read_next_frame().unwrap() {
+        frames.push(f.buffer.to_vec());
+    }
+    assert_eq!(frames.len(), 5, "steps 0, 5, 10, 15, 20");
+    // The rods are drawn in the first colour of the snapshot palette (31, 119, 180).
+    let rod_pixels = |f: &[u8]| {
+        f.chunks(4)
+            .filter(|p| {
+                (p[0] as i32 - 31).abs() < 8
+                    && (p[1] as i32 - 119).abs() < 8
+                    && (p[2] as i32 - 180).abs() < 8
+            })
+            .count()
+    };
+    for (k, f) in frames.iter().enumerate() {
+        assert!(
+            rod_pixels(f) > 200,
+            "frame {k}: {} rod pixels",
+            rod_pixels(f)
+        );
+    }
+    for k in 1..frames.len() {
+        let changed = frames[k]
+            .chunks(4)
+            .zip(frames[k - 1].chunks(4))
+            .filter(|(a, b)| a != b)
+            .count();
+        assert!(changed > 500, "frame {k} equals frame {}", k - 1);
+    }
+}

@@ -193,6 +193,13 @@ struct RunArgs {
     /// Draw `snapshots.png` with the deformed rods every N steps.
     #[arg(long, value_name = "N", value_parser = cmds::at_least_one, allow_negative_numbers = true)]
     snapshots: Option<usize>,
+    /// Write `animation.gif`: the deformed rods at ≈ 100 times over the run (or every N
+    /// steps with `--animate-every N`).
+    #[arg(long)]
+    animate: bool,
+    /// Animation frame every N steps (implies `--animate`).
+    #[arg(long, value_name = "N")]
+    animate_every: Option<usize>,
     /// Write `trajectory.npz`: node positions, directors and velocities at the output times
     /// (default: every `--every`-th step; always the last accepted step).
     #[arg(long)]
@@ -270,6 +277,8 @@ fn main() -> ExitCode {
             every: None,
             vtk: false,
             snapshots: Some(10),
+            animate: false,
+            animate_every: None,
             trajectory: false,
             output_dt: None,
             times: None,
@@ -480,6 +489,12 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         label: scene.name.clone(),
         length_unit: "m".into(),
         trajectory,
+        animate_every: match (a.animate_every, a.animate) {
+            (Some(0), _) => bail!("--animate-every: must be ≥ 1"),
+            (Some(n), _) => Some(n),
+            (None, true) => Some(params.n_steps().div_ceil(100).max(1)),
+            (None, false) => None,
+        },
         cosseratbench: a.cosseratbench.then(|| a.scenario_digest.clone()),
     };
     let mut sim =

@@ -20,7 +20,7 @@ pub(crate) use plot::{ensure_font, FONT};
 pub use plot::{plot_accelerations, plot_comparison, plot_energy, plot_momenta, LabelledHistory};
 pub use probes::ProbeWriter;
 pub use progress::Progress;
-pub use snapshot::{plot_snapshots, Snapshot};
+pub use snapshot::{animate_snapshots, plot_snapshots, Snapshot};
 pub use summary::write_summary;
 pub use trajectory::{CosseratBenchResult, OutputTimes, TrajectoryRecorder};
 pub use vtk::VtkSeries;

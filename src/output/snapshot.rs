@@ -139,26 +139,69 @@ pub fn plot_snapshots(
     };
     let r = if is_svg(path) {
         let root = SVGBackend::new(path, SIZE).into_drawing_area();
-        draw(&root, title, snapshots, proj, unit)
+        draw(&root, SIZE, title, snapshots, snapshots, proj, unit)
             .and_then(|()| root.present().map_err(|e| e.to_string()))
     } else {
         let root = BitMapBackend::new(path, SIZE).into_drawing_area();
-        draw(&root, title, snapshots, proj, unit)
+        draw(&root, SIZE, title, snapshots, snapshots, proj, unit)
             .and_then(|()| root.present().map_err(|e| e.to_string()))
     };
     r.map_err(to_err)
 }
 
+/// Frames of the animated GIF: this size, this many milliseconds each.
+const GIF_SIZE: (u32, u32) = (800, 600);
+const GIF_DELAY_MS: u32 = 60;
+
+/// Writes `frames` as an animated GIF (one frame per snapshot, fixed axes fitted to all
+/// frames, the time in each frame's caption).
+pub fn animate_snapshots(
+    path: &Path,
+    title: &str,
+    frames: &[Snapshot],
+    planar: Option<Plane>,
+    unit: &str,
+) -> Result<(), OutputError> {
+    ensure_font();
+    let proj = planar.map_or(Projection::Oblique, Projection::Planar);
+    let r = (|| -> Result<(), String> {
+        let root = BitMapBackend::gif(path, GIF_SIZE, GIF_DELAY_MS)
+            .map_err(|e| e.to_string())?
+            .into_drawing_area();
+        for f in frames {
+            draw(
+                &root,
+                GIF_SIZE,
+                title,
+                std::slice::from_ref(f),
+                frames,
+                proj,
+                unit,
+            )?;
+            root.present().map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    })();
+    r.map_err(|message| OutputError::Plot {
+        path: path.to_path_buf(),
+        message,
+    })
+}
+
+/// Draws `snapshots` on axes fitted to `fit` (the same snapshots for a still picture, all
+/// frames for an animation).
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, plotters::coord::Shift>,
+    size: (u32, u32),
     title: &str,
     snapshots: &[Snapshot],
+    fit: &[Snapshot],
     proj: Projection,
     unit: &str,
 ) -> Result<(), String> {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let pts = snapshots.iter().flat_map(|s| {
+    let pts = fit.iter().flat_map(|s| {
         s.rods
             .iter()
             .flatten()
@@ -181,7 +224,7 @@ fn draw<DB: DrawingBackend>(
     let (mut w, mut h) = ((x1 - x0).max(1e-3 * span), (y1 - y0).max(1e-3 * span));
     // Equal scales: widen the shorter side to the page's aspect, unless that would
     // flatten the picture beyond recognition.
-    let page = (SIZE.0 as f64 - 160.0) / (SIZE.1 as f64 - 200.0);
+    let page = (size.0 as f64 - 160.0) / (size.1 as f64 - 200.0);
     let mut exaggeration = 1.0;
     if w / h > MAX_ASPECT {
         exaggeration = (w / h) / page;
