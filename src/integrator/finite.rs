@@ -95,13 +95,3 @@ pub fn record_non_finite(r: &StepRecord) -> Option<&'static str> {
         .or_else(|| r.l.iter().any(|x| !x.is_finite()).then_some("L"))
         .or_else(|| r.j.iter().any(|x| !x.is_finite()).then_some("J"))
 }
-
-/// `|v|` computed as `max|vᵢ| · |v / max|vᵢ||`: finite for every finite `v` (the plain
-/// sum of squares overflows from about 1e154 on) and equal to `|v|` to round-off.
-pub fn scaled_norm(v: &nalgebra::Vector3<f64>) -> f64 {
-    let m = v.amax();
-    if m == 0.0 || !m.is_finite() {
-        return m;
-    }
-    m * (v / m).norm()
-}

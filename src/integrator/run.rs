@@ -72,7 +72,7 @@ pub fn record_of(
 
 /// Euclidean norm without overflow of the squares (finite for every finite vector).
 fn norm(v: &crate::model::Vec3) -> f64 {
-    crate::integrator::finite::scaled_norm(v)
+    crate::math::scaled_norm(v)
 }
 
 /// Scales against which momentum drifts are measured: `|L|` or, if the body is nearly

@@ -88,3 +88,13 @@ mod tests {
         }
     }
 }
+
+/// `|v|` computed as `max|vᵢ| · |v / max|vᵢ||`: finite for every finite `v` (the plain
+/// sum of squares overflows from about 1e154 on) and equal to `|v|` to round-off.
+pub fn scaled_norm(v: &Vec3) -> f64 {
+    let m = v.amax();
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    m * (v / m).norm()
+}

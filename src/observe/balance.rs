@@ -13,6 +13,7 @@
 //! drift).
 
 use crate::integrator::state::State;
+use crate::math::scaled_norm;
 use crate::model::{Model, Vec3};
 use crate::observe::record::{EnergyBalance, ImpulseBalance};
 
@@ -56,8 +57,8 @@ impl BalanceObserver {
             force: vec![Vec3::zeros(); n],
             moment: vec![Vec3::zeros(); n],
             last_step: 0,
-            scale_l: l0.norm(),
-            scale_j: j0.norm(),
+            scale_l: scaled_norm(&l0),
+            scale_j: scaled_norm(&j0),
             impulse: ImpulseBalance {
                 rule: "ΔL = Δt Σ F(t_{n+½}), ΔJ = Δt Σ (r_{n+½} × F(t_{n+½}) + M(t_{n+½}))".into(),
                 reactions,
@@ -95,8 +96,14 @@ impl BalanceObserver {
         }
         self.r_prev.copy_from_slice(&state.r);
         self.last_step = step;
-        self.scale_l = self.scale_l.max(l.norm()).max(self.impulse_l.norm());
-        self.scale_j = self.scale_j.max(j.norm()).max(self.impulse_j.norm());
+        self.scale_l = self
+            .scale_l
+            .max(scaled_norm(&l))
+            .max(scaled_norm(&self.impulse_l));
+        self.scale_j = self
+            .scale_j
+            .max(scaled_norm(&j))
+            .max(scaled_norm(&self.impulse_j));
 
         let res_l = l - self.l0 - self.impulse_l;
         let res_j = j - self.j0 - self.impulse_j;
@@ -108,12 +115,12 @@ impl BalanceObserver {
         b.applied_impulse_j = self.impulse_j.into();
         b.residual_l = res_l.into();
         b.residual_j = res_j.into();
-        if res_l.norm() > b.max_residual_l {
-            b.max_residual_l = res_l.norm();
+        if scaled_norm(&res_l) > b.max_residual_l {
+            b.max_residual_l = scaled_norm(&res_l);
             b.max_residual_l_step = step;
         }
-        if res_j.norm() > b.max_residual_j {
-            b.max_residual_j = res_j.norm();
+        if scaled_norm(&res_j) > b.max_residual_j {
+            b.max_residual_j = scaled_norm(&res_j);
             b.max_residual_j_step = step;
         }
         b.max_rel_residual_l = b.max_residual_l / self.scale_l.max(1e-300);
