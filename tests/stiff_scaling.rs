@@ -80,7 +80,12 @@ fn a_cantilever_deflects_as_timoshenko_says_from_e_1e_minus_3_to_1e20() {
         let scene = parse_scene(&text, "cantilever.toml").unwrap();
         let mut sim = Simulation::new(scene.model.clone(), scene.params).unwrap();
         let out = run(&mut sim, 1, |_, _| Ok::<(), ()>(())).unwrap();
-        assert_eq!(out.status, RunStatus::Completed, "E = {e:e}: {:?}", out.reason);
+        assert_eq!(
+            out.status,
+            RunStatus::Completed,
+            "E = {e:e}: {:?}",
+            out.reason
+        );
         let tip = scene
             .model
             .nodes
@@ -95,6 +100,9 @@ fn a_cantilever_deflects_as_timoshenko_says_from_e_1e_minus_3_to_1e20() {
     let e0 = errors[0].1;
     for (e, err) in &errors {
         assert!(err.abs() < 6e-3, "E = {e:e}: deflection off by {err:e}");
-        assert!((err - e0).abs() < 1e-12, "E = {e:e}: {err:e} vs {e0:e} at E = 1e-3");
+        assert!(
+            (err - e0).abs() < 1e-12,
+            "E = {e:e}: {err:e} vs {e0:e} at E = 1e-3"
+        );
     }
 }
