@@ -360,10 +360,10 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
 fn run_command(a: RunArgs) -> Result<ExitCode> {
     let scene = load_scene(&a.scene)?;
     let params = resolve_params(&scene, &a)?;
-    let out = a
-        .out
-        .clone()
-        .unwrap_or_else(|| Path::new("out").join(scene.file_stem()));
+    let out = match a.out.clone() {
+        Some(o) => o,
+        None => cosserat::paths::join_under(Path::new("out"), scene.file_stem())?,
+    };
     let every = a.every.unwrap_or(scene.output_every).max(1);
     let opts = RunOptions {
         every,
