@@ -65,6 +65,9 @@ pub enum DriverError {
     /// The linear solver could not be set up.
     #[error("cannot set up the linear solver: {0}")]
     Setup(#[from] crate::linsolve::LinsolveError),
+    /// An output name would leave the output folder.
+    #[error(transparent)]
+    Path(#[from] crate::paths::PathEscape),
     /// The output folder could not be created.
     #[error("cannot create output directory {}: {error}", path.display())]
     Dir {
@@ -122,7 +125,13 @@ pub fn run_sim_to_dir(
     }
     let mut history = HistoryWriter::create(&out.join("history.csv"))?;
     let mut vtk = match opts.vtk_every {
-        Some(_) => Some(VtkSeries::new(&out.join("vtk"), &scene.file_stem())?),
+        Some(_) => {
+            // The stem is sanitized; join_under proves the files stay inside `out`.
+            let stem = scene.file_stem();
+            let pvd = crate::paths::join_under(out, format!("vtk/{stem}.pvd"))?;
+            let dir = pvd.parent().unwrap_or(out);
+            Some(VtkSeries::new(dir, &stem)?)
+        }
         None => None,
     };
     let mut trajectory = opts

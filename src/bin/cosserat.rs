@@ -467,10 +467,10 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
             .map_err(|e| anyhow!("--set: {e}"))?
     };
     let params = resolve_params(&scene, &a)?;
-    let out = a
-        .out
-        .clone()
-        .unwrap_or_else(|| Path::new("out").join(scene.file_stem()));
+    let out = match a.out.clone() {
+        Some(o) => o,
+        None => cosserat::paths::join_under(Path::new("out"), scene.file_stem())?,
+    };
     let every = a.every.unwrap_or(scene.output_every).max(1);
     let trajectory = if let Some(dt) = a.output_dt {
         Some(OutputTimes::from_dt(dt, params.dt).map_err(|e| anyhow!("--output-dt: {e}"))?)

@@ -571,7 +571,16 @@ pub fn run_sweep(
             };
             // Every file of a member is complete before its row says it is done.
             if opts.histories {
-                let dir = out.join(format!("member_{id}"));
+                let dir = match crate::paths::join_under(out, format!("member_{id}")) {
+                    Ok(d) => d,
+                    Err(e) => {
+                        write_err = Some(SweepError::Output {
+                            context: e.to_string(),
+                            error: std::io::Error::other("path outside the output folder"),
+                        });
+                        return;
+                    }
+                };
                 if let Err(e) = write_history(&dir, &r.history) {
                     write_err = Some(SweepError::Output {
                         context: format!("cannot write {}", dir.display()),
