@@ -4,10 +4,18 @@
 // element residual (18), row scales (18) and tangent (18×18). Rational operations and sqrt
 // only (lavapipe's f64 transcendentals are wrong; the scheme needs none).
 //
+// Two passes, so that no invocation holds the 18×18 tangent (docs/gpu.md, "Kernels"):
+// * `residual_main`, one invocation per element slot: kinematics, (consistent) scalars,
+//   stresses, residual, row scales; when the dispatch wants a tangent, also the few values
+//   the tangent needs (new configuration, Cayley factors, stresses, director forces: NT
+//   fields) into the intermediate buffer (binding 5).
+// * `tangent_main`, four invocations per listed element slot (binding 6): one 9×9 node
+//   block each, read from the intermediate buffer and the state.
+//
 // Buffers are struct-of-arrays, field-major: field `f` of element `i` is `buf[f * n + i]`
 // (coalesced loads on a real GPU). Field offsets are the constants below; their Rust twin is
-// `src/gpu/layout.rs`. `Real` is rewritten to `f32` by `src/gpu/pipeline.rs` on adapters
-// without SHADER_F64 (measured error: README, "GPU precision").
+// `src/gpu/layout.rs`. `Real` is rewritten to `f32` by `src/gpu/kernel.rs` on adapters
+// without SHADER_F64 (measured error: docs/gpu.md).
 
 alias Real = f64;
 alias V3 = vec3<Real>;
@@ -45,13 +53,20 @@ const O_R: u32 = 0u;      // 18
 const O_SC: u32 = 18u;    // 18
 const O_K: u32 = 36u;     // 324 row-major
 const O_S: u32 = 360u;    // 4: the scalars used (frozen or consistent)
+// ---- residual pass → tangent pass (binding 5), NT fields ----
+const T_C1: u32 = 0u;     // 24: new configuration r0 r1, d0 columns, d1 columns
+const T_A: u32 = 24u;     // 18: (I − ½ hat θ_l)⁻¹ columns, l = 0, 1
+const T_SS: u32 = 42u;    // 6: stresses S*
+const T_F: u32 = 48u;     // 18: director forces f[2..8] (stress + inertia)
 
 struct Params {
     n: u32,
+    // 1: the residual pass also writes the intermediate buffer (a tangent pass follows).
     want_tangent: u32,
     // 0: frozen scalars from binding 2; 1: consistent scalars (DESIGN §4 local law).
     mode: u32,
-    pad: u32,
+    // Element slots listed for the tangent pass (binding 6).
+    n_tan: u32,
 }
 
 @group(0) @binding(0) var<storage, read> elem: array<Real>;
@@ -59,6 +74,8 @@ struct Params {
 @group(0) @binding(2) var<storage, read> iter: array<Real>;
 @group(0) @binding(3) var<storage, read_write> outp: array<Real>;
 @group(0) @binding(4) var<uniform> prm: Params;
+@group(0) @binding(5) var<storage, read_write> tmid: array<Real>;
+@group(0) @binding(6) var<storage, read> tan_list: array<u32>;
 
 var<private> gi: u32;
 
@@ -66,6 +83,9 @@ fn ld_e(f: u32) -> Real { return elem[f * prm.n + gi]; }
 fn ld_s(f: u32) -> Real { return state[f * prm.n + gi]; }
 fn ld_i(f: u32) -> Real { return iter[f * prm.n + gi]; }
 fn st_o(f: u32, x: Real) { outp[f * prm.n + gi] = x; }
+fn ld_t(f: u32) -> Real { return tmid[f * prm.n + gi]; }
+fn st_t(f: u32, x: Real) { tmid[f * prm.n + gi] = x; }
+fn st_t3(f: u32, v: V3) { st_t(f, v.x); st_t(f + 1u, v.y); st_t(f + 2u, v.z); }
 fn ld_s3(f: u32) -> V3 { return V3(ld_s(f), ld_s(f + 1u), ld_s(f + 2u)); }
 fn ld_i3(f: u32) -> V3 { return V3(ld_i(f), ld_i(f + 1u), ld_i(f + 2u)); }
 
@@ -133,30 +153,27 @@ fn raw_strains(c: Cfg, h: Real) -> Eps6 {
     return Eps6(gamma, omega);
 }
 
-// B[k][p] at index 8k + p.
-fn strain_gradient(c: Cfg, h: Real) -> array<V3, 48> {
-    var bm: array<V3, 48>;
-    let dr = (c.r1 - c.r0) / h;
-    let a = c.d0;
-    let b = c.d1;
-    for (var i = 0u; i < 3u; i++) {
-        let di = 0.5 * (a[i] + b[i]);
-        bm[8u * i + 0u] = -di / h;
-        bm[8u * i + 1u] = di / h;
-        bm[8u * i + 2u + i] = 0.5 * dr;
-        bm[8u * i + 5u + i] = 0.5 * dr;
+// Entry B[k][q] of the strain gradient (twin of strain_gradient), computed on demand so
+// that no invocation holds the 6×8 (144-value) matrix: rows 0..2 (Γ) have R0, R1, A_k,
+// B_k; row 3 + k (Ω) has A_j, B_i, A_i, B_j with (k, i, j) cyclic; every other entry is 0.
+// Each nonzero entry is a single term, so the values are those of the accumulated matrix.
+fn b_entry(c: Cfg, h: Real, k: u32, q: u32) -> V3 {
+    if k < 3u {
+        let di = 0.5 * (c.d0[k] + c.d1[k]);
+        if q == 0u { return -di / h; }
+        if q == 1u { return di / h; }
+        if q == 2u + k || q == 5u + k { return 0.5 * ((c.r1 - c.r0) / h); }
+        return V3(0.0, 0.0, 0.0);
     }
+    let kk = k - 3u;
+    let i = (kk + 1u) % 3u;
+    let j = (kk + 2u) % 3u;
     let s = 0.5 / h;
-    for (var k = 0u; k < 3u; k++) {
-        let i = (k + 1u) % 3u;
-        let j = (k + 2u) % 3u;
-        let row = 8u * (3u + k);
-        bm[row + 2u + j] += s * b[i];
-        bm[row + 5u + i] += s * a[j];
-        bm[row + 2u + i] -= s * b[j];
-        bm[row + 5u + j] -= s * a[i];
-    }
-    return bm;
+    if q == 2u + j { return s * c.d1[i]; }
+    if q == 5u + i { return s * c.d0[j]; }
+    if q == 2u + i { return -(s * c.d1[j]); }
+    if q == 5u + j { return -(s * c.d0[i]); }
+    return V3(0.0, 0.0, 0.0);
 }
 
 // ---- dissipation (twin of src/element/dissipation.rs) ----
@@ -350,7 +367,7 @@ fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real) -> Consistent {
     return Consistent(array<Real, 4>(loc.beta_g, loc.beta_o, c_v, c_nu), kin);
 }
 
-// ---- residual and tangent (twin of element::residual_tangent / tangent) ----
+// ---- residual (twin of element::residual_tangent without the tangent) ----
 fn u_idx(l: u32) -> u32 { return 6u * l; }
 fn th_idx(l: u32) -> u32 { return 6u * l + 3u; }
 fn g_idx(l: u32) -> u32 { return 12u + 3u * l; }
@@ -363,50 +380,45 @@ fn field_start(p: u32) -> u32 {
 fn field_of(l: u32, a: u32) -> u32 { return 2u + 3u * l + a; }
 fn kin_v1(k: Kin, l: u32) -> V3 { if l == 0u { return k.v10; } return k.v11; }
 fn st_v(s: St, l: u32) -> V3 { if l == 0u { return s.v0; } return s.v1; }
-fn amat(k: Kin, l: u32) -> Tri { if l == 0u { return k.amat0; } return k.amat1; }
 fn kin_g(st: St, k: Kin, m: u32, dt: Real) -> V3 {
     return (cfg_r(k.cfg1, m) - cfg_r(st.cfg, m)) / dt - 0.5 * (st_v(st, m) + kin_v1(k, m));
-}
-
-var<private> kt: array<Real, 324>;
-
-fn kadd(i: u32, j: u32, x: Real) { kt[18u * i + j] += x; }
-fn kadd_blk(r0: u32, c0: u32, b: Tri) {
-    for (var c = 0u; c < 3u; c++) {
-        kadd(r0, c0 + c, b[c].x);
-        kadd(r0 + 1u, c0 + c, b[c].y);
-        kadd(r0 + 2u, c0 + c, b[c].z);
-    }
 }
 
 // Weight of the gross stress forces in the row scales (GROSS_WEIGHT in src/element/mod.rs).
 const GROSS_WEIGHT = 1e-4;
 
-fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
+// Stresses S* = C (ε̄ − ε0 + ½ β Δε) (6).
+fn stresses(st: St, eps1: Eps6, beta_g: Real, beta_o: Real) -> array<Real, 6> {
+    let eps0g = V3(ld_e(E_EPS0), ld_e(E_EPS0 + 1u), ld_e(E_EPS0 + 2u));
+    let eps0o = V3(ld_e(E_EPS0 + 3u), ld_e(E_EPS0 + 4u), ld_e(E_EPS0 + 5u));
+    let mean_g = 0.5 * (st.eps.g + eps1.g) - eps0g;
+    let mean_o = 0.5 * (st.eps.o + eps1.o) - eps0o;
+    let gg = mean_g + 0.5 * beta_g * (eps1.g - st.eps.g);
+    let oo = mean_o + 0.5 * beta_o * (eps1.o - st.eps.o);
+    let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
+    let nn = cg * gg;
+    let mmm = c_omega_mv(oo);
+    return array<Real, 6>(nn.x, nn.y, nn.z, mmm.x, mmm.y, mmm.z);
+}
+
+// Residual pass body: residual, row scales and scalars into the output buffer; with
+// `keep` also what the tangent pass needs into the intermediate buffer (T_* fields).
+fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
     let h = ld_e(E_H);
     let a_rho = ld_e(E_ARHO);
     let trans = ld_e(E_TRANS) != 0.0;
     let beta_g = s[0];
     let beta_o = s[1];
     let c_v = s[2];
-    let c_nu = s[3];
-    // stresses
     let eps0g = V3(ld_e(E_EPS0), ld_e(E_EPS0 + 1u), ld_e(E_EPS0 + 2u));
     let eps0o = V3(ld_e(E_EPS0 + 3u), ld_e(E_EPS0 + 4u), ld_e(E_EPS0 + 5u));
-    let mean_g = 0.5 * (st.eps.g + kin.eps1.g) - eps0g;
-    let mean_o = 0.5 * (st.eps.o + kin.eps1.o) - eps0o;
-    let gg = mean_g + 0.5 * beta_g * (kin.eps1.g - st.eps.g);
-    let oo = mean_o + 0.5 * beta_o * (kin.eps1.o - st.eps.o);
     let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
-    let nn = cg * gg;
-    let mmm = c_omega_mv(oo);
-    let sstar = array<Real, 6>(nn.x, nn.y, nn.z, mmm.x, mmm.y, mmm.z);
-    let b_mid = strain_gradient(kin.mid, h);
+    let sstar = stresses(st, kin.eps1, beta_g, beta_o);
 
     var f: array<V3, 8>;
     for (var k = 0u; k < 6u; k++) {
         let hs = h * sstar[k];
-        for (var q = 0u; q < 8u; q++) { f[q] += b_mid[8u * k + q] * hs; }
+        for (var q = 0u; q < 8u; q++) { f[q] += b_entry(kin.mid, h, k, q) * hs; }
     }
     // Round-off floor of the stress forces: GROSS_WEIGHT × h |B|ᵀ |C| (|ε̄| + |ε0|), the
     // twin of `gross_stress` in src/element/mod.rs.
@@ -423,10 +435,8 @@ fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
     );
     var f_gross: array<Real, 8>;
     for (var k = 0u; k < 6u; k++) {
-        for (var q = 0u; q < 8u; q++) { f_gross[q] += amax(b_mid[8u * k + q]) * h * gross[k]; }
+        for (var q = 0u; q < 8u; q++) { f_gross[q] += amax(b_entry(kin.mid, h, k, q)) * h * gross[k]; }
     }
-    var scale: array<Real, 18>;
-    var r: array<Real, 18>;
     let stress_scale = array<Real, 2>(
         max(amax(f[0]), GROSS_WEIGHT * f_gross[0]),
         max(amax(f[1]), GROSS_WEIGHT * f_gross[1]),
@@ -465,19 +475,21 @@ fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
         let su = max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate);
         let dnorm = max(max(norm(dm[0]), norm(dm[1])), norm(dm[2]));
         for (var c = 0u; c < 3u; c++) {
-            r[u_idx(l) + c] = fr[c];
-            r[th_idx(l) + c] = rt[c];
-            scale[u_idx(l) + c] = su;
-            scale[th_idx(l) + c] = fd_scale[l] * dnorm;
+            st_o(O_R + u_idx(l) + c, fr[c]);
+            st_o(O_R + th_idx(l) + c, rt[c]);
+            st_o(O_SC + u_idx(l) + c, su);
+            st_o(O_SC + th_idx(l) + c, fd_scale[l] * dnorm);
         }
     }
     let vsum = 0.5 * (st.v0 + st.v1) + 0.5 * (kin.v10 + kin.v11);
-    if trans {
-        let bb = 0.5 * h * a_rho * c_v * vsum;
-        for (var l = 0u; l < 2u; l++) {
+    for (var l = 0u; l < 2u; l++) {
+        var rg = V3(0.0, 0.0, 0.0);
+        var sg: Real = 0.0;
+        if trans {
+            let bb = 0.5 * h * a_rho * c_v * vsum;
             var mg = V3(0.0, 0.0, 0.0);
             for (var m = 0u; m < 2u; m++) { mg += a_rho * h * m2(l, m) * kin_g(st, kin, m, dt); }
-            let rg = mg - bb;
+            rg = mg - bb;
             var momentum = 0.5 * a_rho * h * max(amax(st_v(st, l)), amax(kin_v1(kin, l)));
             var psum: Real = 0.0;
             for (var m = 0u; m < 2u; m++) {
@@ -485,153 +497,30 @@ fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
             }
             let pieces = 0.5 * h * a_rho * abs(c_v) * psum;
             momentum = max(momentum, pieces);
-            let sg = max(max(amax(mg), amax(bb)), momentum);
-            for (var c = 0u; c < 3u; c++) {
-                r[g_idx(l) + c] = rg[c];
-                scale[g_idx(l) + c] = sg;
-            }
+            sg = max(max(amax(mg), amax(bb)), momentum);
         }
-    }
-    for (var i = 0u; i < 18u; i++) {
-        st_o(O_R + i, r[i]);
-        st_o(O_SC + i, scale[i]);
+        for (var c = 0u; c < 3u; c++) {
+            st_o(O_R + g_idx(l) + c, rg[c]);
+            st_o(O_SC + g_idx(l) + c, sg);
+        }
     }
     for (var i = 0u; i < 4u; i++) { st_o(O_S + i, s[i]); }
-    if !want_tangent { return; }
-
-    // ---- tangent ----
-    for (var i = 0u; i < 324u; i++) { kt[i] = 0.0; }
-    let b1 = strain_gradient(kin.cfg1, h);
-    var tmat: array<Tri, 8>;
-    var jmat: array<Tri, 8>;
-    tmat[0] = eye(); tmat[1] = eye(); jmat[0] = eye(); jmat[1] = eye();
-    for (var l = 0u; l < 2u; l++) {
-        let dm = cfg_d(kin.mid, l);
+    if keep {
+        st_t3(T_C1, kin.cfg1.r0);
+        st_t3(T_C1 + 3u, kin.cfg1.r1);
         for (var i = 0u; i < 3u; i++) {
-            let q = 2u + 3u * l + i;
-            tmat[q] = mscale(hat(dm[i]), -1.0);
-            jmat[q] = mm(amat(kin, l), tmat[q]);
+            st_t3(T_C1 + 6u + 3u * i, kin.cfg1.d0[i]);
+            st_t3(T_C1 + 15u + 3u * i, kin.cfg1.d1[i]);
+            st_t3(T_A + 3u * i, kin.amat0[i]);
+            st_t3(T_A + 9u + 3u * i, kin.amat1[i]);
         }
+        for (var k = 0u; k < 6u; k++) { st_t(T_SS + k, sstar[k]); }
+        for (var q = 0u; q < 6u; q++) { st_t3(T_F + 3u * q, f[2u + q]); }
     }
-    var bt_mid: array<Real, 72>; // 6 × 12 row-major
-    var bt_1: array<Real, 72>;
-    for (var kk = 0u; kk < 6u; kk++) {
-        for (var q = 0u; q < 8u; q++) {
-            let c0 = field_start(q);
-            let a = mtv(tmat[q], b_mid[8u * kk + q]);
-            let b = mtv(jmat[q], b1[8u * kk + q]);
-            for (var c = 0u; c < 3u; c++) {
-                bt_mid[12u * kk + c0 + c] += a[c];
-                bt_1[12u * kk + c0 + c] += b[c];
-            }
-        }
-    }
-    // D B̃_{n+1}, D = ½(1+β) C.
-    var db: array<Real, 72>;
-    let sg = 0.5 * (1.0 + beta_g);
-    let so = 0.5 * (1.0 + beta_o);
-    for (var j = 0u; j < 12u; j++) {
-        for (var i = 0u; i < 3u; i++) {
-            db[12u * i + j] = sg * ld_e(E_CG + i) * bt_1[12u * i + j];
-            var acc: Real = 0.0;
-            for (var k = 0u; k < 3u; k++) {
-                acc += so * ld_e(E_CO + 3u * i + k) * bt_1[12u * (3u + k) + j];
-            }
-            db[12u * (3u + i) + j] = acc;
-        }
-    }
-    for (var i = 0u; i < 12u; i++) {
-        for (var j = 0u; j < 12u; j++) {
-            var acc: Real = 0.0;
-            for (var k = 0u; k < 6u; k++) { acc += (h * bt_mid[12u * k + i]) * db[12u * k + j]; }
-            kt[18u * i + j] = acc;
-        }
-    }
-    // G_s: ½ h H(S*) + inertia.
-    var gs: array<Real, 64>;
-    let ch = 0.5 / h;
-    let half_h = 0.5 * h;
-    for (var i = 0u; i < 3u; i++) {
-        let n = sstar[i] * ch;
-        for (var e = 0u; e < 2u; e++) {
-            let p = 2u + 3u * e + i;
-            gs[8u * 1u + p] += n;
-            gs[8u * p + 1u] += n;
-            gs[8u * 0u + p] -= n;
-            gs[8u * p + 0u] -= n;
-        }
-    }
-    for (var k = 0u; k < 3u; k++) {
-        let i = (k + 1u) % 3u;
-        let j = (k + 2u) % 3u;
-        let m = sstar[3u + k] * ch;
-        gs[8u * (2u + j) + 5u + i] += m;
-        gs[8u * (5u + i) + 2u + j] += m;
-        gs[8u * (2u + i) + 5u + j] -= m;
-        gs[8u * (5u + j) + 2u + i] -= m;
-    }
-    for (var i = 0u; i < 64u; i++) { gs[i] *= half_h; }
-    let two_dt2 = 2.0 / (dt * dt);
-    for (var l = 0u; l < 2u; l++) {
-        for (var m = 0u; m < 2u; m++) { gs[8u * l + m] += two_dt2 * a_rho * h * m2(l, m); }
-    }
-    let kap = array<Real, 2>(kappa(0u), kappa(1u));
-    let ksum = kap[0] + kap[1];
-    let rot_free = array<bool, 2>(ld_e(E_ROTFREE) != 0.0, ld_e(E_ROTFREE + 1u) != 0.0);
-    let dw = c_nu / (dt * (1.0 + ksum * c_nu));
-    for (var l = 0u; l < 2u; l++) {
-        for (var m = 0u; m < 2u; m++) {
-            for (var a = 0u; a < 2u; a++) {
-                for (var b = 0u; b < 2u; b++) {
-                    let mass = h * m2(l, m) * irho(a, b) / dt;
-                    let pl = field_of(l, a);
-                    let qm = field_of(m, b);
-                    gs[8u * pl + qm] += mass * 2.0 / dt;
-                    for (var qq = 0u; qq < 2u; qq++) {
-                        if rot_free[qq] {
-                            gs[8u * pl + field_of(qq, b)] -= mass * 2.0 * kap[m] * dw;
-                        }
-                    }
-                }
-            }
-        }
-    }
-    for (var pf = 0u; pf < 8u; pf++) {
-        let r0 = field_start(pf);
-        let tt = mt(tmat[pf]);
-        for (var qf = 0u; qf < 8u; qf++) {
-            let gpq = gs[8u * pf + qf];
-            if gpq == 0.0 { continue; }
-            kadd_blk(r0, field_start(qf), mscale(mm(tt, jmat[qf]), gpq));
-        }
-    }
-    for (var l = 0u; l < 2u; l++) {
-        let base = 2u + 3u * l;
-        let dm = cfg_d(kin.mid, l);
-        var blk = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
-        for (var i = 0u; i < 3u; i++) {
-            blk = madd(blk, mm(mm(hat(f[base + i]), amat(kin, l)), hat(dm[i])));
-        }
-        kadd_blk(th_idx(l), th_idx(l), mscale(blk, 0.5));
-    }
-    if trans {
-        let cv = 0.5 * h * a_rho * c_v;
-        for (var l = 0u; l < 2u; l++) {
-            for (var m = 0u; m < 2u; m++) {
-                let mmass = a_rho * h * m2(l, m);
-                for (var c = 0u; c < 3u; c++) {
-                    kadd(u_idx(l) + c, g_idx(m) + c, -2.0 * mmass / dt);
-                    kadd(g_idx(l) + c, u_idx(m) + c, -cv / dt);
-                    kadd(g_idx(l) + c, g_idx(m) + c, mmass + cv);
-                }
-            }
-        }
-    }
-    for (var i = 0u; i < 324u; i++) { st_o(O_K + i, kt[i]); }
 }
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= prm.n { return; }
     gi = gid.x;
     if ld_i(I_ACTIVE) == 0.0 { return; }
@@ -639,12 +528,205 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let st = load_state();
     var x: array<Real, 18>;
     for (var i = 0u; i < 18u; i++) { x[i] = ld_i(I_X + i); }
+    let keep = prm.want_tangent != 0u;
     if prm.mode == 1u {
         let c = consistent_scalars(st, x, dt);
-        evaluate(st, c.kin, c.s, dt, prm.want_tangent != 0u);
+        residual(st, c.kin, c.s, dt, keep);
     } else {
         let s = array<Real, 4>(ld_i(I_S), ld_i(I_S + 1u), ld_i(I_S + 2u), ld_i(I_S + 3u));
         let kin = kinematics(st, x, s[3], dt);
-        evaluate(st, kin, s, dt, prm.want_tangent != 0u);
+        residual(st, kin, s, dt, keep);
     }
+}
+
+// ---- tangent (twin of element::tangent), one 9×9 node block per invocation ----
+//
+// Invocation t handles block (l, m) = ((t % 4) / 2, t % 4 % 2) of element slot
+// tan_list[t / 4]: rows of node l (u_l θ_l g_l), columns of node m. It writes the block's
+// 81 entries of the row-major 18×18 output (element-local order u0 θ0 u1 θ1 g0 g1) and
+// then adds the geometric terms in place, in the order of the CPU kernel (material
+// h B̃ᵀ D B̃, then Tᵀ G J over field pairs, then the θθ stress block, then the g rows), so
+// each entry is the same sum as in src/element/mod.rs. Live values: B̃ of node l and
+// D B̃ of node m (6×6 each) and a few 3×3 blocks.
+
+fn ld_o(f: u32) -> Real { return outp[f * prm.n + gi]; }
+fn kset(i: u32, j: u32, x: Real) { st_o(O_K + 18u * i + j, x); }
+fn kadd(i: u32, j: u32, x: Real) { st_o(O_K + 18u * i + j, ld_o(O_K + 18u * i + j) + x); }
+fn kadd_blk(r0: u32, c0: u32, b: Tri) {
+    for (var c = 0u; c < 3u; c++) {
+        kadd(r0, c0 + c, b[c].x);
+        kadd(r0 + 1u, c0 + c, b[c].y);
+        kadd(r0 + 2u, c0 + c, b[c].z);
+    }
+}
+fn ld_t3(f: u32) -> V3 { return V3(ld_t(f), ld_t(f + 1u), ld_t(f + 2u)); }
+fn ld_tri(f: u32) -> Tri { return Tri(ld_t3(f), ld_t3(f + 3u), ld_t3(f + 6u)); }
+
+// The 8 fields of node l: R_l, then A_l0..2 (l = 0) or B_l0..2 (l = 1).
+fn node_field(l: u32, i: u32) -> u32 {
+    if i == 0u { return l; }
+    return 2u + 3u * l + i - 1u;
+}
+
+// T_q (−hat of the mid-point director of field q; identity for R0, R1).
+fn tmat_of(mid: Cfg, q: u32) -> Tri {
+    if q < 2u { return eye(); }
+    let l = (q - 2u) / 3u;
+    let i = (q - 2u) % 3u;
+    return mscale(hat(cfg_d(mid, l)[i]), -1.0);
+}
+
+// Entry (p, q) of G_s = ½ h H(S*) + inertia, summed in the CPU kernel's order.
+fn gs_at(p: u32, q: u32, ss: array<Real, 6>, h: Real, dt: Real, dw: Real, kap: array<Real, 2>, rot_free: array<bool, 2>) -> Real {
+    let ch = 0.5 / h;
+    var v: Real = 0.0;
+    for (var i = 0u; i < 3u; i++) {
+        let n = ss[i] * ch;
+        for (var e = 0u; e < 2u; e++) {
+            let pp = 2u + 3u * e + i;
+            if p == 1u && q == pp { v += n; }
+            if p == pp && q == 1u { v += n; }
+            if p == 0u && q == pp { v -= n; }
+            if p == pp && q == 0u { v -= n; }
+        }
+    }
+    for (var k = 0u; k < 3u; k++) {
+        let i = (k + 1u) % 3u;
+        let j = (k + 2u) % 3u;
+        let mk = ss[3u + k] * ch;
+        if p == 2u + j && q == 5u + i { v += mk; }
+        if p == 5u + i && q == 2u + j { v += mk; }
+        if p == 2u + i && q == 5u + j { v -= mk; }
+        if p == 5u + j && q == 2u + i { v -= mk; }
+    }
+    v *= 0.5 * h;
+    if p < 2u && q < 2u { v += 2.0 / (dt * dt) * ld_e(E_ARHO) * h * m2(p, q); }
+    for (var l = 0u; l < 2u; l++) {
+        for (var m = 0u; m < 2u; m++) {
+            for (var a = 0u; a < 2u; a++) {
+                if field_of(l, a) != p { continue; }
+                for (var b = 0u; b < 2u; b++) {
+                    let mass = h * m2(l, m) * irho(a, b) / dt;
+                    if field_of(m, b) == q { v += mass * 2.0 / dt; }
+                    for (var qq = 0u; qq < 2u; qq++) {
+                        if rot_free[qq] && field_of(qq, b) == q {
+                            v -= mass * 2.0 * kap[m] * dw;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    return v;
+}
+
+fn tangent_block(l: u32, m: u32) {
+    let h = ld_e(E_H);
+    let a_rho = ld_e(E_ARHO);
+    let dt = ld_e(E_DT);
+    let beta_g = ld_o(O_S);
+    let beta_o = ld_o(O_S + 1u);
+    let c_v = ld_o(O_S + 2u);
+    let c_nu = ld_o(O_S + 3u);
+    let st = load_state();
+    let cfg1 = Cfg(ld_t3(T_C1), ld_t3(T_C1 + 3u), ld_tri(T_C1 + 6u), ld_tri(T_C1 + 15u));
+    let mid = cfg_mean(st.cfg, cfg1);
+    let amat_l = ld_tri(T_A + 9u * l);
+    let amat_m = ld_tri(T_A + 9u * m);
+    // B̃_{n+1} columns of node m (J_q B_q), index 2k + (0: u_m, 1: θ_m), then D B̃.
+    var bm: array<V3, 12>;
+    for (var k = 0u; k < 6u; k++) { bm[2u * k] = mtv(eye(), b_entry(cfg1, h, k, m)); }
+    for (var i = 0u; i < 3u; i++) {
+        let jq = mm(amat_m, tmat_of(mid, 2u + 3u * m + i));
+        for (var k = 0u; k < 6u; k++) { bm[2u * k + 1u] += mtv(jq, b_entry(cfg1, h, k, 2u + 3u * m + i)); }
+    }
+    let sg = 0.5 * (1.0 + beta_g);
+    let so = 0.5 * (1.0 + beta_o);
+    var db: array<V3, 12>;
+    for (var g = 0u; g < 2u; g++) {
+        for (var i = 0u; i < 3u; i++) {
+            db[2u * i + g] = sg * ld_e(E_CG + i) * bm[2u * i + g];
+            var acc = V3(0.0, 0.0, 0.0);
+            for (var k = 0u; k < 3u; k++) {
+                acc += so * ld_e(E_CO + 3u * i + k) * bm[2u * (3u + k) + g];
+            }
+            db[2u * (3u + i) + g] = acc;
+        }
+    }
+    // B̃_mid columns of node l (T_q B_q).
+    var bl: array<V3, 12>;
+    for (var k = 0u; k < 6u; k++) { bl[2u * k] = mtv(eye(), b_entry(mid, h, k, l)); }
+    for (var i = 0u; i < 3u; i++) {
+        let tq = tmat_of(mid, 2u + 3u * l + i);
+        for (var k = 0u; k < 6u; k++) { bl[2u * k + 1u] += mtv(tq, b_entry(mid, h, k, 2u + 3u * l + i)); }
+    }
+    // Material part of the u/θ rows and columns; g rows and columns: translational terms.
+    for (var gr = 0u; gr < 2u; gr++) {
+        for (var cr = 0u; cr < 3u; cr++) {
+            let row = 6u * l + 3u * gr + cr;
+            for (var gc = 0u; gc < 2u; gc++) {
+                for (var cc = 0u; cc < 3u; cc++) {
+                    var acc: Real = 0.0;
+                    for (var k = 0u; k < 6u; k++) { acc += (h * bl[2u * k + gr][cr]) * db[2u * k + gc][cc]; }
+                    kset(row, 6u * m + 3u * gc + cc, acc);
+                }
+            }
+        }
+    }
+    let trans = ld_e(E_TRANS) != 0.0;
+    let mmass = a_rho * h * m2(l, m);
+    let cv = 0.5 * h * a_rho * c_v;
+    for (var r = 0u; r < 3u; r++) {
+        for (var c = 0u; c < 3u; c++) {
+            var ug: Real = 0.0;
+            var gu: Real = 0.0;
+            var gg: Real = 0.0;
+            if trans && r == c {
+                ug = -2.0 * mmass / dt;
+                gu = -cv / dt;
+                gg = mmass + cv;
+            }
+            kset(u_idx(l) + r, g_idx(m) + c, ug);
+            kset(th_idx(l) + r, g_idx(m) + c, 0.0);
+            kset(g_idx(l) + r, u_idx(m) + c, gu);
+            kset(g_idx(l) + r, th_idx(m) + c, 0.0);
+            kset(g_idx(l) + r, g_idx(m) + c, gg);
+        }
+    }
+    // Tᵀ G_s J over the field pairs of the block.
+    let ss = array<Real, 6>(ld_t(T_SS), ld_t(T_SS + 1u), ld_t(T_SS + 2u), ld_t(T_SS + 3u), ld_t(T_SS + 4u), ld_t(T_SS + 5u));
+    let kap = array<Real, 2>(kappa(0u), kappa(1u));
+    let ksum = kap[0] + kap[1];
+    let rot_free = array<bool, 2>(ld_e(E_ROTFREE) != 0.0, ld_e(E_ROTFREE + 1u) != 0.0);
+    let dw = c_nu / (dt * (1.0 + ksum * c_nu));
+    for (var ip = 0u; ip < 4u; ip++) {
+        let pf = node_field(l, ip);
+        let tt = mt(tmat_of(mid, pf));
+        for (var iq = 0u; iq < 4u; iq++) {
+            let qf = node_field(m, iq);
+            let gpq = gs_at(pf, qf, ss, h, dt, dw, kap, rot_free);
+            if gpq == 0.0 { continue; }
+            var jq = eye();
+            if qf >= 2u { jq = mm(amat_m, tmat_of(mid, qf)); }
+            kadd_blk(field_start(pf), field_start(qf), mscale(mm(tt, jq), gpq));
+        }
+    }
+    if l == m {
+        let dm = cfg_d(mid, l);
+        var blk = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
+        for (var i = 0u; i < 3u; i++) {
+            blk = madd(blk, mm(mm(hat(ld_t3(T_F + 9u * l + 3u * i)), amat_l), hat(dm[i])));
+        }
+        kadd_blk(th_idx(l), th_idx(l), mscale(blk, 0.5));
+    }
+}
+
+@compute @workgroup_size(64)
+fn tangent_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nw: vec3<u32>) {
+    let t = gid.x + gid.y * nw.x * 64u;
+    if t >= 4u * prm.n_tan { return; }
+    gi = tan_list[t / 4u];
+    if ld_i(I_ACTIVE) == 0.0 { return; }
+    let b = t % 4u;
+    tangent_block(b / 2u, b % 2u);
 }
