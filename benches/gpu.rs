@@ -9,7 +9,10 @@
 //!   of the batch path does it (frozen scalars and node increments uploaded, the assembled
 //!   systems read back): every member residual-only (modified Newton) or every member with
 //!   the tangent. The tangent passes cost the difference. Bytes read back per element are
-//!   printed once per variant. Skipped without an adapter.
+//!   printed once per variant, and so is the process CPU time per element and dispatch
+//!   (user + system, all threads: on a software adapter the kernels run on the host's
+//!   threads, and CPU time is far less disturbed than wall time when other processes
+//!   share the cores). Skipped without an adapter.
 //! * `rod_solve/30`: one sparse LU refactorization + solve of a 30-element rod's Newton
 //!   system (symbolic analysis reused), what each member does per Newton iteration.
 //!
@@ -245,11 +248,35 @@ fn dispatches(c: &mut Criterion) {
             rods * ne,
             ctx.describe()
         );
+        if let Some(c0) = cpu_seconds() {
+            let (mut n, t0) = (0usize, std::time::Instant::now());
+            while n < 20 || (t0.elapsed().as_secs_f64() < 3.0 && n < 2000) {
+                iterate(&mut kern, &mut asm);
+                n += 1;
+            }
+            if let Some(c1) = cpu_seconds() {
+                println!(
+                    "dispatch/{name}: {:.2} µs CPU time per element and dispatch ({n} dispatches)",
+                    1e6 * (c1 - c0) / (n * rods * ne) as f64
+                );
+            }
+        }
         g.bench_function(format!("{name}/{rods}x{ne}"), |b| {
             b.iter(|| iterate(&mut kern, &mut asm))
         });
     }
     g.finish();
+}
+
+/// User + system CPU time of this process so far (all threads), from `/proc/self/stat`
+/// (clock ticks of 10 ms); `None` where that file does not exist.
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may contain spaces) start at field 3.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 criterion_group!(benches, pipelines, kernels, dispatches, solves);

@@ -9,8 +9,8 @@
 //   stresses, residual, row scales; when the dispatch wants a tangent, also the few values
 //   the tangent needs (new configuration, Cayley factors, stresses, director forces: NT
 //   fields) into the intermediate buffer (binding 5).
-// * `tangent_main`, four invocations per listed element slot (binding 6): one 9×9 node
-//   block each, read from the intermediate buffer and the state.
+// * `tangent_main`, four invocations per listed element slot (binding 6; dispatch y = the
+//   block): one 9×9 node block each, read from the intermediate buffer and the state.
 //
 // Buffers are struct-of-arrays, field-major: field `f` of element `i` is `buf[f * n + i]`
 // (coalesced loads on a real GPU). Field offsets are the constants below; their Rust twin is
@@ -541,8 +541,9 @@ fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // ---- tangent (twin of element::tangent), one 9×9 node block per invocation ----
 //
-// Invocation t handles block (l, m) = ((t % 4) / 2, t % 4 % 2) of element slot
-// tan_list[t / 4]: rows of node l (u_l θ_l g_l), columns of node m. It writes the block's
+// Invocation (x, y) handles block (l, m) = (y / 2, y % 2) of element slot tan_list[x]:
+// rows of node l (u_l θ_l g_l), columns of node m. Neighbouring invocations share the
+// block (no divergence within a SIMD group or warp) and read neighbouring slots. It writes the block's
 // 81 entries of the row-major 18×18 output (element-local order u0 θ0 u1 θ1 g0 g1) and
 // then adds the geometric terms in place, in the order of the CPU kernel (material
 // h B̃ᵀ D B̃, then Tᵀ G J over field pairs, then the θθ stress block, then the g rows), so
@@ -722,11 +723,9 @@ fn tangent_block(l: u32, m: u32) {
 }
 
 @compute @workgroup_size(64)
-fn tangent_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nw: vec3<u32>) {
-    let t = gid.x + gid.y * nw.x * 64u;
-    if t >= 4u * prm.n_tan { return; }
-    gi = tan_list[t / 4u];
+fn tangent_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n_tan { return; }
+    gi = tan_list[gid.x];
     if ld_i(I_ACTIVE) == 0.0 { return; }
-    let b = t % 4u;
-    tangent_block(b / 2u, b % 2u);
+    tangent_block(gid.y / 2u, gid.y % 2u);
 }

@@ -108,8 +108,6 @@ pub struct ElementKernel {
     /// Element slots of the tangent pass (u32 each) and the list last uploaded.
     tan_list: wgpu::Buffer,
     tan_uploaded: Vec<u32>,
-    /// Workgroups per dispatch dimension.
-    max_groups: u32,
     /// Mappable twin of the output buffer and host copy of the output, created by the
     /// first [`Self::run`] (the batch path reads assembled systems instead and never
     /// allocates them).
@@ -139,8 +137,7 @@ impl ElementKernel {
 
     /// The largest number of element slots one kernel may hold on this device: the
     /// output buffer (`NO` scalars per slot) must fit one storage binding, and the passes'
-    /// one row of workgroups of the residual pass (64 invocations each; the tangent pass,
-    /// four invocations per slot, spreads over a few rows).
+    /// one row of workgroups (64 invocations each; the tangent pass runs four such rows).
     pub fn max_capacity(ctx: &GpuContext) -> usize {
         let per = (NO * Self::width(ctx.precision)) as u64;
         let lim = ctx
@@ -274,7 +271,6 @@ impl ElementKernel {
             params,
             tan_list,
             tan_uploaded: Vec::new(),
-            max_groups: ctx.limits.max_compute_workgroups_per_dimension.max(1),
             staging: None,
             host: [
                 vec![0.0; NE * cap],
@@ -515,11 +511,9 @@ impl ElementKernel {
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.dispatch_workgroups(self.cap.div_ceil(64) as u32, 1, 1);
         if n_tan > 0 {
-            // Four invocations per slot, 64 per workgroup, rows of at most `max_groups`.
-            let groups = (4 * n_tan).div_ceil(64) as u32;
-            let x = groups.min(self.max_groups);
+            // One row of workgroups per 9×9 node block (y), 64 listed slots per group (x).
             pass.set_pipeline(&self.tangent_pipeline);
-            pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
+            pass.dispatch_workgroups(n_tan.div_ceil(64) as u32, 4, 1);
         }
         drop(pass);
         self.timers.upload_s += t0.elapsed().as_secs_f64();
