@@ -9,8 +9,10 @@
 //   stresses, residual, row scales; when the dispatch wants a tangent, also the few values
 //   the tangent needs (new configuration, Cayley factors, stresses, director forces: NT
 //   fields) into the intermediate buffer (binding 5).
-// * `tangent_main`, four invocations per listed element slot (binding 6; dispatch y = the
-//   block): one 9×9 node block each, read from the intermediate buffer and the state.
+// * `tangent_prep_main`, two invocations per listed element slot (binding 6; dispatch
+//   y = the node): the reduced strain gradients of the node into the intermediate buffer.
+// * `tangent_main`, four invocations per listed element slot (dispatch y = the block):
+//   one 9×9 node block each, read from the intermediate buffer and the state.
 //
 // Buffers are struct-of-arrays, field-major: field `f` of element `i` is `buf[f * n + i]`
 // (coalesced loads on a real GPU). Field offsets are the constants below; their Rust twin is
@@ -58,6 +60,9 @@ const T_C1: u32 = 0u;     // 24: new configuration r0 r1, d0 columns, d1 columns
 const T_A: u32 = 24u;     // 18: (I − ½ hat θ_l)⁻¹ columns, l = 0, 1
 const T_SS: u32 = 42u;    // 6: stresses S*
 const T_F: u32 = 48u;     // 18: director forces f[2..8] (stress + inertia)
+// ---- tangent prep → tangent blocks (binding 5) ----
+const T_BT: u32 = 66u;    // 72: B̃_½ columns of nodes 0, 1 (36 n + 6 k + 3 g + c)
+const T_DB: u32 = 138u;   // 72: D B̃_{n+1} columns of nodes 0, 1 (same order)
 
 struct Params {
     n: u32,
@@ -542,24 +547,15 @@ fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 // ---- tangent (twin of element::tangent), one 9×9 node block per invocation ----
 //
 // Invocation (x, y) handles block (l, m) = (y / 2, y % 2) of element slot tan_list[x]:
-// rows of node l (u_l θ_l g_l), columns of node m. Neighbouring invocations share the
-// block (no divergence within a SIMD group or warp) and read neighbouring slots. It writes the block's
-// 81 entries of the row-major 18×18 output (element-local order u0 θ0 u1 θ1 g0 g1) and
-// then adds the geometric terms in place, in the order of the CPU kernel (material
-// h B̃ᵀ D B̃, then Tᵀ G J over field pairs, then the θθ stress block, then the g rows), so
-// each entry is the same sum as in src/element/mod.rs. Live values: B̃ of node l and
-// D B̃ of node m (6×6 each) and a few 3×3 blocks.
+// rows of node l (u_l θ_l g_l), columns of node m, of the row-major 18×18 output
+// (element-local order u0 θ0 u1 θ1 g0 g1). Neighbouring invocations share the block (no
+// divergence within a SIMD group or warp) and read neighbouring slots. Each entry is the
+// sum of the CPU kernel (src/element/mod.rs) in its order: material h B̃ᵀ D B̃, then
+// Tᵀ G_s J over the field pairs, then the θθ stress block, then the g rows. Live values:
+// B̃ of node l and D B̃ of node m (6×6 each), one 3×3 block and a few 3×3 factors.
 
 fn ld_o(f: u32) -> Real { return outp[f * prm.n + gi]; }
 fn kset(i: u32, j: u32, x: Real) { st_o(O_K + 18u * i + j, x); }
-fn kadd(i: u32, j: u32, x: Real) { st_o(O_K + 18u * i + j, ld_o(O_K + 18u * i + j) + x); }
-fn kadd_blk(r0: u32, c0: u32, b: Tri) {
-    for (var c = 0u; c < 3u; c++) {
-        kadd(r0, c0 + c, b[c].x);
-        kadd(r0 + 1u, c0 + c, b[c].y);
-        kadd(r0 + 2u, c0 + c, b[c].z);
-    }
-}
 fn ld_t3(f: u32) -> V3 { return V3(ld_t(f), ld_t(f + 1u), ld_t(f + 2u)); }
 fn ld_tri(f: u32) -> Tri { return Tri(ld_t3(f), ld_t3(f + 3u), ld_t3(f + 6u)); }
 
@@ -577,56 +573,99 @@ fn tmat_of(mid: Cfg, q: u32) -> Tri {
     return mscale(hat(cfg_d(mid, l)[i]), -1.0);
 }
 
-// Entry (p, q) of G_s = ½ h H(S*) + inertia, summed in the CPU kernel's order.
+// Entry (p, q) of G_s = ½ h H(S*) + inertia, in closed form: the stress Hessian H(S*)
+// has one term per entry (stress forces couple R0/R1 with the directors, moments couple
+// A_a with B_b, a ≠ b), scaled by ½ h, then the translational mass (R0, R1) and the
+// director mass with its rotation-free correction, summed in the CPU kernel's order.
 fn gs_at(p: u32, q: u32, ss: array<Real, 6>, h: Real, dt: Real, dw: Real, kap: array<Real, 2>, rot_free: array<bool, 2>) -> Real {
     let ch = 0.5 / h;
     var v: Real = 0.0;
-    for (var i = 0u; i < 3u; i++) {
-        let n = ss[i] * ch;
-        for (var e = 0u; e < 2u; e++) {
-            let pp = 2u + 3u * e + i;
-            if p == 1u && q == pp { v += n; }
-            if p == pp && q == 1u { v += n; }
-            if p == 0u && q == pp { v -= n; }
-            if p == pp && q == 0u { v -= n; }
-        }
-    }
-    for (var k = 0u; k < 3u; k++) {
-        let i = (k + 1u) % 3u;
-        let j = (k + 2u) % 3u;
-        let mk = ss[3u + k] * ch;
-        if p == 2u + j && q == 5u + i { v += mk; }
-        if p == 5u + i && q == 2u + j { v += mk; }
-        if p == 2u + i && q == 5u + j { v -= mk; }
-        if p == 5u + j && q == 2u + i { v -= mk; }
+    if p < 2u && q >= 2u {
+        let n = ss[(q - 2u) % 3u] * ch;
+        if p == 1u { v = n; } else { v = -n; }
+    } else if q < 2u && p >= 2u {
+        let n = ss[(p - 2u) % 3u] * ch;
+        if q == 1u { v = n; } else { v = -n; }
+    } else if p >= 2u && q >= 2u && (p < 5u) != (q < 5u) {
+        // a: director of end 0 (A_a), b: director of end 1 (B_b).
+        var a = p - 2u;
+        var b = q - 5u;
+        if p >= 5u { a = q - 2u; b = p - 5u; }
+        if a == (b + 1u) % 3u { v = ss[3u + (b + 2u) % 3u] * ch; }
+        if b == (a + 1u) % 3u { v = -(ss[3u + (a + 2u) % 3u] * ch); }
     }
     v *= 0.5 * h;
     if p < 2u && q < 2u { v += 2.0 / (dt * dt) * ld_e(E_ARHO) * h * m2(p, q); }
-    for (var l = 0u; l < 2u; l++) {
-        for (var m = 0u; m < 2u; m++) {
-            for (var a = 0u; a < 2u; a++) {
-                if field_of(l, a) != p { continue; }
-                for (var b = 0u; b < 2u; b++) {
-                    let mass = h * m2(l, m) * irho(a, b) / dt;
-                    if field_of(m, b) == q { v += mass * 2.0 / dt; }
-                    for (var qq = 0u; qq < 2u; qq++) {
-                        if rot_free[qq] && field_of(qq, b) == q {
-                            v -= mass * 2.0 * kap[m] * dw;
-                        }
-                    }
-                }
+    if p >= 2u && q >= 2u {
+        let lp = (p - 2u) / 3u;
+        let ap = (p - 2u) % 3u;
+        let mq = (q - 2u) / 3u;
+        let bq = (q - 2u) % 3u;
+        if ap < 2u && bq < 2u {
+            for (var m = 0u; m < 2u; m++) {
+                let mass = h * m2(lp, m) * irho(ap, bq) / dt;
+                if m == mq { v += mass * 2.0 / dt; }
+                if rot_free[mq] { v -= mass * 2.0 * kap[m] * dw; }
             }
         }
     }
     return v;
 }
 
+// Tangent prep, one invocation per (listed element, node n): the reduced strain-gradient
+// columns of node n, B̃_½ = B(Φ_½) T (T_BT) and D B̃_{n+1} = ½(1+β) C B(Φ_{n+1}) J (T_DB),
+// 6 rows × (3 u_n + 3 θ_n) each, computed once per element and node instead of once per
+// block. Index of row k, column group g (0: u_n, 1: θ_n), component c: 36 n + 6 k + 3 g + c.
+fn tangent_prep(n: u32) {
+    let h = ld_e(E_H);
+    let beta_g = ld_o(O_S);
+    let beta_o = ld_o(O_S + 1u);
+    let st = load_state();
+    let cfg1 = Cfg(ld_t3(T_C1), ld_t3(T_C1 + 3u), ld_tri(T_C1 + 6u), ld_tri(T_C1 + 15u));
+    let mid = cfg_mean(st.cfg, cfg1);
+    let amat_n = ld_tri(T_A + 9u * n);
+    // B̃_{n+1} columns of node n (J_q B_q), index 2k + g.
+    var bm: array<V3, 12>;
+    for (var k = 0u; k < 6u; k++) { bm[2u * k] = mtv(eye(), b_entry(cfg1, h, k, n)); }
+    for (var i = 0u; i < 3u; i++) {
+        let jq = mm(amat_n, tmat_of(mid, 2u + 3u * n + i));
+        for (var k = 0u; k < 6u; k++) { bm[2u * k + 1u] += mtv(jq, b_entry(cfg1, h, k, 2u + 3u * n + i)); }
+    }
+    let sg = 0.5 * (1.0 + beta_g);
+    let so = 0.5 * (1.0 + beta_o);
+    for (var g = 0u; g < 2u; g++) {
+        for (var i = 0u; i < 3u; i++) {
+            st_t3(T_DB + 36u * n + 6u * i + 3u * g, sg * ld_e(E_CG + i) * bm[2u * i + g]);
+            var acc = V3(0.0, 0.0, 0.0);
+            for (var k = 0u; k < 3u; k++) {
+                acc += so * ld_e(E_CO + 3u * i + k) * bm[2u * (3u + k) + g];
+            }
+            st_t3(T_DB + 36u * n + 6u * (3u + i) + 3u * g, acc);
+        }
+    }
+    // B̃_½ columns of node n (T_q B_q).
+    for (var k = 0u; k < 6u; k++) {
+        st_t3(T_BT + 36u * n + 6u * k, mtv(eye(), b_entry(mid, h, k, n)));
+        var acc = V3(0.0, 0.0, 0.0);
+        for (var i = 0u; i < 3u; i++) {
+            acc += mtv(tmat_of(mid, 2u + 3u * n + i), b_entry(mid, h, k, 2u + 3u * n + i));
+        }
+        st_t3(T_BT + 36u * n + 6u * k + 3u, acc);
+    }
+}
+
+@compute @workgroup_size(64)
+fn tangent_prep_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n_tan { return; }
+    gi = tan_list[gid.x];
+    if ld_i(I_ACTIVE) == 0.0 { return; }
+    tangent_prep(gid.y);
+}
+
 fn tangent_block(l: u32, m: u32) {
     let h = ld_e(E_H);
     let a_rho = ld_e(E_ARHO);
     let dt = ld_e(E_DT);
-    let beta_g = ld_o(O_S);
-    let beta_o = ld_o(O_S + 1u);
     let c_v = ld_o(O_S + 2u);
     let c_nu = ld_o(O_S + 3u);
     let st = load_state();
@@ -634,91 +673,84 @@ fn tangent_block(l: u32, m: u32) {
     let mid = cfg_mean(st.cfg, cfg1);
     let amat_l = ld_tri(T_A + 9u * l);
     let amat_m = ld_tri(T_A + 9u * m);
-    // B̃_{n+1} columns of node m (J_q B_q), index 2k + (0: u_m, 1: θ_m), then D B̃.
-    var bm: array<V3, 12>;
-    for (var k = 0u; k < 6u; k++) { bm[2u * k] = mtv(eye(), b_entry(cfg1, h, k, m)); }
-    for (var i = 0u; i < 3u; i++) {
-        let jq = mm(amat_m, tmat_of(mid, 2u + 3u * m + i));
-        for (var k = 0u; k < 6u; k++) { bm[2u * k + 1u] += mtv(jq, b_entry(cfg1, h, k, 2u + 3u * m + i)); }
-    }
-    let sg = 0.5 * (1.0 + beta_g);
-    let so = 0.5 * (1.0 + beta_o);
-    var db: array<V3, 12>;
-    for (var g = 0u; g < 2u; g++) {
-        for (var i = 0u; i < 3u; i++) {
-            db[2u * i + g] = sg * ld_e(E_CG + i) * bm[2u * i + g];
-            var acc = V3(0.0, 0.0, 0.0);
-            for (var k = 0u; k < 3u; k++) {
-                acc += so * ld_e(E_CO + 3u * i + k) * bm[2u * (3u + k) + g];
-            }
-            db[2u * (3u + i) + g] = acc;
-        }
-    }
-    // B̃_mid columns of node l (T_q B_q).
-    var bl: array<V3, 12>;
-    for (var k = 0u; k < 6u; k++) { bl[2u * k] = mtv(eye(), b_entry(mid, h, k, l)); }
-    for (var i = 0u; i < 3u; i++) {
-        let tq = tmat_of(mid, 2u + 3u * l + i);
-        for (var k = 0u; k < 6u; k++) { bl[2u * k + 1u] += mtv(tq, b_entry(mid, h, k, 2u + 3u * l + i)); }
-    }
-    // Material part of the u/θ rows and columns; g rows and columns: translational terms.
-    for (var gr = 0u; gr < 2u; gr++) {
-        for (var cr = 0u; cr < 3u; cr++) {
-            let row = 6u * l + 3u * gr + cr;
-            for (var gc = 0u; gc < 2u; gc++) {
-                for (var cc = 0u; cc < 3u; cc++) {
-                    var acc: Real = 0.0;
-                    for (var k = 0u; k < 6u; k++) { acc += (h * bl[2u * k + gr][cr]) * db[2u * k + gc][cc]; }
-                    kset(row, 6u * m + 3u * gc + cc, acc);
-                }
-            }
-        }
-    }
-    let trans = ld_e(E_TRANS) != 0.0;
-    let mmass = a_rho * h * m2(l, m);
-    let cv = 0.5 * h * a_rho * c_v;
-    for (var r = 0u; r < 3u; r++) {
-        for (var c = 0u; c < 3u; c++) {
-            var ug: Real = 0.0;
-            var gu: Real = 0.0;
-            var gg: Real = 0.0;
-            if trans && r == c {
-                ug = -2.0 * mmass / dt;
-                gu = -cv / dt;
-                gg = mmass + cv;
-            }
-            kset(u_idx(l) + r, g_idx(m) + c, ug);
-            kset(th_idx(l) + r, g_idx(m) + c, 0.0);
-            kset(g_idx(l) + r, u_idx(m) + c, gu);
-            kset(g_idx(l) + r, th_idx(m) + c, 0.0);
-            kset(g_idx(l) + r, g_idx(m) + c, gg);
-        }
-    }
-    // Tᵀ G_s J over the field pairs of the block.
     let ss = array<Real, 6>(ld_t(T_SS), ld_t(T_SS + 1u), ld_t(T_SS + 2u), ld_t(T_SS + 3u), ld_t(T_SS + 4u), ld_t(T_SS + 5u));
     let kap = array<Real, 2>(kappa(0u), kappa(1u));
     let ksum = kap[0] + kap[1];
     let rot_free = array<bool, 2>(ld_e(E_ROTFREE) != 0.0, ld_e(E_ROTFREE + 1u) != 0.0);
     let dw = c_nu / (dt * (1.0 + ksum * c_nu));
-    for (var ip = 0u; ip < 4u; ip++) {
-        let pf = node_field(l, ip);
-        let tt = mt(tmat_of(mid, pf));
-        for (var iq = 0u; iq < 4u; iq++) {
-            let qf = node_field(m, iq);
-            let gpq = gs_at(pf, qf, ss, h, dt, dw, kap, rot_free);
-            if gpq == 0.0 { continue; }
-            var jq = eye();
-            if qf >= 2u { jq = mm(amat_m, tmat_of(mid, qf)); }
-            kadd_blk(field_start(pf), field_start(qf), mscale(mm(tt, jq), gpq));
+    // J_q of the director fields of node m (A_m T_q).
+    var jm = array<Tri, 3>(
+        mm(amat_m, tmat_of(mid, 2u + 3u * m)),
+        mm(amat_m, tmat_of(mid, 3u + 3u * m)),
+        mm(amat_m, tmat_of(mid, 4u + 3u * m)),
+    );
+    // Per 3×3 field block (rows u_l or θ_l, columns u_m or θ_m), accumulated in
+    // registers and written once: material h B̃_½ᵀ D B̃_{n+1}, then Tᵀ G_s J over the field
+    // pairs that meet in the block (in the CPU kernel's order; products with an identity
+    // T or J are skipped, they are exact), then the θθ stress block.
+    for (var gr = 0u; gr < 2u; gr++) {
+        for (var gc = 0u; gc < 2u; gc++) {
+            var blk: Tri; // column cc, row cr
+            for (var cc = 0u; cc < 3u; cc++) {
+                var col = V3(0.0, 0.0, 0.0);
+                for (var k = 0u; k < 6u; k++) {
+                    let d = ld_t(T_DB + 36u * m + 6u * k + 3u * gc + cc);
+                    col += (h * ld_t3(T_BT + 36u * l + 6u * k + 3u * gr)) * d;
+                }
+                blk[cc] = col;
+            }
+            let np = 1u + 2u * gr;
+            let nq = 1u + 2u * gc;
+            for (var ip = 0u; ip < np; ip++) {
+                let pf = node_field(l, gr * (1u + ip));
+                let tt = mt(tmat_of(mid, pf));
+                for (var iq = 0u; iq < nq; iq++) {
+                    let qf = node_field(m, gc * (1u + iq));
+                    let gpq = gs_at(pf, qf, ss, h, dt, dw, kap, rot_free);
+                    if gpq == 0.0 { continue; }
+                    var tj: Tri;
+                    if gr == 0u && gc == 0u { tj = eye(); }
+                    else if gr == 0u { tj = jm[iq]; }
+                    else if gc == 0u { tj = tt; }
+                    else { tj = mm(tt, jm[iq]); }
+                    blk = madd(blk, mscale(tj, gpq));
+                }
+            }
+            if gr == 1u && gc == 1u && l == m {
+                let dm = cfg_d(mid, l);
+                var th = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
+                for (var i = 0u; i < 3u; i++) {
+                    th = madd(th, mm(mm(hat(ld_t3(T_F + 9u * l + 3u * i)), amat_l), hat(dm[i])));
+                }
+                blk = madd(blk, mscale(th, 0.5));
+            }
+            let r0 = 6u * l + 3u * gr;
+            let c0 = 6u * m + 3u * gc;
+            for (var cc = 0u; cc < 3u; cc++) {
+                kset(r0, c0 + cc, blk[cc].x);
+                kset(r0 + 1u, c0 + cc, blk[cc].y);
+                kset(r0 + 2u, c0 + cc, blk[cc].z);
+            }
         }
     }
-    if l == m {
-        let dm = cfg_d(mid, l);
-        var blk = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
-        for (var i = 0u; i < 3u; i++) {
-            blk = madd(blk, mm(mm(hat(ld_t3(T_F + 9u * l + 3u * i)), amat_l), hat(dm[i])));
+    // g rows and columns: translational dissipation terms on the diagonals (the other
+    // entries of these rows and columns, and θ_l × g_m, g_l × θ_m, are structurally zero:
+    // the tangent pass never writes them, and the output buffer starts zeroed).
+    let trans = ld_e(E_TRANS) != 0.0;
+    let mmass = a_rho * h * m2(l, m);
+    let cv = 0.5 * h * a_rho * c_v;
+    for (var c = 0u; c < 3u; c++) {
+        var ug: Real = 0.0;
+        var gu: Real = 0.0;
+        var gg: Real = 0.0;
+        if trans {
+            ug = -2.0 * mmass / dt;
+            gu = -cv / dt;
+            gg = mmass + cv;
         }
-        kadd_blk(th_idx(l), th_idx(l), mscale(blk, 0.5));
+        kset(u_idx(l) + c, g_idx(m) + c, ug);
+        kset(g_idx(l) + c, u_idx(m) + c, gu);
+        kset(g_idx(l) + c, g_idx(m) + c, gg);
     }
 }
 

@@ -339,6 +339,8 @@ fn shader_layout_matches_rust_layout() {
         ("T_A", layout::T_A),
         ("T_SS", layout::T_SS),
         ("T_F", layout::T_F),
+        ("T_BT", layout::T_BT),
+        ("T_DB", layout::T_DB),
     ];
     for (name, val) in consts {
         let needle = format!("const {name}: u32 = {val}u;");

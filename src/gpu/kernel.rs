@@ -1,6 +1,6 @@
-//! The element kernel on the GPU: two pipelines built once (the residual pass, one
-//! invocation per element, and the tangent pass, four invocations per element that wants
-//! a tangent: `shaders/element.wgsl`), host mirrors of the struct-of-arrays buffers,
+//! The element kernel on the GPU: three pipelines built once from `shaders/element.wgsl`
+//! (the residual pass, one invocation per element; for the elements that want a tangent,
+//! the tangent prep pass, two invocations per element, and the tangent block pass, four), host mirrors of the struct-of-arrays buffers,
 //! upload of what changed, one dispatch, readback of what is needed (residual and scales
 //! only, or everything with the tangent). The model behind the split is in docs/gpu.md,
 //! "Kernels".
@@ -101,6 +101,7 @@ pub struct ElementKernel {
     device: wgpu::Device,
     queue: wgpu::Queue,
     residual_pipeline: wgpu::ComputePipeline,
+    prep_pipeline: wgpu::ComputePipeline,
     tangent_pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     bufs: [wgpu::Buffer; 4],
@@ -211,6 +212,7 @@ impl ElementKernel {
             })
         };
         let residual_pipeline = pipe("residual_main");
+        let prep_pipeline = pipe("tangent_prep_main");
         let tangent_pipeline = pipe("tangent_main");
         ctx.save_pipeline_cache();
         let mk = |label: &str, fields: usize, usage: wgpu::BufferUsages| {
@@ -265,6 +267,7 @@ impl ElementKernel {
             device,
             queue: ctx.queue.clone(),
             residual_pipeline,
+            prep_pipeline,
             tangent_pipeline,
             bind_group,
             bufs,
@@ -511,9 +514,13 @@ impl ElementKernel {
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.dispatch_workgroups(self.cap.div_ceil(64) as u32, 1, 1);
         if n_tan > 0 {
-            // One row of workgroups per 9×9 node block (y), 64 listed slots per group (x).
+            // 64 listed slots per workgroup (x); one row of workgroups per node (y) in the
+            // prep pass, per 9×9 node block in the block pass.
+            let x = n_tan.div_ceil(64) as u32;
+            pass.set_pipeline(&self.prep_pipeline);
+            pass.dispatch_workgroups(x, 2, 1);
             pass.set_pipeline(&self.tangent_pipeline);
-            pass.dispatch_workgroups(n_tan.div_ceil(64) as u32, 4, 1);
+            pass.dispatch_workgroups(x, 4, 1);
         }
         drop(pass);
         self.timers.upload_s += t0.elapsed().as_secs_f64();

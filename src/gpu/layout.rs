@@ -72,8 +72,13 @@ pub const T_A: usize = 24;
 pub const T_SS: usize = 42;
 /// Director forces `f[2..8]` (stress and inertia, 18).
 pub const T_F: usize = 48;
+/// Tangent prep → tangent blocks: `B̃_½` columns of nodes 0 and 1 (72, at
+/// `36 n + 6 k + 3 g + c` for row `k`, group `g` (u, θ), component `c`).
+pub const T_BT: usize = 66;
+/// `D B̃_{n+1}` columns of nodes 0 and 1 (72, same order).
+pub const T_DB: usize = 138;
 /// Number of intermediate fields.
-pub const NT: usize = 66;
+pub const NT: usize = 210;
 
 /// Node-local unknowns (`u0..2 θ0..2 g0..2`) of the assembled system.
 pub const A_NODE: usize = 9;
