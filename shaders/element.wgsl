@@ -616,6 +616,33 @@ fn gs_at(p: u32, q: u32, ss: array<Real, 6>, h: Real, dt: Real, dw: Real, kap: a
 // columns of node n, B̃_½ = B(Φ_½) T (T_BT) and D B̃_{n+1} = ½(1+β) C B(Φ_{n+1}) J (T_DB),
 // 6 rows × (3 u_n + 3 θ_n) each, computed once per element and node instead of once per
 // block. Index of row k, column group g (0: u_n, 1: θ_n), component c: 36 n + 6 k + 3 g + c.
+// Reduced strain-gradient columns of node n at configuration c: row k of u_n (B[k][R_n])
+// and of θ_n (Σ_a X_aᵀ B[k][director a of node n], X_a = T_a or J_a), written out from
+// the sparsity of B (b_entry) so that no row or field index is dynamic; the θ sums run
+// over the nonzero terms in the order of the full sum (the others add exact zeros).
+struct Bt { u: array<V3, 6>, t: array<V3, 6>, }
+
+fn btilde(c: Cfg, h: Real, n: u32, x0: Tri, x1: Tri, x2: Tri) -> Bt {
+    var bt: Bt;
+    let half_dr = 0.5 * ((c.r1 - c.r0) / h);
+    let s = 0.5 / h;
+    var o = c.d1; // directors of the other end
+    var sg: Real = -1.0;
+    if n == 1u { o = c.d0; sg = 1.0; }
+    bt.u[0] = sg * (0.5 * (c.d0[0] + c.d1[0])) / h;
+    bt.u[1] = sg * (0.5 * (c.d0[1] + c.d1[1])) / h;
+    bt.u[2] = sg * (0.5 * (c.d0[2] + c.d1[2])) / h;
+    bt.t[0] = mtv(x0, half_dr);
+    bt.t[1] = mtv(x1, half_dr);
+    bt.t[2] = mtv(x2, half_dr);
+    // Ω rows (k, i, j) cyclic: end 0 has +s o_i at a = j and −s o_j at a = i; end 1 the
+    // opposite signs at b = j and b = i.
+    bt.t[3] = mtv(x1, sg * (s * o[2])) + mtv(x2, -sg * (s * o[1]));
+    bt.t[4] = mtv(x0, -sg * (s * o[2])) + mtv(x2, sg * (s * o[0]));
+    bt.t[5] = mtv(x0, sg * (s * o[1])) + mtv(x1, -sg * (s * o[0]));
+    return bt;
+}
+
 fn tangent_prep(n: u32) {
     let h = ld_e(E_H);
     let beta_g = ld_o(O_S);
@@ -624,33 +651,30 @@ fn tangent_prep(n: u32) {
     let cfg1 = Cfg(ld_t3(T_C1), ld_t3(T_C1 + 3u), ld_tri(T_C1 + 6u), ld_tri(T_C1 + 15u));
     let mid = cfg_mean(st.cfg, cfg1);
     let amat_n = ld_tri(T_A + 9u * n);
-    // B̃_{n+1} columns of node n (J_q B_q), index 2k + g.
-    var bm: array<V3, 12>;
-    for (var k = 0u; k < 6u; k++) { bm[2u * k] = mtv(eye(), b_entry(cfg1, h, k, n)); }
-    for (var i = 0u; i < 3u; i++) {
-        let jq = mm(amat_n, tmat_of(mid, 2u + 3u * n + i));
-        for (var k = 0u; k < 6u; k++) { bm[2u * k + 1u] += mtv(jq, b_entry(cfg1, h, k, 2u + 3u * n + i)); }
-    }
+    let t0 = tmat_of(mid, 2u + 3u * n);
+    let t1 = tmat_of(mid, 3u + 3u * n);
+    let t2 = tmat_of(mid, 4u + 3u * n);
+    // D B̃_{n+1}: B at Φ_{n+1} with J_a = A_n T_a, then ½(1+β) C.
+    let b1 = btilde(cfg1, h, n, mm(amat_n, t0), mm(amat_n, t1), mm(amat_n, t2));
     let sg = 0.5 * (1.0 + beta_g);
     let so = 0.5 * (1.0 + beta_o);
-    for (var g = 0u; g < 2u; g++) {
-        for (var i = 0u; i < 3u; i++) {
-            st_t3(T_DB + 36u * n + 6u * i + 3u * g, sg * ld_e(E_CG + i) * bm[2u * i + g]);
-            var acc = V3(0.0, 0.0, 0.0);
-            for (var k = 0u; k < 3u; k++) {
-                acc += so * ld_e(E_CO + 3u * i + k) * bm[2u * (3u + k) + g];
-            }
-            st_t3(T_DB + 36u * n + 6u * (3u + i) + 3u * g, acc);
-        }
+    let base = T_DB + 36u * n;
+    for (var i = 0u; i < 3u; i++) {
+        let cgi = sg * ld_e(E_CG + i);
+        st_t3(base + 6u * i, cgi * b1.u[i]);
+        st_t3(base + 6u * i + 3u, cgi * b1.t[i]);
+        let c0 = so * ld_e(E_CO + 3u * i);
+        let c1 = so * ld_e(E_CO + 3u * i + 1u);
+        let c2 = so * ld_e(E_CO + 3u * i + 2u);
+        st_t3(base + 6u * (3u + i), V3(0.0, 0.0, 0.0) + c0 * b1.u[3] + c1 * b1.u[4] + c2 * b1.u[5]);
+        st_t3(base + 6u * (3u + i) + 3u, V3(0.0, 0.0, 0.0) + c0 * b1.t[3] + c1 * b1.t[4] + c2 * b1.t[5]);
     }
-    // B̃_½ columns of node n (T_q B_q).
+    // B̃_½: B at Φ_½ with T_a.
+    let bm = btilde(mid, h, n, t0, t1, t2);
+    let bb = T_BT + 36u * n;
     for (var k = 0u; k < 6u; k++) {
-        st_t3(T_BT + 36u * n + 6u * k, mtv(eye(), b_entry(mid, h, k, n)));
-        var acc = V3(0.0, 0.0, 0.0);
-        for (var i = 0u; i < 3u; i++) {
-            acc += mtv(tmat_of(mid, 2u + 3u * n + i), b_entry(mid, h, k, 2u + 3u * n + i));
-        }
-        st_t3(T_BT + 36u * n + 6u * k + 3u, acc);
+        st_t3(bb + 6u * k, bm.u[k]);
+        st_t3(bb + 6u * k + 3u, bm.t[k]);
     }
 }
 
