@@ -376,13 +376,6 @@ fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real) -> Consistent {
 fn u_idx(l: u32) -> u32 { return 6u * l; }
 fn th_idx(l: u32) -> u32 { return 6u * l + 3u; }
 fn g_idx(l: u32) -> u32 { return 12u + 3u * l; }
-fn field_start(p: u32) -> u32 {
-    if p == 0u { return 0u; }
-    if p == 1u { return 6u; }
-    if p <= 4u { return 3u; }
-    return 9u;
-}
-fn field_of(l: u32, a: u32) -> u32 { return 2u + 3u * l + a; }
 fn kin_v1(k: Kin, l: u32) -> V3 { if l == 0u { return k.v10; } return k.v11; }
 fn st_v(s: St, l: u32) -> V3 { if l == 0u { return s.v0; } return s.v1; }
 fn kin_g(st: St, k: Kin, m: u32, dt: Real) -> V3 {
@@ -559,57 +552,12 @@ fn kset(i: u32, j: u32, x: Real) { st_o(O_K + 18u * i + j, x); }
 fn ld_t3(f: u32) -> V3 { return V3(ld_t(f), ld_t(f + 1u), ld_t(f + 2u)); }
 fn ld_tri(f: u32) -> Tri { return Tri(ld_t3(f), ld_t3(f + 3u), ld_t3(f + 6u)); }
 
-// The 8 fields of node l: R_l, then A_l0..2 (l = 0) or B_l0..2 (l = 1).
-fn node_field(l: u32, i: u32) -> u32 {
-    if i == 0u { return l; }
-    return 2u + 3u * l + i - 1u;
-}
-
 // T_q (−hat of the mid-point director of field q; identity for R0, R1).
 fn tmat_of(mid: Cfg, q: u32) -> Tri {
     if q < 2u { return eye(); }
     let l = (q - 2u) / 3u;
     let i = (q - 2u) % 3u;
     return mscale(hat(cfg_d(mid, l)[i]), -1.0);
-}
-
-// Entry (p, q) of G_s = ½ h H(S*) + inertia, in closed form: the stress Hessian H(S*)
-// has one term per entry (stress forces couple R0/R1 with the directors, moments couple
-// A_a with B_b, a ≠ b), scaled by ½ h, then the translational mass (R0, R1) and the
-// director mass with its rotation-free correction, summed in the CPU kernel's order.
-fn gs_at(p: u32, q: u32, ss: array<Real, 6>, h: Real, dt: Real, dw: Real, kap: array<Real, 2>, rot_free: array<bool, 2>) -> Real {
-    let ch = 0.5 / h;
-    var v: Real = 0.0;
-    if p < 2u && q >= 2u {
-        let n = ss[(q - 2u) % 3u] * ch;
-        if p == 1u { v = n; } else { v = -n; }
-    } else if q < 2u && p >= 2u {
-        let n = ss[(p - 2u) % 3u] * ch;
-        if q == 1u { v = n; } else { v = -n; }
-    } else if p >= 2u && q >= 2u && (p < 5u) != (q < 5u) {
-        // a: director of end 0 (A_a), b: director of end 1 (B_b).
-        var a = p - 2u;
-        var b = q - 5u;
-        if p >= 5u { a = q - 2u; b = p - 5u; }
-        if a == (b + 1u) % 3u { v = ss[3u + (b + 2u) % 3u] * ch; }
-        if b == (a + 1u) % 3u { v = -(ss[3u + (a + 2u) % 3u] * ch); }
-    }
-    v *= 0.5 * h;
-    if p < 2u && q < 2u { v += 2.0 / (dt * dt) * ld_e(E_ARHO) * h * m2(p, q); }
-    if p >= 2u && q >= 2u {
-        let lp = (p - 2u) / 3u;
-        let ap = (p - 2u) % 3u;
-        let mq = (q - 2u) / 3u;
-        let bq = (q - 2u) % 3u;
-        if ap < 2u && bq < 2u {
-            for (var m = 0u; m < 2u; m++) {
-                let mass = h * m2(lp, m) * irho(ap, bq) / dt;
-                if m == mq { v += mass * 2.0 / dt; }
-                if rot_free[mq] { v -= mass * 2.0 * kap[m] * dw; }
-            }
-        }
-    }
-    return v;
 }
 
 // Tangent prep, one invocation per (listed element, node n): the reduced strain-gradient
@@ -686,6 +634,48 @@ fn tangent_prep_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     tangent_prep(gid.y);
 }
 
+// h B̃_½ᵀ D B̃ for one 3×3 field block: column c = Σ_k (h b_k) (d_k)_c, k ascending.
+fn mat_blk(b: array<V3, 6>, d: array<V3, 6>, h: Real) -> Tri {
+    let b0 = h * b[0];
+    let b1 = h * b[1];
+    let b2 = h * b[2];
+    let b3 = h * b[3];
+    let b4 = h * b[4];
+    let b5 = h * b[5];
+    let z = V3(0.0, 0.0, 0.0);
+    return Tri(
+        z + b0 * d[0].x + b1 * d[1].x + b2 * d[2].x + b3 * d[3].x + b4 * d[4].x + b5 * d[5].x,
+        z + b0 * d[0].y + b1 * d[1].y + b2 * d[2].y + b3 * d[3].y + b4 * d[4].y + b5 * d[5].y,
+        z + b0 * d[0].z + b1 * d[1].z + b2 * d[2].z + b3 * d[3].z + b4 * d[4].z + b5 * d[5].z,
+    );
+}
+
+fn ld_cols(f: u32) -> array<V3, 6> {
+    return array<V3, 6>(ld_t3(f), ld_t3(f + 6u), ld_t3(f + 12u), ld_t3(f + 18u), ld_t3(f + 24u), ld_t3(f + 30u));
+}
+
+fn st_blk(r0: u32, c0: u32, b: Tri) {
+    for (var c = 0u; c < 3u; c++) {
+        kset(r0, c0 + c, b[c].x);
+        kset(r0 + 1u, c0 + c, b[c].y);
+        kset(r0 + 2u, c0 + c, b[c].z);
+    }
+}
+
+// v0 (the stress part of G_s) plus the director masses between director a of end l and
+// director b of end m (a, b < 2), added in the CPU kernel's order over the summed end m'.
+fn dir_mass(v0: Real, l: u32, m: u32, a: u32, b: u32, h: Real, dt: Real, dw: Real, kap0: Real, kap1: Real, free_m: bool) -> Real {
+    var v = v0;
+    let i_ab = irho(a, b);
+    let mass0 = h * m2(l, 0u) * i_ab / dt;
+    if m == 0u { v += mass0 * 2.0 / dt; }
+    if free_m { v -= mass0 * 2.0 * kap0 * dw; }
+    let mass1 = h * m2(l, 1u) * i_ab / dt;
+    if m == 1u { v += mass1 * 2.0 / dt; }
+    if free_m { v -= mass1 * 2.0 * kap1 * dw; }
+    return v;
+}
+
 fn tangent_block(l: u32, m: u32) {
     let h = ld_e(E_H);
     let a_rho = ld_e(E_ARHO);
@@ -697,81 +687,99 @@ fn tangent_block(l: u32, m: u32) {
     let mid = cfg_mean(st.cfg, cfg1);
     let amat_l = ld_tri(T_A + 9u * l);
     let amat_m = ld_tri(T_A + 9u * m);
-    let ss = array<Real, 6>(ld_t(T_SS), ld_t(T_SS + 1u), ld_t(T_SS + 2u), ld_t(T_SS + 3u), ld_t(T_SS + 4u), ld_t(T_SS + 5u));
-    let kap = array<Real, 2>(kappa(0u), kappa(1u));
-    let ksum = kap[0] + kap[1];
-    let rot_free = array<bool, 2>(ld_e(E_ROTFREE) != 0.0, ld_e(E_ROTFREE + 1u) != 0.0);
+    let ch = 0.5 / h;
+    let hh = 0.5 * h;
+    let kap0 = kappa(0u);
+    let kap1 = kappa(1u);
+    let ksum = kap0 + kap1;
+    let free_m = ld_e(E_ROTFREE + m) != 0.0;
     let dw = c_nu / (dt * (1.0 + ksum * c_nu));
-    // J_q of the director fields of node m (A_m T_q).
-    var jm = array<Tri, 3>(
-        mm(amat_m, tmat_of(mid, 2u + 3u * m)),
-        mm(amat_m, tmat_of(mid, 3u + 3u * m)),
-        mm(amat_m, tmat_of(mid, 4u + 3u * m)),
-    );
-    // Per 3×3 field block (rows u_l or θ_l, columns u_m or θ_m), accumulated in
-    // registers and written once: material h B̃_½ᵀ D B̃_{n+1}, then Tᵀ G_s J over the field
-    // pairs that meet in the block (in the CPU kernel's order; products with an identity
-    // T or J are skipped, they are exact), then the θθ stress block.
-    for (var gr = 0u; gr < 2u; gr++) {
-        for (var gc = 0u; gc < 2u; gc++) {
-            var blk: Tri; // column cc, row cr
-            for (var cc = 0u; cc < 3u; cc++) {
-                var col = V3(0.0, 0.0, 0.0);
-                for (var k = 0u; k < 6u; k++) {
-                    let d = ld_t(T_DB + 36u * m + 6u * k + 3u * gc + cc);
-                    col += (h * ld_t3(T_BT + 36u * l + 6u * k + 3u * gr)) * d;
-                }
-                blk[cc] = col;
-            }
-            let np = 1u + 2u * gr;
-            let nq = 1u + 2u * gc;
-            for (var ip = 0u; ip < np; ip++) {
-                let pf = node_field(l, gr * (1u + ip));
-                let tt = mt(tmat_of(mid, pf));
-                for (var iq = 0u; iq < nq; iq++) {
-                    let qf = node_field(m, gc * (1u + iq));
-                    let gpq = gs_at(pf, qf, ss, h, dt, dw, kap, rot_free);
-                    if gpq == 0.0 { continue; }
-                    var tj: Tri;
-                    if gr == 0u && gc == 0u { tj = eye(); }
-                    else if gr == 0u { tj = jm[iq]; }
-                    else if gc == 0u { tj = tt; }
-                    else { tj = mm(tt, jm[iq]); }
-                    blk = madd(blk, mscale(tj, gpq));
-                }
-            }
-            if gr == 1u && gc == 1u && l == m {
-                let dm = cfg_d(mid, l);
-                var th = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
-                for (var i = 0u; i < 3u; i++) {
-                    th = madd(th, mm(mm(hat(ld_t3(T_F + 9u * l + 3u * i)), amat_l), hat(dm[i])));
-                }
-                blk = madd(blk, mscale(th, 0.5));
-            }
-            let r0 = 6u * l + 3u * gr;
-            let c0 = 6u * m + 3u * gc;
-            for (var cc = 0u; cc < 3u; cc++) {
-                kset(r0, c0 + cc, blk[cc].x);
-                kset(r0 + 1u, c0 + cc, blk[cc].y);
-                kset(r0 + 2u, c0 + cc, blk[cc].z);
-            }
-        }
+    // Stress forces n (per director index) and moments m' (hat form) of G_s, before ½h.
+    let n = V3(ld_t(T_SS), ld_t(T_SS + 1u), ld_t(T_SS + 2u)) * ch;
+    let mo = V3(ld_t(T_SS + 3u), ld_t(T_SS + 4u), ld_t(T_SS + 5u)) * ch;
+    // T_i (node l, test side) and J_j = A_m T_j (node m, trial side).
+    let dl = cfg_d(mid, l);
+    let dm = cfg_d(mid, m);
+    let t0 = mscale(hat(dl[0]), -1.0);
+    let t1 = mscale(hat(dl[1]), -1.0);
+    let t2 = mscale(hat(dl[2]), -1.0);
+    let j0 = mm(amat_m, mscale(hat(dm[0]), -1.0));
+    let j1 = mm(amat_m, mscale(hat(dm[1]), -1.0));
+    let j2 = mm(amat_m, mscale(hat(dm[2]), -1.0));
+    let bu = ld_cols(T_BT + 36u * l);
+    let bt = ld_cols(T_BT + 36u * l + 3u);
+    let du = ld_cols(T_DB + 36u * m);
+    let dt3 = ld_cols(T_DB + 36u * m + 3u);
+    let r0 = 6u * l;
+    let c0 = 6u * m;
+    // Each block: material, then G_s terms over its field pairs in the CPU kernel's order
+    // (pairs with G_s = 0 add exact zeros; products with an identity T or J are exact).
+    // u_l × u_m: translational mass.
+    let guu = 2.0 / (dt * dt) * a_rho * h * m2(l, m);
+    st_blk(r0, c0, madd(mat_blk(bu, du, h), mscale(eye(), guu)));
+    // u_l × θ_m: stress forces (+ at end 1, − at end 0).
+    var sl: Real = -1.0;
+    if l == 1u { sl = 1.0; }
+    var sm: Real = -1.0;
+    if m == 1u { sm = 1.0; }
+    var b = mat_blk(bu, dt3, h);
+    b = madd(b, mscale(j0, (sl * n.x) * hh));
+    b = madd(b, mscale(j1, (sl * n.y) * hh));
+    b = madd(b, mscale(j2, (sl * n.z) * hh));
+    st_blk(r0, c0 + 3u, b);
+    // θ_l × u_m.
+    b = mat_blk(bt, du, h);
+    b = madd(b, mscale(mt(t0), (sm * n.x) * hh));
+    b = madd(b, mscale(mt(t1), (sm * n.y) * hh));
+    b = madd(b, mscale(mt(t2), (sm * n.z) * hh));
+    st_blk(r0 + 3u, c0, b);
+    // θ_l × θ_m: moments couple A_a with B_b (G[a][b] = hat(m')[a][b], transposed for
+    // l = 1), then the director masses (directors 0 and 1 of each end).
+    var hm = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
+    if l == 0u && m == 1u { hm = hat(mo); }
+    if l == 1u && m == 0u { hm = mt(hat(mo)); }
+    // g_ij = hm[j][i] (column j, row i), times ½h, plus masses.
+    let g00 = dir_mass(hm[0].x * hh, l, m, 0u, 0u, h, dt, dw, kap0, kap1, free_m);
+    let g01 = dir_mass(hm[1].x * hh, l, m, 0u, 1u, h, dt, dw, kap0, kap1, free_m);
+    let g10 = dir_mass(hm[0].y * hh, l, m, 1u, 0u, h, dt, dw, kap0, kap1, free_m);
+    let g11 = dir_mass(hm[1].y * hh, l, m, 1u, 1u, h, dt, dw, kap0, kap1, free_m);
+    b = mat_blk(bt, dt3, h);
+    let tt0 = mt(t0);
+    let tt1 = mt(t1);
+    let tt2 = mt(t2);
+    b = madd(b, mscale(mm(tt0, j0), g00));
+    b = madd(b, mscale(mm(tt0, j1), g01));
+    b = madd(b, mscale(mm(tt0, j2), hm[2].x * hh));
+    b = madd(b, mscale(mm(tt1, j0), g10));
+    b = madd(b, mscale(mm(tt1, j1), g11));
+    b = madd(b, mscale(mm(tt1, j2), hm[2].y * hh));
+    b = madd(b, mscale(mm(tt2, j0), hm[0].z * hh));
+    b = madd(b, mscale(mm(tt2, j1), hm[1].z * hh));
+    b = madd(b, mscale(mm(tt2, j2), hm[2].z * hh));
+    if l == m {
+        let f = T_F + 9u * l;
+        var th = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
+        th = madd(th, mm(mm(hat(ld_t3(f)), amat_l), hat(dl[0])));
+        th = madd(th, mm(mm(hat(ld_t3(f + 3u)), amat_l), hat(dl[1])));
+        th = madd(th, mm(mm(hat(ld_t3(f + 6u)), amat_l), hat(dl[2])));
+        b = madd(b, mscale(th, 0.5));
     }
+    st_blk(r0 + 3u, c0 + 3u, b);
     // g rows and columns: translational dissipation terms on the diagonals (the other
     // entries of these rows and columns, and θ_l × g_m, g_l × θ_m, are structurally zero:
     // the tangent pass never writes them, and the output buffer starts zeroed).
     let trans = ld_e(E_TRANS) != 0.0;
     let mmass = a_rho * h * m2(l, m);
     let cv = 0.5 * h * a_rho * c_v;
+    var ug: Real = 0.0;
+    var gu: Real = 0.0;
+    var gg: Real = 0.0;
+    if trans {
+        ug = -2.0 * mmass / dt;
+        gu = -cv / dt;
+        gg = mmass + cv;
+    }
     for (var c = 0u; c < 3u; c++) {
-        var ug: Real = 0.0;
-        var gu: Real = 0.0;
-        var gg: Real = 0.0;
-        if trans {
-            ug = -2.0 * mmass / dt;
-            gu = -cv / dt;
-            gg = mmass + cv;
-        }
         kset(u_idx(l) + c, g_idx(m) + c, ug);
         kset(g_idx(l) + c, u_idx(m) + c, gu);
         kset(g_idx(l) + c, g_idx(m) + c, gg);
