@@ -8,7 +8,9 @@
 //! come out of a fixed-point iteration, to `SCALARS_RTOL`), measured relative to the
 //! largest entry of each quantity. A residual-only dispatch returns the same residual as
 //! one with the tangent. The f32 fallback is measured on the same elements and must stay
-//! within `F32_RTOL` (docs/gpu.md, "Kernels"). Without an adapter the GPU tests print
+//! within `F32_RTOL` (docs/gpu.md, "Kernels"). A software adapter says it is one, and the
+//! pipeline cache lands in the folder it is given, as one complete file per adapter and
+//! shader revision that a second context reads back. Without an adapter the GPU tests print
 //! `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU` is set, in which case they fail.
 
 use cosserat::element::strain::Config;
@@ -305,6 +307,51 @@ fn gpu_f32_fallback_error_is_bounded() {
     for (q, name) in ["residual", "scales", "tangent"].iter().enumerate() {
         assert!(w[q] <= F32_RTOL, "f32 {name}: {:.3e}", w[q]);
     }
+}
+
+#[test]
+fn software_adapter_and_pipeline_cache_file() {
+    let Some(ctx) = context() else { return };
+    let name = ctx.info.name.to_lowercase();
+    if ["llvmpipe", "lavapipe", "swiftshader", "warp"]
+        .iter()
+        .any(|s| name.contains(s))
+    {
+        assert!(
+            ctx.is_software(),
+            "{} is a software adapter",
+            ctx.describe()
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cached = GpuContext::with_cache_dir(None, Some(dir.path().join("cache"))).unwrap();
+    let Some(path) = cached.pipeline_cache_path().map(|p| p.to_path_buf()) else {
+        println!("{}: no PIPELINE_CACHE, nothing cached", ctx.describe());
+        return;
+    };
+    ElementKernel::new(&cached, 8).unwrap();
+    let files: Vec<_> = std::fs::read_dir(dir.path().join("cache"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(
+        files,
+        vec![path.clone()],
+        "one cache file, no temporary left"
+    );
+    let name = path.file_name().unwrap().to_str().unwrap();
+    assert!(name.starts_with("wgpu_pipeline_cache_") && name.ends_with(".bin"));
+    let len = std::fs::metadata(&path).unwrap().len();
+    println!("pipeline cache of {}: {len} bytes", ctx.describe());
+    assert!(len > 0);
+    // A second context reads it back and builds the same pipelines.
+    let again = GpuContext::with_cache_dir(None, Some(dir.path().join("cache"))).unwrap();
+    assert_eq!(again.pipeline_cache_path(), Some(path.as_path()));
+    ElementKernel::new(&again, 8).unwrap();
+    assert!(GpuContext::with_cache_dir(None, None)
+        .unwrap()
+        .pipeline_cache_path()
+        .is_none());
 }
 
 /// The shader's field offsets are the Rust layout's (no GPU needed).

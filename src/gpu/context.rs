@@ -113,11 +113,22 @@ impl GpuContext {
     /// (case-insensitive); without it, adapters with `SHADER_F64` are preferred, then
     /// discrete over integrated over software. The backends come from `WGPU_BACKEND`
     /// (e.g. `vulkan`, `gl`) when set, else all.
+    ///
+    /// Compiled pipelines are cached in [`pipeline_cache_dir`] where the adapter supports
+    /// it.
     pub fn new(filter: Option<&str>) -> Result<Self, GpuError> {
-        pollster::block_on(Self::new_async(filter))
+        Self::with_cache_dir(filter, pipeline_cache_dir())
     }
 
-    async fn new_async(filter: Option<&str>) -> Result<Self, GpuError> {
+    /// As [`Self::new`], with the pipeline cache kept in `cache_dir` (`None`: no cache).
+    pub fn with_cache_dir(
+        filter: Option<&str>,
+        cache_dir: Option<PathBuf>,
+    ) -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async(filter, cache_dir))
+    }
+
+    async fn new_async(filter: Option<&str>, cache_dir: Option<PathBuf>) -> Result<Self, GpuError> {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let mut adapters = instance.enumerate_adapters(wgpu::Backends::all()).await;
@@ -141,7 +152,7 @@ impl GpuContext {
         };
         let info = adapter.get_info();
         let f64 = adapter.features().contains(wgpu::Features::SHADER_F64);
-        let cache_path = pipeline_cache_dir()
+        let cache_path = cache_dir
             .filter(|_| adapter.features().contains(wgpu::Features::PIPELINE_CACHE))
             .and_then(|dir| {
                 let key = wgpu::util::pipeline_cache_key(&info)?;
