@@ -413,13 +413,10 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
     let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
     let sstar = stresses(st, kin.eps1, beta_g, beta_o);
 
-    var f: array<V3, 8>;
-    for (var k = 0u; k < 6u; k++) {
-        let hs = h * sstar[k];
-        for (var q = 0u; q < 8u; q++) { f[q] += b_entry(kin.mid, h, k, q) * hs; }
-    }
-    // Round-off floor of the stress forces: GROSS_WEIGHT × h |B|ᵀ |C| (|ε̄| + |ε0|), the
-    // twin of `gross_stress` in src/element/mod.rs.
+    // Stress forces f_q = Σ_k B[k][q] h S*_k and their round-off floor
+    // Σ_k |B[k][q]| h gross_k (GROSS_WEIGHT × the twin of `gross_stress` in
+    // src/element/mod.rs), written out from the sparsity of B (b_entry): the nonzero terms
+    // in ascending k, the others add exact zeros.
     let eg = abs(0.5 * (st.eps.g + kin.eps1.g)) + abs(eps0g);
     let eo = abs(0.5 * (st.eps.o + kin.eps1.o)) + abs(eps0o);
     let gn = abs(cg) * eg;
@@ -431,10 +428,40 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
         abs(ld_e(E_CO + 3u)) * eo.x + abs(ld_e(E_CO + 4u)) * eo.y + abs(ld_e(E_CO + 5u)) * eo.z,
         abs(ld_e(E_CO + 6u)) * eo.x + abs(ld_e(E_CO + 7u)) * eo.y + abs(ld_e(E_CO + 8u)) * eo.z,
     );
-    var f_gross: array<Real, 8>;
-    for (var k = 0u; k < 6u; k++) {
-        for (var q = 0u; q < 8u; q++) { f_gross[q] += amax(b_entry(kin.mid, h, k, q)) * h * gross[k]; }
-    }
+    let c = kin.mid;
+    let hs = array<Real, 6>(h * sstar[0], h * sstar[1], h * sstar[2], h * sstar[3], h * sstar[4], h * sstar[5]);
+    let dh0 = 0.5 * (c.d0[0] + c.d1[0]) / h;
+    let dh1 = 0.5 * (c.d0[1] + c.d1[1]) / h;
+    let dh2 = 0.5 * (c.d0[2] + c.d1[2]) / h;
+    let hdr = 0.5 * ((c.r1 - c.r0) / h);
+    let sc = 0.5 / h;
+    let a0 = sc * c.d0[0];
+    let a1 = sc * c.d0[1];
+    let a2 = sc * c.d0[2];
+    let b0 = sc * c.d1[0];
+    let b1 = sc * c.d1[1];
+    let b2 = sc * c.d1[2];
+    var f: array<V3, 8>;
+    f[0] = -dh0 * hs[0] + -dh1 * hs[1] + -dh2 * hs[2];
+    f[1] = dh0 * hs[0] + dh1 * hs[1] + dh2 * hs[2];
+    f[2] = hdr * hs[0] + b2 * hs[4] + -b1 * hs[5];
+    f[3] = hdr * hs[1] + -b2 * hs[3] + b0 * hs[5];
+    f[4] = hdr * hs[2] + b1 * hs[3] + -b0 * hs[4];
+    f[5] = hdr * hs[0] + -a2 * hs[4] + a1 * hs[5];
+    f[6] = hdr * hs[1] + a2 * hs[3] + -a0 * hs[5];
+    f[7] = hdr * hs[2] + -a1 * hs[3] + a0 * hs[4];
+    let fg_r = amax(dh0) * h * gross[0] + amax(dh1) * h * gross[1] + amax(dh2) * h * gross[2];
+    let mdr = amax(hdr);
+    var f_gross = array<Real, 8>(
+        fg_r,
+        fg_r,
+        mdr * h * gross[0] + amax(b2) * h * gross[4] + amax(b1) * h * gross[5],
+        mdr * h * gross[1] + amax(b2) * h * gross[3] + amax(b0) * h * gross[5],
+        mdr * h * gross[2] + amax(b1) * h * gross[3] + amax(b0) * h * gross[4],
+        mdr * h * gross[0] + amax(a2) * h * gross[4] + amax(a1) * h * gross[5],
+        mdr * h * gross[1] + amax(a2) * h * gross[3] + amax(a0) * h * gross[5],
+        mdr * h * gross[2] + amax(a1) * h * gross[3] + amax(a0) * h * gross[4],
+    );
     let stress_scale = array<Real, 2>(
         max(amax(f[0]), GROSS_WEIGHT * f_gross[0]),
         max(amax(f[1]), GROSS_WEIGHT * f_gross[1]),
