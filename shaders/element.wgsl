@@ -158,28 +158,13 @@ fn raw_strains(c: Cfg, h: Real) -> Eps6 {
     return Eps6(gamma, omega);
 }
 
-// Entry B[k][q] of the strain gradient (twin of strain_gradient), computed on demand so
-// that no invocation holds the 6×8 (144-value) matrix: rows 0..2 (Γ) have R0, R1, A_k,
-// B_k; row 3 + k (Ω) has A_j, B_i, A_i, B_j with (k, i, j) cyclic; every other entry is 0.
-// Each nonzero entry is a single term, so the values are those of the accumulated matrix.
-fn b_entry(c: Cfg, h: Real, k: u32, q: u32) -> V3 {
-    if k < 3u {
-        let di = 0.5 * (c.d0[k] + c.d1[k]);
-        if q == 0u { return -di / h; }
-        if q == 1u { return di / h; }
-        if q == 2u + k || q == 5u + k { return 0.5 * ((c.r1 - c.r0) / h); }
-        return V3(0.0, 0.0, 0.0);
-    }
-    let kk = k - 3u;
-    let i = (kk + 1u) % 3u;
-    let j = (kk + 2u) % 3u;
-    let s = 0.5 / h;
-    if q == 2u + j { return s * c.d1[i]; }
-    if q == 5u + i { return s * c.d0[j]; }
-    if q == 2u + i { return -(s * c.d1[j]); }
-    if q == 5u + j { return -(s * c.d0[i]); }
-    return V3(0.0, 0.0, 0.0);
-}
+// Strain gradient B (twin of strain_gradient), 6 rows × 8 fields of 3: rows 0..2 (Γ_k)
+// have R0: −d̄_k/h, R1: d̄_k/h (d̄_k = ½(a_k + b_k)), A_k and B_k: ½ (r1 − r0)/h; row 3 + k
+// (Ω_k, (k, i, j) cyclic) has A_j: s b_i, B_i: s a_j, A_i: −(s b_j), B_j: −(s a_i) with
+// s = 1/(2h); every other entry is 0. Each nonzero entry is a single term. The passes never
+// hold B: they use it written out (stress forces in `residual`, `btilde` in the tangent
+// prep), the nonzero terms of each sum in ascending row order (the zeros add exact zeros),
+// so the sums are those of the CPU kernel's full products.
 
 // ---- dissipation (twin of src/element/dissipation.rs) ----
 struct Inputs { v_n: Real, v_n1: Real, nu_n: Real, nu_n1: Real, x_g: Real, x_o: Real, }
@@ -415,7 +400,7 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
 
     // Stress forces f_q = Σ_k B[k][q] h S*_k and their round-off floor
     // Σ_k |B[k][q]| h gross_k (GROSS_WEIGHT × the twin of `gross_stress` in
-    // src/element/mod.rs), written out from the sparsity of B (b_entry): the nonzero terms
+    // src/element/mod.rs), written out from the sparsity of B (above): the nonzero terms
     // in ascending k, the others add exact zeros.
     let eg = abs(0.5 * (st.eps.g + kin.eps1.g)) + abs(eps0g);
     let eo = abs(0.5 * (st.eps.o + kin.eps1.o)) + abs(eps0o);
@@ -593,7 +578,7 @@ fn tmat_of(mid: Cfg, q: u32) -> Tri {
 // block. Index of row k, column group g (0: u_n, 1: θ_n), component c: 36 n + 6 k + 3 g + c.
 // Reduced strain-gradient columns of node n at configuration c: row k of u_n (B[k][R_n])
 // and of θ_n (Σ_a X_aᵀ B[k][director a of node n], X_a = T_a or J_a), written out from
-// the sparsity of B (b_entry) so that no row or field index is dynamic; the θ sums run
+// the sparsity of B (above) so that no row or field index is dynamic; the θ sums run
 // over the nonzero terms in the order of the full sum (the others add exact zeros).
 struct Bt { u: array<V3, 6>, t: array<V3, 6>, }
 
