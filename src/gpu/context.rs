@@ -11,7 +11,7 @@ use super::GpuError;
 pub enum Precision {
     /// `SHADER_F64`: the CPU kernel's arithmetic to round-off.
     F64,
-    /// Fallback on adapters without f64 (error bound in README, "GPU precision").
+    /// Fallback on adapters without f64 (measured error: docs/gpu.md, "Kernels").
     F32,
 }
 
