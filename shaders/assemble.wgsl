@@ -55,6 +55,8 @@ struct Params {
 @group(0) @binding(4) var<storage, read> member_n: array<u32>;
 @group(0) @binding(5) var<storage, read_write> asm_out: array<Real>;
 @group(0) @binding(6) var<uniform> prm: Params;
+// Per member slot: 1 when this dispatch computed (and assembles) its tangent.
+@group(0) @binding(7) var<storage, read> member_tan: array<u32>;
 
 // Element-local index of node-local unknown k at element end l (u0 θ0 u1 θ1 g0 g1).
 fn loc_idx(l: u32, k: u32) -> u32 {
@@ -91,7 +93,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             asm_out[r0 + k] = acc;
         }
-        if prm.want_tangent != 0u {
+        if prm.want_tangent != 0u && member_tan[m] != 0u {
             for (var a = 0u; a < 9u; a++) {
                 for (var b = 0u; b < 9u; b++) {
                     var acc: Real = 0.0;
@@ -105,7 +107,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    if prm.want_tangent != 0u && i < prm.n_elem {
+    if prm.want_tangent != 0u && i < prm.n_elem && member_tan[i / prm.per_slot] != 0u {
         let m = i / prm.per_slot;
         let e = i % prm.per_slot;
         let k0 = prm.k_start + m * kpm() + 81u * (prm.nodes_per_slot + 2u * e);

@@ -4,10 +4,20 @@
 // element residual (18), row scales (18) and tangent (18×18). Rational operations and sqrt
 // only (lavapipe's f64 transcendentals are wrong; the scheme needs none).
 //
+// Two passes, so that no invocation holds the 18×18 tangent (docs/gpu.md, "Kernels"):
+// * `residual_main`, one invocation per element slot: kinematics, (consistent) scalars,
+//   stresses, residual, row scales; when the dispatch wants a tangent, also the few values
+//   the tangent needs (new configuration, Cayley factors, stresses, director forces: NT
+//   fields) into the intermediate buffer (binding 5).
+// * `tangent_prep_main`, two invocations per listed element slot (binding 6; dispatch
+//   y = the node): the reduced strain gradients of the node into the intermediate buffer.
+// * `tangent_main`, four invocations per listed element slot (dispatch y = the block):
+//   one 9×9 node block each, read from the intermediate buffer and the state.
+//
 // Buffers are struct-of-arrays, field-major: field `f` of element `i` is `buf[f * n + i]`
 // (coalesced loads on a real GPU). Field offsets are the constants below; their Rust twin is
-// `src/gpu/layout.rs`. `Real` is rewritten to `f32` by `src/gpu/pipeline.rs` on adapters
-// without SHADER_F64 (measured error: README, "GPU precision").
+// `src/gpu/layout.rs`. `Real` is rewritten to `f32` by `src/gpu/kernel.rs` on adapters
+// without SHADER_F64 (measured error: docs/gpu.md).
 
 alias Real = f64;
 alias V3 = vec3<Real>;
@@ -45,13 +55,23 @@ const O_R: u32 = 0u;      // 18
 const O_SC: u32 = 18u;    // 18
 const O_K: u32 = 36u;     // 324 row-major
 const O_S: u32 = 360u;    // 4: the scalars used (frozen or consistent)
+// ---- residual pass → tangent pass (binding 5), NT fields ----
+const T_C1: u32 = 0u;     // 24: new configuration r0 r1, d0 columns, d1 columns
+const T_A: u32 = 24u;     // 18: (I − ½ hat θ_l)⁻¹ columns, l = 0, 1
+const T_SS: u32 = 42u;    // 6: stresses S*
+const T_F: u32 = 48u;     // 18: director forces f[2..8] (stress + inertia)
+// ---- tangent prep → tangent blocks (binding 5) ----
+const T_BT: u32 = 66u;    // 72: B̃_½ columns of nodes 0, 1 (36 n + 6 k + 3 g + c)
+const T_DB: u32 = 138u;   // 72: D B̃_{n+1} columns of nodes 0, 1 (same order)
 
 struct Params {
     n: u32,
+    // 1: the residual pass also writes the intermediate buffer (a tangent pass follows).
     want_tangent: u32,
     // 0: frozen scalars from binding 2; 1: consistent scalars (DESIGN §4 local law).
     mode: u32,
-    pad: u32,
+    // Element slots listed for the tangent pass (binding 6).
+    n_tan: u32,
 }
 
 @group(0) @binding(0) var<storage, read> elem: array<Real>;
@@ -59,6 +79,8 @@ struct Params {
 @group(0) @binding(2) var<storage, read> iter: array<Real>;
 @group(0) @binding(3) var<storage, read_write> outp: array<Real>;
 @group(0) @binding(4) var<uniform> prm: Params;
+@group(0) @binding(5) var<storage, read_write> tmid: array<Real>;
+@group(0) @binding(6) var<storage, read> tan_list: array<u32>;
 
 var<private> gi: u32;
 
@@ -66,6 +88,9 @@ fn ld_e(f: u32) -> Real { return elem[f * prm.n + gi]; }
 fn ld_s(f: u32) -> Real { return state[f * prm.n + gi]; }
 fn ld_i(f: u32) -> Real { return iter[f * prm.n + gi]; }
 fn st_o(f: u32, x: Real) { outp[f * prm.n + gi] = x; }
+fn ld_t(f: u32) -> Real { return tmid[f * prm.n + gi]; }
+fn st_t(f: u32, x: Real) { tmid[f * prm.n + gi] = x; }
+fn st_t3(f: u32, v: V3) { st_t(f, v.x); st_t(f + 1u, v.y); st_t(f + 2u, v.z); }
 fn ld_s3(f: u32) -> V3 { return V3(ld_s(f), ld_s(f + 1u), ld_s(f + 2u)); }
 fn ld_i3(f: u32) -> V3 { return V3(ld_i(f), ld_i(f + 1u), ld_i(f + 2u)); }
 
@@ -133,31 +158,13 @@ fn raw_strains(c: Cfg, h: Real) -> Eps6 {
     return Eps6(gamma, omega);
 }
 
-// B[k][p] at index 8k + p.
-fn strain_gradient(c: Cfg, h: Real) -> array<V3, 48> {
-    var bm: array<V3, 48>;
-    let dr = (c.r1 - c.r0) / h;
-    let a = c.d0;
-    let b = c.d1;
-    for (var i = 0u; i < 3u; i++) {
-        let di = 0.5 * (a[i] + b[i]);
-        bm[8u * i + 0u] = -di / h;
-        bm[8u * i + 1u] = di / h;
-        bm[8u * i + 2u + i] = 0.5 * dr;
-        bm[8u * i + 5u + i] = 0.5 * dr;
-    }
-    let s = 0.5 / h;
-    for (var k = 0u; k < 3u; k++) {
-        let i = (k + 1u) % 3u;
-        let j = (k + 2u) % 3u;
-        let row = 8u * (3u + k);
-        bm[row + 2u + j] += s * b[i];
-        bm[row + 5u + i] += s * a[j];
-        bm[row + 2u + i] -= s * b[j];
-        bm[row + 5u + j] -= s * a[i];
-    }
-    return bm;
-}
+// Strain gradient B (twin of strain_gradient), 6 rows × 8 fields of 3: rows 0..2 (Γ_k)
+// have R0: −d̄_k/h, R1: d̄_k/h (d̄_k = ½(a_k + b_k)), A_k and B_k: ½ (r1 − r0)/h; row 3 + k
+// (Ω_k, (k, i, j) cyclic) has A_j: s b_i, B_i: s a_j, A_i: −(s b_j), B_j: −(s a_i) with
+// s = 1/(2h); every other entry is 0. Each nonzero entry is a single term. The passes never
+// hold B: they use it written out (stress forces in `residual`, `btilde` in the tangent
+// prep), the nonzero terms of each sum in ascending row order (the zeros add exact zeros),
+// so the sums are those of the CPU kernel's full products.
 
 // ---- dissipation (twin of src/element/dissipation.rs) ----
 struct Inputs { v_n: Real, v_n1: Real, nu_n: Real, nu_n1: Real, x_g: Real, x_o: Real, }
@@ -350,66 +357,51 @@ fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real) -> Consistent {
     return Consistent(array<Real, 4>(loc.beta_g, loc.beta_o, c_v, c_nu), kin);
 }
 
-// ---- residual and tangent (twin of element::residual_tangent / tangent) ----
+// ---- residual (twin of element::residual_tangent without the tangent) ----
 fn u_idx(l: u32) -> u32 { return 6u * l; }
 fn th_idx(l: u32) -> u32 { return 6u * l + 3u; }
 fn g_idx(l: u32) -> u32 { return 12u + 3u * l; }
-fn field_start(p: u32) -> u32 {
-    if p == 0u { return 0u; }
-    if p == 1u { return 6u; }
-    if p <= 4u { return 3u; }
-    return 9u;
-}
-fn field_of(l: u32, a: u32) -> u32 { return 2u + 3u * l + a; }
 fn kin_v1(k: Kin, l: u32) -> V3 { if l == 0u { return k.v10; } return k.v11; }
 fn st_v(s: St, l: u32) -> V3 { if l == 0u { return s.v0; } return s.v1; }
-fn amat(k: Kin, l: u32) -> Tri { if l == 0u { return k.amat0; } return k.amat1; }
 fn kin_g(st: St, k: Kin, m: u32, dt: Real) -> V3 {
     return (cfg_r(k.cfg1, m) - cfg_r(st.cfg, m)) / dt - 0.5 * (st_v(st, m) + kin_v1(k, m));
-}
-
-var<private> kt: array<Real, 324>;
-
-fn kadd(i: u32, j: u32, x: Real) { kt[18u * i + j] += x; }
-fn kadd_blk(r0: u32, c0: u32, b: Tri) {
-    for (var c = 0u; c < 3u; c++) {
-        kadd(r0, c0 + c, b[c].x);
-        kadd(r0 + 1u, c0 + c, b[c].y);
-        kadd(r0 + 2u, c0 + c, b[c].z);
-    }
 }
 
 // Weight of the gross stress forces in the row scales (GROSS_WEIGHT in src/element/mod.rs).
 const GROSS_WEIGHT = 1e-4;
 
-fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
+// Stresses S* = C (ε̄ − ε0 + ½ β Δε) (6).
+fn stresses(st: St, eps1: Eps6, beta_g: Real, beta_o: Real) -> array<Real, 6> {
+    let eps0g = V3(ld_e(E_EPS0), ld_e(E_EPS0 + 1u), ld_e(E_EPS0 + 2u));
+    let eps0o = V3(ld_e(E_EPS0 + 3u), ld_e(E_EPS0 + 4u), ld_e(E_EPS0 + 5u));
+    let mean_g = 0.5 * (st.eps.g + eps1.g) - eps0g;
+    let mean_o = 0.5 * (st.eps.o + eps1.o) - eps0o;
+    let gg = mean_g + 0.5 * beta_g * (eps1.g - st.eps.g);
+    let oo = mean_o + 0.5 * beta_o * (eps1.o - st.eps.o);
+    let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
+    let nn = cg * gg;
+    let mmm = c_omega_mv(oo);
+    return array<Real, 6>(nn.x, nn.y, nn.z, mmm.x, mmm.y, mmm.z);
+}
+
+// Residual pass body: residual, row scales and scalars into the output buffer; with
+// `keep` also what the tangent pass needs into the intermediate buffer (T_* fields).
+fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
     let h = ld_e(E_H);
     let a_rho = ld_e(E_ARHO);
     let trans = ld_e(E_TRANS) != 0.0;
     let beta_g = s[0];
     let beta_o = s[1];
     let c_v = s[2];
-    let c_nu = s[3];
-    // stresses
     let eps0g = V3(ld_e(E_EPS0), ld_e(E_EPS0 + 1u), ld_e(E_EPS0 + 2u));
     let eps0o = V3(ld_e(E_EPS0 + 3u), ld_e(E_EPS0 + 4u), ld_e(E_EPS0 + 5u));
-    let mean_g = 0.5 * (st.eps.g + kin.eps1.g) - eps0g;
-    let mean_o = 0.5 * (st.eps.o + kin.eps1.o) - eps0o;
-    let gg = mean_g + 0.5 * beta_g * (kin.eps1.g - st.eps.g);
-    let oo = mean_o + 0.5 * beta_o * (kin.eps1.o - st.eps.o);
     let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
-    let nn = cg * gg;
-    let mmm = c_omega_mv(oo);
-    let sstar = array<Real, 6>(nn.x, nn.y, nn.z, mmm.x, mmm.y, mmm.z);
-    let b_mid = strain_gradient(kin.mid, h);
+    let sstar = stresses(st, kin.eps1, beta_g, beta_o);
 
-    var f: array<V3, 8>;
-    for (var k = 0u; k < 6u; k++) {
-        let hs = h * sstar[k];
-        for (var q = 0u; q < 8u; q++) { f[q] += b_mid[8u * k + q] * hs; }
-    }
-    // Round-off floor of the stress forces: GROSS_WEIGHT × h |B|ᵀ |C| (|ε̄| + |ε0|), the
-    // twin of `gross_stress` in src/element/mod.rs.
+    // Stress forces f_q = Σ_k B[k][q] h S*_k and their round-off floor
+    // Σ_k |B[k][q]| h gross_k (GROSS_WEIGHT × the twin of `gross_stress` in
+    // src/element/mod.rs), written out from the sparsity of B (above): the nonzero terms
+    // in ascending k, the others add exact zeros.
     let eg = abs(0.5 * (st.eps.g + kin.eps1.g)) + abs(eps0g);
     let eo = abs(0.5 * (st.eps.o + kin.eps1.o)) + abs(eps0o);
     let gn = abs(cg) * eg;
@@ -421,12 +413,40 @@ fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
         abs(ld_e(E_CO + 3u)) * eo.x + abs(ld_e(E_CO + 4u)) * eo.y + abs(ld_e(E_CO + 5u)) * eo.z,
         abs(ld_e(E_CO + 6u)) * eo.x + abs(ld_e(E_CO + 7u)) * eo.y + abs(ld_e(E_CO + 8u)) * eo.z,
     );
-    var f_gross: array<Real, 8>;
-    for (var k = 0u; k < 6u; k++) {
-        for (var q = 0u; q < 8u; q++) { f_gross[q] += amax(b_mid[8u * k + q]) * h * gross[k]; }
-    }
-    var scale: array<Real, 18>;
-    var r: array<Real, 18>;
+    let c = kin.mid;
+    let hs = array<Real, 6>(h * sstar[0], h * sstar[1], h * sstar[2], h * sstar[3], h * sstar[4], h * sstar[5]);
+    let dh0 = 0.5 * (c.d0[0] + c.d1[0]) / h;
+    let dh1 = 0.5 * (c.d0[1] + c.d1[1]) / h;
+    let dh2 = 0.5 * (c.d0[2] + c.d1[2]) / h;
+    let hdr = 0.5 * ((c.r1 - c.r0) / h);
+    let sc = 0.5 / h;
+    let a0 = sc * c.d0[0];
+    let a1 = sc * c.d0[1];
+    let a2 = sc * c.d0[2];
+    let b0 = sc * c.d1[0];
+    let b1 = sc * c.d1[1];
+    let b2 = sc * c.d1[2];
+    var f: array<V3, 8>;
+    f[0] = -dh0 * hs[0] + -dh1 * hs[1] + -dh2 * hs[2];
+    f[1] = dh0 * hs[0] + dh1 * hs[1] + dh2 * hs[2];
+    f[2] = hdr * hs[0] + b2 * hs[4] + -b1 * hs[5];
+    f[3] = hdr * hs[1] + -b2 * hs[3] + b0 * hs[5];
+    f[4] = hdr * hs[2] + b1 * hs[3] + -b0 * hs[4];
+    f[5] = hdr * hs[0] + -a2 * hs[4] + a1 * hs[5];
+    f[6] = hdr * hs[1] + a2 * hs[3] + -a0 * hs[5];
+    f[7] = hdr * hs[2] + -a1 * hs[3] + a0 * hs[4];
+    let fg_r = amax(dh0) * h * gross[0] + amax(dh1) * h * gross[1] + amax(dh2) * h * gross[2];
+    let mdr = amax(hdr);
+    var f_gross = array<Real, 8>(
+        fg_r,
+        fg_r,
+        mdr * h * gross[0] + amax(b2) * h * gross[4] + amax(b1) * h * gross[5],
+        mdr * h * gross[1] + amax(b2) * h * gross[3] + amax(b0) * h * gross[5],
+        mdr * h * gross[2] + amax(b1) * h * gross[3] + amax(b0) * h * gross[4],
+        mdr * h * gross[0] + amax(a2) * h * gross[4] + amax(a1) * h * gross[5],
+        mdr * h * gross[1] + amax(a2) * h * gross[3] + amax(a0) * h * gross[5],
+        mdr * h * gross[2] + amax(a1) * h * gross[3] + amax(a0) * h * gross[4],
+    );
     let stress_scale = array<Real, 2>(
         max(amax(f[0]), GROSS_WEIGHT * f_gross[0]),
         max(amax(f[1]), GROSS_WEIGHT * f_gross[1]),
@@ -465,19 +485,21 @@ fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
         let su = max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate);
         let dnorm = max(max(norm(dm[0]), norm(dm[1])), norm(dm[2]));
         for (var c = 0u; c < 3u; c++) {
-            r[u_idx(l) + c] = fr[c];
-            r[th_idx(l) + c] = rt[c];
-            scale[u_idx(l) + c] = su;
-            scale[th_idx(l) + c] = fd_scale[l] * dnorm;
+            st_o(O_R + u_idx(l) + c, fr[c]);
+            st_o(O_R + th_idx(l) + c, rt[c]);
+            st_o(O_SC + u_idx(l) + c, su);
+            st_o(O_SC + th_idx(l) + c, fd_scale[l] * dnorm);
         }
     }
     let vsum = 0.5 * (st.v0 + st.v1) + 0.5 * (kin.v10 + kin.v11);
-    if trans {
-        let bb = 0.5 * h * a_rho * c_v * vsum;
-        for (var l = 0u; l < 2u; l++) {
+    for (var l = 0u; l < 2u; l++) {
+        var rg = V3(0.0, 0.0, 0.0);
+        var sg: Real = 0.0;
+        if trans {
+            let bb = 0.5 * h * a_rho * c_v * vsum;
             var mg = V3(0.0, 0.0, 0.0);
             for (var m = 0u; m < 2u; m++) { mg += a_rho * h * m2(l, m) * kin_g(st, kin, m, dt); }
-            let rg = mg - bb;
+            rg = mg - bb;
             var momentum = 0.5 * a_rho * h * max(amax(st_v(st, l)), amax(kin_v1(kin, l)));
             var psum: Real = 0.0;
             for (var m = 0u; m < 2u; m++) {
@@ -485,153 +507,30 @@ fn evaluate(st: St, kin: Kin, s: array<Real, 4>, dt: Real, want_tangent: bool) {
             }
             let pieces = 0.5 * h * a_rho * abs(c_v) * psum;
             momentum = max(momentum, pieces);
-            let sg = max(max(amax(mg), amax(bb)), momentum);
-            for (var c = 0u; c < 3u; c++) {
-                r[g_idx(l) + c] = rg[c];
-                scale[g_idx(l) + c] = sg;
-            }
+            sg = max(max(amax(mg), amax(bb)), momentum);
         }
-    }
-    for (var i = 0u; i < 18u; i++) {
-        st_o(O_R + i, r[i]);
-        st_o(O_SC + i, scale[i]);
+        for (var c = 0u; c < 3u; c++) {
+            st_o(O_R + g_idx(l) + c, rg[c]);
+            st_o(O_SC + g_idx(l) + c, sg);
+        }
     }
     for (var i = 0u; i < 4u; i++) { st_o(O_S + i, s[i]); }
-    if !want_tangent { return; }
-
-    // ---- tangent ----
-    for (var i = 0u; i < 324u; i++) { kt[i] = 0.0; }
-    let b1 = strain_gradient(kin.cfg1, h);
-    var tmat: array<Tri, 8>;
-    var jmat: array<Tri, 8>;
-    tmat[0] = eye(); tmat[1] = eye(); jmat[0] = eye(); jmat[1] = eye();
-    for (var l = 0u; l < 2u; l++) {
-        let dm = cfg_d(kin.mid, l);
+    if keep {
+        st_t3(T_C1, kin.cfg1.r0);
+        st_t3(T_C1 + 3u, kin.cfg1.r1);
         for (var i = 0u; i < 3u; i++) {
-            let q = 2u + 3u * l + i;
-            tmat[q] = mscale(hat(dm[i]), -1.0);
-            jmat[q] = mm(amat(kin, l), tmat[q]);
+            st_t3(T_C1 + 6u + 3u * i, kin.cfg1.d0[i]);
+            st_t3(T_C1 + 15u + 3u * i, kin.cfg1.d1[i]);
+            st_t3(T_A + 3u * i, kin.amat0[i]);
+            st_t3(T_A + 9u + 3u * i, kin.amat1[i]);
         }
+        for (var k = 0u; k < 6u; k++) { st_t(T_SS + k, sstar[k]); }
+        for (var q = 0u; q < 6u; q++) { st_t3(T_F + 3u * q, f[2u + q]); }
     }
-    var bt_mid: array<Real, 72>; // 6 × 12 row-major
-    var bt_1: array<Real, 72>;
-    for (var kk = 0u; kk < 6u; kk++) {
-        for (var q = 0u; q < 8u; q++) {
-            let c0 = field_start(q);
-            let a = mtv(tmat[q], b_mid[8u * kk + q]);
-            let b = mtv(jmat[q], b1[8u * kk + q]);
-            for (var c = 0u; c < 3u; c++) {
-                bt_mid[12u * kk + c0 + c] += a[c];
-                bt_1[12u * kk + c0 + c] += b[c];
-            }
-        }
-    }
-    // D B̃_{n+1}, D = ½(1+β) C.
-    var db: array<Real, 72>;
-    let sg = 0.5 * (1.0 + beta_g);
-    let so = 0.5 * (1.0 + beta_o);
-    for (var j = 0u; j < 12u; j++) {
-        for (var i = 0u; i < 3u; i++) {
-            db[12u * i + j] = sg * ld_e(E_CG + i) * bt_1[12u * i + j];
-            var acc: Real = 0.0;
-            for (var k = 0u; k < 3u; k++) {
-                acc += so * ld_e(E_CO + 3u * i + k) * bt_1[12u * (3u + k) + j];
-            }
-            db[12u * (3u + i) + j] = acc;
-        }
-    }
-    for (var i = 0u; i < 12u; i++) {
-        for (var j = 0u; j < 12u; j++) {
-            var acc: Real = 0.0;
-            for (var k = 0u; k < 6u; k++) { acc += (h * bt_mid[12u * k + i]) * db[12u * k + j]; }
-            kt[18u * i + j] = acc;
-        }
-    }
-    // G_s: ½ h H(S*) + inertia.
-    var gs: array<Real, 64>;
-    let ch = 0.5 / h;
-    let half_h = 0.5 * h;
-    for (var i = 0u; i < 3u; i++) {
-        let n = sstar[i] * ch;
-        for (var e = 0u; e < 2u; e++) {
-            let p = 2u + 3u * e + i;
-            gs[8u * 1u + p] += n;
-            gs[8u * p + 1u] += n;
-            gs[8u * 0u + p] -= n;
-            gs[8u * p + 0u] -= n;
-        }
-    }
-    for (var k = 0u; k < 3u; k++) {
-        let i = (k + 1u) % 3u;
-        let j = (k + 2u) % 3u;
-        let m = sstar[3u + k] * ch;
-        gs[8u * (2u + j) + 5u + i] += m;
-        gs[8u * (5u + i) + 2u + j] += m;
-        gs[8u * (2u + i) + 5u + j] -= m;
-        gs[8u * (5u + j) + 2u + i] -= m;
-    }
-    for (var i = 0u; i < 64u; i++) { gs[i] *= half_h; }
-    let two_dt2 = 2.0 / (dt * dt);
-    for (var l = 0u; l < 2u; l++) {
-        for (var m = 0u; m < 2u; m++) { gs[8u * l + m] += two_dt2 * a_rho * h * m2(l, m); }
-    }
-    let kap = array<Real, 2>(kappa(0u), kappa(1u));
-    let ksum = kap[0] + kap[1];
-    let rot_free = array<bool, 2>(ld_e(E_ROTFREE) != 0.0, ld_e(E_ROTFREE + 1u) != 0.0);
-    let dw = c_nu / (dt * (1.0 + ksum * c_nu));
-    for (var l = 0u; l < 2u; l++) {
-        for (var m = 0u; m < 2u; m++) {
-            for (var a = 0u; a < 2u; a++) {
-                for (var b = 0u; b < 2u; b++) {
-                    let mass = h * m2(l, m) * irho(a, b) / dt;
-                    let pl = field_of(l, a);
-                    let qm = field_of(m, b);
-                    gs[8u * pl + qm] += mass * 2.0 / dt;
-                    for (var qq = 0u; qq < 2u; qq++) {
-                        if rot_free[qq] {
-                            gs[8u * pl + field_of(qq, b)] -= mass * 2.0 * kap[m] * dw;
-                        }
-                    }
-                }
-            }
-        }
-    }
-    for (var pf = 0u; pf < 8u; pf++) {
-        let r0 = field_start(pf);
-        let tt = mt(tmat[pf]);
-        for (var qf = 0u; qf < 8u; qf++) {
-            let gpq = gs[8u * pf + qf];
-            if gpq == 0.0 { continue; }
-            kadd_blk(r0, field_start(qf), mscale(mm(tt, jmat[qf]), gpq));
-        }
-    }
-    for (var l = 0u; l < 2u; l++) {
-        let base = 2u + 3u * l;
-        let dm = cfg_d(kin.mid, l);
-        var blk = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
-        for (var i = 0u; i < 3u; i++) {
-            blk = madd(blk, mm(mm(hat(f[base + i]), amat(kin, l)), hat(dm[i])));
-        }
-        kadd_blk(th_idx(l), th_idx(l), mscale(blk, 0.5));
-    }
-    if trans {
-        let cv = 0.5 * h * a_rho * c_v;
-        for (var l = 0u; l < 2u; l++) {
-            for (var m = 0u; m < 2u; m++) {
-                let mmass = a_rho * h * m2(l, m);
-                for (var c = 0u; c < 3u; c++) {
-                    kadd(u_idx(l) + c, g_idx(m) + c, -2.0 * mmass / dt);
-                    kadd(g_idx(l) + c, u_idx(m) + c, -cv / dt);
-                    kadd(g_idx(l) + c, g_idx(m) + c, mmass + cv);
-                }
-            }
-        }
-    }
-    for (var i = 0u; i < 324u; i++) { st_o(O_K + i, kt[i]); }
 }
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= prm.n { return; }
     gi = gid.x;
     if ld_i(I_ACTIVE) == 0.0 { return; }
@@ -639,12 +538,270 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let st = load_state();
     var x: array<Real, 18>;
     for (var i = 0u; i < 18u; i++) { x[i] = ld_i(I_X + i); }
+    let keep = prm.want_tangent != 0u;
     if prm.mode == 1u {
         let c = consistent_scalars(st, x, dt);
-        evaluate(st, c.kin, c.s, dt, prm.want_tangent != 0u);
+        residual(st, c.kin, c.s, dt, keep);
     } else {
         let s = array<Real, 4>(ld_i(I_S), ld_i(I_S + 1u), ld_i(I_S + 2u), ld_i(I_S + 3u));
         let kin = kinematics(st, x, s[3], dt);
-        evaluate(st, kin, s, dt, prm.want_tangent != 0u);
+        residual(st, kin, s, dt, keep);
     }
+}
+
+// ---- tangent (twin of element::tangent), one 9×9 node block per invocation ----
+//
+// Invocation (x, y) handles block (l, m) = (y / 2, y % 2) of element slot tan_list[x]:
+// rows of node l (u_l θ_l g_l), columns of node m, of the row-major 18×18 output
+// (element-local order u0 θ0 u1 θ1 g0 g1). Neighbouring invocations share the block (no
+// divergence within a SIMD group or warp) and read neighbouring slots. Each entry is the
+// sum of the CPU kernel (src/element/mod.rs) in its order: material h B̃ᵀ D B̃, then
+// Tᵀ G_s J over the field pairs, then the θθ stress block, then the g rows. Live values:
+// B̃ of node l and D B̃ of node m (6×6 each), one 3×3 block and a few 3×3 factors.
+
+fn ld_o(f: u32) -> Real { return outp[f * prm.n + gi]; }
+fn kset(i: u32, j: u32, x: Real) { st_o(O_K + 18u * i + j, x); }
+fn ld_t3(f: u32) -> V3 { return V3(ld_t(f), ld_t(f + 1u), ld_t(f + 2u)); }
+fn ld_tri(f: u32) -> Tri { return Tri(ld_t3(f), ld_t3(f + 3u), ld_t3(f + 6u)); }
+
+// T_q (−hat of the mid-point director of field q; identity for R0, R1).
+fn tmat_of(mid: Cfg, q: u32) -> Tri {
+    if q < 2u { return eye(); }
+    let l = (q - 2u) / 3u;
+    let i = (q - 2u) % 3u;
+    return mscale(hat(cfg_d(mid, l)[i]), -1.0);
+}
+
+// Tangent prep, one invocation per (listed element, node n): the reduced strain-gradient
+// columns of node n, B̃_½ = B(Φ_½) T (T_BT) and D B̃_{n+1} = ½(1+β) C B(Φ_{n+1}) J (T_DB),
+// 6 rows × (3 u_n + 3 θ_n) each, computed once per element and node instead of once per
+// block. Index of row k, column group g (0: u_n, 1: θ_n), component c: 36 n + 6 k + 3 g + c.
+// Reduced strain-gradient columns of node n at configuration c: row k of u_n (B[k][R_n])
+// and of θ_n (Σ_a X_aᵀ B[k][director a of node n], X_a = T_a or J_a), written out from
+// the sparsity of B (above) so that no row or field index is dynamic; the θ sums run
+// over the nonzero terms in the order of the full sum (the others add exact zeros).
+struct Bt { u: array<V3, 6>, t: array<V3, 6>, }
+
+fn btilde(c: Cfg, h: Real, n: u32, x0: Tri, x1: Tri, x2: Tri) -> Bt {
+    var bt: Bt;
+    let half_dr = 0.5 * ((c.r1 - c.r0) / h);
+    let s = 0.5 / h;
+    var o = c.d1; // directors of the other end
+    var sg: Real = -1.0;
+    if n == 1u { o = c.d0; sg = 1.0; }
+    bt.u[0] = sg * (0.5 * (c.d0[0] + c.d1[0])) / h;
+    bt.u[1] = sg * (0.5 * (c.d0[1] + c.d1[1])) / h;
+    bt.u[2] = sg * (0.5 * (c.d0[2] + c.d1[2])) / h;
+    bt.t[0] = mtv(x0, half_dr);
+    bt.t[1] = mtv(x1, half_dr);
+    bt.t[2] = mtv(x2, half_dr);
+    // Ω rows (k, i, j) cyclic: end 0 has +s o_i at a = j and −s o_j at a = i; end 1 the
+    // opposite signs at b = j and b = i.
+    bt.t[3] = mtv(x1, sg * (s * o[2])) + mtv(x2, -sg * (s * o[1]));
+    bt.t[4] = mtv(x0, -sg * (s * o[2])) + mtv(x2, sg * (s * o[0]));
+    bt.t[5] = mtv(x0, sg * (s * o[1])) + mtv(x1, -sg * (s * o[0]));
+    return bt;
+}
+
+fn tangent_prep(n: u32) {
+    let h = ld_e(E_H);
+    let beta_g = ld_o(O_S);
+    let beta_o = ld_o(O_S + 1u);
+    let st = load_state();
+    let cfg1 = Cfg(ld_t3(T_C1), ld_t3(T_C1 + 3u), ld_tri(T_C1 + 6u), ld_tri(T_C1 + 15u));
+    let mid = cfg_mean(st.cfg, cfg1);
+    let amat_n = ld_tri(T_A + 9u * n);
+    let t0 = tmat_of(mid, 2u + 3u * n);
+    let t1 = tmat_of(mid, 3u + 3u * n);
+    let t2 = tmat_of(mid, 4u + 3u * n);
+    // D B̃_{n+1}: B at Φ_{n+1} with J_a = A_n T_a, then ½(1+β) C.
+    let b1 = btilde(cfg1, h, n, mm(amat_n, t0), mm(amat_n, t1), mm(amat_n, t2));
+    let sg = 0.5 * (1.0 + beta_g);
+    let so = 0.5 * (1.0 + beta_o);
+    let base = T_DB + 36u * n;
+    for (var i = 0u; i < 3u; i++) {
+        let cgi = sg * ld_e(E_CG + i);
+        st_t3(base + 6u * i, cgi * b1.u[i]);
+        st_t3(base + 6u * i + 3u, cgi * b1.t[i]);
+        let c0 = so * ld_e(E_CO + 3u * i);
+        let c1 = so * ld_e(E_CO + 3u * i + 1u);
+        let c2 = so * ld_e(E_CO + 3u * i + 2u);
+        st_t3(base + 6u * (3u + i), V3(0.0, 0.0, 0.0) + c0 * b1.u[3] + c1 * b1.u[4] + c2 * b1.u[5]);
+        st_t3(base + 6u * (3u + i) + 3u, V3(0.0, 0.0, 0.0) + c0 * b1.t[3] + c1 * b1.t[4] + c2 * b1.t[5]);
+    }
+    // B̃_½: B at Φ_½ with T_a.
+    let bm = btilde(mid, h, n, t0, t1, t2);
+    let bb = T_BT + 36u * n;
+    for (var k = 0u; k < 6u; k++) {
+        st_t3(bb + 6u * k, bm.u[k]);
+        st_t3(bb + 6u * k + 3u, bm.t[k]);
+    }
+}
+
+@compute @workgroup_size(64)
+fn tangent_prep_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n_tan { return; }
+    gi = tan_list[gid.x];
+    if ld_i(I_ACTIVE) == 0.0 { return; }
+    tangent_prep(gid.y);
+}
+
+// h B̃_½ᵀ D B̃ for one 3×3 field block: column c = Σ_k (h b_k) (d_k)_c, k ascending.
+fn mat_blk(b: array<V3, 6>, d: array<V3, 6>, h: Real) -> Tri {
+    let b0 = h * b[0];
+    let b1 = h * b[1];
+    let b2 = h * b[2];
+    let b3 = h * b[3];
+    let b4 = h * b[4];
+    let b5 = h * b[5];
+    let z = V3(0.0, 0.0, 0.0);
+    return Tri(
+        z + b0 * d[0].x + b1 * d[1].x + b2 * d[2].x + b3 * d[3].x + b4 * d[4].x + b5 * d[5].x,
+        z + b0 * d[0].y + b1 * d[1].y + b2 * d[2].y + b3 * d[3].y + b4 * d[4].y + b5 * d[5].y,
+        z + b0 * d[0].z + b1 * d[1].z + b2 * d[2].z + b3 * d[3].z + b4 * d[4].z + b5 * d[5].z,
+    );
+}
+
+fn ld_cols(f: u32) -> array<V3, 6> {
+    return array<V3, 6>(ld_t3(f), ld_t3(f + 6u), ld_t3(f + 12u), ld_t3(f + 18u), ld_t3(f + 24u), ld_t3(f + 30u));
+}
+
+fn st_blk(r0: u32, c0: u32, b: Tri) {
+    for (var c = 0u; c < 3u; c++) {
+        kset(r0, c0 + c, b[c].x);
+        kset(r0 + 1u, c0 + c, b[c].y);
+        kset(r0 + 2u, c0 + c, b[c].z);
+    }
+}
+
+// v0 (the stress part of G_s) plus the director masses between director a of end l and
+// director b of end m (a, b < 2), added in the CPU kernel's order over the summed end m'.
+fn dir_mass(v0: Real, l: u32, m: u32, a: u32, b: u32, h: Real, dt: Real, dw: Real, kap0: Real, kap1: Real, free_m: bool) -> Real {
+    var v = v0;
+    let i_ab = irho(a, b);
+    let mass0 = h * m2(l, 0u) * i_ab / dt;
+    if m == 0u { v += mass0 * 2.0 / dt; }
+    if free_m { v -= mass0 * 2.0 * kap0 * dw; }
+    let mass1 = h * m2(l, 1u) * i_ab / dt;
+    if m == 1u { v += mass1 * 2.0 / dt; }
+    if free_m { v -= mass1 * 2.0 * kap1 * dw; }
+    return v;
+}
+
+fn tangent_block(l: u32, m: u32) {
+    let h = ld_e(E_H);
+    let a_rho = ld_e(E_ARHO);
+    let dt = ld_e(E_DT);
+    let c_v = ld_o(O_S + 2u);
+    let c_nu = ld_o(O_S + 3u);
+    let st = load_state();
+    let cfg1 = Cfg(ld_t3(T_C1), ld_t3(T_C1 + 3u), ld_tri(T_C1 + 6u), ld_tri(T_C1 + 15u));
+    let mid = cfg_mean(st.cfg, cfg1);
+    let amat_l = ld_tri(T_A + 9u * l);
+    let amat_m = ld_tri(T_A + 9u * m);
+    let ch = 0.5 / h;
+    let hh = 0.5 * h;
+    let kap0 = kappa(0u);
+    let kap1 = kappa(1u);
+    let ksum = kap0 + kap1;
+    let free_m = ld_e(E_ROTFREE + m) != 0.0;
+    let dw = c_nu / (dt * (1.0 + ksum * c_nu));
+    // Stress forces n (per director index) and moments m' (hat form) of G_s, before ½h.
+    let n = V3(ld_t(T_SS), ld_t(T_SS + 1u), ld_t(T_SS + 2u)) * ch;
+    let mo = V3(ld_t(T_SS + 3u), ld_t(T_SS + 4u), ld_t(T_SS + 5u)) * ch;
+    // T_i (node l, test side) and J_j = A_m T_j (node m, trial side).
+    let dl = cfg_d(mid, l);
+    let dm = cfg_d(mid, m);
+    let t0 = mscale(hat(dl[0]), -1.0);
+    let t1 = mscale(hat(dl[1]), -1.0);
+    let t2 = mscale(hat(dl[2]), -1.0);
+    let j0 = mm(amat_m, mscale(hat(dm[0]), -1.0));
+    let j1 = mm(amat_m, mscale(hat(dm[1]), -1.0));
+    let j2 = mm(amat_m, mscale(hat(dm[2]), -1.0));
+    let bu = ld_cols(T_BT + 36u * l);
+    let bt = ld_cols(T_BT + 36u * l + 3u);
+    let du = ld_cols(T_DB + 36u * m);
+    let dt3 = ld_cols(T_DB + 36u * m + 3u);
+    let r0 = 6u * l;
+    let c0 = 6u * m;
+    // Each block: material, then G_s terms over its field pairs in the CPU kernel's order
+    // (pairs with G_s = 0 add exact zeros; products with an identity T or J are exact).
+    // u_l × u_m: translational mass.
+    let guu = 2.0 / (dt * dt) * a_rho * h * m2(l, m);
+    st_blk(r0, c0, madd(mat_blk(bu, du, h), mscale(eye(), guu)));
+    // u_l × θ_m: stress forces (+ at end 1, − at end 0).
+    var sl: Real = -1.0;
+    if l == 1u { sl = 1.0; }
+    var sm: Real = -1.0;
+    if m == 1u { sm = 1.0; }
+    var b = mat_blk(bu, dt3, h);
+    b = madd(b, mscale(j0, (sl * n.x) * hh));
+    b = madd(b, mscale(j1, (sl * n.y) * hh));
+    b = madd(b, mscale(j2, (sl * n.z) * hh));
+    st_blk(r0, c0 + 3u, b);
+    // θ_l × u_m.
+    b = mat_blk(bt, du, h);
+    b = madd(b, mscale(mt(t0), (sm * n.x) * hh));
+    b = madd(b, mscale(mt(t1), (sm * n.y) * hh));
+    b = madd(b, mscale(mt(t2), (sm * n.z) * hh));
+    st_blk(r0 + 3u, c0, b);
+    // θ_l × θ_m: moments couple A_a with B_b (G[a][b] = hat(m')[a][b], transposed for
+    // l = 1), then the director masses (directors 0 and 1 of each end).
+    var hm = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
+    if l == 0u && m == 1u { hm = hat(mo); }
+    if l == 1u && m == 0u { hm = mt(hat(mo)); }
+    // g_ij = hm[j][i] (column j, row i), times ½h, plus masses.
+    let g00 = dir_mass(hm[0].x * hh, l, m, 0u, 0u, h, dt, dw, kap0, kap1, free_m);
+    let g01 = dir_mass(hm[1].x * hh, l, m, 0u, 1u, h, dt, dw, kap0, kap1, free_m);
+    let g10 = dir_mass(hm[0].y * hh, l, m, 1u, 0u, h, dt, dw, kap0, kap1, free_m);
+    let g11 = dir_mass(hm[1].y * hh, l, m, 1u, 1u, h, dt, dw, kap0, kap1, free_m);
+    b = mat_blk(bt, dt3, h);
+    let tt0 = mt(t0);
+    let tt1 = mt(t1);
+    let tt2 = mt(t2);
+    b = madd(b, mscale(mm(tt0, j0), g00));
+    b = madd(b, mscale(mm(tt0, j1), g01));
+    b = madd(b, mscale(mm(tt0, j2), hm[2].x * hh));
+    b = madd(b, mscale(mm(tt1, j0), g10));
+    b = madd(b, mscale(mm(tt1, j1), g11));
+    b = madd(b, mscale(mm(tt1, j2), hm[2].y * hh));
+    b = madd(b, mscale(mm(tt2, j0), hm[0].z * hh));
+    b = madd(b, mscale(mm(tt2, j1), hm[1].z * hh));
+    b = madd(b, mscale(mm(tt2, j2), hm[2].z * hh));
+    if l == m {
+        let f = T_F + 9u * l;
+        var th = Tri(V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0), V3(0.0, 0.0, 0.0));
+        th = madd(th, mm(mm(hat(ld_t3(f)), amat_l), hat(dl[0])));
+        th = madd(th, mm(mm(hat(ld_t3(f + 3u)), amat_l), hat(dl[1])));
+        th = madd(th, mm(mm(hat(ld_t3(f + 6u)), amat_l), hat(dl[2])));
+        b = madd(b, mscale(th, 0.5));
+    }
+    st_blk(r0 + 3u, c0 + 3u, b);
+    // g rows and columns: translational dissipation terms on the diagonals (the other
+    // entries of these rows and columns, and θ_l × g_m, g_l × θ_m, are structurally zero:
+    // the tangent pass never writes them, and the output buffer starts zeroed).
+    let trans = ld_e(E_TRANS) != 0.0;
+    let mmass = a_rho * h * m2(l, m);
+    let cv = 0.5 * h * a_rho * c_v;
+    var ug: Real = 0.0;
+    var gu: Real = 0.0;
+    var gg: Real = 0.0;
+    if trans {
+        ug = -2.0 * mmass / dt;
+        gu = -cv / dt;
+        gg = mmass + cv;
+    }
+    for (var c = 0u; c < 3u; c++) {
+        kset(u_idx(l) + c, g_idx(m) + c, ug);
+        kset(g_idx(l) + c, u_idx(m) + c, gu);
+        kset(g_idx(l) + c, g_idx(m) + c, gg);
+    }
+}
+
+@compute @workgroup_size(64)
+fn tangent_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n_tan { return; }
+    gi = tan_list[gid.x];
+    if ld_i(I_ACTIVE) == 0.0 { return; }
+    tangent_block(gid.y / 2u, gid.y % 2u);
 }

@@ -13,6 +13,10 @@
 //!   off-diagonal blocks, nothing of the other member slots; an iteration at an unchanged
 //!   state uploads only the frozen scalars per element and the increments of the nodes
 //!   that moved.
+//! * A dispatch in which only some members want the tangent gives those members exactly
+//!   the systems of a dispatch in which all do, and the others exactly their residuals
+//!   and scales; the tangent pass runs over the wanting members' elements only, and not
+//!   at all when none wants it.
 //! * The field offsets of the bookkeeping shaders match `src/gpu/layout.rs`.
 //!
 //! Without an adapter the tests print `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
@@ -21,10 +25,11 @@
 use std::sync::Arc;
 
 use cosserat::batch::{BackendChoice, Executor, GpuBatcher};
-use cosserat::element::FrozenScalars;
-use cosserat::gpu::gpu_required;
+use cosserat::element::{FrozenScalars, StepConsts};
 use cosserat::gpu::layout::{I_S, NI, NS};
+use cosserat::gpu::{gpu_required, Assembler, ElementKernel};
 use cosserat::integrator::dofs::NONE;
+use cosserat::integrator::evaluate::AssembledSystem;
 use cosserat::integrator::{IntegratorParams, Scheme, Simulation};
 use cosserat::math::rng::Rng;
 use cosserat::model::Model;
@@ -228,10 +233,11 @@ fn readback_and_upload_bytes_follow_the_layout() {
         364 * 8,
         40 * 8
     );
-    // The first run uploaded constants, state and iteration data; the state has not
-    // changed since, so the next iteration uploads the frozen scalars and active flags
-    // (`NI − I_S` fields per element) and 9 increments per node whose increment changed
-    // (every node with an unknown).
+    // The first run uploaded constants, state and iteration data (and the tangent pass's
+    // element list, 4 bytes per element); the state has not changed since, so the next
+    // iteration uploads the frozen scalars and active flags (`NI − I_S` fields per
+    // element), 9 increments per node whose increment changed (every node with an
+    // unknown) and the member's tangent flag (4 bytes: set, then cleared).
     let moved = gpu
         .dof_map()
         .nodes
@@ -239,13 +245,110 @@ fn readback_and_upload_bytes_follow_the_layout() {
         .filter(|nd| nd.u.iter().chain(&nd.th).chain(&nd.g).any(|&i| i != NONE))
         .count();
     let up = t2.bytes_up - t1.bytes_up;
-    assert_eq!(up, 8 * ((NI - I_S) * ne + 9 * moved) as u64);
-    assert!(t1.bytes_up - t0.bytes_up >= 8 * ((NS + NI - I_S) * ne) as u64);
+    assert_eq!(up, 8 * ((NI - I_S) * ne + 9 * moved) as u64 + 4);
+    assert!(t1.bytes_up - t0.bytes_up >= 8 * ((NS + NI - I_S) * ne) as u64 + 4 * ne as u64);
     println!(
         "bytes up per element per iteration at an unchanged state: {:.1} (per-element increments: {})",
         up as f64 / ne as f64,
         8 * NI
     );
+}
+
+#[test]
+fn tangent_for_some_members_equals_tangent_for_all() {
+    let Some(ctx) = gpu() else { return };
+    let (model, params) = scene("cantilever", Some(Scheme::edmc2(0.5)));
+    // Three members at different states.
+    let sims: Vec<Simulation> = [1usize, 3, 2]
+        .iter()
+        .map(|&steps| {
+            let mut s = Simulation::new(model.clone(), params).unwrap();
+            for _ in 0..steps {
+                s.step().expect("CPU step");
+            }
+            s
+        })
+        .collect();
+    let (ne, nn) = (model.elements.len(), model.n_nodes());
+    let mut kern = ElementKernel::new(&ctx, 3 * ne).unwrap();
+    let mut asm = Assembler::new(&ctx, &mut kern, 3, ne, nn).unwrap();
+    let k = StepConsts {
+        dt: params.dt,
+        scheme: params.scheme,
+    };
+    let trans = k.scheme.translational_dissipation();
+    let ends: Vec<[usize; 2]> = model.elements.iter().map(|e| e.nodes).collect();
+    for (m, sim) in sims.iter().enumerate() {
+        let masks: Vec<u32> = sim
+            .dof_map()
+            .elements
+            .iter()
+            .map(|d| {
+                d.iter()
+                    .enumerate()
+                    .filter(|(_, &i)| i != NONE)
+                    .fold(0u32, |acc, (r, _)| acc | (1 << r))
+            })
+            .collect();
+        asm.set_member(m, nn, &ends, &masks).unwrap();
+        for e in 0..ne {
+            kern.set_element(m * ne + e, &sim.element_data()[e], &k, trans);
+            kern.set_state(
+                m * ne + e,
+                &sim.state().element(&model, e),
+                &sim.state().eps[e],
+            );
+        }
+    }
+    let mut rng = Rng::new(0x5eed_0011);
+    let s = FrozenScalars {
+        beta_gamma: 0.4,
+        beta_omega: 0.3,
+        c_v: 0.2,
+        c_nu: 0.1,
+    };
+    let incs: Vec<Vec<[f64; 9]>> = (0..3)
+        .map(|_| {
+            (0..nn)
+                .map(|_| std::array::from_fn(|_| 1e-3 * rng.symmetric()))
+                .collect()
+        })
+        .collect();
+    let mut run = |pending: &[(usize, bool)]| -> (Vec<AssembledSystem>, u64) {
+        for (m, x) in incs.iter().enumerate() {
+            (0..ne).for_each(|e| kern.set_scalars(m * ne + e, &s));
+            asm.set_increments(m, x);
+        }
+        let t0 = kern.timers.tangent_elements;
+        asm.run(&mut kern, pending).unwrap();
+        let systems = pending
+            .iter()
+            .map(|&(m, t)| asm.system(m, nn, ne, t))
+            .collect();
+        (systems, kern.timers.tangent_elements - t0)
+    };
+    let (all, n_all) = run(&[(0, true), (1, true), (2, true)]);
+    let (some, n_some) = run(&[(0, false), (1, true), (2, false)]);
+    let (none, n_none) = run(&[(0, false), (1, false), (2, false)]);
+    assert_eq!((n_all, n_some, n_none), (3 * ne as u64, ne as u64, 0));
+    assert!(all[1].node_k.len() == nn && all[1].off_k.len() == ne);
+    assert_eq!(
+        some[1], all[1],
+        "member 1 wants the tangent in both dispatches"
+    );
+    for m in [0, 2] {
+        assert!(some[m].node_k.is_empty() && some[m].off_k.is_empty());
+        assert_eq!(
+            (&some[m].node_r, some[m].scale),
+            (&all[m].node_r, all[m].scale)
+        );
+    }
+    for m in 0..3 {
+        assert_eq!(
+            (&none[m].node_r, none[m].scale),
+            (&all[m].node_r, all[m].scale)
+        );
+    }
 }
 
 /// The element-output and iteration field offsets the bookkeeping shaders read or write

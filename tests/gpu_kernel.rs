@@ -2,13 +2,16 @@
 //!
 //! On seeded random elements (random sections, distorted triads, velocities, increments,
 //! every scheme, clamped/free ends, with and without translational dissipation), the WGSL
-//! kernel (`shaders/element.wgsl`) returns the residual, row scales, tangent and — in
-//! consistent mode — the EDMC local scalars of [`cosserat::element`] to
-//! `KERNEL_PARITY_RTOL` (f64), measured relative to the largest entry of each quantity.
-//! The f32 fallback is measured on the same elements and must stay within
-//! `F32_RTOL` (the bound README's "GPU precision" documents).
-//! Without an adapter the GPU tests print `skipped: no adapter` unless
-//! `COSSERAT_REQUIRE_GPU` is set, in which case they fail.
+//! kernel (`shaders/element.wgsl`: residual pass, then the tangent pass by 9×9 node
+//! blocks) returns the residual, row scales, tangent and — in consistent mode — the EDMC
+//! local scalars of [`cosserat::element`] to `KERNEL_PARITY_RTOL` (f64; the scalars, which
+//! come out of a fixed-point iteration, to `SCALARS_RTOL`), measured relative to the
+//! largest entry of each quantity. A residual-only dispatch returns the same residual as
+//! one with the tangent. The f32 fallback is measured on the same elements and must stay
+//! within `F32_RTOL` (docs/gpu.md, "Kernels"). A software adapter says it is one, and the
+//! pipeline cache lands in the folder it is given, as one complete file per adapter and
+//! shader revision that a second context reads back. Without an adapter the GPU tests print
+//! `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU` is set, in which case they fail.
 
 use cosserat::element::strain::Config;
 use cosserat::element::{
@@ -22,10 +25,14 @@ use cosserat::math::cay;
 use cosserat::model::{ElementProps, Mat3, Vec3};
 use nalgebra::{Matrix2, Vector6};
 
-/// f64 parity: a few hundred round-offs of the largest term.
-const KERNEL_PARITY_RTOL: f64 = 1e-12;
-/// f32 fallback bound (documented in README, "GPU precision").
-const F32_RTOL: f64 = 1e-4;
+/// f64 parity of residual, scales and tangent: measured ≤ 5.8e-16 on lavapipe (the same
+/// operations in the same order; the difference is the compilers' contractions).
+const KERNEL_PARITY_RTOL: f64 = 5e-15;
+/// f64 parity of the consistent EDMC scalars: measured 7.6e-15 (the fixed-point
+/// iteration on c_ν amplifies round-off).
+const SCALARS_RTOL: f64 = 5e-14;
+/// f32 fallback bound: measured 3.1e-6 (residual and scales), 2.7e-7 (tangent).
+const F32_RTOL: f64 = 3e-5;
 
 struct Rng(u64);
 impl Rng {
@@ -277,7 +284,12 @@ fn gpu_matches_cpu_element_kernel_f64() {
             .iter()
             .enumerate()
         {
-            assert!(w[q] <= KERNEL_PARITY_RTOL, "{mode:?} {name}: {:.3e}", w[q]);
+            let bound = if q == 3 {
+                SCALARS_RTOL
+            } else {
+                KERNEL_PARITY_RTOL
+            };
+            assert!(w[q] <= bound, "{mode:?} {name}: {:.3e}", w[q]);
         }
     }
 }
@@ -295,6 +307,51 @@ fn gpu_f32_fallback_error_is_bounded() {
     for (q, name) in ["residual", "scales", "tangent"].iter().enumerate() {
         assert!(w[q] <= F32_RTOL, "f32 {name}: {:.3e}", w[q]);
     }
+}
+
+#[test]
+fn software_adapter_and_pipeline_cache_file() {
+    let Some(ctx) = context() else { return };
+    let name = ctx.info.name.to_lowercase();
+    if ["llvmpipe", "lavapipe", "swiftshader", "warp"]
+        .iter()
+        .any(|s| name.contains(s))
+    {
+        assert!(
+            ctx.is_software(),
+            "{} is a software adapter",
+            ctx.describe()
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cached = GpuContext::with_cache_dir(None, Some(dir.path().join("cache"))).unwrap();
+    let Some(path) = cached.pipeline_cache_path().map(|p| p.to_path_buf()) else {
+        println!("{}: no PIPELINE_CACHE, nothing cached", ctx.describe());
+        return;
+    };
+    ElementKernel::new(&cached, 8).unwrap();
+    let files: Vec<_> = std::fs::read_dir(dir.path().join("cache"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(
+        files,
+        vec![path.clone()],
+        "one cache file, no temporary left"
+    );
+    let name = path.file_name().unwrap().to_str().unwrap();
+    assert!(name.starts_with("wgpu_pipeline_cache_") && name.ends_with(".bin"));
+    let len = std::fs::metadata(&path).unwrap().len();
+    println!("pipeline cache of {}: {len} bytes", ctx.describe());
+    assert!(len > 0);
+    // A second context reads it back and builds the same pipelines.
+    let again = GpuContext::with_cache_dir(None, Some(dir.path().join("cache"))).unwrap();
+    assert_eq!(again.pipeline_cache_path(), Some(path.as_path()));
+    ElementKernel::new(&again, 8).unwrap();
+    assert!(GpuContext::with_cache_dir(None, None)
+        .unwrap()
+        .pipeline_cache_path()
+        .is_none());
 }
 
 /// The shader's field offsets are the Rust layout's (no GPU needed).
@@ -325,6 +382,12 @@ fn shader_layout_matches_rust_layout() {
         ("O_SC", layout::O_SC),
         ("O_K", layout::O_K),
         ("O_S", layout::O_S),
+        ("T_C1", layout::T_C1),
+        ("T_A", layout::T_A),
+        ("T_SS", layout::T_SS),
+        ("T_F", layout::T_F),
+        ("T_BT", layout::T_BT),
+        ("T_DB", layout::T_DB),
     ];
     for (name, val) in consts {
         let needle = format!("const {name}: u32 = {val}u;");

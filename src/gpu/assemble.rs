@@ -11,6 +11,7 @@
 use super::context::{GpuContext, Precision};
 use super::kernel::{
     shader_precision, take_runs, write_scalars, ElementKernel, KernelMode, KernelTimers, Readback,
+    TangentSlots,
 };
 use super::layout::{AsmLayout, A_NODE};
 use super::GpuError;
@@ -48,6 +49,8 @@ const INC: usize = 1;
 const ROW_MASK: usize = 2;
 const MEMBER_N: usize = 3;
 const ELEM_NODES: usize = 4;
+/// Per member slot: 1 when the dispatch assembles its tangent.
+const MEMBER_TAN: usize = 5;
 
 /// Assembly of `members` member slots of at most `per_slot` elements and `nodes_per_slot`
 /// nodes each, over the element slots of one [`ElementKernel`] (member `m`'s element `e`
@@ -63,11 +66,13 @@ pub struct Assembler {
     queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
-    /// Topology buffers (the assembly pass binds the first four, the gather pass the
-    /// last: per element slot, the node slots of its ends).
-    topo: [wgpu::Buffer; 5],
+    /// Topology buffers (the assembly pass binds the first four and the per-member
+    /// tangent flags, the gather pass per element slot the node slots of its ends).
+    topo: [wgpu::Buffer; 6],
     /// Host mirrors of the topology buffers.
-    topo_host: [Vec<u32>; 5],
+    topo_host: [Vec<u32>; 6],
+    /// Element slots of the members that want the tangent (the tangent pass's list).
+    tan_slots: Vec<u32>,
     gather_pipeline: wgpu::ComputePipeline,
     gather_group: wgpu::BindGroup,
     /// Node increments (9 per node slot, field-major) on the device, their host mirror
@@ -131,16 +136,25 @@ impl Assembler {
         let n_elems = kernel.capacity();
         let device = ctx.device.clone();
         let w = ElementKernel::width(ctx.precision) as u64;
-        let pipeline = compute_pipeline(&device, "assemble", ASSEMBLE_WGSL, ctx.precision);
-        let gather_pipeline = compute_pipeline(&device, "gather", GATHER_WGSL, ctx.precision);
+        let pipeline = compute_pipeline(ctx, "assemble", ASSEMBLE_WGSL);
+        let gather_pipeline = compute_pipeline(ctx, "gather", GATHER_WGSL);
+        ctx.save_pipeline_cache();
         let topo_host = [
             vec![0u32; 2 * n_nodes],
             vec![0u32; 2 * n_elems],
             vec![0u32; n_elems],
             vec![0u32; layout.members],
             vec![0u32; 2 * n_elems],
+            vec![0u32; layout.members],
         ];
-        let names = ["node_inc", "inc", "row_mask", "member_n", "elem_nodes"];
+        let names = [
+            "node_inc",
+            "inc",
+            "row_mask",
+            "member_n",
+            "elem_nodes",
+            "member_tan",
+        ];
         let topo = std::array::from_fn(|b| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(names[b]),
@@ -187,6 +201,7 @@ impl Assembler {
                 &topo[MEMBER_N],
                 &asm,
                 &params,
+                &topo[MEMBER_TAN],
             ],
         );
         let node_x = device.create_buffer(&wgpu::BufferDescriptor {
@@ -231,6 +246,7 @@ impl Assembler {
             bind_group,
             topo,
             topo_host,
+            tan_slots: Vec::new(),
             gather_pipeline,
             gather_group,
             node_x,
@@ -325,10 +341,12 @@ impl Assembler {
         }
     }
 
-    /// Runs the gather pass, the element pass of `kernel` (frozen scalars) and the
+    /// Runs the gather pass, the element passes of `kernel` (frozen scalars) and the
     /// assembly pass in one command buffer and reads back the assembled systems of the
     /// `pending` member slots: each one's node residuals and scales, and its blocks when it
-    /// asked for the tangent (`pending[i].1`). Traffic and time go to `kernel`'s timers.
+    /// asked for the tangent (`pending[i].1`). The tangent pass runs only over the
+    /// elements of the members that asked for it (not at all when none did), and only
+    /// their blocks are assembled. Traffic and time go to `kernel`'s timers.
     pub fn run(
         &mut self,
         kernel: &mut ElementKernel,
@@ -352,6 +370,32 @@ impl Assembler {
                 );
             }
         }
+        // Per-member tangent flags (uploaded where they changed) and the tangent pass's
+        // element list.
+        let mut flags = vec![0u32; l.members];
+        self.tan_slots.clear();
+        for &(m, t) in pending.iter().filter(|p| p.1) {
+            flags[m] = t as u32;
+            let base = (m * l.per_slot) as u32;
+            let n = self.topo_host[MEMBER_N][m];
+            self.tan_slots.extend(base..base + n);
+        }
+        self.tan_slots.sort_unstable();
+        let mut changed: Vec<bool> = flags
+            .iter()
+            .zip(&self.topo_host[MEMBER_TAN])
+            .map(|(a, b)| a != b)
+            .collect();
+        self.topo_host[MEMBER_TAN] = flags;
+        for (lo, hi) in take_runs(&mut changed) {
+            let src = &self.topo_host[MEMBER_TAN][lo..hi];
+            self.queue.write_buffer(
+                &self.topo[MEMBER_TAN],
+                4 * lo as u64,
+                bytemuck::cast_slice(src),
+            );
+            kernel.timers.bytes_up += 4 * (hi - lo) as u64;
+        }
         kernel.timers.upload_s += t0.elapsed().as_secs_f64();
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -362,7 +406,12 @@ impl Assembler {
             pass.set_bind_group(0, &self.gather_group, &[]);
             pass.dispatch_workgroups(self.n_elems.div_ceil(64) as u32, 1, 1);
         }
-        kernel.encode(&mut enc, KernelMode::Frozen, want_tangent);
+        let tangent = if want_tangent {
+            TangentSlots::List(&self.tan_slots)
+        } else {
+            TangentSlots::None
+        };
+        kernel.encode(&mut enc, KernelMode::Frozen, tangent);
         let prm = Params {
             n_elem: self.n_elems as u32,
             n_node: self.n_nodes as u32,
@@ -460,24 +509,22 @@ fn member_runs(members: impl Iterator<Item = usize>) -> Vec<(usize, usize)> {
     runs
 }
 
-fn compute_pipeline(
-    device: &wgpu::Device,
-    label: &str,
-    src: &str,
-    precision: Precision,
-) -> wgpu::ComputePipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(shader_precision(src, precision).into()),
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    })
+fn compute_pipeline(ctx: &GpuContext, label: &str, src: &str) -> wgpu::ComputePipeline {
+    let module = ctx
+        .device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(shader_precision(src, ctx.precision).into()),
+        });
+    ctx.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: ctx.pipeline_cache(),
+        })
 }
 
 /// A bind group of `pipeline`'s group 0 with `buffers` at bindings 0, 1, ….

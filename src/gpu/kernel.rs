@@ -1,6 +1,9 @@
-//! The element kernel on the GPU: pipeline built once, host mirrors of the four
-//! struct-of-arrays buffers, upload of what changed, one dispatch, readback of what is
-//! needed (residual and scales only, or everything with the tangent).
+//! The element kernel on the GPU: three pipelines built once from `shaders/element.wgsl`
+//! (the residual pass, one invocation per element; for the elements that want a tangent,
+//! the tangent prep pass, two invocations per element, and the tangent block pass, four), host mirrors of the struct-of-arrays buffers,
+//! upload of what changed, one dispatch, readback of what is needed (residual and scales
+//! only, or everything with the tangent). The model behind the split is in docs/gpu.md,
+//! "Kernels".
 
 use std::time::Instant;
 
@@ -66,6 +69,9 @@ pub struct KernelTimers {
     pub bytes_up: u64,
     /// Bytes read back.
     pub bytes_down: u64,
+    /// Element slots dispatched to the tangent pass (four invocations each), summed over
+    /// dispatches: the tangent work done (every slot runs the residual pass).
+    pub tangent_elements: u64,
 }
 
 #[repr(C)]
@@ -74,7 +80,18 @@ struct Params {
     n: u32,
     want_tangent: u32,
     mode: u32,
-    pad: u32,
+    n_tan: u32,
+}
+
+/// Which element slots the tangent pass evaluates.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum TangentSlots<'a> {
+    /// None: the residual pass alone runs (no tangent work at all).
+    None,
+    /// Every slot (the inactive ones return at once).
+    All,
+    /// These slots.
+    List(&'a [u32]),
 }
 
 /// A batch of `capacity` element slots on the GPU.
@@ -83,10 +100,15 @@ pub struct ElementKernel {
     precision: Precision,
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipeline: wgpu::ComputePipeline,
+    residual_pipeline: wgpu::ComputePipeline,
+    prep_pipeline: wgpu::ComputePipeline,
+    tangent_pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     bufs: [wgpu::Buffer; 4],
     params: wgpu::Buffer,
+    /// Element slots of the tangent pass (u32 each) and the list last uploaded.
+    tan_list: wgpu::Buffer,
+    tan_uploaded: Vec<u32>,
     /// Mappable twin of the output buffer and host copy of the output, created by the
     /// first [`Self::run`] (the batch path reads assembled systems instead and never
     /// allocates them).
@@ -114,14 +136,17 @@ impl ElementKernel {
         }
     }
 
-    /// The largest number of element slots one kernel may hold on this device.
+    /// The largest number of element slots one kernel may hold on this device: the
+    /// output buffer (`NO` scalars per slot) must fit one storage binding, and the passes'
+    /// one row of workgroups (64 invocations each; the tangent pass runs four such rows).
     pub fn max_capacity(ctx: &GpuContext) -> usize {
         let per = (NO * Self::width(ctx.precision)) as u64;
         let lim = ctx
             .limits
             .max_storage_buffer_binding_size
             .min(ctx.limits.max_buffer_size);
-        (lim / per) as usize
+        let groups = ctx.limits.max_compute_workgroups_per_dimension as u64;
+        ((lim / per).min(groups * 64)) as usize
     }
 
     /// Builds the pipeline and buffers for `capacity` element slots (all inactive).
@@ -140,14 +165,56 @@ impl ElementKernel {
             label: Some("element.wgsl"),
             source: wgpu::ShaderSource::Wgsl(shader_source(ctx.precision).into()),
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("element"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
+            entries: &[
+                storage(0, true),
+                storage(1, true),
+                storage(2, true),
+                storage(3, false),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage(5, false),
+                storage(6, true),
+            ],
         });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("element"),
+            bind_group_layouts: &[Some(&bgl)],
+            immediate_size: 0,
+        });
+        let pipe = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: ctx.pipeline_cache(),
+            })
+        };
+        let residual_pipeline = pipe("residual_main");
+        let prep_pipeline = pipe("tangent_prep_main");
+        let tangent_pipeline = pipe("tangent_main");
+        ctx.save_pipeline_cache();
         let mk = |label: &str, fields: usize, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -167,16 +234,22 @@ impl ElementKernel {
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             ),
         ];
+        let tmid = mk("intermediate", NT, wgpu::BufferUsages::STORAGE);
+        let tan_list = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tangent slots"),
+            size: 4 * cap as u64,
+            usage: input,
+            mapped_at_creation: false,
+        });
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("params"),
             size: std::mem::size_of::<Params>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let layout = pipeline.get_bind_group_layout(0);
         let entries: Vec<wgpu::BindGroupEntry> = bufs
             .iter()
-            .chain(std::iter::once(&params))
+            .chain([&params, &tmid, &tan_list])
             .enumerate()
             .map(|(i, b)| wgpu::BindGroupEntry {
                 binding: i as u32,
@@ -185,7 +258,7 @@ impl ElementKernel {
             .collect();
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("element"),
-            layout: &layout,
+            layout: &bgl,
             entries: &entries,
         });
         Ok(Self {
@@ -193,10 +266,14 @@ impl ElementKernel {
             precision: ctx.precision,
             device,
             queue: ctx.queue.clone(),
-            pipeline,
+            residual_pipeline,
+            prep_pipeline,
+            tangent_pipeline,
             bind_group,
             bufs,
             params,
+            tan_list,
+            tan_uploaded: Vec::new(),
             staging: None,
             host: [
                 vec![0.0; NE * cap],
@@ -389,34 +466,62 @@ impl ElementKernel {
         &self.bufs[3]
     }
 
-    /// Uploads what changed and records the element pass into `enc` (counted as upload
-    /// time).
+    /// Uploads what changed and records the element passes into `enc` (counted as upload
+    /// time): the residual pass over every slot, then, unless `tangent` is
+    /// [`TangentSlots::None`], the tangent pass over the listed slots (a changed list goes
+    /// up as 4 bytes per slot).
     pub(crate) fn encode(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
         mode: KernelMode,
-        want_tangent: bool,
+        tangent: TangentSlots<'_>,
     ) {
         let t0 = Instant::now();
         self.upload();
+        let n_tan = match tangent {
+            TangentSlots::None => 0,
+            TangentSlots::All => self.cap,
+            TangentSlots::List(l) => l.len(),
+        };
+        let list: Option<Vec<u32>> = match tangent {
+            TangentSlots::None => None,
+            TangentSlots::All => Some((0..self.cap as u32).collect()),
+            TangentSlots::List(l) => Some(l.to_vec()),
+        };
+        if let Some(list) = list.filter(|l| !l.is_empty() && *l != self.tan_uploaded) {
+            self.queue
+                .write_buffer(&self.tan_list, 0, bytemuck::cast_slice(&list));
+            self.timers.bytes_up += 4 * list.len() as u64;
+            self.tan_uploaded = list;
+        }
         let prm = Params {
             n: self.cap as u32,
-            want_tangent: want_tangent as u32,
+            want_tangent: (n_tan > 0) as u32,
             mode: match mode {
                 KernelMode::Frozen => 0,
                 KernelMode::Consistent => 1,
             },
-            pad: 0,
+            n_tan: n_tan as u32,
         };
+        self.timers.tangent_elements += n_tan as u64;
         self.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("element"),
             timestamp_writes: None,
         });
-        pass.set_pipeline(&self.pipeline);
+        pass.set_pipeline(&self.residual_pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.dispatch_workgroups(self.cap.div_ceil(64) as u32, 1, 1);
+        if n_tan > 0 {
+            // 64 listed slots per workgroup (x); one row of workgroups per node (y) in the
+            // prep pass, per 9×9 node block in the block pass.
+            let x = n_tan.div_ceil(64) as u32;
+            pass.set_pipeline(&self.prep_pipeline);
+            pass.dispatch_workgroups(x, 2, 1);
+            pass.set_pipeline(&self.tangent_pipeline);
+            pass.dispatch_workgroups(x, 4, 1);
+        }
         drop(pass);
         self.timers.upload_s += t0.elapsed().as_secs_f64();
     }
@@ -427,7 +532,12 @@ impl ElementKernel {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        self.encode(&mut enc, mode, want_tangent);
+        let tangent = if want_tangent {
+            TangentSlots::All
+        } else {
+            TangentSlots::None
+        };
+        self.encode(&mut enc, mode, tangent);
         let w = Self::width(self.precision) as u64;
         let cap = self.cap as u64;
         // Field-major: the residual and scales are one leading range, the scalars a

@@ -1,5 +1,5 @@
 //! Struct-of-arrays layout of the kernel buffers: field `f` of element `i` lives at
-//! `f * capacity + i`. Twin of the `E_*`, `S_*`, `I_*`, `O_*` constants at the top of
+//! `f * capacity + i`. Twin of the `E_*`, `S_*`, `I_*`, `O_*`, `T_*` constants at the top of
 //! `shaders/element.wgsl` (which point back here); `tests/gpu_kernel.rs` checks them
 //! against the shader text.
 
@@ -62,6 +62,23 @@ pub const O_K: usize = 36;
 pub const O_S: usize = 360;
 /// Number of output fields.
 pub const NO: usize = 364;
+
+/// Residual pass → tangent pass (intermediate buffer): new configuration (24: `r0 r1`,
+/// columns of `d0`, columns of `d1`).
+pub const T_C1: usize = 0;
+/// Columns of `(I − ½ hat θ_l)⁻¹`, `l = 0, 1` (18).
+pub const T_A: usize = 24;
+/// Stresses `S*` (6).
+pub const T_SS: usize = 42;
+/// Director forces `f[2..8]` (stress and inertia, 18).
+pub const T_F: usize = 48;
+/// Tangent prep → tangent blocks: `B̃_½` columns of nodes 0 and 1 (72, at
+/// `36 n + 6 k + 3 g + c` for row `k`, group `g` (u, θ), component `c`).
+pub const T_BT: usize = 66;
+/// `D B̃_{n+1}` columns of nodes 0 and 1 (72, same order).
+pub const T_DB: usize = 138;
+/// Number of intermediate fields.
+pub const NT: usize = 210;
 
 /// Node-local unknowns (`u0..2 θ0..2 g0..2`) of the assembled system.
 pub const A_NODE: usize = 9;

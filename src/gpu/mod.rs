@@ -2,18 +2,20 @@
 //! [`crate::element`]).
 //!
 //! * [`context`]: adapter choice (`--adapter` substring, `WGPU_BACKEND`), device with the
-//!   adapter's own limits, `SHADER_F64` detection, a one-line adapter description.
+//!   adapter's own limits, `SHADER_F64` detection, a one-line adapter description, whether
+//!   the adapter is a software rasterizer, the per-user compiled-pipeline cache.
 //! * [`layout`]: the struct-of-arrays buffer layout (field offsets), twin of the constants
 //!   at the top of `shaders/element.wgsl`.
-//! * [`kernel`]: the compute pipeline built once, host mirrors of the buffers, upload of
-//!   the changed slots, dispatch and readback of a batch of elements.
+//! * [`kernel`]: the element passes (residual; tangent prep and 9×9 tangent blocks for the
+//!   elements that want a tangent) built once, host mirrors of the buffers, upload of the
+//!   changed slots, dispatch and readback of a batch of elements.
 //! * [`assemble`]: the assembly pass run right after the element pass (node blocks,
 //!   residuals, off-diagonal blocks, per-member row scales), so that only assembled
 //!   systems are read back.
 //!
 //! f64 is used whenever the adapter offers `SHADER_F64`; otherwise the same shader runs in
-//! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (README,
-//! "GPU precision"); callers are told which precision they got, never silently.
+//! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (docs/gpu.md,
+//! "Kernels"); callers are told which precision they got, never silently.
 
 pub mod assemble;
 pub mod context;
