@@ -348,6 +348,8 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
     obj["model_unpack_us_per_request"] = (1e6 * k.unpack_s / (sv.requests.max(1) as f64)).into();
     obj["model_dispatch_overhead_us"] =
         (1e6 * (k.upload_s + k.readback_s) / (k.dispatches.max(1) as f64)).into();
+    obj["model_host_own_assemble_us_per_eval"] =
+        (1e6 * g.stages.assemble_s / (sv.requests.max(1) as f64)).into();
     obj["gpu_peak_rss_bytes"] = g.peak_rss.into();
     stages_json(obj, "gpu", &g.stages);
 }
@@ -433,6 +435,8 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
                 (1e6 * c.stats.wall_s * rayon::current_num_threads() as f64
                     / (c.iters.max(1) as f64))
                     .into();
+            obj["cpu_thread_us_per_member_step"] =
+                (1e6 * c.stats.wall_s * rayon::current_num_threads() as f64 / rod_steps).into();
             stages_json(&mut obj, "cpu", &c.stages);
         }
         if let Some(g) = &gpu {
