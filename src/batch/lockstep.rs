@@ -91,7 +91,7 @@ pub(super) fn run(
         for ((slot, index), sim) in admit.into_iter().zip(sims) {
             let attached = sim.and_then(|mut sim| match gpu.attach(slot, &mut sim) {
                 Ok(on_gpu) => Ok((sim, on_gpu)),
-                Err(e) => Err(setup_failure(e)),
+                Err(e) => Err(e.to_string()),
             });
             match attached {
                 Ok((sim, on_gpu)) => {
@@ -104,11 +104,11 @@ pub(super) fn run(
                         done: None,
                     });
                 }
-                Err(outcome) => {
+                Err(e) => {
                     free.push(slot);
                     on_done(MemberResult {
                         index,
-                        outcome,
+                        outcome: setup_failure(e),
                         history: vec![],
                         state: None,
                     });

@@ -193,12 +193,12 @@ fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
 }
 
 /// A member's simulation, set up (or why it could not be).
-fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, RunOutcome> {
+fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, String> {
     let mut params = m.params;
     if let Some(v) = opts.newton {
         params.newton = v;
     }
-    Simulation::new(m.model.clone(), params).map_err(setup_failure)
+    Simulation::new(m.model.clone(), params).map_err(|e| e.to_string())
 }
 
 /// Runs one member's simulation to its end time (a future: on the GPU path it waits on
@@ -241,9 +241,9 @@ pub fn run_members(
                         .for_each_with(tx, |tx, (i, m)| {
                             let r = match setup(m, opts) {
                                 Ok(sim) => now(run_member(i, sim, opts)),
-                                Err(outcome) => MemberResult {
+                                Err(e) => MemberResult {
                                     index: i,
-                                    outcome,
+                                    outcome: setup_failure(e),
                                     history: vec![],
                                     state: None,
                                 },

@@ -56,6 +56,16 @@ pub fn exp_so3(theta: &Vec3) -> Mat3 {
     Mat3::identity() + t * s + t * t * c
 }
 
+/// `|v|` computed as `max|vᵢ| · |v / max|vᵢ||`: finite for every finite `v` (the plain
+/// sum of squares overflows from about 1e154 on) and equal to `|v|` to round-off.
+pub fn scaled_norm(v: &Vec3) -> f64 {
+    let m = v.amax();
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    m * (v / m).norm()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -87,14 +97,4 @@ mod tests {
             assert!((r - c).norm() < 1e-13);
         }
     }
-}
-
-/// `|v|` computed as `max|vᵢ| · |v / max|vᵢ||`: finite for every finite `v` (the plain
-/// sum of squares overflows from about 1e154 on) and equal to `|v|` to round-off.
-pub fn scaled_norm(v: &Vec3) -> f64 {
-    let m = v.amax();
-    if m == 0.0 || !m.is_finite() {
-        return m;
-    }
-    m * (v / m).norm()
 }
