@@ -7,7 +7,7 @@
 //! has no GPU kernel (generalized-α, run on the CPU kernel inside the batch), and more
 //! members than slots (3 slots: the queue streams through). For full and modified
 //! Newton, every member ends the same way on both paths — status, steps, Newton
-//! iterations — and its final state (positions, directors, velocities) and energies agree
+//! iterations (modified Newton: within 2 % + 2) — and its final state (positions, directors, velocities) and energies agree
 //! to `STATE_RTOL`.
 //!
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
@@ -21,7 +21,7 @@ use cosserat::integrator::{NewtonVariant, Scheme};
 use cosserat::observe::record::RunStatus;
 
 /// Final states of the two paths: both Newton solves converge to 1e-11 of the force scale
-/// from element blocks that differ by round-off (measured on lavapipe: 5.9e-12, the test
+/// from element blocks that differ by round-off (measured on lavapipe: 1.8e-11, the test
 /// prints it).
 const STATE_RTOL: f64 = 5e-11;
 
@@ -121,10 +121,20 @@ fn lockstep_gpu_batch_matches_cpu_member_by_member() {
                 g.outcome.reason
             );
             assert_eq!(c.outcome.steps, g.outcome.steps, "{tag}");
-            assert_eq!(
-                c.outcome.newton_iters_total, g.outcome.newton_iters_total,
-                "{tag}"
-            );
+            // Full Newton takes the same iterations on both paths. Modified Newton decides
+            // by comparing residuals (keep the tangent while they fall ≥ 5× per
+            // iteration): a round-off difference can flip a decision and cost or save an
+            // iteration; the converged states still agree (below).
+            let (ic, ig) = (c.outcome.newton_iters_total, g.outcome.newton_iters_total);
+            match newton {
+                NewtonVariant::Full => assert_eq!(ic, ig, "{tag}"),
+                NewtonVariant::Modified => {
+                    assert!(
+                        ic.abs_diff(ig) <= 2 + ic / 50,
+                        "{tag}: {ic} vs {ig} iterations"
+                    )
+                }
+            }
             assert_eq!(c.history.len(), g.history.len(), "{tag}");
             let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
             assert_eq!(sc.t, sg.t, "{tag}");

@@ -34,6 +34,9 @@ impl Simulation {
         r.iter_mut().for_each(|x| *x = 0.0);
         let mut scale = [0.0f64; 3]; // u, θ, g rows
         if tangent {
+            // The values are about to change: the factorization no longer matches them
+            // (the solver checks each solve against the current values).
+            self.factored = None;
             self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
         }
         // With an evaluator the elements arrive already summed per node; the CPU kernel

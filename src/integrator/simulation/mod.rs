@@ -108,6 +108,9 @@ pub struct Simulation {
     sent_version: Option<u64>,
     /// Time spent per Newton stage.
     timers: SolveTimers,
+    /// The mode whose tangent the solver holds factorized (modified Newton reuses it);
+    /// `None` before the first factorization or after a failed one.
+    factored: Option<Mode>,
 }
 
 impl Simulation {
@@ -235,6 +238,7 @@ impl Simulation {
             state_version: 0,
             sent_version: None,
             timers: SolveTimers::default(),
+            factored: None,
         })
     }
 

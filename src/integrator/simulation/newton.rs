@@ -1,7 +1,8 @@
 //! Stage 3 of a step: Newton on the nodal increments. Full Newton takes a fresh tangent
-//! every iteration; modified Newton keeps the last tangent and its LU factorization while
-//! the residual contracts by at least [`MODIFIED_NEWTON_RATE`] per iteration, and the
-//! iterations that keep it assemble the residual only.
+//! every iteration. Modified Newton keeps the last factorized tangent — across iterations,
+//! staggered rounds and steps — as long as each correction made with it cuts the residual
+//! by at least [`MODIFIED_NEWTON_RATE`]; the iterations that keep it assemble the residual
+//! only.
 
 use std::time::Instant;
 
@@ -10,8 +11,8 @@ use crate::integrator::params::NewtonVariant;
 use crate::integrator::report::{StepFailure, ROUNDOFF_RESIDUAL};
 use crate::integrator::scaling;
 
-/// Modified Newton takes a fresh tangent when the last iteration reduced the residual by
-/// less than this factor.
+/// Modified Newton takes a fresh tangent when the last correction (made with a kept
+/// tangent) reduced the residual by less than this factor.
 const MODIFIED_NEWTON_RATE: f64 = 0.2;
 
 impl Simulation {
@@ -26,30 +27,47 @@ impl Simulation {
         let mut r = vec![0.0; n];
         let mut history = Vec::new();
         let tol = self.params.newton_tol;
+        let modified = self.params.newton == NewtonVariant::Modified;
+        // Whether the correction that led to the current iterate was made with a kept
+        // (not freshly evaluated) tangent, and the iterate before it.
+        let mut last_kept = false;
+        let mut q_prev = vec![0.0; n];
         for it in 0..=self.params.max_iter {
-            // Modified Newton: keep the last tangent while the residual contracts fast.
-            let fresh = self.params.newton == NewtonVariant::Full
-                || it < 2
-                || history[it - 1] > MODIFIED_NEWTON_RATE * history[it - 2];
-            let (t0, wait0) = (Instant::now(), self.timers.evaluate_wait_s);
-            let (res, _) = self.assemble(q, mode, fresh, &mut r).await;
-            let waited = self.timers.evaluate_wait_s - wait0;
-            self.timers.assemble_s += t0.elapsed().as_secs_f64() - waited;
-            history.push(res);
-            if !res.is_finite() {
-                return Err(StepFailure {
-                    reason: "non-finite residual (Newton diverged)".into(),
-                    residuals: history,
-                });
-            }
-            // Newton converges quadratically: from a residual of 1e5·tol the next one is
-            // far below tol. A residual that stops falling there sits on its f64 floor
-            // (stiff members under small loads: the arch at t ≈ 0), so accept it; the energy
-            // checks that follow still apply.
-            let stalled = it >= 2 && res <= ROUNDOFF_RESIDUAL * tol && res >= 0.5 * history[it - 1];
-            if (res <= tol && scaling::may_accept(it)) || stalled {
-                self.last_residual.clone_from(&r);
-                return Ok((it, history));
+            // Modified Newton keeps the factorized tangent of this mode (from an earlier
+            // iteration, outer round or step) and evaluates the residual only.
+            let reuse = modified && self.factored == Some(mode);
+            let res = self.timed_assemble(q, mode, !reuse, &mut r).await;
+            let mut fresh = !reuse;
+            let undo = last_kept
+                && !history
+                    .last()
+                    .is_some_and(|&prev| res <= MODIFIED_NEWTON_RATE * prev);
+            if undo {
+                // The kept tangent no longer contracts fast enough (or sent the iterate
+                // astray): undo its correction and take a fresh tangent there (that
+                // iterate's residual is already in the history).
+                q.copy_from_slice(&q_prev);
+                self.timed_assemble(q, mode, true, &mut r).await;
+                fresh = true;
+            } else {
+                history.push(res);
+                if !res.is_finite() {
+                    return Err(StepFailure {
+                        reason: "non-finite residual (Newton diverged)".into(),
+                        residuals: history,
+                    });
+                }
+                // Newton converges quadratically: from a residual of 1e5·tol the next one
+                // is far below tol. A residual that stops falling there sits on its f64
+                // floor (stiff members under small loads: the arch at t ≈ 0), so accept
+                // it; the energy checks that follow still apply.
+                let h = history.len();
+                let stalled =
+                    h >= 3 && res <= ROUNDOFF_RESIDUAL * tol && res >= 0.5 * history[h - 2];
+                if (res <= tol && scaling::may_accept(it)) || stalled {
+                    self.last_residual.clone_from(&r);
+                    return Ok((it, history));
+                }
             }
             if it == self.params.max_iter {
                 break;
@@ -59,7 +77,12 @@ impl Simulation {
             let t0 = Instant::now();
             let factored = if fresh {
                 self.timers.factorizations += 1;
-                self.solver.factor()
+                self.factored = None;
+                let f = self.solver.factor();
+                if f.is_ok() {
+                    self.factored = Some(mode);
+                }
+                f
             } else {
                 Ok(())
             };
@@ -74,9 +97,11 @@ impl Simulation {
                     residuals: history,
                 });
             }
+            q_prev.copy_from_slice(q);
             for (qi, di) in q.iter_mut().zip(&r) {
                 *qi += di;
             }
+            last_kept = !fresh;
         }
         Err(StepFailure {
             reason: format!(
@@ -87,5 +112,15 @@ impl Simulation {
             ),
             residuals: history,
         })
+    }
+
+    /// [`Self::assemble`] with its own time (not the wait for an evaluator) counted as
+    /// assembly. Returns the relative residual.
+    async fn timed_assemble(&mut self, q: &[f64], mode: Mode, tangent: bool, r: &mut [f64]) -> f64 {
+        let (t0, wait0) = (Instant::now(), self.timers.evaluate_wait_s);
+        let (res, _) = self.assemble(q, mode, tangent, r).await;
+        let waited = self.timers.evaluate_wait_s - wait0;
+        self.timers.assemble_s += t0.elapsed().as_secs_f64() - waited;
+        res
     }
 }
