@@ -356,13 +356,13 @@ fn oversized_inputs_are_refused_before_allocating() {
         ),
         (
             vec!["sweep".into(), grid.display().to_string()],
-            vec![],
-            "g.toml: vary: this sweep would need about 353.9 GiB of memory (1000000 member(s) × 15 element(s)), above the limit of 16.0 GiB",
+            vec![("COSSERAT_MAX_MEMORY", "4G")],
+            "g.toml: vary: this sweep would need about 8.0 GiB of memory (1000000 member(s) × 15 element(s)), above the limit of 4.0 GiB",
         ),
         (
             vec!["sweep".into(), mid.display().to_string()],
             vec![("COSSERAT_MAX_MEMORY", "10M")],
-            "m.toml:3:11: samples: this sweep would need about 362.4 MiB of memory (1000 member(s) × 15 element(s)), above the limit of 10.0 MiB (set COSSERAT_MAX_MEMORY",
+            "m.toml:3:11: samples: this sweep would need about 369.1 MiB of memory (1000 member(s) × 15 element(s)), above the limit of 10.0 MiB (set COSSERAT_MAX_MEMORY",
         ),
         (
             vec!["sweep".into(), mid.display().to_string()],
@@ -380,9 +380,9 @@ fn oversized_inputs_are_refused_before_allocating() {
             "--rods: 1000000000 rods, above the limit of 10000000",
         ),
         (
-            vec!["bench".into(), "--rods".into(), "1000000".into()],
+            vec!["bench".into(), "--rods".into(), "2000000".into()],
             vec![],
-            "bench would need about 521.5 GiB of memory (1000000 member(s) × 30 element(s))",
+            "bench would need about 26.4 GiB of memory (2000000 member(s) × 30 element(s))",
         ),
     ];
     for (args, env, want) in cases {

@@ -7,6 +7,8 @@
 use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use crate::element::StepConsts;
 use crate::gpu::kernel::KernelTimers;
 use crate::gpu::layout::AsmLayout;
@@ -202,15 +204,19 @@ impl GpuEvaluator {
         }
         let res = self.assembler.run(&mut self.kernel, &pending);
         let t0 = Instant::now();
-        for &(slot, tangent) in &pending {
-            let (n_elems, n_nodes) = self.sizes[slot];
+        // Unpacking is per member and independent: in parallel.
+        let (asm, sizes) = (&self.assembler, &self.sizes);
+        answers.par_extend(pending.par_iter().map(|&(slot, tangent)| {
+            let (n_elems, n_nodes) = sizes[slot];
             let out = match &res {
-                Ok(()) => Ok(self.assembler.system(slot, n_nodes, n_elems, tangent)),
+                Ok(()) => Ok(asm.system(slot, n_nodes, n_elems, tangent)),
                 Err(e) => Err(e.to_string()),
             };
-            answers.push((slot, out));
+            (slot, out)
+        }));
+        for &(slot, _) in &pending {
             let base = slot * self.per_slot;
-            for e in 0..n_elems {
+            for e in 0..self.sizes[slot].0 {
                 self.kernel.set_inactive(base + e);
             }
         }
