@@ -12,8 +12,9 @@
 //! Without an adapter the tests print `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case they fail.
 
-use cosserat::batch::{run_members, BackendChoice, BatchOptions, Executor, Member, MemberResult};
-use cosserat::gpu::gpu_required;
+mod common;
+use common::gpu;
+use cosserat::batch::{run_members, BatchOptions, Executor, Member, MemberResult};
 use cosserat::integrator::{NewtonVariant, Scheme};
 use cosserat::observe::record::RunStatus;
 use cosserat::scene::load_scene;
@@ -23,17 +24,6 @@ use cosserat::scene::load_scene;
 const HISTORY_RTOL: f64 = 1e-9;
 const MOMENTUM_RTOL: f64 = 1e-10;
 const EM_ENERGY_RTOL: f64 = 1e-10;
-
-fn gpu() -> Option<Executor> {
-    match Executor::resolve(BackendChoice::Gpu, None) {
-        Ok((e, _)) => Some(e),
-        Err(e) if !gpu_required() => {
-            println!("skipped: no adapter ({e})");
-            None
-        }
-        Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no usable adapter: {e}"),
-    }
-}
 
 fn members(n: usize, scheme_of: impl Fn(usize) -> Scheme, t_end: f64) -> Vec<Member> {
     let scene = load_scene("frame").unwrap();

@@ -13,10 +13,9 @@
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case it fails.
 
-use cosserat::batch::{
-    bench_members, run_members, BackendChoice, BatchOptions, Executor, Member, MemberResult,
-};
-use cosserat::gpu::gpu_required;
+mod common;
+use common::gpu;
+use cosserat::batch::{bench_members, run_members, BatchOptions, Executor, Member, MemberResult};
 use cosserat::integrator::{NewtonVariant, Scheme};
 use cosserat::observe::record::RunStatus;
 
@@ -24,17 +23,6 @@ use cosserat::observe::record::RunStatus;
 /// from element blocks that differ by round-off (measured on lavapipe: 1.8e-11, the test
 /// prints it).
 const STATE_RTOL: f64 = 5e-11;
-
-fn gpu() -> Option<Executor> {
-    match Executor::resolve(BackendChoice::Gpu, None) {
-        Ok((e, _)) => Some(e),
-        Err(e) if !gpu_required() => {
-            println!("skipped: no adapter ({e})");
-            None
-        }
-        Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no usable adapter: {e}"),
-    }
-}
 
 /// 10 members: 0..5 full length, 5..7 end after 3 steps, 7 fails at step 2, 8 and 9 are
 /// generalized-α (no GPU kernel).

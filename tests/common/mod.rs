@@ -103,3 +103,17 @@ pub fn frame() -> Model {
     m.velocity0[ic] = Vec3::new(0.0, -1.0, 0.0);
     m
 }
+
+/// The GPU executor, or `None` (printing `skipped: no adapter`) when no usable adapter
+/// exists and `COSSERAT_REQUIRE_GPU` is not set; with it set, a missing adapter panics.
+pub fn gpu() -> Option<cosserat::batch::Executor> {
+    use cosserat::batch::{BackendChoice, Executor};
+    match Executor::resolve(BackendChoice::Gpu, None) {
+        Ok((e, _)) => Some(e),
+        Err(e) if !cosserat::gpu::gpu_required() => {
+            println!("skipped: no adapter ({e})");
+            None
+        }
+        Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no usable adapter: {e}"),
+    }
+}
