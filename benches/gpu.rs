@@ -35,7 +35,7 @@ use cosserat::linsolve::SparseSolver;
 use cosserat::model::Vec3;
 
 fn kernels(c: &mut Criterion) {
-    let m = &bench_members(1, 30, 1)[0];
+    let m = &bench_members(1, 30, 1).unwrap()[0];
     let sim = Simulation::new(m.model.clone(), m.params).unwrap();
     let k = StepConsts {
         dt: m.params.dt,
@@ -100,7 +100,7 @@ fn kernels(c: &mut Criterion) {
 /// against the block-tridiagonal LU, and a solve that reuses the factorization (modified
 /// Newton).
 fn solves(c: &mut Criterion) {
-    let m = &bench_members(1, 30, 1)[0];
+    let m = &bench_members(1, 30, 1).unwrap()[0];
     let dofs = DofMap::new(&m.model, true);
     let mut pattern = dofs.pattern();
     for i in 0..dofs.n {
@@ -174,7 +174,7 @@ fn dispatches(c: &mut Criterion) {
         return;
     };
     let rods = 64;
-    let members = bench_members(rods, 30, 1);
+    let members = bench_members(rods, 30, 1).unwrap();
     let sims: Vec<Simulation> = members
         .iter()
         .map(|m| Simulation::new(m.model.clone(), m.params).unwrap())

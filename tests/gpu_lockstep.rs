@@ -27,7 +27,7 @@ const STATE_RTOL: f64 = 5e-11;
 /// 10 members: 0..5 full length, 5..7 end after 3 steps, 7 fails at step 2, 8 and 9 are
 /// generalized-α (no GPU kernel).
 fn members() -> Vec<Member> {
-    let mut ms = bench_members(10, 10, 8);
+    let mut ms = bench_members(10, 10, 8).unwrap();
     for (i, m) in ms.iter_mut().enumerate() {
         match i {
             5 | 6 => m.params.t_end = 3.0 * m.params.dt,

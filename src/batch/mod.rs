@@ -267,25 +267,36 @@ pub fn run_members(
 /// elements each (the built-in `cantilever` scene's rod and section), EDMC-2 α = 0.5,
 /// staggered, Δt = 0.01, `steps` steps, each member's tip kicked with a different speed
 /// (so the members need different Newton iteration counts, as in a real sweep).
-pub fn bench_members(rods: usize, elements: usize, steps: usize) -> Vec<Member> {
-    let base = crate::scene::load_scene("cantilever").expect("built-in scene");
+///
+/// An error (never another size than asked) when the scene with `elements` elements does
+/// not build.
+pub fn bench_members(
+    rods: usize,
+    elements: usize,
+    steps: usize,
+) -> Result<Vec<Member>, crate::scene::SceneError> {
     let text = crate::scene::builtin_scenes()
         .iter()
         .find(|b| b.name == "cantilever")
-        .expect("built-in scene")
+        .expect("the built-in cantilever scene exists")
         .toml
         .replace("elements = 50", &format!("elements = {}", elements.max(1)));
-    let scene = crate::scene::parse_scene(&text, "builtin:cantilever").unwrap_or(base);
+    let scene = crate::scene::parse_scene(&text, "builtin:cantilever")?;
+    assert_eq!(
+        scene.model.elements.len(),
+        elements.max(1),
+        "the benchmark cantilever's element count is its `elements = 50` line"
+    );
     let mut params = scene.params;
     params.scheme = crate::integrator::Scheme::edmc2(0.5);
     params.dt = 0.01;
     params.t_end = steps as f64 * params.dt;
-    (0..rods)
+    Ok((0..rods)
         .map(|i| {
             let mut model = scene.model.clone();
             let s = 0.5 + (i % 16) as f64 / 16.0;
             model.velocity0.iter_mut().for_each(|v| *v *= s);
             Member { model, params }
         })
-        .collect()
+        .collect())
 }

@@ -71,7 +71,7 @@ static BUILTINS: &[BuiltinScene] = &[
     BuiltinScene {
         name: "frame",
         description:
-            "free-flying frame of three rods at two right angles (paper §5.1, DESIGN §6.1)",
+            "free-flying frame of three rods at two right angles (paper §5.1; reconstruction in docs/theory.md)",
         toml: include_str!("../../scenes/frame.toml"),
     },
     BuiltinScene {
@@ -81,7 +81,7 @@ static BUILTINS: &[BuiltinScene] = &[
     },
     BuiltinScene {
         name: "arch",
-        description: "shallow arch snap-through under a ramped apex load (paper §5.2, DESIGN §6.2)",
+        description: "shallow arch snap-through under a ramped apex load (paper §5.2; reconstruction in docs/theory.md)",
         toml: include_str!("../../scenes/arch.toml"),
     },
     BuiltinScene {
