@@ -488,6 +488,8 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         energy_initial: o.energy_initial,
         energy_final: o.energy_final,
         max_link_g: o.max_link_g,
+        fallback_steps: o.fallback_steps,
+        accepted: o.accepted,
         backend: sim.backend_name(),
         linear_solver: sim.linear_solver().0.to_string(),
         linear_solver_fallbacks: sim.linear_solver().1,

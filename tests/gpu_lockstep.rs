@@ -65,6 +65,7 @@ fn run(ms: &[Member], exec: &Executor, newton: NewtonVariant, slots: usize) -> V
             keep_state: true,
             workers: slots,
             newton: Some(newton),
+            fallback: None,
         },
         |r| {
             let i = r.index;

@@ -108,7 +108,7 @@ pub(super) fn run(
                     free.push(slot);
                     on_done(MemberResult {
                         index,
-                        outcome,
+                        outcome: *outcome,
                         history: vec![],
                         state: None,
                     });

@@ -144,6 +144,8 @@ pub struct BatchOptions {
     pub workers: usize,
     /// Overrides every member's Newton variant when set.
     pub newton: Option<NewtonVariant>,
+    /// Overrides every member's solver fallback when set.
+    pub fallback: Option<bool>,
 }
 
 /// Members in flight at once on the GPU path unless [`BatchOptions::workers`] says
@@ -174,8 +176,8 @@ pub struct BatchStats {
     pub admit_s: f64,
 }
 
-fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
-    RunOutcome {
+fn setup_failure(e: impl std::fmt::Display) -> Box<RunOutcome> {
+    Box::new(RunOutcome {
         status: RunStatus::Failed,
         t_reached: 0.0,
         steps: 0,
@@ -189,14 +191,19 @@ fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
         wall_s: 0.0,
         max_link_g: 0.0,
         timers: Default::default(),
-    }
+        fallback_steps: 0,
+        accepted: Default::default(),
+    })
 }
 
 /// A member's simulation, set up (or why it could not be).
-fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, RunOutcome> {
+fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, Box<RunOutcome>> {
     let mut params = m.params;
     if let Some(v) = opts.newton {
         params.newton = v;
+    }
+    if let Some(f) = opts.fallback {
+        params.fallback = f;
     }
     Simulation::new(m.model.clone(), params).map_err(setup_failure)
 }
@@ -243,7 +250,7 @@ pub fn run_members(
                                 Ok(sim) => now(run_member(i, sim, opts)),
                                 Err(outcome) => MemberResult {
                                     index: i,
-                                    outcome,
+                                    outcome: *outcome,
                                     history: vec![],
                                     state: None,
                                 },

@@ -93,6 +93,10 @@ struct StudyCommon {
     /// Newton variant of every run (default: the scene's, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
+    /// No monolithic fallback when the staggered loop fails on a step (maps of the
+    /// paper's pure staggered strategy; default: the scene's, else fallback on).
+    #[arg(long)]
+    no_fallback: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -181,6 +185,10 @@ struct RunArgs {
     /// Newton variant (default: the scene's `[integrator] newton`, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
+    /// No monolithic fallback when the staggered loop fails on a step: the paper's pure
+    /// staggered strategy (default: the scene's `[integrator] fallback`, else on).
+    #[arg(long)]
+    no_fallback: bool,
     /// Output directory (default: `out/<scene name>`).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -273,6 +281,7 @@ fn main() -> ExitCode {
             rho_inf: None,
             strategy: None,
             newton: None,
+            no_fallback: false,
             out: Some(PathBuf::from("out/frame")),
             every: None,
             vtk: false,
@@ -456,6 +465,9 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     if let Some(n) = a.newton {
         p.newton = n.variant();
     }
+    if a.no_fallback {
+        p.fallback = false;
+    }
     Ok(p)
 }
 
@@ -585,6 +597,9 @@ fn study_scene(c: &StudyCommon) -> Result<Scene> {
     }
     if let Some(n) = c.newton {
         scene.params.newton = n.variant();
+    }
+    if c.no_fallback {
+        scene.params.fallback = false;
     }
     Ok(scene)
 }

@@ -33,6 +33,9 @@ pub struct StepReport {
     pub max_link_g: f64,
     /// Augmented-Lagrangian rounds the step took (1 without links).
     pub link_rounds: usize,
+    /// True when the staggered loop failed on this step and the monolithic strategy
+    /// ([`crate::integrator::IntegratorParams::fallback`]) solved it.
+    pub fallback: bool,
 }
 
 /// Where a simulation's Newton time went (accumulated over its life; thread time, so a

@@ -53,6 +53,8 @@ mod tests {
             last_accepted: Default::default(),
             outputs: vec!["history.csv".into()],
             max_link_g: 0.0,
+            fallback_steps: 0,
+            accepted: Default::default(),
             backend: "cpu".into(),
             linear_solver: "block-tridiagonal-6".into(),
             linear_solver_fallbacks: 0,

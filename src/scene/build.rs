@@ -636,6 +636,9 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
             }
         };
     }
+    if let Some(f) = r.fallback {
+        p.fallback = f;
+    }
     if let Some(s) = r.newton.as_deref() {
         p.newton = match s {
             "full" => NewtonVariant::Full,

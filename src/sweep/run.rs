@@ -37,6 +37,8 @@ pub struct SweepOptions {
     pub workers: usize,
     /// Overrides every member's Newton variant when set.
     pub newton: Option<crate::integrator::NewtonVariant>,
+    /// Overrides every member's solver fallback when set (`IntegratorParams::fallback`).
+    pub fallback: Option<bool>,
 }
 
 /// One row of `members.csv`.
@@ -549,6 +551,7 @@ pub fn run_sweep(
             keep_history: opts.histories,
             workers: opts.workers,
             newton: opts.newton,
+            fallback: opts.fallback,
             ..Default::default()
         },
         |r: MemberResult| {

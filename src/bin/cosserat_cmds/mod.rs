@@ -134,6 +134,10 @@ pub struct SweepArgs {
     /// Newton variant of every member (default: each member's scene, else full).
     #[arg(long, value_enum)]
     pub newton: Option<NewtonArg>,
+    /// No monolithic fallback in any member (the paper's pure staggered strategy;
+    /// default: each member's scene, else fallback on).
+    #[arg(long)]
+    pub no_fallback: bool,
 }
 
 /// `cosserat sweep`.
@@ -165,6 +169,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         histories: a.histories,
         workers: 0,
         newton: a.newton.map(NewtonArg::variant),
+        fallback: a.no_fallback.then_some(false),
     };
     let summary = run_sweep(&spec, &exec, &a.out, &opts, |row| {
         done += 1;

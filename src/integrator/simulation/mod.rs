@@ -108,6 +108,9 @@ pub struct Simulation {
     sent_version: Option<u64>,
     /// Time spent per Newton stage.
     timers: SolveTimers,
+    /// Set when the current step's staggered loop failed and the monolithic fallback
+    /// solved it (reset at the start of every step).
+    fell_back: bool,
 }
 
 impl Simulation {
@@ -235,6 +238,7 @@ impl Simulation {
             state_version: 0,
             sent_version: None,
             timers: SolveTimers::default(),
+            fell_back: false,
         })
     }
 

@@ -35,6 +35,7 @@ impl Simulation {
             }
             return self.step_gen_alpha();
         }
+        self.fell_back = false;
         let dt = self.params.dt;
         let t_mid = self.state.t + 0.5 * dt;
         let (mut force, mut moment) = (
@@ -92,6 +93,7 @@ impl Simulation {
                         acc_rot: ar,
                         max_link_g,
                         link_rounds: round,
+                        fallback: self.fell_back,
                     };
                     if let Err(f) = finite::check_step(&next, &inv, &report) {
                         self.state.lambda.clone_from(&lambda0);
@@ -156,6 +158,7 @@ impl Simulation {
             acc_rot: ar,
             max_link_g: 0.0,
             link_rounds: 1,
+            fallback: false,
         };
         finite::check_step(&out.state, &inv, &report)?;
         self.inv = inv;
