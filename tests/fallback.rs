@@ -143,3 +143,18 @@ fn cli_run_of_the_mechanism_completes_by_default_and_fails_without_fallback() {
     assert!(s["t_reached"].as_f64().unwrap() > 5.0);
     assert!(csv.lines().skip(1).all(|l| l.ends_with(",0")));
 }
+
+/// `check` says whether the fallback is on.
+#[test]
+fn check_names_the_fallback() {
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["check", "mechanism"])
+        .output()
+        .unwrap();
+    assert!(st.status.success());
+    let text = String::from_utf8_lossy(&st.stdout);
+    assert!(
+        text.contains("strategy staggered (monolithic fallback)"),
+        "{text}"
+    );
+}
