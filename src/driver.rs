@@ -489,6 +489,8 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         energy_final: o.energy_final,
         max_link_g: o.max_link_g,
         fallback_steps: o.fallback_steps,
+        cutback_steps: o.cutback_steps,
+        smallest_substep: o.smallest_substep,
         accepted: o.accepted,
         backend: sim.backend_name(),
         linear_solver: sim.linear_solver().0.to_string(),

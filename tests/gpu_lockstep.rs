@@ -68,6 +68,7 @@ fn run(ms: &[Member], exec: &Executor, newton: NewtonVariant, slots: usize) -> V
             workers: slots,
             newton: Some(newton),
             fallback: None,
+            cutback: None,
         },
         |r| {
             let i = r.index;

@@ -146,6 +146,9 @@ pub struct BatchOptions {
     pub newton: Option<NewtonVariant>,
     /// Overrides every member's solver fallback when set.
     pub fallback: Option<bool>,
+    /// Overrides every member's step cut-back when set (CPU path only; members on the
+    /// GPU path do not cut back).
+    pub cutback: Option<usize>,
 }
 
 /// Members in flight at once on the GPU path unless [`BatchOptions::workers`] says
@@ -193,6 +196,8 @@ fn setup_failure(e: impl std::fmt::Display) -> Box<RunOutcome> {
         timers: Default::default(),
         fallback_steps: 0,
         accepted: Default::default(),
+        cutback_steps: 0,
+        smallest_substep: None,
     })
 }
 
@@ -204,6 +209,9 @@ fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, Box<RunOutcome>> 
     }
     if let Some(f) = opts.fallback {
         params.fallback = f;
+    }
+    if let Some(n) = opts.cutback {
+        params.cutback = n;
     }
     Simulation::new(m.model.clone(), params).map_err(setup_failure)
 }

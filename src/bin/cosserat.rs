@@ -97,6 +97,10 @@ struct StudyCommon {
     /// paper's pure staggered strategy; default: the scene's, else fallback on).
     #[arg(long)]
     no_fallback: bool,
+    /// Step cut-back of every run: a failed step is redone as up to 2^N sub-steps
+    /// (default: the scene's, else 0 = off).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
+    cutback: Option<u8>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -189,6 +193,11 @@ struct RunArgs {
     /// staggered strategy (default: the scene's `[integrator] fallback`, else on).
     #[arg(long)]
     no_fallback: bool,
+    /// Step cut-back: redo a failed step as 2, 4, … 2^N sub-steps of the same scheme
+    /// before reporting the failure (default: the scene's `[integrator] cutback`, else 0 =
+    /// off; CPU element kernel only).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
+    cutback: Option<u8>,
     /// Output directory (default: `out/<scene name>`).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -282,6 +291,7 @@ fn main() -> ExitCode {
             strategy: None,
             newton: None,
             no_fallback: false,
+            cutback: None,
             out: Some(PathBuf::from("out/frame")),
             every: None,
             vtk: false,
@@ -468,6 +478,9 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     if a.no_fallback {
         p.fallback = false;
     }
+    if let Some(n) = a.cutback {
+        p.cutback = n.into();
+    }
     Ok(p)
 }
 
@@ -600,6 +613,9 @@ fn study_scene(c: &StudyCommon) -> Result<Scene> {
     }
     if c.no_fallback {
         scene.params.fallback = false;
+    }
+    if let Some(n) = c.cutback {
+        scene.params.cutback = n.into();
     }
     Ok(scene)
 }

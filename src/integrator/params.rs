@@ -210,6 +210,11 @@ pub struct IntegratorParams {
     /// solved differs. Default `true`; `false` (scene `fallback = false`, CLI
     /// `--no-fallback`) gives the paper's pure staggered strategy.
     pub fallback: bool,
+    /// Step cut-back: a step that fails at Δt is redone as 2, 4, … 2^cutback sub-steps of
+    /// the same scheme (each a complete, checked step, so momenta and the energy law hold
+    /// across them) before the run reports the failure. Default 0 (off: fixed-Δt results
+    /// stay the paper's). CPU element kernel only.
+    pub cutback: usize,
 }
 
 impl IntegratorParams {
@@ -228,6 +233,7 @@ impl IntegratorParams {
             energy_tol: 1e-9,
             max_link_rounds: 50,
             fallback: true,
+            cutback: 0,
         }
     }
 

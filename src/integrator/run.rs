@@ -40,6 +40,10 @@ pub struct RunOutcome {
     pub timers: crate::integrator::SolveTimers,
     /// Accepted steps that needed the monolithic fallback.
     pub fallback_steps: usize,
+    /// Accepted steps redone as sub-steps (cut-back).
+    pub cutback_steps: usize,
+    /// Smallest sub-step Δt of a cut-back step.
+    pub smallest_substep: Option<f64>,
     /// Largest energy growth and residual the acceptance checks let through.
     pub accepted: crate::observe::record::AcceptedExtremes,
 }
@@ -72,6 +76,7 @@ pub fn record_of(
         residual: rep.residual,
         max_link_g: rep.max_link_g,
         fallback: rep.fallback,
+        substeps: rep.substeps,
     }
 }
 
@@ -160,6 +165,8 @@ pub async fn run_async<E>(
         timers: Default::default(),
         fallback_steps: 0,
         accepted: Default::default(),
+        cutback_steps: 0,
+        smallest_substep: None,
     };
     if let Some(field) = crate::integrator::finite::record_non_finite(&record_of(sim, 0, None)) {
         out.status = RunStatus::Failed;
@@ -186,6 +193,11 @@ pub async fn run_async<E>(
                 out.newton_iters_total += rep.newton_iters;
                 out.max_link_g = out.max_link_g.max(rep.max_link_g);
                 out.fallback_steps += usize::from(rep.fallback);
+                if rep.substeps > 1 {
+                    out.cutback_steps += 1;
+                    let h = dt / rep.substeps as f64;
+                    out.smallest_substep = Some(out.smallest_substep.map_or(h, |m| m.min(h)));
+                }
                 let (h0, h1) = (prev.total(), inv.total());
                 let growth = h1 - h0 - rep.external_work;
                 let href = h0.abs().max(h1.abs()).max(rep.external_work.abs());

@@ -46,6 +46,8 @@ pub struct StepRecord {
     /// True when the step that ended here was solved by the monolithic fallback after
     /// the staggered loop failed on it (`IntegratorParams::fallback`).
     pub fallback: bool,
+    /// Sub-steps the step that ended here was cut into (1: taken at the full Δt; row 0: 0).
+    pub substeps: usize,
 }
 
 /// How a run ended.
@@ -115,6 +117,10 @@ pub struct RunSummary {
     /// What the acceptance checks let through over the run: the largest energy growth
     /// beyond the external work and the largest final Newton residual of an accepted step.
     pub accepted: AcceptedExtremes,
+    /// Steps redone as sub-steps (`IntegratorParams::cutback`; 0 when off or never needed).
+    pub cutback_steps: usize,
+    /// The smallest sub-step Δt taken (`null` when no step was cut back).
+    pub smallest_substep: Option<f64>,
     /// Where the element kernel ran (`cpu` or `gpu: ADAPTER, f64`).
     pub backend: String,
     /// The Newton linear solver (`dense`, `sparse`, `block-tridiagonal-B`).

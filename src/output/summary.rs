@@ -54,6 +54,8 @@ mod tests {
             outputs: vec!["history.csv".into()],
             max_link_g: 0.0,
             fallback_steps: 0,
+            cutback_steps: 0,
+            smallest_substep: None,
             accepted: Default::default(),
             backend: "cpu".into(),
             linear_solver: "block-tridiagonal-6".into(),

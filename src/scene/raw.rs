@@ -161,6 +161,7 @@ pub(crate) struct RawIntegrator {
     pub rho_inf: Option<f64>,
     pub strategy: Option<String>,
     pub fallback: Option<bool>,
+    pub cutback: Option<i64>,
     pub newton: Option<String>,
     pub newton_tol: Option<f64>,
     pub max_iter: Option<i64>,

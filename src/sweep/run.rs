@@ -39,6 +39,8 @@ pub struct SweepOptions {
     pub newton: Option<crate::integrator::NewtonVariant>,
     /// Overrides every member's solver fallback when set (`IntegratorParams::fallback`).
     pub fallback: Option<bool>,
+    /// Overrides every member's step cut-back when set (`IntegratorParams::cutback`).
+    pub cutback: Option<usize>,
 }
 
 /// One row of `members.csv`.
@@ -552,6 +554,7 @@ pub fn run_sweep(
             workers: opts.workers,
             newton: opts.newton,
             fallback: opts.fallback,
+            cutback: opts.cutback,
             ..Default::default()
         },
         |r: MemberResult| {
