@@ -41,10 +41,7 @@ fn frame_at_half_a_second_fails_without_and_completes_with_cutback() {
         assert!(out.cutback_steps > 0, "{name}");
         assert_eq!(cut.len(), out.cutback_steps, "{name}");
         let smallest = out.smallest_substep.unwrap();
-        assert!(
-            smallest >= 0.5 / 8.0 && smallest < 0.5,
-            "{name}: {smallest}"
-        );
+        assert!((0.5 / 8.0..0.5).contains(&smallest), "{name}: {smallest}");
         assert!(recs.iter().skip(1).all(|r| r.substeps >= 1));
         // Free flight: momenta per step (cut or not) to round-off (measured ≤ 1.5e-15).
         assert!(out.max_rel_dl <= 1e-14, "{name}: dL {:e}", out.max_rel_dl);
@@ -63,4 +60,53 @@ fn frame_at_half_a_second_fails_without_and_completes_with_cutback() {
             }
         }
     }
+}
+
+/// The CLI: `--cutback 2` completes the run, `summary.json` counts the cut steps and
+/// their smallest sub-step, `history.csv` has each step's `substeps`.
+#[test]
+fn cli_cutback_reports_cut_steps() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("c");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args([
+            "run",
+            "frame",
+            "--scheme",
+            "em",
+            "--dt",
+            "0.5",
+            "--cutback",
+            "2",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["status"], "completed", "{s}");
+    assert_eq!(s["params"]["cutback"], 2);
+    let n = s["cutback_steps"].as_u64().unwrap();
+    assert!(n > 0);
+    assert_eq!(s["smallest_substep"].as_f64(), Some(0.25));
+    let csv = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|c| *c == "substeps").unwrap();
+    let cut = csv
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(col).is_some_and(|v| v != "0" && v != "1"))
+        .count();
+    assert_eq!(cut as u64, n);
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["run", "frame", "--cutback", "21"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
 }
