@@ -163,3 +163,34 @@ fn check_names_the_fallback() {
         "{text}"
     );
 }
+
+/// The stability study: the default cell completes; `--no-fallback` maps the paper's pure
+/// staggered strategy, whose cell fails at t = 5.5.
+#[test]
+fn stability_study_maps_the_pure_staggered_strategy_with_no_fallback() {
+    let dir = tempfile::tempdir().unwrap();
+    for (flag, row) in [
+        (None, "edmc2,0.5,0.05,6,6,completed,"),
+        (Some("--no-fallback"), "edmc2,0.5,0.05,5.5,6,failed,"),
+    ] {
+        let out = dir.path().join(if flag.is_some() { "b" } else { "a" });
+        let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+            .args(["study", "stability", "mechanism", "--schemes", "edmc2"])
+            .args(["--params", "0.5", "--dts", "0.05", "--t-end", "6"])
+            .args(flag)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        let csv = std::fs::read_to_string(out.join("stability.csv")).unwrap();
+        assert!(
+            csv.lines().nth(1).unwrap().starts_with(row),
+            "{flag:?}: {csv}"
+        );
+    }
+}
