@@ -3,7 +3,7 @@
 //! A batch of cantilevers (EDMC-2 α = 0.5, each tip kicked differently) mixed with the
 //! cases a streaming lockstep driver must get right: members that end early (shorter
 //! `t_end`), a member that fails mid-run (its staggered loop capped at 3 rounds, while its
-//! second step needs 4), members whose scheme
+//! second step needs 4, and no monolithic fallback), members whose scheme
 //! has no GPU kernel (generalized-α, run on the CPU kernel inside the batch), and more
 //! members than slots (3 slots: the queue streams through). For full and modified
 //! Newton, every member ends the same way on both paths — status, steps, Newton
@@ -32,8 +32,10 @@ fn members() -> Vec<Member> {
         match i {
             5 | 6 => m.params.t_end = 3.0 * m.params.dt,
             7 => {
-                // A stronger kick: its first step takes 3 staggered rounds, the second 4.
+                // A stronger kick: its first step takes 3 staggered rounds, the second 4;
+                // without the monolithic fallback (which would solve that step) it fails.
                 m.params.max_outer = 3;
+                m.params.fallback = false;
                 m.model.velocity0.iter_mut().for_each(|v| *v *= 3.0);
             }
             8 | 9 => m.params.scheme = Scheme::GenAlpha { rho_inf: 0.8 },
@@ -53,6 +55,8 @@ fn run(ms: &[Member], exec: &Executor, newton: NewtonVariant, slots: usize) -> V
             keep_state: true,
             workers: slots,
             newton: Some(newton),
+            fallback: None,
+            cutback: None,
         },
         |r| {
             let i = r.index;

@@ -197,6 +197,30 @@ fn resume_refuses_another_sweeps_folder_naming_the_identity_file() {
         e.contains("members.csv:") && e.contains(":1: (row): --resume: member 1 has integrator.alpha = 0.3 here but 0.25 in this sweep"),
         "{e}"
     );
+    // The same sweep resumed with an override that changes results is another sweep.
+    let out2 = dir.path().join("o2");
+    sweep_into(&sp, &out2, false);
+    for flag in [
+        &["--newton", "modified"][..],
+        &["--no-fallback"][..],
+        &["--cutback", "2"][..],
+    ] {
+        let o = cosserat()
+            .arg("sweep")
+            .arg(&sp)
+            .arg("--out")
+            .arg(&out2)
+            .arg("--resume")
+            .args(flag)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{flag:?}");
+        let e = stderr(&o);
+        assert!(
+            e.contains("--resume: the folder holds another sweep") && e.contains("overrides"),
+            "{flag:?}: {e}"
+        );
+    }
 }
 
 #[test]

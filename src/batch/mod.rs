@@ -144,6 +144,11 @@ pub struct BatchOptions {
     pub workers: usize,
     /// Overrides every member's Newton variant when set.
     pub newton: Option<NewtonVariant>,
+    /// Overrides every member's solver fallback when set.
+    pub fallback: Option<bool>,
+    /// Overrides every member's step cut-back when set (CPU path only; members on the
+    /// GPU path do not cut back).
+    pub cutback: Option<usize>,
 }
 
 /// Members in flight at once on the GPU path unless [`BatchOptions::workers`] says
@@ -189,6 +194,10 @@ fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
         wall_s: 0.0,
         max_link_g: 0.0,
         timers: Default::default(),
+        fallback_steps: 0,
+        accepted: Default::default(),
+        cutback_steps: 0,
+        smallest_substep: None,
     }
 }
 
@@ -197,6 +206,12 @@ fn setup(m: &Member, opts: BatchOptions) -> Result<Simulation, String> {
     let mut params = m.params;
     if let Some(v) = opts.newton {
         params.newton = v;
+    }
+    if let Some(f) = opts.fallback {
+        params.fallback = f;
+    }
+    if let Some(n) = opts.cutback {
+        params.cutback = n;
     }
     Simulation::new(m.model.clone(), params).map_err(|e| e.to_string())
 }

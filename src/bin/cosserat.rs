@@ -93,6 +93,14 @@ struct StudyCommon {
     /// Newton variant of every run (default: the scene's, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
+    /// No monolithic fallback when the staggered loop fails on a step (maps of the
+    /// paper's pure staggered strategy; default: the scene's, else fallback on).
+    #[arg(long)]
+    no_fallback: bool,
+    /// Step cut-back of every run: a failed step is redone as up to 2^N sub-steps
+    /// (default: the scene's, else 0 = off).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
+    cutback: Option<u8>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -181,6 +189,15 @@ struct RunArgs {
     /// Newton variant (default: the scene's `[integrator] newton`, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
+    /// No monolithic fallback when the staggered loop fails on a step: the paper's pure
+    /// staggered strategy (default: the scene's `[integrator] fallback`, else on).
+    #[arg(long)]
+    no_fallback: bool,
+    /// Step cut-back: redo a failed step as 2, 4, … 2^N sub-steps of the same scheme
+    /// before reporting the failure (default: the scene's `[integrator] cutback`, else 0 =
+    /// off; CPU element kernel only).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
+    cutback: Option<u8>,
     /// Output directory (default: `out/<scene name>`).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -273,6 +290,8 @@ fn main() -> ExitCode {
             rho_inf: None,
             strategy: None,
             newton: None,
+            no_fallback: false,
+            cutback: None,
             out: Some(PathBuf::from("out/frame")),
             every: None,
             vtk: false,
@@ -456,6 +475,12 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     if let Some(n) = a.newton {
         p.newton = n.variant();
     }
+    if a.no_fallback {
+        p.fallback = false;
+    }
+    if let Some(n) = a.cutback {
+        p.cutback = n.into();
+    }
     Ok(p)
 }
 
@@ -585,6 +610,12 @@ fn study_scene(c: &StudyCommon) -> Result<Scene> {
     }
     if let Some(n) = c.newton {
         scene.params.newton = n.variant();
+    }
+    if c.no_fallback {
+        scene.params.fallback = false;
+    }
+    if let Some(n) = c.cutback {
+        scene.params.cutback = n.into();
     }
     Ok(scene)
 }

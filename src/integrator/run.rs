@@ -38,6 +38,14 @@ pub struct RunOutcome {
     pub max_link_g: f64,
     /// Where the simulation's Newton time went (whole life of the simulation).
     pub timers: crate::integrator::SolveTimers,
+    /// Accepted steps that needed the monolithic fallback.
+    pub fallback_steps: usize,
+    /// Accepted steps redone as sub-steps (cut-back).
+    pub cutback_steps: usize,
+    /// Smallest sub-step Δt of a cut-back step.
+    pub smallest_substep: Option<f64>,
+    /// Largest energy growth and residual the acceptance checks let through.
+    pub accepted: crate::observe::record::AcceptedExtremes,
 }
 
 /// The record of the current level of `sim` (its `t` is the state's; the running totals are
@@ -67,6 +75,8 @@ pub fn record_of(
         outer_iters: rep.outer_iters,
         residual: rep.residual,
         max_link_g: rep.max_link_g,
+        fallback: rep.fallback,
+        substeps: rep.substeps,
     }
 }
 
@@ -153,6 +163,10 @@ pub async fn run_async<E>(
         wall_s: 0.0,
         max_link_g: 0.0,
         timers: Default::default(),
+        fallback_steps: 0,
+        accepted: Default::default(),
+        cutback_steps: 0,
+        smallest_substep: None,
     };
     if let Some(field) = crate::integrator::finite::record_non_finite(&record_of(sim, 0, None)) {
         out.status = RunStatus::Failed;
@@ -178,6 +192,25 @@ pub async fn run_async<E>(
                 out.max_rel_dj = max_dj / j_ref;
                 out.newton_iters_total += rep.newton_iters;
                 out.max_link_g = out.max_link_g.max(rep.max_link_g);
+                out.fallback_steps += usize::from(rep.fallback);
+                if rep.substeps > 1 {
+                    out.cutback_steps += 1;
+                    let h = dt / rep.substeps as f64;
+                    out.smallest_substep = Some(out.smallest_substep.map_or(h, |m| m.min(h)));
+                }
+                let (h0, h1) = (prev.total(), inv.total());
+                let growth = h1 - h0 - rep.external_work;
+                let href = h0.abs().max(h1.abs()).max(rep.external_work.abs());
+                let acc = &mut out.accepted;
+                if out.steps == 0 {
+                    acc.max_energy_growth = growth;
+                    acc.max_rel_energy_growth = growth / href.max(1e-300);
+                } else {
+                    acc.max_energy_growth = acc.max_energy_growth.max(growth);
+                    acc.max_rel_energy_growth =
+                        acc.max_rel_energy_growth.max(growth / href.max(1e-300));
+                }
+                acc.max_residual = acc.max_residual.max(rep.residual);
                 out.steps = step;
                 out.t_reached = t0 + step as f64 * dt;
                 work_total += rep.external_work;

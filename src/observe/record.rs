@@ -43,6 +43,11 @@ pub struct StepRecord {
     pub residual: f64,
     /// Largest rigid-link strain `|g|` at this level (0 without links).
     pub max_link_g: f64,
+    /// True when the step that ended here was solved by the monolithic fallback after
+    /// the staggered loop failed on it (`IntegratorParams::fallback`).
+    pub fallback: bool,
+    /// Sub-steps the step that ended here was cut into (1: taken at the full Δt; row 0: 0).
+    pub substeps: usize,
 }
 
 /// How a run ended.
@@ -106,6 +111,16 @@ pub struct RunSummary {
     pub energy_final: f64,
     /// Largest rigid-link strain `|g|` over the accepted steps (0 without links).
     pub max_link_g: f64,
+    /// Steps the staggered loop could not solve and the monolithic fallback did (0 when
+    /// the fallback is off or never needed).
+    pub fallback_steps: usize,
+    /// What the acceptance checks let through over the run: the largest energy growth
+    /// beyond the external work and the largest final Newton residual of an accepted step.
+    pub accepted: AcceptedExtremes,
+    /// Steps redone as sub-steps (`IntegratorParams::cutback`; 0 when off or never needed).
+    pub cutback_steps: usize,
+    /// The smallest sub-step Δt taken (`null` when no step was cut back).
+    pub smallest_substep: Option<f64>,
     /// Where the element kernel ran (`cpu` or `gpu: ADAPTER, f64`).
     pub backend: String,
     /// The Newton linear solver (`dense`, `sparse`, `block-tridiagonal-B`).
@@ -171,6 +186,21 @@ pub struct ImpulseBalance {
     pub max_rel_residual_l: f64,
     /// `max_residual_j` relative to the largest `|J|` or `|I_J|` of the run.
     pub max_rel_residual_j: f64,
+}
+
+/// The largest deviations the acceptance checks let through over a run's accepted steps
+/// (docs/theory.md, "Tolerances", states the bounds they are held to).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct AcceptedExtremes {
+    /// Largest `H_{n+1} − H_n − W` of an accepted step (≤ 0 means energy never grew
+    /// beyond the external work; for a dissipative scheme it is at most `−D` plus the
+    /// tolerances).
+    pub max_energy_growth: f64,
+    /// The same growth relative to `max(|H_n|, |H_{n+1}|, |W|)` of its step (the largest
+    /// such ratio of the run).
+    pub max_rel_energy_growth: f64,
+    /// Largest final relative Newton residual of an accepted step.
+    pub max_residual: f64,
 }
 
 /// Where the outputs of a run end.

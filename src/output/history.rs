@@ -35,6 +35,8 @@ pub const HISTORY_COLUMNS: &[&str] = &[
     "max_link_g",
     "work_total",
     "dissipation_total",
+    "fallback",
+    "substeps",
 ];
 
 /// Streams `history.csv`: the header is written on [`create`](Self::create), one row per
@@ -126,7 +128,7 @@ fn format_row(r: &StepRecord, out: &mut String) {
         out.push(',');
         fmt_f64(v, out);
     }
-    out.push('\n');
+    let _ = writeln!(out, ",{},{}", u8::from(r.fallback), r.substeps);
 }
 
 /// Reads a `history.csv` written by [`HistoryWriter`] back. The header must equal
@@ -216,6 +218,12 @@ fn parse_row(line: &str) -> Result<StepRecord, String> {
         max_link_g: flt(18)?,
         work_total: flt(19)?,
         dissipation_total: flt(20)?,
+        fallback: match fields[21] {
+            "0" => false,
+            "1" => true,
+            other => return Err(format!("column 22 `fallback`: `{other}` is not 0 or 1")),
+        },
+        substeps: int(22)?,
     })
 }
 
@@ -242,6 +250,8 @@ mod tests {
             outer_iters: 1,
             residual: 1.234e-12 * seed,
             max_link_g: 3e-11 * seed,
+            fallback: step % 3 == 1,
+            substeps: step % 5,
         }
     }
 
@@ -315,7 +325,7 @@ mod tests {
         drop(HistoryWriter::create(&path).unwrap());
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text, format!("{}\n", HISTORY_COLUMNS.join(",")));
-        assert_eq!(HISTORY_COLUMNS.len(), 21);
+        assert_eq!(HISTORY_COLUMNS.len(), 23);
         assert!(read_history(&path).unwrap().is_empty());
     }
 

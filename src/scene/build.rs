@@ -636,6 +636,20 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
             }
         };
     }
+    if let Some(f) = r.fallback {
+        p.fallback = f;
+    }
+    if let Some(n) = r.cutback {
+        p.cutback = match n {
+            0..=20 => n as usize,
+            _ => {
+                return Err(cx.err(
+                    &k("cutback"),
+                    format!("must be between 0 and 20 halvings (got {n})"),
+                ))
+            }
+        };
+    }
     if let Some(s) = r.newton.as_deref() {
         p.newton = match s {
             "full" => NewtonVariant::Full,

@@ -421,7 +421,8 @@ impl Scene {
         };
         let strategy = match p.strategy {
             Strategy::Monolithic => "monolithic",
-            Strategy::Staggered => "staggered",
+            Strategy::Staggered if p.fallback => "staggered (monolithic fallback)",
+            Strategy::Staggered => "staggered (no fallback)",
         };
         let _ = writeln!(s, "integrator: {scheme}");
         let _ = writeln!(

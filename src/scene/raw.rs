@@ -160,6 +160,8 @@ pub(crate) struct RawIntegrator {
     pub chi_nu: Option<f64>,
     pub rho_inf: Option<f64>,
     pub strategy: Option<String>,
+    pub fallback: Option<bool>,
+    pub cutback: Option<i64>,
     pub newton: Option<String>,
     pub newton_tol: Option<f64>,
     pub max_iter: Option<i64>,

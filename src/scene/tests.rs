@@ -103,6 +103,7 @@ fn frame_mesh_is_the_staircase() {
     assert_eq!(s.params.t_end, 10.0);
     assert_eq!(s.params.n_steps(), 50);
     assert_eq!(s.params.strategy, Strategy::Staggered);
+    assert!(s.params.fallback, "the fallback is on by default");
     assert_eq!(s.output_every, 1);
 }
 
@@ -266,6 +267,7 @@ scheme = "edmc1"
 chi_gamma = 0.1
 chi_v = 0.2
 strategy = "staggered"
+fallback = false
 dt = 0.01
 t_end = 2
 max_iter = 7
@@ -299,6 +301,7 @@ output_every = 5
         }
     );
     assert_eq!(s.params.strategy, Strategy::Staggered);
+    assert!(!s.params.fallback);
     assert_eq!(s.params.max_iter, 7);
     assert_eq!(s.params.max_outer, 4);
     assert_eq!(s.params.newton_tol, 1e-9);

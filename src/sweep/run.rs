@@ -37,6 +37,10 @@ pub struct SweepOptions {
     pub workers: usize,
     /// Overrides every member's Newton variant when set.
     pub newton: Option<crate::integrator::NewtonVariant>,
+    /// Overrides every member's solver fallback when set (`IntegratorParams::fallback`).
+    pub fallback: Option<bool>,
+    /// Overrides every member's step cut-back when set (`IntegratorParams::cutback`).
+    pub cutback: Option<usize>,
 }
 
 /// One row of `members.csv`.
@@ -296,11 +300,28 @@ fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
+/// The identity of a sweep run: the sweep's own ([`SweepSpec::identity`]) and the
+/// command-line overrides that change its results (`--newton`, `--no-fallback`,
+/// `--cutback`), so that `--resume` with other overrides is refused, not mixed in.
+fn run_identity(spec: &SweepSpec, opts: &SweepOptions) -> String {
+    let mut id = spec.identity();
+    if let Some(n) = opts.newton {
+        id += &format!("+newton={}", n.name());
+    }
+    if let Some(f) = opts.fallback {
+        id += &format!("+fallback={f}");
+    }
+    if let Some(c) = opts.cutback {
+        id += &format!("+cutback={c}");
+    }
+    id
+}
+
 /// The identity text of a sweep as recorded in [`IDENTITY_FILE`].
-fn identity_text(spec: &SweepSpec) -> String {
+fn identity_text(spec: &SweepSpec, opts: &SweepOptions) -> String {
     format!(
         "id {}\nmembers {}\nparameters {}\nsweep {}\n",
-        spec.identity(),
+        run_identity(spec, opts),
         spec.len(),
         spec.params
             .iter()
@@ -312,7 +333,7 @@ fn identity_text(spec: &SweepSpec) -> String {
 }
 
 /// On `--resume`: the folder must hold this sweep (same identity).
-fn check_identity(out: &Path, spec: &SweepSpec) -> Result<(), SweepError> {
+fn check_identity(out: &Path, spec: &SweepSpec, opts: &SweepOptions) -> Result<(), SweepError> {
     let path = out.join(IDENTITY_FILE);
     let file = path.display().to_string();
     let text = std::fs::read_to_string(&path).map_err(|e| SweepError::Invalid {
@@ -328,7 +349,7 @@ fn check_identity(out: &Path, spec: &SweepSpec) -> Result<(), SweepError> {
         .find_map(|l| l.strip_prefix("id "))
         .unwrap_or("")
         .trim();
-    let want = spec.identity();
+    let want = run_identity(spec, opts);
     if recorded != want {
         let line = |k: &str| {
             text.lines()
@@ -342,7 +363,7 @@ fn check_identity(out: &Path, spec: &SweepSpec) -> Result<(), SweepError> {
             location: None,
             key: "id".into(),
             reason: format!(
-                "--resume: the folder holds another sweep (id {recorded}: {} members over {}, from {}); {} is id {want} ({} members over {}): its base scene or member values differ. Run it into another --out, or without --resume to start afresh",
+                "--resume: the folder holds another sweep (id {recorded}: {} members over {}, from {}); {} is id {want} ({} members over {}): its base scene, member values or overrides (--newton, --no-fallback, --cutback) differ. Run it into another --out, or without --resume to start afresh",
                 line("members "),
                 line("parameters "),
                 line("sweep "),
@@ -429,7 +450,7 @@ pub fn run_sweep(
     let head = header(spec);
     let resuming = opts.resume && csv_path.exists();
     let rec = if resuming {
-        check_identity(out, spec)?;
+        check_identity(out, spec, opts)?;
         recorded(&csv_path, &head, spec)?
     } else {
         Recorded {
@@ -440,10 +461,9 @@ pub fn run_sweep(
     if !resuming {
         // A fresh start: the identity first, then a members.csv holding only the header
         // (renamed into place: a kill leaves either no file or a whole header).
-        write_atomic(&out.join(IDENTITY_FILE), &identity_text(spec)).map_err(ctx(format!(
-            "cannot write {}",
-            out.join(IDENTITY_FILE).display()
-        )))?;
+        write_atomic(&out.join(IDENTITY_FILE), &identity_text(spec, opts)).map_err(ctx(
+            format!("cannot write {}", out.join(IDENTITY_FILE).display()),
+        ))?;
         write_atomic(&csv_path, &format!("{head}\n"))
             .map_err(ctx(format!("cannot write {}", csv_path.display())))?;
     }
@@ -549,6 +569,8 @@ pub fn run_sweep(
             keep_history: opts.histories,
             workers: opts.workers,
             newton: opts.newton,
+            fallback: opts.fallback,
+            cutback: opts.cutback,
             ..Default::default()
         },
         |r: MemberResult| {
@@ -607,7 +629,10 @@ pub fn run_sweep(
     summary.wall_s = start.elapsed().as_secs_f64();
     let info = serde_json::json!({
         "sweep": spec.source,
-        "id": spec.identity(),
+        "id": run_identity(spec, opts),
+        "newton": opts.newton.map(|n| n.name()),
+        "fallback": opts.fallback,
+        "cutback": opts.cutback,
         "base": spec.base,
         "mode": format!("{:?}", spec.mode).to_lowercase(),
         "parameters": spec.params.iter().map(|p| p.key.clone()).collect::<Vec<_>>(),

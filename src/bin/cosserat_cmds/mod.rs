@@ -134,6 +134,14 @@ pub struct SweepArgs {
     /// Newton variant of every member (default: each member's scene, else full).
     #[arg(long, value_enum)]
     pub newton: Option<NewtonArg>,
+    /// No monolithic fallback in any member (the paper's pure staggered strategy;
+    /// default: each member's scene, else fallback on).
+    #[arg(long)]
+    pub no_fallback: bool,
+    /// Step cut-back in every member: a failed step is redone as up to 2^N sub-steps
+    /// (default: each member's scene, else 0 = off).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
+    pub cutback: Option<u8>,
 }
 
 /// `cosserat sweep`.
@@ -165,6 +173,8 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         histories: a.histories,
         workers: 0,
         newton: a.newton.map(NewtonArg::variant),
+        fallback: a.no_fallback.then_some(false),
+        cutback: a.cutback.map(usize::from),
     };
     let summary = run_sweep(&spec, &exec, &a.out, &opts, |row| {
         done += 1;

@@ -111,6 +111,9 @@ pub struct Simulation {
     /// The mode whose tangent the solver holds factorized (modified Newton reuses it);
     /// `None` before the first factorization or after a failed one.
     factored: Option<Mode>,
+    /// Set when the current step's staggered loop failed and the monolithic fallback
+    /// solved it (reset at the start of every step).
+    fell_back: bool,
 }
 
 impl Simulation {
@@ -239,6 +242,7 @@ impl Simulation {
             sent_version: None,
             timers: SolveTimers::default(),
             factored: None,
+            fell_back: false,
         })
     }
 

@@ -3,7 +3,7 @@
 //! round a complete checked solve ([`super::strategy`]) with the multipliers fixed. The
 //! generalized-α baseline steps through its own Newton loop instead.
 
-use super::Simulation;
+use super::{Backend, Simulation};
 use crate::integrator::evaluate::now;
 use crate::integrator::report::{StepFailure, StepReport};
 use crate::integrator::{finite, links};
@@ -24,6 +24,73 @@ impl Simulation {
     /// [`Self::step`] as a future that waits wherever the element evaluation is posted to
     /// a lockstep batch driver (on the CPU kernel or a direct backend it never waits).
     pub async fn step_async(&mut self) -> Result<StepReport, StepFailure> {
+        let fail = match self.step_at_dt().await {
+            Ok(rep) => return Ok(rep),
+            Err(f) => f,
+        };
+        let cutback = self.params.cutback;
+        if cutback == 0 || self.gen_alpha.is_some() || !matches!(self.backend, Backend::Cpu) {
+            return Err(fail);
+        }
+        // Cut-back: redo the step as 2, 4, … 2^cutback complete sub-steps.
+        let dt = self.params.dt;
+        let saved = (
+            self.state.clone(),
+            self.inv,
+            self.prev.clone(),
+            self.frozen.clone(),
+        );
+        for k in 1..=cutback.min(20) {
+            let n = 1usize << k;
+            self.params.dt = dt / n as f64;
+            self.prev.iter_mut().for_each(|x| *x /= n as f64);
+            let mut agg = StepReport {
+                substeps: n,
+                ..StepReport::default()
+            };
+            let mut ok = true;
+            for _ in 0..n {
+                match self.step_at_dt().await {
+                    Ok(r) => {
+                        agg.newton_iters += r.newton_iters;
+                        agg.outer_iters = agg.outer_iters.max(r.outer_iters);
+                        agg.residual = agg.residual.max(r.residual);
+                        agg.dissipation += r.dissipation;
+                        agg.external_work += r.external_work;
+                        agg.acc_trans = agg.acc_trans.max(r.acc_trans);
+                        agg.acc_rot = agg.acc_rot.max(r.acc_rot);
+                        agg.max_link_g = agg.max_link_g.max(r.max_link_g);
+                        agg.link_rounds = agg.link_rounds.max(r.link_rounds);
+                        agg.fallback |= r.fallback;
+                    }
+                    Err(_) => {
+                        ok = false;
+                        break;
+                    }
+                }
+            }
+            self.params.dt = dt;
+            if ok {
+                // The next full step predicts from a full-step increment.
+                self.prev.iter_mut().for_each(|x| *x *= n as f64);
+                self.state.t = saved.0.t + dt;
+                return Ok(agg);
+            }
+            (self.state, self.inv, self.prev, self.frozen) = saved.clone();
+            self.state_version += 1;
+        }
+        Err(StepFailure {
+            reason: format!(
+                "{} (cut back to {} sub-steps, it failed too)",
+                fail.reason,
+                1usize << cutback.min(20)
+            ),
+            residuals: fail.residuals,
+        })
+    }
+
+    /// One step of the current Δt (no cut-back).
+    async fn step_at_dt(&mut self) -> Result<StepReport, StepFailure> {
         if self.gen_alpha.is_some() {
             if !self.model.links.is_empty() {
                 // The baseline has no augmented-Lagrangian treatment of rigid links;
@@ -35,6 +102,7 @@ impl Simulation {
             }
             return self.step_gen_alpha();
         }
+        self.fell_back = false;
         let dt = self.params.dt;
         let t_mid = self.state.t + 0.5 * dt;
         let (mut force, mut moment) = (
@@ -92,6 +160,8 @@ impl Simulation {
                         acc_rot: ar,
                         max_link_g,
                         link_rounds: round,
+                        fallback: self.fell_back,
+                        substeps: 1,
                     };
                     if let Err(f) = finite::check_step(&next, &inv, &report) {
                         self.state.lambda.clone_from(&lambda0);
@@ -156,6 +226,8 @@ impl Simulation {
             acc_rot: ar,
             max_link_g: 0.0,
             link_rounds: 1,
+            fallback: false,
+            substeps: 1,
         };
         finite::check_step(&out.state, &inv, &report)?;
         self.inv = inv;

@@ -26,7 +26,38 @@ impl Simulation {
         }
         match self.params.strategy {
             Strategy::Monolithic => self.solve_once(q, Mode::Consistent, total_iters).await,
-            Strategy::Staggered => self.solve_staggered(q, total_iters).await,
+            Strategy::Staggered if !self.params.fallback => {
+                self.solve_staggered(q, total_iters).await
+            }
+            Strategy::Staggered => {
+                // Fallback: a staggered failure (outer cap, Newton failure, acceptance
+                // check) is retried from the same predictor with the monolithic Newton,
+                // which solves the same scheme's equations with the scalars linearized.
+                let q0 = q.to_vec();
+                let frozen0 = self.frozen.clone();
+                match self.solve_staggered(q, total_iters).await {
+                    Ok(x) => Ok(x),
+                    Err(staggered) => {
+                        q.copy_from_slice(&q0);
+                        match self.solve_once(q, Mode::Consistent, total_iters).await {
+                            Ok(x) => {
+                                self.fell_back = true;
+                                Ok(x)
+                            }
+                            Err(mono) => {
+                                self.frozen = frozen0;
+                                Err(StepFailure {
+                                    reason: format!(
+                                        "{} (the monolithic fallback failed too: {})",
+                                        staggered.reason, mono.reason
+                                    ),
+                                    residuals: mono.residuals,
+                                })
+                            }
+                        }
+                    }
+                }
+            }
         }
     }
 
