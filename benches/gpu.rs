@@ -29,7 +29,7 @@ use cosserat::batch::bench_members;
 use cosserat::element::{kinematics, residual_tangent, FrozenScalars, Increment, StepConsts};
 use cosserat::gpu::kernel::KernelMode;
 use cosserat::gpu::{Assembler, ElementKernel, GpuContext};
-use cosserat::integrator::dofs::{DofMap, NONE};
+use cosserat::integrator::dofs::DofMap;
 use cosserat::integrator::Simulation;
 use cosserat::linsolve::SparseSolver;
 use cosserat::model::Vec3;
@@ -195,17 +195,7 @@ fn dispatches(c: &mut Criterion) {
         };
         let trans = k.scheme.translational_dissipation();
         let ends: Vec<[usize; 2]> = sim.model().elements.iter().map(|e| e.nodes).collect();
-        let masks: Vec<u32> = sim
-            .dof_map()
-            .elements
-            .iter()
-            .map(|d| {
-                d.iter()
-                    .enumerate()
-                    .filter(|(_, &i)| i != NONE)
-                    .fold(0u32, |acc, (r, _)| acc | (1 << r))
-            })
-            .collect();
+        let masks = sim.dof_map().element_row_masks();
         asm.set_member(m, nn, &ends, &masks).unwrap();
         for e in 0..ne {
             kern.set_element(m * ne + e, &sim.element_data()[e], &k, trans);

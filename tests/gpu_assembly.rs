@@ -279,17 +279,7 @@ fn tangent_for_some_members_equals_tangent_for_all() {
     let trans = k.scheme.translational_dissipation();
     let ends: Vec<[usize; 2]> = model.elements.iter().map(|e| e.nodes).collect();
     for (m, sim) in sims.iter().enumerate() {
-        let masks: Vec<u32> = sim
-            .dof_map()
-            .elements
-            .iter()
-            .map(|d| {
-                d.iter()
-                    .enumerate()
-                    .filter(|(_, &i)| i != NONE)
-                    .fold(0u32, |acc, (r, _)| acc | (1 << r))
-            })
-            .collect();
+        let masks = sim.dof_map().element_row_masks();
         asm.set_member(m, nn, &ends, &masks).unwrap();
         for e in 0..ne {
             kern.set_element(m * ne + e, &sim.element_data()[e], &k, trans);

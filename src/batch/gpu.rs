@@ -13,7 +13,6 @@ use crate::element::StepConsts;
 use crate::gpu::kernel::KernelTimers;
 use crate::gpu::layout::AsmLayout;
 use crate::gpu::{Assembler, ElementKernel, GpuContext, GpuError};
-use crate::integrator::dofs::NONE;
 use crate::integrator::evaluate::{AssembledSystem, ElementBackend, EvalPort, EvalRequest};
 use crate::integrator::Simulation;
 
@@ -99,17 +98,7 @@ impl GpuEvaluator {
         };
         let trans = sim.params().scheme.translational_dissipation();
         let ends: Vec<[usize; 2]> = sim.model().elements.iter().map(|e| e.nodes).collect();
-        let masks: Vec<u32> = sim
-            .dof_map()
-            .elements
-            .iter()
-            .map(|m| {
-                m.iter()
-                    .enumerate()
-                    .filter(|(_, &i)| i != NONE)
-                    .fold(0u32, |acc, (r, _)| acc | (1 << r))
-            })
-            .collect();
+        let masks = sim.dof_map().element_row_masks();
         let n_nodes = sim.model().n_nodes();
         self.assembler.set_member(slot, n_nodes, &ends, &masks)?;
         for (e, d) in sim.element_data().iter().enumerate() {

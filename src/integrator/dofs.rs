@@ -32,6 +32,20 @@ pub struct DofMap {
 }
 
 impl DofMap {
+    /// Per element: a bit per element-local row that is an unknown (bit `r` set when row
+    /// `r` of the element's 18 is numbered), the activity mask the GPU kernels use.
+    pub fn element_row_masks(&self) -> Vec<u32> {
+        self.elements
+            .iter()
+            .map(|m| {
+                m.iter()
+                    .enumerate()
+                    .filter(|(_, &i)| i != NONE)
+                    .fold(0u32, |acc, (r, _)| acc | (1 << r))
+            })
+            .collect()
+    }
+
     /// Numbers the unknowns node by node (keeps the matrix block-banded along a rod).
     pub fn new(model: &Model, with_g: bool) -> Self {
         let mut n = 0;

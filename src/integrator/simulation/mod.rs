@@ -34,7 +34,7 @@ use crate::element::{
 use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
 use crate::integrator::evaluate::{ElementBackend, EvalPort};
 use crate::integrator::gen_alpha::GenAlpha;
-use crate::integrator::params::{IntegratorParams, NewtonVariant, Scheme};
+use crate::integrator::params::{IntegratorParams, Scheme};
 use crate::integrator::report::SolveTimers;
 use crate::integrator::state::State;
 use crate::linsolve::{SolverKind, SparseSolver};
@@ -290,11 +290,6 @@ impl Simulation {
         self.backend = backend;
         self.sent_version = None;
         true
-    }
-
-    /// The Newton variant (full, or modified: tangent and factorization reused).
-    pub fn newton_variant(&self) -> NewtonVariant {
-        self.params.newton
     }
 
     /// The model.

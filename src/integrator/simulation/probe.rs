@@ -57,18 +57,6 @@ impl Simulation {
         (r, scale, values)
     }
 
-    /// The external loads at the middle of the coming step (for the test helpers).
-    pub(super) fn mid_step_loads(&mut self) {
-        let t_mid = self.state.t + 0.5 * self.params.dt;
-        let (mut f, mut m) = (
-            std::mem::take(&mut self.force),
-            std::mem::take(&mut self.moment),
-        );
-        self.model.external_loads(t_mid, &mut f, &mut m);
-        self.force = f;
-        self.moment = m;
-    }
-
     /// Sets the frozen dissipation scalars of every element (tests of the staggered
     /// tangent).
     pub fn set_frozen(&mut self, s: FrozenScalars) {

@@ -103,15 +103,7 @@ impl Simulation {
             return self.step_gen_alpha();
         }
         self.fell_back = false;
-        let dt = self.params.dt;
-        let t_mid = self.state.t + 0.5 * dt;
-        let (mut force, mut moment) = (
-            std::mem::take(&mut self.force),
-            std::mem::take(&mut self.moment),
-        );
-        self.model.external_loads(t_mid, &mut force, &mut moment);
-        self.force = force;
-        self.moment = moment;
+        self.mid_step_loads();
 
         let mut predictors = vec![self.prev.clone()];
         if self.prev.iter().any(|&x| x != 0.0) {
@@ -234,5 +226,18 @@ impl Simulation {
         self.state = out.state;
         self.state_version += 1;
         Ok(report)
+    }
+
+    /// The external loads at the middle of the coming step (the step uses them; so do the
+    /// test entry points of `probe`).
+    pub(super) fn mid_step_loads(&mut self) {
+        let t_mid = self.state.t + 0.5 * self.params.dt;
+        let (mut f, mut m) = (
+            std::mem::take(&mut self.force),
+            std::mem::take(&mut self.moment),
+        );
+        self.model.external_loads(t_mid, &mut f, &mut m);
+        self.force = f;
+        self.moment = m;
     }
 }
