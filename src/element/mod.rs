@@ -18,6 +18,7 @@
 //! monolithic strategy re-evaluates them from the iterate and adds their linearization
 //! ([`monolithic_correction`]).
 
+pub mod director_factor;
 pub mod dissipation;
 pub mod strain;
 
@@ -283,8 +284,9 @@ pub fn kinematics(
 /// Evaluates the scheme's local law at the state an increment produces and returns the
 /// scalars consistent with it (what the staggered loop converges to and what the
 /// monolithic Newton uses). The director factor `c_ν` enters the director speeds it is
-/// computed from; that scalar fixed point is solved here (a contraction for any sensible
-/// Δt: `c_ν` is `O(χ)`, `O(α Δt/h)`).
+/// computed from; that scalar equation is solved here to round-off
+/// ([`director_factor::solve_fixed_point`]: plain iteration oscillates at
+/// turning points of the director motion).
 pub fn consistent_scalars(
     data: &ElementData,
     st: &ElementState,
@@ -295,20 +297,22 @@ pub fn consistent_scalars(
     let p = &data.props;
     let dt_h = k.dt / p.h;
     let mut c_nu = 0.0;
-    let mut kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
-    let mut loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
     if k.scheme.director_dissipation() {
-        for _ in 0..200 {
-            let next = loc.c_nu(&kin.inputs);
-            let done = (next - c_nu).abs() <= 1e-15 * (1.0 + c_nu.abs());
-            c_nu = next;
-            kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
-            loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
-            if done {
-                break;
-            }
-        }
+        let law = |c: f64| {
+            let kin = kinematics(data, st, eps_n, inc, c, k.dt);
+            local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h).c_nu(&kin.inputs)
+        };
+        // The update divides by 1 + K c_ν (K = Σ κ_l): the domain is c_ν > −1/K.
+        let ksum: f64 = data.kappa().iter().sum();
+        let c_min = if ksum > 0.0 {
+            -1.0 / ksum
+        } else {
+            f64::NEG_INFINITY
+        };
+        c_nu = director_factor::solve_fixed_point(law, c_min);
     }
+    let kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
+    let loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
     let frozen = FrozenScalars {
         beta_gamma: loc.beta_gamma,
         beta_omega: loc.beta_omega,
