@@ -336,23 +336,89 @@ fn kinematics(st: St, x: array<Real, 18>, c_nu: Real, dt: Real) -> Kin {
 // Twin of element::consistent_scalars: returns (β_Γ, β_Ω, c_v, c_ν) and the kinematics.
 struct Consistent { s: array<Real, 4>, kin: Kin, }
 
+// c_ν's local law at the kinematics of c (the map F of element::director_factor).
+fn cnu_law(st: St, x: array<Real, 18>, c: Real, dt: Real) -> Real {
+    let kin = kinematics(st, x, c, dt);
+    let loc = local_scalars(kin.inputs, ld_e(E_ARHO), dt / ld_e(E_H));
+    return ratio(0.5 * loc.dnu, kin.inputs.nu_n + kin.inputs.nu_n1);
+}
+
+fn cnu_tol(c: Real) -> Real { return CNU_TOL * (1.0 + abs(c)); }
+
+// Twin of element::director_factor::solve_fixed_point: a few fixed-point steps, then a
+// bracket walked away from 0 and the Illinois regula falsi.
+fn solve_cnu(st: St, x: array<Real, 18>, dt: Real) -> Real {
+    let ksum = kappa(0u) + kappa(1u);
+    let has_min = ksum > 0.0;
+    var c_min: Real = 0.0;
+    if has_min { c_min = -1.0 / ksum; }
+    let f0 = cnu_law(st, x, 0.0, dt);
+    if abs(f0) <= cnu_tol(0.0) { return f0; }
+    var c = f0;
+    for (var it = 0u; it < 6u; it++) {
+        let next = cnu_law(st, x, c, dt);
+        if abs(next - c) <= cnu_tol(c) { return next; }
+        c = next;
+    }
+    var a: Real;
+    var ga: Real;
+    var b: Real;
+    var gb: Real;
+    if f0 > 0.0 {
+        a = 0.0;
+        ga = f0;
+        b = f0;
+        gb = cnu_law(st, x, b, dt) - b;
+        for (var k = 0u; k < 60u && gb > 0.0; k++) {
+            a = b;
+            ga = gb;
+            b = 2.0 * b + TINY;
+            gb = cnu_law(st, x, b, dt) - b;
+        }
+    } else {
+        b = 0.0;
+        gb = f0;
+        if !has_min || f0 > c_min { a = f0; } else { a = 0.5 * c_min; }
+        ga = cnu_law(st, x, a, dt) - a;
+        for (var k = 0u; k < 60u && ga < 0.0; k++) {
+            b = a;
+            gb = ga;
+            if has_min { a = 0.5 * (a + c_min); } else { a = 2.0 * a - TINY; }
+            ga = cnu_law(st, x, a, dt) - a;
+        }
+    }
+    if !(ga >= 0.0 && gb <= 0.0) { return c; }
+    var side = 0i;
+    for (var it = 0u; it < 200u; it++) {
+        var xc: Real;
+        if ga - gb > 0.0 { xc = (a * (-gb) + b * ga) / (ga - gb); } else { xc = 0.5 * (a + b); }
+        let gx = cnu_law(st, x, xc, dt) - xc;
+        if abs(gx) <= cnu_tol(xc) || abs(b - a) <= cnu_tol(xc) { return xc; }
+        if gx > 0.0 {
+            a = xc;
+            ga = gx;
+            if side == 1i { gb *= 0.5; }
+            side = 1i;
+        } else {
+            b = xc;
+            gb = gx;
+            if side == -1i { ga *= 0.5; }
+            side = -1i;
+        }
+    }
+    return 0.5 * (a + b);
+}
+
 fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real) -> Consistent {
     let h = ld_e(E_H);
     let a_rho = ld_e(E_ARHO);
     let dt_h = dt / h;
     var c_nu: Real = 0.0;
-    var kin = kinematics(st, x, c_nu, dt);
-    var loc = local_scalars(kin.inputs, a_rho, dt_h);
     if ld_e(E_DIRDISS) != 0.0 {
-        for (var it = 0u; it < 200u; it++) {
-            let next = ratio(0.5 * loc.dnu, kin.inputs.nu_n + kin.inputs.nu_n1);
-            let done = abs(next - c_nu) <= CNU_TOL * (1.0 + abs(c_nu));
-            c_nu = next;
-            kin = kinematics(st, x, c_nu, dt);
-            loc = local_scalars(kin.inputs, a_rho, dt_h);
-            if done { break; }
-        }
+        c_nu = solve_cnu(st, x, dt);
     }
+    let kin = kinematics(st, x, c_nu, dt);
+    let loc = local_scalars(kin.inputs, a_rho, dt_h);
     let c_v = ratio(0.5 * loc.dv, kin.inputs.v_n + kin.inputs.v_n1);
     return Consistent(array<Real, 4>(loc.beta_g, loc.beta_o, c_v, c_nu), kin);
 }
