@@ -7,12 +7,16 @@
 //!   completed cell, and `stability.csv` has the documented columns;
 //! * on the free-flying frame, per scheme, the drifts of H, L and J: the mid-point rule keeps
 //!   L and J to round-off but not H; generalized-α keeps L to round-off (its translational
-//!   update is linear and the internal forces are self-equilibrated) but neither H nor J.
+//!   update is linear and the internal forces are self-equilibrated) but neither H nor J;
+//! * the damping study (the dissipation guide): EM does not damp; χ_Γ damps the axial and
+//!   χ_Ω the bending mode, each leaving the other nearly untouched; EDMC-1's ζ is linear in
+//!   χ, EDMC-2's quadratic in α (at this amplitude); the chart has both panels drawn.
 use cosserat::observe::record::RunStatus;
 use cosserat::scene::{load_scene, parse_scene, Scene};
 use cosserat::study::{
-    run_member, stability, work_precision, write_stability_csv, write_work_precision_csv,
-    SchemeKind, SchemeSpec, StabilityConfig, WorkPrecisionConfig, STABILITY_COLUMNS,
+    damping, plot_damping, run_member, stability, work_precision, write_damping_csv,
+    write_stability_csv, write_work_precision_csv, DampingConfig, ModeKind, SchemeKind, SchemeSpec,
+    StabilityConfig, WorkPrecisionConfig, DAMPING_COLUMNS, STABILITY_COLUMNS,
     WORK_PRECISION_COLUMNS,
 };
 
@@ -251,4 +255,113 @@ fn frame_drifts_of_h_l_j_per_scheme() {
         "gen-α ρ∞=1 H drift {}",
         rel_dh(&ga1)
     );
+}
+
+#[test]
+fn damping_study_separates_what_each_parameter_damps() {
+    let scene = smooth_rod();
+    let cfg = DampingConfig {
+        values: vec![0.1, 1.0],
+        periods: 2.0,
+        steps_per_period: 12,
+        amplitude: 0.01,
+        jobs: 2,
+    };
+    let d = damping(&scene, &cfg).unwrap();
+    assert_eq!(d.rows.len(), 2 * (1 + 8 * 2));
+    let zeta = |mode: ModeKind, key: &str, v: f64| {
+        let r = d
+            .rows
+            .iter()
+            .find(|r| r.mode == mode && r.param == key && r.value == v)
+            .unwrap();
+        assert_eq!(r.status, RunStatus::Completed, "{key} {v}: {:?}", r.reason);
+        r.zeta
+    };
+    for mode in [ModeKind::Axial, ModeKind::Bending] {
+        let em = zeta(mode, "em", 0.0);
+        assert!(
+            em.abs() < 1e-12,
+            "EM damps the {} mode: ζ = {em:e}",
+            mode.name()
+        );
+    }
+    let (ax, be) = (ModeKind::Axial, ModeKind::Bending);
+    // χ_Γ damps the axial mode (measured ζ ≈ 0.09 at χ = 1 on the cantilever).
+    assert!(zeta(ax, "chi_gamma", 1.0) > 1e-2);
+    assert!(zeta(be, "chi_gamma", 1.0) < 0.1 * zeta(ax, "chi_gamma", 1.0));
+    // χ_Ω damps bending and leaves the axial mode alone (no curvature in it).
+    assert!(zeta(be, "chi_omega", 1.0) > 1e-2);
+    assert!(zeta(ax, "chi_omega", 1.0).abs() < 1e-12);
+    // EDMC-1 acts linearly: ζ ∝ χ.
+    for (mode, key) in [(ax, "chi_gamma"), (be, "chi_omega")] {
+        let ratio = zeta(mode, key, 1.0) / zeta(mode, key, 0.1);
+        assert!((ratio - 10.0).abs() < 0.5, "{key}: ζ(1)/ζ(0.1) = {ratio}");
+    }
+    // EDMC-2 acts on increments: ζ ∝ α² at small amplitude, and far below EDMC-1's.
+    let ratio = zeta(ax, "alpha_gv", 1.0) / zeta(ax, "alpha_gv", 0.1);
+    assert!((ratio - 100.0).abs() < 15.0, "α_Γv: ζ(1)/ζ(0.1) = {ratio}");
+    assert!(zeta(ax, "alpha_gv", 1.0) < 0.1 * zeta(ax, "chi_gamma", 1.0));
+    // Every completed run dissipates (ζ ≥ −round-off).
+    for r in d.rows.iter().filter(|r| r.status == RunStatus::Completed) {
+        assert!(r.zeta > -1e-12, "{:?}", r);
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("damping.csv");
+    write_damping_csv(&csv, &d).unwrap();
+    assert_eq!(header(&csv), DAMPING_COLUMNS.to_vec());
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().count(), 1 + d.rows.len());
+    let png = dir.path().join("damping.png");
+    plot_damping(&png, &d).unwrap();
+    // Both panels carry drawn lines: count non-white, non-grey (coloured) pixels per half.
+    let img = image_rgb(&png);
+    let (w, h) = (img.0, img.1);
+    for half in 0..2 {
+        let coloured = (0..h)
+            .flat_map(|y| (half * w / 2..(half + 1) * w / 2).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let p = &img.2[(y * w + x) * 3..(y * w + x) * 3 + 3];
+                let (mx, mn) = (p.iter().max().unwrap(), p.iter().min().unwrap());
+                mx - mn > 60
+            })
+            .count();
+        assert!(coloured > 500, "panel {half}: {coloured} coloured pixels");
+    }
+}
+
+/// Decodes a PNG into (width, height, RGB bytes).
+fn image_rgb(path: &std::path::Path) -> (usize, usize, Vec<u8>) {
+    let file = std::fs::File::open(path).unwrap();
+    let decoder = png::Decoder::new(std::io::BufReader::new(file));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let ch = info.color_type.samples();
+    let rgb: Vec<u8> = buf[..info.buffer_size()]
+        .chunks(ch)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    (info.width as usize, info.height as usize, rgb)
+}
+
+/// `study damping` refuses a scene that is not one clamped straight rod, by name, with
+/// exit code 2 and without creating the output folder.
+#[test]
+fn damping_study_refuses_the_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["study", "damping", "frame", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("scene `frame`") && err.contains("exactly one rod"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }

@@ -71,6 +71,39 @@ enum StudyCommand {
     /// Fraction of the run completed over a grid Δt × dissipation parameter per scheme:
     /// writes stability.csv and stability.png.
     Stability(StabilityArgs),
+    /// The dissipation guide: modal damping ratio of the first axial and bending mode of
+    /// a clamped rod under each dissipation parameter: writes damping.csv and damping.png.
+    Damping(DampingArgs),
+}
+
+#[derive(clap::Args, Debug)]
+struct DampingArgs {
+    /// Scene file or built-in name: one straight uniform rod clamped at its first node.
+    #[arg(default_value = "cantilever")]
+    scene: String,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Values of each dissipation parameter (χ or α).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.01,0.1,0.5,1",
+        allow_negative_numbers = true
+    )]
+    values: Vec<f64>,
+    /// Periods of the mode each run covers.
+    #[arg(long, default_value_t = 4.0, allow_negative_numbers = true)]
+    periods: f64,
+    /// Time steps per period of the mode (ωΔt = 2π / this).
+    #[arg(long, default_value_t = 16)]
+    steps_per_period: usize,
+    /// Tip displacement amplitude of the mode relative to the rod length.
+    #[arg(long, default_value_t = 0.01, allow_negative_numbers = true)]
+    amplitude: f64,
+    /// Parallel runs (default: the number of cores).
+    #[arg(long)]
+    jobs: Option<usize>,
 }
 
 /// Options every study takes.
@@ -312,6 +345,7 @@ fn main() -> ExitCode {
         Some(Command::Reproduce { out, quick, no_vtk }) => reproduce_command(&out, quick, !no_vtk),
         Some(Command::Study(StudyCommand::WorkPrecision(a))) => work_precision_command(&a),
         Some(Command::Study(StudyCommand::Stability(a))) => stability_command(&a),
+        Some(Command::Study(StudyCommand::Damping(a))) => damping_command(&a),
         Some(Command::Sweep(a)) => cmds::sweep_command(a),
         Some(Command::Bench(a)) => cmds::bench_command(a),
         Some(Command::Scenes) => {
@@ -676,6 +710,53 @@ fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
         scene.name,
         wp.reference_dt,
         a.common.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn damping_command(a: &DampingArgs) -> Result<ExitCode> {
+    let scene = load_scene(&a.scene)?;
+    let cfg = study::DampingConfig {
+        values: a.values.clone(),
+        periods: a.periods,
+        steps_per_period: a.steps_per_period,
+        amplitude: a.amplitude,
+        jobs: default_jobs(a.jobs),
+    };
+    // Nothing is written until the study has run (a refused scene leaves no folder).
+    let d = study::damping(&scene, &cfg)?;
+    create_out(&a.out)?;
+    study::write_damping_csv(&a.out.join("damping.csv"), &d)?;
+    study::plot_damping(&a.out.join("damping.png"), &d)?;
+    for mode in [study::ModeKind::Axial, study::ModeKind::Bending] {
+        let rows: Vec<_> = d.rows.iter().filter(|r| r.mode == mode).collect();
+        if let Some(r) = rows.first() {
+            println!(
+                "first {} mode: ω = {:.4e} rad/s, Δt = {:.4e} (ωΔt = {:.3})",
+                mode.name(),
+                r.omega,
+                r.dt,
+                r.omega * r.dt
+            );
+        }
+        for r in rows {
+            println!(
+                "  {:<10} {:>8}  ζ = {:>10.3e}  energy lost per period {:>9.3e}{}",
+                r.param,
+                r.value,
+                r.zeta,
+                r.loss_per_period,
+                r.reason
+                    .as_deref()
+                    .map(|w| format!("  FAILED: {w}"))
+                    .unwrap_or_default()
+            );
+        }
+    }
+    println!(
+        "{}: damping study; outputs in {}",
+        scene.name,
+        a.out.display()
     );
     Ok(ExitCode::SUCCESS)
 }

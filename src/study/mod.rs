@@ -17,19 +17,24 @@
 //!   it got and the largest relative growth of `H − H_0 − W` (energy created beyond the
 //!   external work).
 //!
+//! * [`damping`]: the dissipation guide, the modal damping ratio of the first axial and
+//!   bending mode of a clamped rod under each dissipation parameter.
+//!
 //! Each member is one [`run_member`] call (a plain function of scene, scheme, parameter,
 //! Δt and end time), run on `jobs` threads ([`parallel_map`]); nothing else is shared.
 
+mod damping;
 mod plot;
 mod write;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
-pub use plot::{plot_stability, plot_work_precision};
+pub use damping::{damping, Damping, DampingConfig, DampingRow, ModeKind, Parameter, PARAMETERS};
+pub use plot::{plot_damping, plot_stability, plot_work_precision};
 pub use write::{
-    write_failures, write_stability_csv, write_work_precision_csv, STABILITY_COLUMNS,
-    WORK_PRECISION_COLUMNS,
+    write_damping_csv, write_failures, write_stability_csv, write_work_precision_csv,
+    DAMPING_COLUMNS, STABILITY_COLUMNS, WORK_PRECISION_COLUMNS,
 };
 
 use crate::batch::{run_members, BatchOptions, Executor, Member};

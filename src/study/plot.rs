@@ -8,7 +8,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::{SchemeKind, SchemeSpec, Stability, WorkPrecision};
+use super::{Damping, ModeKind, SchemeKind, SchemeSpec, Stability, WorkPrecision, PARAMETERS};
 use crate::observe::record::RunStatus;
 use crate::output::{ensure_font, OutputError, FONT};
 
@@ -368,6 +368,121 @@ fn draw_stability_panel<DB: DrawingBackend>(
                 }))
                 .map_err(e)?;
         }
+    }
+    Ok(())
+}
+
+/// Draws `damping.png`: the modal damping ratio ζ against the parameter value on log-log
+/// axes, one panel per mode (axial, bending), one line per dissipation parameter; EM's
+/// ζ (round-off) is given in each panel's caption. Failed runs are left out of the lines.
+pub fn plot_damping(path: &Path, d: &Damping) -> Result<(), OutputError> {
+    ensure_font();
+    let root = BitMapBackend::new(path, (1400, 700)).into_drawing_area();
+    draw_damping(&root, d).map_err(plot_err(path))?;
+    root.present().map_err(|e| plot_err(path)(e.to_string()))
+}
+
+/// Smallest ζ drawn (smaller values, e.g. EDMC-2 at small amplitude, sit on the floor).
+const ZETA_FLOOR: f64 = 1e-8;
+
+fn draw_damping<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    d: &Damping,
+) -> Result<(), String> {
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    root.fill(&WHITE).map_err(e)?;
+    let c = &d.config;
+    let title = format!(
+        "{}: modal damping ratio per dissipation parameter ({} steps per period, tip amplitude {:e} L, {} periods)",
+        d.scene, c.steps_per_period, c.amplitude, c.periods
+    );
+    let (top, body) = root.split_vertically(40);
+    top.draw(&Text::new(
+        title,
+        (20, 10),
+        (FONT, 22).into_font().color(&BLACK),
+    ))
+    .map_err(e)?;
+    let panels = body.split_evenly((1, 2));
+    let ok = |r: &&super::DampingRow| r.status == RunStatus::Completed && r.zeta.is_finite();
+    let (xl, xh) = decades(
+        c.values.iter().copied().fold(f64::INFINITY, f64::min),
+        c.values.iter().copied().fold(0.0, f64::max),
+    );
+    let zmax = d
+        .rows
+        .iter()
+        .filter(ok)
+        .map(|r| r.zeta)
+        .fold(ZETA_FLOOR, f64::max);
+    let (yl, yh) = decades(ZETA_FLOOR, zmax);
+    for (panel, mode) in panels.iter().zip([ModeKind::Axial, ModeKind::Bending]) {
+        let rows: Vec<_> = d.rows.iter().filter(|r| r.mode == mode).collect();
+        let em = rows.iter().find(|r| r.param == "em");
+        let caption = format!(
+            "first {} mode, ωΔt = {:.3}; EM ζ = {}",
+            mode.name(),
+            rows.first().map_or(f64::NAN, |r| r.omega * r.dt),
+            em.map_or("—".to_string(), |r| format!("{:.1e}", r.zeta))
+        );
+        let mut chart = ChartBuilder::on(panel)
+            .caption(caption, (FONT, 20))
+            .margin(15)
+            .x_label_area_size(55)
+            .y_label_area_size(80)
+            .build_cartesian_2d((xl..xh).log_scale(), (yl..yh).log_scale())
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("parameter value (χ or α)")
+            .y_desc("modal damping ratio ζ")
+            .axis_desc_style((FONT, 18))
+            .label_style((FONT, 15))
+            .x_label_formatter(&|v| sci(*v))
+            .y_label_formatter(&|v| sci(*v))
+            .draw()
+            .map_err(e)?;
+        for (i, p) in PARAMETERS.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            let style = if i < 4 {
+                ShapeStyle::from(&color).stroke_width(2)
+            } else {
+                ShapeStyle::from(&color).stroke_width(1)
+            };
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.param == p.key && ok(r))
+                .map(|r| (r.value, r.zeta.max(ZETA_FLOOR)))
+                .collect();
+            if pts.is_empty() {
+                continue;
+            }
+            chart
+                .draw_series(LineSeries::new(pts.clone(), style))
+                .map_err(e)?
+                .label(p.symbol)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            if i < 4 {
+                chart
+                    .draw_series(pts.iter().map(|&q| Circle::new(q, 4, color.filled())))
+                    .map_err(e)?;
+            } else {
+                chart
+                    .draw_series(
+                        pts.iter()
+                            .map(|&q| TriangleMarker::new(q, 5, color.filled())),
+                    )
+                    .map_err(e)?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .label_font((FONT, 15))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
     }
     Ok(())
 }

@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::{Stability, WorkPrecision};
+use super::{Damping, Stability, WorkPrecision};
 use crate::observe::record::RunStatus;
 use crate::output::OutputError;
 
@@ -141,4 +141,44 @@ impl Stability {
             })
             .collect()
     }
+}
+
+/// Header of `damping.csv`.
+pub const DAMPING_COLUMNS: [&str; 11] = [
+    "mode",
+    "param",
+    "value",
+    "omega",
+    "dt",
+    "omega_dt",
+    "energy_decay_rate",
+    "zeta",
+    "loss_per_period",
+    "status",
+    "reason",
+];
+
+/// Writes `damping.csv` (columns [`DAMPING_COLUMNS`]; NaN rates for failed runs).
+pub fn write_damping_csv(path: &Path, d: &Damping) -> Result<(), OutputError> {
+    let lines: Vec<String> = d
+        .rows
+        .iter()
+        .map(|r| {
+            format!(
+                "{},{},{},{:.9e},{:.9e},{:.6},{:.9e},{:.9e},{:.9e},{},\"{}\"",
+                r.mode.name(),
+                r.param,
+                r.value,
+                r.omega,
+                r.dt,
+                r.omega * r.dt,
+                r.energy_decay_rate,
+                r.zeta,
+                r.loss_per_period,
+                status(r.status),
+                r.reason.as_deref().unwrap_or("").replace('"', "'")
+            )
+        })
+        .collect();
+    write_lines(path, &DAMPING_COLUMNS, &lines)
 }
