@@ -25,6 +25,8 @@
 //! `sweep.toml:7:7: vary[0].key: base scene rejects it: builtin:frame: integrator.alpha: …`.
 
 mod run;
+pub mod shard;
+pub mod slurm;
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +38,7 @@ use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
 pub use run::{
     run_sweep, MemberRow, SweepOptions, SweepSummary, CSV_COLUMNS, IDENTITY_FILE, LOCK_FILE,
 };
+pub use shard::{check_shard_folder, merge_shards, MergeSummary, Shard};
 
 /// Everything that can go wrong reading a sweep file (or its output directory).
 #[derive(Debug, thiserror::Error)]
@@ -85,6 +88,16 @@ pub enum SweepError {
     Locked {
         /// The output folder.
         dir: String,
+    },
+    /// A shard of a sharded sweep is missing, torn, incomplete, foreign or running.
+    #[error("{file}: shard {shard}: {reason}")]
+    Shard {
+        /// The shard's file (or folder) the problem was found in.
+        file: String,
+        /// The shard, `I-of-N`.
+        shard: String,
+        /// Why, and what to do.
+        reason: String,
     },
     /// The GPU backend failed as a whole.
     #[error(transparent)]
