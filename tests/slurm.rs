@@ -26,7 +26,10 @@ fn required() -> bool {
 fn slurm_here() -> bool {
     let why = match Command::new("sbatch").arg("--version").output() {
         Err(e) => format!("no `sbatch` ({e})"),
-        Ok(o) if !o.status.success() => format!("`sbatch --version` failed: {}", text(&o)),
+        Ok(o) if !o.status.success() => format!(
+            "sbatch is installed but does not run, no cluster configured? ({})",
+            text(&o).trim()
+        ),
         Ok(_) => match Command::new("sinfo").args(["-h", "-o", "%t"]).output() {
             Ok(o) if o.status.success() && !o.stdout.is_empty() => return true,
             Ok(o) => format!(
