@@ -211,7 +211,7 @@ pub enum SweepAction {
     },
     /// Write DIR/sweep.sbatch, a Slurm job array with one task per shard, and print the
     /// commands to submit and merge it (`--submit`, `--wait`: do them).
-    Slurm(SlurmArgs),
+    Slurm(Box<SlurmArgs>),
 }
 
 /// Arguments of `cosserat sweep slurm`.
@@ -266,7 +266,7 @@ pub struct SlurmArgs {
 pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
     match a.action {
         Some(SweepAction::Merge { dir }) => return merge_command(&dir),
-        Some(SweepAction::Slurm(s)) => return slurm_command(s),
+        Some(SweepAction::Slurm(s)) => return slurm_command(*s),
         None => {}
     }
     let (Some(file), Some(out)) = (a.sweep.as_ref(), a.out.as_ref()) else {
