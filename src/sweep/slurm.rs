@@ -152,10 +152,12 @@ pub fn script(job: &JobSpec) -> Result<String, SlurmError> {
     let exe = path_text("--exe", &job.exe)?;
     let logs = job.out.join(LOGS_DIR);
     let logs = path_text("--out", &logs)?;
-    if logs.contains(' ') {
+    if logs.contains([' ', '%']) {
         return Err(SlurmError::Option {
             option: "--out".into(),
-            reason: format!("{logs} holds a space, which #SBATCH --output cannot take"),
+            reason: format!(
+                "{logs} holds a space or `%`, which #SBATCH --output cannot take: choose another folder"
+            ),
         });
     }
     directive_value("--job-name", &job.job_name)?;
