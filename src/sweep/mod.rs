@@ -2,7 +2,9 @@
 //! seeded random samples) over any numeric scene key (`integrator.alpha`, `integrator.dt`,
 //! `material.soft.E`, `initial_velocity[0].v[2]`, …). Each member is the base scene with
 //! its values written in and validated by the scene parser; members run as one batch
-//! ([`crate::batch`]) and `DIR/members.csv` grows by one row per finished member.
+//! ([`crate::batch`]) and `DIR/members.csv` grows by one row per finished member. A sweep
+//! can also run as shards on many machines and be merged back ([`shard`]), for instance as
+//! a Slurm job array ([`slurm`]).
 //!
 //! File format (`docs/sweeps.md` is not separate: README, "Sweeps"):
 //!
