@@ -2,7 +2,9 @@
 //! seeded random samples) over any numeric scene key (`integrator.alpha`, `integrator.dt`,
 //! `material.soft.E`, `initial_velocity[0].v[2]`, …). Each member is the base scene with
 //! its values written in and validated by the scene parser; members run as one batch
-//! ([`crate::batch`]) and `DIR/members.csv` grows by one row per finished member.
+//! ([`crate::batch`]) and `DIR/members.csv` grows by one row per finished member. A sweep
+//! can also run as shards on many machines and be merged back ([`shard`]), for instance as
+//! a Slurm job array ([`slurm`]).
 //!
 //! File format (`docs/sweeps.md` is not separate: README, "Sweeps"):
 //!
@@ -25,6 +27,8 @@
 //! `sweep.toml:7:7: vary[0].key: base scene rejects it: builtin:frame: integrator.alpha: …`.
 
 mod run;
+pub mod shard;
+pub mod slurm;
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +40,7 @@ use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
 pub use run::{
     run_sweep, MemberRow, SweepOptions, SweepSummary, CSV_COLUMNS, IDENTITY_FILE, LOCK_FILE,
 };
+pub use shard::{check_shard_folder, merge_shards, MergeSummary, Shard};
 
 /// Everything that can go wrong reading a sweep file (or its output directory).
 #[derive(Debug, thiserror::Error)]
@@ -85,6 +90,16 @@ pub enum SweepError {
     Locked {
         /// The output folder.
         dir: String,
+    },
+    /// A shard of a sharded sweep is missing, torn, incomplete, foreign or running.
+    #[error("{file}: shard {shard}: {reason}")]
+    Shard {
+        /// The shard's file (or folder) the problem was found in.
+        file: String,
+        /// The shard, `I-of-N`.
+        shard: String,
+        /// Why, and what to do.
+        reason: String,
     },
     /// The GPU backend failed as a whole.
     #[error(transparent)]

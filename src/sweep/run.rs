@@ -6,6 +6,7 @@ use std::fs::OpenOptions;
 use std::io::Write;
 use std::path::Path;
 
+use super::shard::{self, Shard};
 use super::{SweepError, SweepSpec};
 use crate::batch::{run_members, BatchOptions, Executor, Member, MemberResult};
 use crate::gpu::kernel::KernelTimers;
@@ -41,6 +42,10 @@ pub struct SweepOptions {
     pub fallback: Option<bool>,
     /// Overrides every member's step cut-back when set (`IntegratorParams::cutback`).
     pub cutback: Option<usize>,
+    /// Run only this shard's members (member index ≡ I mod N) into
+    /// `DIR/shards/I-of-N.{csv,id,json}` ([`crate::sweep::shard`]); `None`: every member
+    /// into `DIR/members.csv`.
+    pub shard: Option<Shard>,
 }
 
 /// One row of `members.csv`.
@@ -71,7 +76,7 @@ pub struct MemberRow {
 /// What a sweep did.
 #[derive(Clone, Debug, Default)]
 pub struct SweepSummary {
-    /// Members in the sweep.
+    /// Members in the sweep (in the shard, when sharded).
     pub members: usize,
     /// Members skipped because `members.csv` already had them (`--resume`).
     pub skipped: usize,
@@ -99,7 +104,7 @@ fn num(x: f64) -> String {
     }
 }
 
-fn csv_escape(s: &str) -> String {
+pub(super) fn csv_escape(s: &str) -> String {
     format!("\"{}\"", s.replace('"', "\"\"").replace('\n', " "))
 }
 
@@ -129,8 +134,13 @@ impl MemberRow {
 }
 
 fn header(spec: &SweepSpec) -> String {
+    header_of(spec.params.iter().map(|p| p.key.as_str()))
+}
+
+/// The `members.csv` header of a sweep varying `keys`.
+pub(super) fn header_of<'a>(keys: impl Iterator<Item = &'a str>) -> String {
     let mut cols: Vec<String> = CSV_COLUMNS.iter().map(|s| s.to_string()).collect();
-    cols.extend(spec.params.iter().map(|p| p.key.clone()));
+    cols.extend(keys.map(str::to_string));
     cols.push("reason".into());
     cols.join(",")
 }
@@ -147,7 +157,7 @@ struct Recorded {
 }
 
 /// Splits a CSV row into fields (double-quoted fields may hold commas and `""`).
-fn split_csv(line: &str) -> Vec<String> {
+pub(super) fn split_csv(line: &str) -> Vec<String> {
     let mut out = vec![String::new()];
     let mut quoted = false;
     let mut chars = line.chars().peekable();
@@ -169,7 +179,12 @@ fn split_csv(line: &str) -> Vec<String> {
 /// row must name a member of this sweep with this sweep's values, and a torn last row
 /// (a kill between the start of a row and its newline) is cut off the file so that its
 /// member runs again.
-fn recorded(path: &Path, head: &str, spec: &SweepSpec) -> Result<Recorded, SweepError> {
+fn recorded(
+    path: &Path,
+    head: &str,
+    spec: &SweepSpec,
+    shard: Option<Shard>,
+) -> Result<Recorded, SweepError> {
     let file = path.display().to_string();
     let io = |error| SweepError::Output {
         context: format!("cannot read {file}"),
@@ -238,6 +253,12 @@ fn recorded(path: &Path, head: &str, spec: &SweepSpec) -> Result<Recorded, Sweep
                     spec.len()
                 ))
             })?;
+        if let Some(sh) = shard.filter(|sh| !sh.contains(i)) {
+            return Err(bad(format!(
+                "member {i} is not one of shard {sh}'s (members ≡ {} mod {}): the file was edited or copied from another shard",
+                sh.index, sh.count
+            )));
+        }
         for (j, p) in spec.params.iter().enumerate() {
             let got: Option<f64> = f[CSV_COLUMNS.len() + j].parse().ok();
             let want = spec.values[i][j];
@@ -263,24 +284,29 @@ pub const IDENTITY_FILE: &str = "sweep.id";
 /// Name of the lock file a running sweep holds exclusively.
 pub const LOCK_FILE: &str = ".sweep.lock";
 
-/// Takes the folder's exclusive lock (held until the returned file is dropped, and
-/// released by the system when the process dies, however it dies).
-fn lock(out: &Path) -> Result<std::fs::File, SweepError> {
-    let path = out.join(LOCK_FILE);
+/// Opens (creating) a lock file and tries to lock it, exclusively or shared. `Ok(None)`:
+/// another process holds a conflicting lock.
+pub(super) fn try_lock_file(
+    path: &Path,
+    exclusive: bool,
+) -> Result<Option<std::fs::File>, SweepError> {
     let f = OpenOptions::new()
         .create(true)
         .truncate(false)
         .write(true)
-        .open(&path)
+        .open(path)
         .map_err(|error| SweepError::Output {
             context: format!("cannot open {}", path.display()),
             error,
         })?;
-    match f.try_lock() {
-        Ok(()) => Ok(f),
-        Err(std::fs::TryLockError::WouldBlock) => Err(SweepError::Locked {
-            dir: out.display().to_string(),
-        }),
+    let got = if exclusive {
+        f.try_lock()
+    } else {
+        f.try_lock_shared()
+    };
+    match got {
+        Ok(()) => Ok(Some(f)),
+        Err(std::fs::TryLockError::WouldBlock) => Ok(None),
         Err(std::fs::TryLockError::Error(error)) => Err(SweepError::Output {
             context: format!("cannot lock {}", path.display()),
             error,
@@ -288,9 +314,36 @@ fn lock(out: &Path) -> Result<std::fs::File, SweepError> {
     }
 }
 
+/// Takes the folder's locks, held until the returned files are dropped and released by
+/// the system when the process dies, however it dies. An unsharded sweep (and `sweep
+/// merge`) holds `DIR/.sweep.lock` exclusively; a shard holds it shared (shards of one
+/// folder run side by side) plus its own `DIR/shards/I-of-N.lock` exclusively.
+fn lock(out: &Path, shard: Option<Shard>) -> Result<Vec<std::fs::File>, SweepError> {
+    let Some(folder) = try_lock_file(&out.join(LOCK_FILE), shard.is_none())? else {
+        return Err(SweepError::Locked {
+            dir: out.display().to_string(),
+        });
+    };
+    let mut held = vec![folder];
+    if let Some(sh) = shard {
+        let path = shard::file(out, sh, "lock");
+        match try_lock_file(&path, true)? {
+            Some(f) => held.push(f),
+            None => {
+                return Err(SweepError::Shard {
+                    file: path.display().to_string(),
+                    shard: sh.name(),
+                    reason: format!("shard {sh} is already running in this folder (another process holds this lock); wait for it to finish"),
+                })
+            }
+        }
+    }
+    Ok(held)
+}
+
 /// Writes `text` to `path` through a temporary file renamed over it, synced, so the file
 /// is either the old one or the whole new one.
-fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
+pub(super) fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
     let tmp = path.with_extension("tmp");
     {
         let mut f = std::fs::File::create(&tmp)?;
@@ -303,7 +356,7 @@ fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
 /// The identity of a sweep run: the sweep's own ([`SweepSpec::identity`]) and the
 /// command-line overrides that change its results (`--newton`, `--no-fallback`,
 /// `--cutback`), so that `--resume` with other overrides is refused, not mixed in.
-fn run_identity(spec: &SweepSpec, opts: &SweepOptions) -> String {
+pub(super) fn run_identity(spec: &SweepSpec, opts: &SweepOptions) -> String {
     let mut id = spec.identity();
     if let Some(n) = opts.newton {
         id += &format!("+newton={}", n.name());
@@ -317,10 +370,15 @@ fn run_identity(spec: &SweepSpec, opts: &SweepOptions) -> String {
     id
 }
 
-/// The identity text of a sweep as recorded in [`IDENTITY_FILE`].
+/// The identity text of a sweep as recorded in [`IDENTITY_FILE`] (a shard's adds a line
+/// `shard I/N`).
 fn identity_text(spec: &SweepSpec, opts: &SweepOptions) -> String {
+    let shard = opts
+        .shard
+        .map(|sh| format!("shard {sh}\n"))
+        .unwrap_or_default();
     format!(
-        "id {}\nmembers {}\nparameters {}\nsweep {}\n",
+        "id {}\nmembers {}\nparameters {}\nsweep {}\n{shard}",
         run_identity(spec, opts),
         spec.len(),
         spec.params
@@ -332,11 +390,11 @@ fn identity_text(spec: &SweepSpec, opts: &SweepOptions) -> String {
     )
 }
 
-/// On `--resume`: the folder must hold this sweep (same identity).
-fn check_identity(out: &Path, spec: &SweepSpec, opts: &SweepOptions) -> Result<(), SweepError> {
-    let path = out.join(IDENTITY_FILE);
+/// On `--resume`: the folder (or the shard's identity file `path`) must hold this sweep
+/// (same identity).
+fn check_identity(path: &Path, spec: &SweepSpec, opts: &SweepOptions) -> Result<(), SweepError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(&path).map_err(|e| SweepError::Invalid {
+    let text = std::fs::read_to_string(path).map_err(|e| SweepError::Invalid {
         file: file.clone(),
         location: None,
         key: "id".into(),
@@ -377,17 +435,24 @@ fn check_identity(out: &Path, spec: &SweepSpec, opts: &SweepOptions) -> Result<(
 }
 
 /// A fresh start removes the previous sweep's `member_<i>/history.csv` (and their
-/// temporary files and then-empty folders), so the folder never mixes two sweeps.
-fn remove_stale_histories(out: &Path) -> std::io::Result<usize> {
+/// temporary files and then-empty folders), so the folder never mixes two sweeps. A
+/// shard removes only those of its own member indices (the shards together remove all).
+fn remove_stale_histories(out: &Path, shard: Option<Shard>) -> std::io::Result<usize> {
     let mut n = 0;
     for entry in std::fs::read_dir(out)? {
         let entry = entry?;
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        let is_member = name
+        let member = name
             .strip_prefix("member_")
-            .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()));
-        if !is_member || !entry.file_type()?.is_dir() {
+            .filter(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+            .map(|d| d.parse::<usize>().unwrap_or(usize::MAX));
+        let ours = match (member, shard) {
+            (None, _) => false,
+            (Some(_), None) => true,
+            (Some(i), Some(sh)) => sh.contains(i),
+        };
+        if !ours || !entry.file_type()?.is_dir() {
             continue;
         }
         for f in ["history.csv", "history.csv.tmp"] {
@@ -430,6 +495,13 @@ fn write_history(dir: &Path, history: &[crate::observe::record::StepRecord]) -> 
 /// complete before its row is written; `--resume` checks the folder's identity
 /// (`sweep.id`) and every recorded row's values against this sweep and cuts a torn last
 /// row, whose member then runs again.
+///
+/// With [`SweepOptions::shard`] only that shard's members run, into
+/// `out/shards/I-of-N.{csv,id,json}` (member histories still in `out/member_<i>/`); the
+/// shard holds the folder lock shared and its own lock exclusively, refuses a folder whose
+/// other shards belong to another sweep or another split, and `--resume` checks its own
+/// identity file and that every recorded row is one of its members.
+/// [`merge_shards`](crate::sweep::merge_shards) joins the shards into `out/members.csv`.
 pub fn run_sweep(
     spec: &SweepSpec,
     exec: &Executor,
@@ -444,14 +516,32 @@ pub fn run_sweep(
             error,
         }
     };
-    std::fs::create_dir_all(out).map_err(ctx(format!("cannot create {}", out.display())))?;
-    let _lock = lock(out)?;
-    let csv_path = out.join("members.csv");
+    let shard = opts.shard;
+    let (csv_path, id_path, json_path) = match shard {
+        None => (
+            out.join("members.csv"),
+            out.join(IDENTITY_FILE),
+            out.join("sweep.json"),
+        ),
+        Some(sh) => (
+            shard::file(out, sh, "csv"),
+            shard::file(out, sh, "id"),
+            shard::file(out, sh, "json"),
+        ),
+    };
+    let dir = csv_path.parent().unwrap_or(out);
+    std::fs::create_dir_all(dir).map_err(ctx(format!("cannot create {}", dir.display())))?;
+    let _lock = lock(out, shard)?;
+    if let Some(sh) = shard {
+        shard::check_siblings(out, &run_identity(spec, opts), sh)?;
+    }
+    let in_scope = |i: &usize| shard.is_none_or(|sh| sh.contains(*i));
+    let scope = shard.map_or(spec.len(), |sh| sh.len_of(spec.len()));
     let head = header(spec);
     let resuming = opts.resume && csv_path.exists();
     let rec = if resuming {
-        check_identity(out, spec, opts)?;
-        recorded(&csv_path, &head, spec)?
+        check_identity(&id_path, spec, opts)?;
+        recorded(&csv_path, &head, spec, shard)?
     } else {
         Recorded {
             needs_header: true,
@@ -461,16 +551,16 @@ pub fn run_sweep(
     if !resuming {
         // A fresh start: the identity first, then a members.csv holding only the header
         // (renamed into place: a kill leaves either no file or a whole header).
-        write_atomic(&out.join(IDENTITY_FILE), &identity_text(spec, opts)).map_err(ctx(
-            format!("cannot write {}", out.join(IDENTITY_FILE).display()),
-        ))?;
+        write_atomic(&id_path, &identity_text(spec, opts))
+            .map_err(ctx(format!("cannot write {}", id_path.display())))?;
         write_atomic(&csv_path, &format!("{head}\n"))
             .map_err(ctx(format!("cannot write {}", csv_path.display())))?;
     }
     let stale_histories = if resuming {
         0
     } else {
-        remove_stale_histories(out).map_err(ctx(format!("cannot clean {}", out.display())))?
+        remove_stale_histories(out, shard)
+            .map_err(ctx(format!("cannot clean {}", out.display())))?
     };
     let mut csv = OpenOptions::new()
         .append(true)
@@ -499,14 +589,14 @@ pub fn run_sweep(
     }
     let done = rec.done;
     let mut summary = SweepSummary {
-        members: spec.len(),
+        members: scope,
         skipped: done.len(),
         repaired_bytes: rec.torn_bytes,
         stale_histories,
         ..Default::default()
     };
     // Memory of the members this invocation will hold at once, before building them.
-    let todo = (spec.len() - done.len()) as u64;
+    let todo = (scope - done.len()) as u64;
     if todo > 0 {
         let elements = spec.base_elements() as u64;
         crate::scene::limits::check_memory("this sweep", todo, elements).map_err(|e| {
@@ -522,7 +612,7 @@ pub fn run_sweep(
     let mut members = Vec::new();
     let mut ids = Vec::new();
     let mut elements_total = 0u64;
-    for i in (0..spec.len()).filter(|i| !done.contains(i)) {
+    for i in (0..spec.len()).filter(|i| in_scope(i) && !done.contains(i)) {
         match spec.member_scene(i) {
             Ok(scene) => {
                 // Members may differ in size (a varied element count): count what is built.
@@ -635,6 +725,7 @@ pub fn run_sweep(
         "cutback": opts.cutback,
         "base": spec.base,
         "mode": format!("{:?}", spec.mode).to_lowercase(),
+        "shard": shard.map(|sh| sh.to_string()),
         "parameters": spec.params.iter().map(|p| p.key.clone()).collect::<Vec<_>>(),
         "members": summary.members,
         "completed": summary.completed,
@@ -644,8 +735,7 @@ pub fn run_sweep(
         "backend": exec.describe(),
         "wall_s": summary.wall_s,
     });
-    let path = out.join("sweep.json");
-    write_atomic(&path, &format!("{info:#}\n"))
-        .map_err(ctx(format!("cannot write {}", path.display())))?;
+    write_atomic(&json_path, &format!("{info:#}\n"))
+        .map_err(ctx(format!("cannot write {}", json_path.display())))?;
     Ok(summary)
 }

@@ -14,7 +14,10 @@ use cosserat::batch::{
 };
 use cosserat::integrator::{NewtonVariant, Simulation, SolveTimers};
 use cosserat::observe::record::RunStatus;
-use cosserat::sweep::{load_sweep, run_sweep, SweepOptions};
+use cosserat::sweep::slurm::{self, JobSpec};
+use cosserat::sweep::{
+    check_shard_folder, load_sweep, merge_shards, run_sweep, Shard, SweepOptions,
+};
 
 /// Where the element kernel runs.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq, Default)]
@@ -111,23 +114,15 @@ pub fn at_least_one(s: &str) -> Result<usize, String> {
     }
 }
 
-/// Arguments of `cosserat sweep`.
-#[derive(clap::Args, Debug)]
-pub struct SweepArgs {
-    /// Sweep file (TOML: base scene + parameters to vary; README, "Sweeps").
-    pub sweep: PathBuf,
-    /// Output directory (members.csv, member_<i>/history.csv).
-    #[arg(long)]
-    pub out: PathBuf,
+/// Options of every member of a sweep, sharded or not (forwarded to Slurm array tasks).
+#[derive(clap::Args, Debug, Clone)]
+pub struct MemberOpts {
     /// Where the element kernel runs.
     #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
     pub backend: BackendArg,
     /// GPU adapter: first adapter whose name contains this (case-insensitive).
     #[arg(long)]
     pub adapter: Option<String>,
-    /// Skip members already recorded in DIR/members.csv.
-    #[arg(long)]
-    pub resume: bool,
     /// Also write DIR/member_<i>/history.csv for every member.
     #[arg(long)]
     pub histories: bool,
@@ -144,14 +139,152 @@ pub struct SweepArgs {
     pub cutback: Option<u8>,
 }
 
-/// `cosserat sweep`.
+impl MemberOpts {
+    fn sweep_options(&self, resume: bool, shard: Option<Shard>) -> SweepOptions {
+        SweepOptions {
+            resume,
+            histories: self.histories,
+            workers: 0,
+            newton: self.newton.map(NewtonArg::variant),
+            fallback: self.no_fallback.then_some(false),
+            cutback: self.cutback.map(usize::from),
+            shard,
+        }
+    }
+
+    /// These options as `cosserat sweep` arguments (all but `--backend`).
+    fn args(&self) -> Vec<String> {
+        let mut a = Vec::new();
+        if let Some(ad) = &self.adapter {
+            a.extend(["--adapter".into(), ad.clone()]);
+        }
+        if self.histories {
+            a.push("--histories".into());
+        }
+        if let Some(n) = self.newton {
+            let v = n.to_possible_value().map(|v| v.get_name().to_string());
+            a.extend(["--newton".into(), v.unwrap_or_default()]);
+        }
+        if self.no_fallback {
+            a.push("--no-fallback".into());
+        }
+        if let Some(c) = self.cutback {
+            a.extend(["--cutback".into(), c.to_string()]);
+        }
+        a
+    }
+}
+
+/// Arguments of `cosserat sweep`.
+#[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct SweepArgs {
+    /// Merge shards, or run the sweep as a Slurm job array.
+    #[command(subcommand)]
+    pub action: Option<SweepAction>,
+    /// Sweep file (TOML: base scene + parameters to vary; docs/cli.md, "sweep").
+    #[arg(required = true)]
+    pub sweep: Option<PathBuf>,
+    /// Output directory (members.csv, member_<i>/history.csv; shards/ when sharded).
+    #[arg(long, required = true)]
+    pub out: Option<PathBuf>,
+    /// Skip members already recorded in DIR/members.csv (DIR/shards/I-of-N.csv with
+    /// --shard).
+    #[arg(long)]
+    pub resume: bool,
+    /// Run only shard I of N (members whose index is ≡ I mod N) into
+    /// DIR/shards/I-of-N.csv; `cosserat sweep merge DIR` joins the shards.
+    #[arg(long, value_name = "I/N", value_parser = Shard::parse)]
+    pub shard: Option<Shard>,
+    #[command(flatten)]
+    pub member: MemberOpts,
+}
+
+/// Subcommands of `cosserat sweep`.
+#[derive(clap::Subcommand, Debug)]
+pub enum SweepAction {
+    /// Check that every shard in DIR/shards is present, of one sweep and complete, and
+    /// write DIR/members.csv, sweep.id and sweep.json as a one-machine run does.
+    Merge {
+        /// The sweep's output directory (the --out of its shards).
+        dir: PathBuf,
+    },
+    /// Write DIR/sweep.sbatch, a Slurm job array with one task per shard, and print the
+    /// commands to submit and merge it (`--submit`, `--wait`: do them).
+    Slurm(Box<SlurmArgs>),
+}
+
+/// Arguments of `cosserat sweep slurm`.
+#[derive(clap::Args, Debug)]
+pub struct SlurmArgs {
+    /// Sweep file.
+    pub sweep: PathBuf,
+    /// Number of shards (array tasks), at most the number of members.
+    #[arg(long, value_parser = at_least_one)]
+    pub shards: usize,
+    /// Output directory, on a file system every node sees.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Slurm partition (`#SBATCH --partition`).
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Time limit per task (`#SBATCH --time`, e.g. 30, 2:00:00, 1-00:00).
+    #[arg(long)]
+    pub time: Option<String>,
+    /// CPUs per task, also each task's thread count (`#SBATCH --cpus-per-task`).
+    #[arg(long, value_parser = at_least_one)]
+    pub cpus_per_task: Option<usize>,
+    /// Memory per task's node (`#SBATCH --mem`, e.g. 4G).
+    #[arg(long)]
+    pub mem: Option<String>,
+    /// Generic resources per task (`#SBATCH --gres`, e.g. gpu:1; use with --backend gpu).
+    #[arg(long)]
+    pub gres: Option<String>,
+    /// At most K tasks at once (`--array=0-(N-1)%K`).
+    #[arg(long, value_name = "K", value_parser = at_least_one)]
+    pub max_running: Option<usize>,
+    /// Job name (default: cosserat-<sweep file stem>).
+    #[arg(long)]
+    pub job_name: Option<String>,
+    /// Further sbatch option for the script, e.g. --sbatch=--account=proj (repeatable).
+    #[arg(long = "sbatch", value_name = "OPTION", allow_hyphen_values = true)]
+    pub sbatch: Vec<String>,
+    /// The cosserat executable the tasks run (default: this one).
+    #[arg(long)]
+    pub exe: Option<PathBuf>,
+    /// Submit the script (`sbatch --parsable`) and print the job id.
+    #[arg(long)]
+    pub submit: bool,
+    /// Submit, wait until every task has left the queue, then merge (implies --submit).
+    #[arg(long)]
+    pub wait: bool,
+    #[command(flatten)]
+    pub member: MemberOpts,
+}
+
+/// `cosserat sweep` (and its `merge` and `slurm` subcommands).
 pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
-    let spec = load_sweep(&a.sweep)?;
-    let exec = executor(a.backend, a.adapter.as_deref())?;
+    match a.action {
+        Some(SweepAction::Merge { dir }) => return merge_command(&dir),
+        Some(SweepAction::Slurm(s)) => return slurm_command(*s),
+        None => {}
+    }
+    let (Some(file), Some(out)) = (a.sweep.as_ref(), a.out.as_ref()) else {
+        bail!("sweep: a sweep file and --out DIR are required");
+    };
+    let spec = load_sweep(file)?;
+    let exec = executor(a.member.backend, a.member.adapter.as_deref())?;
+    let scope = match a.shard {
+        Some(sh) => format!(
+            "shard {sh}: {} of {} members",
+            sh.len_of(spec.len()),
+            spec.len()
+        ),
+        None => format!("{} members", spec.len()),
+    };
     println!(
-        "sweep {}: {} members over {} ({}), backend {}",
+        "sweep {}: {scope} over {} ({}), backend {}",
         spec.source,
-        spec.len(),
         spec.params
             .iter()
             .map(|p| p.key.as_str())
@@ -160,7 +293,8 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         spec.base,
         exec.describe()
     );
-    let bar = ProgressBar::new(spec.len() as u64);
+    let total = a.shard.map_or(spec.len(), |sh| sh.len_of(spec.len()));
+    let bar = ProgressBar::new(total as u64);
     bar.set_style(
         ProgressStyle::with_template(
             "{bar:30} {pos}/{len} members  {msg}  elapsed {elapsed_precise}  ETA {eta_precise}",
@@ -168,15 +302,8 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let (mut done, mut failed) = (0usize, 0usize);
-    let opts = SweepOptions {
-        resume: a.resume,
-        histories: a.histories,
-        workers: 0,
-        newton: a.newton.map(NewtonArg::variant),
-        fallback: a.no_fallback.then_some(false),
-        cutback: a.cutback.map(usize::from),
-    };
-    let summary = run_sweep(&spec, &exec, &a.out, &opts, |row| {
+    let opts = a.member.sweep_options(a.resume, a.shard);
+    let summary = run_sweep(&spec, &exec, out, &opts, |row| {
         done += 1;
         if row.status == RunStatus::Failed {
             failed += 1;
@@ -185,17 +312,21 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         bar.set_message(format!("done {done}, failed {failed}"));
     })?;
     bar.finish_and_clear();
+    let csv = match a.shard {
+        Some(sh) => cosserat::sweep::shard::file(out, sh, "csv"),
+        None => out.join("members.csv"),
+    };
     if summary.repaired_bytes > 0 {
         eprintln!(
             "note: {}: cut a torn last row ({} bytes, a member being recorded when the sweep was stopped); that member ran again",
-            a.out.join("members.csv").display(),
+            csv.display(),
             summary.repaired_bytes
         );
     }
     if summary.stale_histories > 0 {
         eprintln!(
             "note: {}: removed {} member history file(s) of the previous sweep in this folder",
-            a.out.display(),
+            out.display(),
             summary.stale_histories
         );
     }
@@ -206,9 +337,152 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         summary.failed,
         summary.skipped,
         summary.wall_s,
-        a.out.join("members.csv").display()
+        csv.display()
+    );
+    if a.shard.is_some() {
+        println!(
+            "when every shard has run: cosserat sweep merge {}",
+            out.display()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `cosserat sweep merge DIR`.
+fn merge_command(dir: &std::path::Path) -> Result<ExitCode> {
+    let m = merge_shards(dir)?;
+    println!(
+        "merged {} shards of {}: {} members ({} completed, {} failed), backend {}. Results in {}",
+        m.shards,
+        m.sweep,
+        m.members,
+        m.completed,
+        m.failed,
+        if m.backends.is_empty() {
+            "unknown".to_string()
+        } else {
+            m.backends.join(" + ")
+        },
+        dir.join("members.csv").display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// An absolute form of `p` (the tasks may start in another directory).
+fn absolute(p: &std::path::Path, what: &str) -> Result<PathBuf> {
+    std::path::absolute(p).with_context(|| format!("{what}: cannot make {} absolute", p.display()))
+}
+
+/// `cosserat sweep slurm`.
+fn slurm_command(a: SlurmArgs) -> Result<ExitCode> {
+    let spec = load_sweep(&a.sweep)?;
+    if a.shards > spec.len() {
+        bail!(
+            "--shards: {} shards for {} members: at most one shard per member",
+            a.shards,
+            spec.len()
+        );
+    }
+    let opts = a.member.sweep_options(true, None);
+    check_shard_folder(&a.out, &spec, &opts, a.shards)?;
+    let exe = match &a.exe {
+        Some(e) => absolute(e, "--exe")?,
+        None => std::env::current_exe().context("cannot find this program's path (use --exe)")?,
+    };
+    let stem = a
+        .sweep
+        .file_stem()
+        .map(|s| cosserat::paths::safe_stem(&s.to_string_lossy()))
+        .unwrap_or_else(|| "sweep".into());
+    let backend = a
+        .member
+        .backend
+        .to_possible_value()
+        .map(|v| v.get_name().to_string())
+        .unwrap_or_else(|| "cpu".into());
+    let job = JobSpec {
+        sweep: absolute(&a.sweep, "SWEEP")?,
+        out: absolute(&a.out, "--out")?,
+        exe,
+        shards: a.shards,
+        job_name: a.job_name.clone().unwrap_or(format!("cosserat-{stem}")),
+        partition: a.partition.clone(),
+        time: a.time.clone(),
+        cpus_per_task: a.cpus_per_task,
+        mem: a.mem.clone(),
+        gres: a.gres.clone(),
+        max_running: a.max_running,
+        extra: a.sbatch.clone(),
+        backend,
+        shard_args: a.member.args(),
+    };
+    // Validate every option before creating anything.
+    slurm::script(&job)?;
+    std::fs::create_dir_all(&job.out)
+        .with_context(|| format!("cannot create {}", job.out.display()))?;
+    let script = slurm::write_script(&job)?;
+    let per = spec.len().div_ceil(a.shards);
+    println!(
+        "wrote {}: {} array tasks, task I runs shard I/{} (members ≡ I mod {}, ≤ {per} each) of {} members",
+        script.display(),
+        a.shards,
+        a.shards,
+        a.shards,
+        spec.len()
+    );
+    println!("submit:           sbatch {}", script.display());
+    println!("re-run shard I:   sbatch --array=I {}", script.display());
+    println!(
+        "merge when done:  {} sweep merge {}",
+        job.exe.display(),
+        job.out.display()
+    );
+    if !(a.submit || a.wait) {
+        return Ok(ExitCode::SUCCESS);
+    }
+    let id = slurm::submit(&script, &[])?;
+    println!("submitted job {id} ({} tasks)", a.shards);
+    if !a.wait {
+        return Ok(ExitCode::SUCCESS);
+    }
+    let start = std::time::Instant::now();
+    let mut last = None;
+    let ends = slurm::wait(&id, |q| {
+        if last != Some(q) {
+            println!(
+                "[{:>6.1} s] job {id}: {} running, {} pending",
+                start.elapsed().as_secs_f64(),
+                q.running,
+                q.pending
+            );
+            last = Some(q);
+        }
+    })?;
+    let bad: Vec<String> = ends
+        .iter()
+        .filter(|t| t.state != "COMPLETED" || t.exit_code != "0:0")
+        .map(|t| format!("task {} {} (exit {})", t.task, t.state, t.exit_code))
+        .collect();
+    println!(
+        "job {id} left the queue after {:.1} s{}",
+        start.elapsed().as_secs_f64(),
+        if bad.is_empty() {
+            String::new()
+        } else {
+            format!("; {}", bad.join(", "))
+        }
+    );
+    merge_command(&job.out).with_context(|| {
+        format!(
+            "job {id} ended but its shards do not merge{}; logs in {}",
+            if bad.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", bad.join(", "))
+            },
+            job.out.join(slurm::LOGS_DIR).display()
+        )
+    })
 }
 
 /// Arguments of `cosserat bench`.

@@ -1,0 +1,666 @@
+//! Sharded sweeps: one sweep split into N shards that run anywhere (other machines, Slurm
+//! array tasks) and are merged back into the `members.csv` of a one-machine run.
+//!
+//! Shard I of N runs the members whose index is ≡ I mod N (round-robin, so that members
+//! whose cost grows along a grid axis — a smaller Δt, a longer `t_end` — spread over all
+//! shards). Each shard writes only its own files, so shards never write the same file:
+//!
+//! ```text
+//! DIR/shards/I-of-N.csv    its rows (members.csv's columns), appended as members finish
+//! DIR/shards/I-of-N.id     its identity: the sweep's (`sweep.id`) plus `shard I/N`
+//! DIR/shards/I-of-N.json   what its last invocation did (backend, counts, wall time)
+//! DIR/shards/I-of-N.lock   held while it runs
+//! DIR/member_<i>/          its members' histories (`--histories`), as unsharded
+//! ```
+//!
+//! [`merge_shards`] checks that every shard is present, of this sweep, not torn and
+//! complete, and that no member is missing or twice, then writes `DIR/members.csv` (rows
+//! in member order), `DIR/sweep.id` and `DIR/sweep.json`.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use super::run::{header_of, run_identity, split_csv, try_lock_file, write_atomic};
+use super::{SweepError, SweepOptions, SweepSpec, CSV_COLUMNS, IDENTITY_FILE, LOCK_FILE};
+
+/// Folder (inside the sweep's `--out`) that holds the shards' files.
+pub const SHARDS_DIR: &str = "shards";
+
+/// Shard `index` of `count`: the members whose index is ≡ `index` mod `count`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Shard {
+    /// This shard, 0-based (`0 ≤ index < count`).
+    pub index: usize,
+    /// Number of shards.
+    pub count: usize,
+}
+
+impl Shard {
+    /// Shard `index` of `count`, checked.
+    pub fn new(index: usize, count: usize) -> Result<Shard, String> {
+        if count == 0 {
+            return Err("the number of shards must be ≥ 1".into());
+        }
+        if index >= count {
+            return Err(format!(
+                "shard {index} of {count} does not exist (shards are numbered 0 to {})",
+                count - 1
+            ));
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// Parses `I/N` (the form of `--shard`).
+    pub fn parse(s: &str) -> Result<Shard, String> {
+        let (i, n) = s
+            .split_once('/')
+            .ok_or_else(|| format!("`{s}` is not I/N (e.g. 0/4: shard 0 of 4)"))?;
+        let num = |t: &str| {
+            t.trim()
+                .parse::<usize>()
+                .map_err(|_| format!("`{s}` is not I/N: `{}` is not a whole number", t.trim()))
+        };
+        Shard::new(num(i)?, num(n)?)
+    }
+
+    /// Whether member `i` belongs to this shard.
+    pub fn contains(&self, i: usize) -> bool {
+        i % self.count == self.index
+    }
+
+    /// Number of this shard's members in a sweep of `total` members.
+    pub fn len_of(&self, total: usize) -> usize {
+        total.saturating_sub(self.index).div_ceil(self.count)
+    }
+
+    /// The stem of the shard's files, `I-of-N`.
+    pub fn name(&self) -> String {
+        format!("{}-of-{}", self.index, self.count)
+    }
+
+    /// Parses a file name `I-of-N.EXT` into the shard and `EXT`.
+    fn from_file_name(name: &str) -> Option<(Shard, &str)> {
+        let (stem, ext) = name.split_once('.')?;
+        let (i, n) = stem.split_once("-of-")?;
+        let digits = |t: &str| !t.is_empty() && t.bytes().all(|b| b.is_ascii_digit());
+        if !digits(i) || !digits(n) {
+            return None;
+        }
+        Some((Shard::new(i.parse().ok()?, n.parse().ok()?).ok()?, ext))
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+/// `out/shards/I-of-N.EXT`.
+pub fn file(out: &Path, shard: Shard, ext: &str) -> PathBuf {
+    out.join(SHARDS_DIR).join(format!("{}.{ext}", shard.name()))
+}
+
+/// A shard identity file's lines.
+struct IdFile {
+    text: String,
+}
+
+impl IdFile {
+    fn read(path: &Path) -> Option<IdFile> {
+        std::fs::read_to_string(path)
+            .ok()
+            .map(|text| IdFile { text })
+    }
+    fn get(&self, key: &str) -> &str {
+        self.text
+            .lines()
+            .find_map(|l| l.strip_prefix(key).and_then(|r| r.strip_prefix(' ')))
+            .unwrap_or("")
+            .trim()
+    }
+    /// The sweep's identity text (`sweep.id` of an unsharded run): without the shard line.
+    fn sweep_text(&self) -> String {
+        self.text
+            .lines()
+            .filter(|l| !l.starts_with("shard "))
+            .map(|l| format!("{l}\n"))
+            .collect()
+    }
+}
+
+/// The shards' identity files found in `out/shards` (any split), by shard.
+fn id_files(out: &Path) -> BTreeMap<Shard, PathBuf> {
+    let mut found = BTreeMap::new();
+    let Ok(entries) = std::fs::read_dir(out.join(SHARDS_DIR)) else {
+        return found;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        if let Some((sh, "id")) = Shard::from_file_name(&name.to_string_lossy()) {
+            found.insert(sh, e.path());
+        }
+    }
+    found
+}
+
+/// The folder holds one split of one sweep: every shard identity file in `out/shards`
+/// must record identity `id` and `count` shards (`skip`: the caller's own shard, which it
+/// is about to write or check itself).
+fn check_ids(out: &Path, id: &str, count: usize, skip: Option<Shard>) -> Result<(), SweepError> {
+    let remedy = format!(
+        "one folder holds one split of one sweep: use another --out, or delete {} (and {}/member_*) if those results are not needed",
+        out.join(SHARDS_DIR).display(),
+        out.display()
+    );
+    for (sh, path) in id_files(out) {
+        if Some(sh) == skip {
+            continue;
+        }
+        let Some(f) = IdFile::read(&path) else {
+            continue;
+        };
+        if sh.count != count {
+            return Err(SweepError::Shard {
+                file: path.display().to_string(),
+                shard: sh.name(),
+                reason: format!(
+                    "this folder's shards split the sweep into {} shards, this run into {count}: {remedy}",
+                    sh.count
+                ),
+            });
+        }
+        if f.get("id") != id {
+            return Err(SweepError::Shard {
+                file: path.display().to_string(),
+                shard: sh.name(),
+                reason: format!(
+                    "belongs to another sweep (id {}: {} members over {}, from {}); this one is id {id}: its base scene, member values or overrides (--newton, --no-fallback, --cutback) differ. {remedy}",
+                    f.get("id"),
+                    f.get("members"),
+                    f.get("parameters"),
+                    f.get("sweep")
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Before a shard runs: the folder's other shards (if any) are of this sweep and split.
+pub(super) fn check_siblings(out: &Path, id: &str, shard: Shard) -> Result<(), SweepError> {
+    check_ids(out, id, shard.count, Some(shard))
+}
+
+/// Checks that `out` can take `count` shards of `spec` run with `opts`: the shards
+/// already there (if any) are of this sweep, with these overrides, split into `count`
+/// (what `cosserat sweep slurm` checks before writing its job script).
+pub fn check_shard_folder(
+    out: &Path,
+    spec: &SweepSpec,
+    opts: &SweepOptions,
+    count: usize,
+) -> Result<(), SweepError> {
+    check_ids(out, &run_identity(spec, opts), count, None)
+}
+
+/// What [`merge_shards`] wrote.
+#[derive(Clone, Debug, Default)]
+pub struct MergeSummary {
+    /// Members of the sweep (rows of the merged `members.csv`).
+    pub members: usize,
+    /// Rows with status `completed`.
+    pub completed: usize,
+    /// Rows with status `failed`.
+    pub failed: usize,
+    /// Number of shards merged.
+    pub shards: usize,
+    /// The sweep file the shards were run from (as they recorded it).
+    pub sweep: String,
+    /// The distinct backends of the shards' last invocations.
+    pub backends: Vec<String>,
+}
+
+/// How to finish one shard, for error messages.
+fn resume_hint(out: &Path, sweep: &str, sh: Shard) -> String {
+    let script = out.join(super::slurm::SCRIPT_FILE);
+    let slurm = if script.exists() {
+        format!(
+            "`sbatch --array={} {}` (Slurm), or ",
+            sh.index,
+            script.display()
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "resume it: {slurm}`cosserat sweep {sweep} --shard {sh} --out {} --resume` with the shard's other options",
+        out.display()
+    )
+}
+
+/// Names the shards of `out/shards` whose lock is held by a running process.
+fn running_shards(out: &Path) -> Vec<(Shard, PathBuf)> {
+    let mut running = Vec::new();
+    let Ok(entries) = std::fs::read_dir(out.join(SHARDS_DIR)) else {
+        return running;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        if let Some((sh, "lock")) = Shard::from_file_name(&name.to_string_lossy()) {
+            let busy = std::fs::OpenOptions::new()
+                .write(true)
+                .open(e.path())
+                .is_ok_and(|f| matches!(f.try_lock(), Err(std::fs::TryLockError::WouldBlock)));
+            if busy {
+                running.push((sh, e.path()));
+            }
+        }
+    }
+    running.sort();
+    running
+}
+
+/// Merges the shards in `out/shards` into `out/members.csv`, `out/sweep.id` and
+/// `out/sweep.json`, as a one-machine run of the sweep writes them (rows in member order,
+/// each row as its shard recorded it).
+///
+/// Refuses, naming the shard and what to do: a shard still running, shards of two splits,
+/// a missing shard (no `.id` or `.csv`), a foreign one (another sweep's identity, or
+/// another header), a torn last row, a row that is not one of the shard's members or is
+/// recorded twice, and an incomplete shard (members missing). Also refuses when
+/// `out/sweep.id` holds another sweep's results. Nothing is written unless every check
+/// passes; each file is replaced whole (written to a temporary file, then renamed).
+pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
+    let start = std::time::Instant::now();
+    let dir = out.join(SHARDS_DIR);
+    if !dir.is_dir() {
+        return Err(SweepError::Invalid {
+            file: dir.display().to_string(),
+            location: None,
+            key: "(shards)".into(),
+            reason: format!(
+                "no shards to merge: run `cosserat sweep SWEEP --shard I/N --out {}` for every I (or `cosserat sweep slurm`) first",
+                out.display()
+            ),
+        });
+    }
+    let _lock = match try_lock_file(&out.join(LOCK_FILE), true)? {
+        Some(f) => f,
+        None => {
+            let running = running_shards(out);
+            return Err(match running.first() {
+                Some((sh, path)) => SweepError::Shard {
+                    file: path.display().to_string(),
+                    shard: sh.name(),
+                    reason: format!(
+                        "still running ({} of this folder's shards are: {}); merge once they have finished (`squeue` on Slurm)",
+                        running.len(),
+                        running.iter().map(|(s, _)| s.name()).collect::<Vec<_>>().join(", ")
+                    ),
+                },
+                None => SweepError::Locked {
+                    dir: out.display().to_string(),
+                },
+            });
+        }
+    };
+    // Which split: every shard file must name the same N.
+    let mut splits: BTreeMap<usize, BTreeSet<Shard>> = BTreeMap::new();
+    let entries = std::fs::read_dir(&dir).map_err(|error| SweepError::Output {
+        context: format!("cannot read {}", dir.display()),
+        error,
+    })?;
+    for e in entries.flatten() {
+        let name = e.file_name();
+        if let Some((sh, "csv" | "id")) = Shard::from_file_name(&name.to_string_lossy()) {
+            splits.entry(sh.count).or_default().insert(sh);
+        }
+    }
+    let Some((&count, _)) = splits.iter().max_by_key(|(_, s)| s.len()) else {
+        return Err(SweepError::Invalid {
+            file: dir.display().to_string(),
+            location: None,
+            key: "(shards)".into(),
+            reason: "no shard files (I-of-N.csv, I-of-N.id) here".into(),
+        });
+    };
+    if let Some((_, other)) = splits.iter().find(|(&n, _)| n != count) {
+        let sh = *other.iter().next().unwrap_or_else(|| unreachable!());
+        return Err(SweepError::Shard {
+            file: dir.display().to_string(),
+            shard: sh.name(),
+            reason: format!(
+                "this folder holds shards of two splits ({} of {} shards, {} of {count}): one folder holds one split of one sweep; delete the stale shard files",
+                other.len(),
+                sh.count,
+                splits[&count].len()
+            ),
+        });
+    }
+    let shards: Vec<Shard> = (0..count).map(|i| Shard { index: i, count }).collect();
+    // Present: identity and rows of every shard.
+    let missing: Vec<Shard> = shards
+        .iter()
+        .copied()
+        .filter(|&sh| !file(out, sh, "id").is_file() || !file(out, sh, "csv").is_file())
+        .collect();
+    let ids: Vec<Option<IdFile>> = shards
+        .iter()
+        .map(|&sh| IdFile::read(&file(out, sh, "id")))
+        .collect();
+    // The sweep: the identity most shards record.
+    let mut votes: BTreeMap<&str, usize> = BTreeMap::new();
+    for f in ids.iter().flatten() {
+        *votes.entry(f.get("id")).or_default() += 1;
+    }
+    let sweep_id = votes
+        .iter()
+        .max_by_key(|(_, &n)| n)
+        .map(|(id, _)| id.to_string())
+        .unwrap_or_default();
+    let reference = ids
+        .iter()
+        .flatten()
+        .find(|f| f.get("id") == sweep_id)
+        .ok_or_else(|| SweepError::Shard {
+            file: dir.display().to_string(),
+            shard: shards[0].name(),
+            reason: "no shard identity file can be read".into(),
+        })?;
+    let sweep_file = reference.get("sweep").to_string();
+    if let Some(&sh) = missing.first() {
+        let what = if file(out, sh, "id").is_file() {
+            "csv"
+        } else {
+            "id"
+        };
+        return Err(SweepError::Shard {
+            file: file(out, sh, what).display().to_string(),
+            shard: sh.name(),
+            reason: format!(
+                "missing: the file does not exist (the shard never ran here, or was stopped before it began){}; {}",
+                if missing.len() > 1 {
+                    format!(
+                        " — {} shards are missing: {}",
+                        missing.len(),
+                        missing.iter().map(|s| s.name()).collect::<Vec<_>>().join(", ")
+                    )
+                } else {
+                    String::new()
+                },
+                resume_hint(out, &sweep_file, sh)
+            ),
+        });
+    }
+    for (sh, f) in shards.iter().zip(&ids) {
+        let f = f
+            .as_ref()
+            .unwrap_or_else(|| unreachable!("checked present"));
+        if f.get("id") != sweep_id {
+            return Err(SweepError::Shard {
+                file: file(out, *sh, "id").display().to_string(),
+                shard: sh.name(),
+                reason: format!(
+                    "foreign: it belongs to another sweep (id {}, from {}) than the other shards (id {sweep_id}, from {sweep_file}); delete it and run this sweep's shard {sh} instead",
+                    f.get("id"),
+                    f.get("sweep")
+                ),
+            });
+        }
+    }
+    // The sweep's size and columns, from its identity.
+    let members: usize = reference
+        .get("members")
+        .parse()
+        .map_err(|_| SweepError::Shard {
+            file: file(out, shards[0], "id").display().to_string(),
+            shard: shards[0].name(),
+            reason: format!("`members {}` is not a count", reference.get("members")),
+        })?;
+    let params: Vec<&str> = match reference.get("parameters") {
+        "" => vec![],
+        p => p.split(',').collect(),
+    };
+    let head = header_of(params.iter().copied());
+    let n_fields = CSV_COLUMNS.len() + params.len() + 1;
+    // Rows, shard by shard.
+    let mut rows: Vec<(usize, String)> = Vec::with_capacity(members);
+    let (mut completed, mut failed) = (0usize, 0usize);
+    let mut shard_info = Vec::new();
+    let mut backends: Vec<String> = Vec::new();
+    let mut template: Option<serde_json::Value> = None;
+    let mut wall_max = 0.0f64;
+    for &sh in &shards {
+        let path = file(out, sh, "csv");
+        let name = path.display().to_string();
+        let fail = |reason: String| SweepError::Shard {
+            file: name.clone(),
+            shard: sh.name(),
+            reason,
+        };
+        let bytes = std::fs::read(&path).map_err(|error| SweepError::Output {
+            context: format!("cannot read {name}"),
+            error,
+        })?;
+        let complete = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        if complete < bytes.len() {
+            return Err(fail(format!(
+                "torn: {} bytes after the last newline (the shard was stopped while writing a row); {}",
+                bytes.len() - complete,
+                resume_hint(out, &sweep_file, sh)
+            )));
+        }
+        let text = String::from_utf8_lossy(&bytes);
+        let mut lines = text.lines();
+        match lines.next() {
+            Some(h) if h == head => {}
+            Some(h) => {
+                return Err(fail(format!(
+                    "foreign: its columns `{h}` are not the sweep's `{head}`"
+                )))
+            }
+            None => {
+                return Err(fail(format!(
+                    "torn: the file is empty; {}",
+                    resume_hint(out, &sweep_file, sh)
+                )))
+            }
+        }
+        let mut seen = BTreeSet::new();
+        let (mut c, mut f) = (0usize, 0usize);
+        for (k, l) in lines.enumerate() {
+            let at = format!("line {}", k + 2);
+            let fields = split_csv(l);
+            if fields.len() != n_fields {
+                return Err(fail(format!(
+                    "{at}: {} fields, expected {n_fields} (the file was edited)",
+                    fields.len()
+                )));
+            }
+            let i: usize = fields[0]
+                .parse()
+                .ok()
+                .filter(|&i| i < members)
+                .ok_or_else(|| {
+                    fail(format!(
+                        "{at}: member `{}` is not one of the sweep's 0..{members}",
+                        fields[0]
+                    ))
+                })?;
+            if !sh.contains(i) {
+                return Err(fail(format!(
+                    "{at}: member {i} is not one of this shard's (members ≡ {} mod {count}): the file was edited or copied",
+                    sh.index
+                )));
+            }
+            if !seen.insert(i) {
+                return Err(fail(format!("{at}: member {i} is recorded twice")));
+            }
+            match fields[1].as_str() {
+                "completed" => c += 1,
+                "failed" => f += 1,
+                other => {
+                    return Err(fail(format!(
+                        "{at}: status `{other}` is not completed or failed"
+                    )))
+                }
+            }
+            rows.push((i, l.to_string()));
+        }
+        let want = sh.len_of(members);
+        if seen.len() != want {
+            let absent: Vec<String> = (sh.index..members)
+                .step_by(count)
+                .filter(|i| !seen.contains(i))
+                .take(8)
+                .map(|i| i.to_string())
+                .collect();
+            let more = want - seen.len() > absent.len();
+            return Err(fail(format!(
+                "incomplete: {} of its {want} members recorded (missing: {}{}); it was stopped before the end — {}",
+                seen.len(),
+                absent.join(", "),
+                if more { ", …" } else { "" },
+                resume_hint(out, &sweep_file, sh)
+            )));
+        }
+        completed += c;
+        failed += f;
+        // The shard's last invocation, when it recorded one.
+        let info: Option<serde_json::Value> = std::fs::read_to_string(file(out, sh, "json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+        let backend = info
+            .as_ref()
+            .and_then(|v| v["backend"].as_str())
+            .map(str::to_string);
+        let wall = info.as_ref().and_then(|v| v["wall_s"].as_f64());
+        if let Some(b) = &backend {
+            if !backends.contains(b) {
+                backends.push(b.clone());
+            }
+        }
+        wall_max = wall_max.max(wall.unwrap_or(0.0));
+        if template.is_none() {
+            template = info.clone();
+        }
+        shard_info.push(serde_json::json!({
+            "shard": sh.to_string(),
+            "members": want,
+            "completed": c,
+            "failed": f,
+            "backend": backend,
+            "wall_s": wall,
+        }));
+    }
+    rows.sort_by_key(|(i, _)| *i);
+    debug_assert_eq!(rows.len(), members);
+    // A folder already holding another sweep's merged or unsharded results is not
+    // overwritten.
+    let id_path = out.join(IDENTITY_FILE);
+    if let Some(existing) = IdFile::read(&id_path) {
+        if existing.get("id") != sweep_id {
+            return Err(SweepError::Invalid {
+                file: id_path.display().to_string(),
+                location: None,
+                key: "id".into(),
+                reason: format!(
+                    "the folder already holds another sweep's members.csv (id {}, from {}); the shards are id {sweep_id}: move those results away, then merge",
+                    existing.get("id"),
+                    existing.get("sweep")
+                ),
+            });
+        }
+    }
+    let csv: String = std::iter::once(head)
+        .chain(rows.into_iter().map(|(_, l)| l))
+        .map(|l| l + "\n")
+        .collect();
+    let out_err = |path: &Path| {
+        let context = format!("cannot write {}", path.display());
+        move |error| SweepError::Output { context, error }
+    };
+    let csv_path = out.join("members.csv");
+    write_atomic(&id_path, &reference.sweep_text()).map_err(out_err(&id_path))?;
+    write_atomic(&csv_path, &csv).map_err(out_err(&csv_path))?;
+    let t = template.unwrap_or(serde_json::Value::Null);
+    let info = serde_json::json!({
+        "sweep": sweep_file,
+        "id": sweep_id,
+        "newton": t["newton"],
+        "fallback": t["fallback"],
+        "cutback": t["cutback"],
+        "base": t["base"],
+        "mode": t["mode"],
+        "parameters": params,
+        "members": members,
+        "completed": completed,
+        "failed": failed,
+        "skipped": 0,
+        "repaired_bytes": 0,
+        "backend": backends.join(" + "),
+        "wall_s": wall_max,
+        "merged_shards": count,
+        "merge_wall_s": start.elapsed().as_secs_f64(),
+        "shards": shard_info,
+    });
+    let json_path = out.join("sweep.json");
+    write_atomic(&json_path, &format!("{info:#}\n")).map_err(out_err(&json_path))?;
+    Ok(MergeSummary {
+        members,
+        completed,
+        failed,
+        shards: count,
+        sweep: sweep_file,
+        backends,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_partition_the_members() {
+        for total in [0, 1, 5, 12, 13] {
+            for n in 1..=6 {
+                let mut hits = vec![0; total];
+                let mut sum = 0;
+                for i in 0..n {
+                    let sh = Shard::new(i, n).unwrap();
+                    sum += sh.len_of(total);
+                    (0..total)
+                        .filter(|&m| sh.contains(m))
+                        .for_each(|m| hits[m] += 1);
+                }
+                assert_eq!(sum, total, "{total} members in {n} shards");
+                assert!(hits.iter().all(|&h| h == 1));
+            }
+        }
+    }
+
+    #[test]
+    fn parse_and_names() {
+        assert_eq!(Shard::parse("2/4").unwrap(), Shard { index: 2, count: 4 });
+        assert_eq!(Shard::parse("2/4").unwrap().name(), "2-of-4");
+        assert!(Shard::parse("4/4").unwrap_err().contains("numbered 0 to 3"));
+        assert!(Shard::parse("0/0").unwrap_err().contains("≥ 1"));
+        assert!(Shard::parse("x/4")
+            .unwrap_err()
+            .contains("`x` is not a whole number"));
+        assert!(Shard::parse("3").unwrap_err().contains("is not I/N"));
+        assert_eq!(
+            Shard::from_file_name("10-of-12.csv"),
+            Some((
+                Shard {
+                    index: 10,
+                    count: 12
+                },
+                "csv"
+            ))
+        );
+        assert_eq!(Shard::from_file_name("a-of-12.csv"), None);
+        assert_eq!(Shard::from_file_name("12-of-12.csv"), None);
+    }
+}
