@@ -23,7 +23,8 @@ pub mod strain;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
 
-use crate::integrator::params::Scheme;
+pub use crate::scheme::StressRule;
+use crate::scheme::Scheme;
 use crate::math::{cay, hat, inv_i_minus_half_hat};
 use crate::model::{ElementProps, Mat3, Vec3};
 use dissipation::{local_scalars, LocalInputs, LocalScalars};
@@ -68,6 +69,29 @@ pub struct ElementData {
 }
 
 impl ElementData {
+    /// The constant data of every element of `model`, in element order: section
+    /// constants, reference strains of the reference configuration, end rotations free.
+    pub fn for_model(model: &crate::model::Model) -> Vec<ElementData> {
+        model
+            .elements
+            .iter()
+            .map(|e| {
+                let cfg = Config {
+                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
+                    d: e.ref_triad,
+                };
+                ElementData {
+                    props: e.props.clone(),
+                    eps0: strains6(&cfg, e.props.h),
+                    rot_free: [
+                        !model.supports[e.nodes[0]].rotation,
+                        !model.supports[e.nodes[1]].rotation,
+                    ],
+                }
+            })
+            .collect()
+    }
+
     /// Director-dissipation mass factors `κ_l` (DESIGN §4): `g_α^l = κ_l w_α` keeps
     /// `M_e g = ∫ N_l w` on the free ends: 1 on both ends when both are free, 1.5 on the
     /// free end of an element whose other end is clamped, 0 on a clamped end.
@@ -161,18 +185,6 @@ pub struct Kinematics {
     pub w: [Vec3; 2],
     /// Local dissipation inputs (speeds and strain-increment energies).
     pub inputs: LocalInputs,
-}
-
-/// Which strains the element stresses are formed from: the only difference between the
-/// energy–momentum scheme and the plain implicit mid-point rule on this discretization.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StressRule {
-    /// `S = C(½(ε_n + ε_{n+1}) − ε°)`: the mean of the strains (EM, EDMC-1, EDMC-2;
-    /// energy-consistent because `B_{n+½}(Φ_{n+1} − Φ_n) = ε_{n+1} − ε_n`).
-    MeanOfStrains,
-    /// `S = C(ε(Φ_{n+½}) − ε°)`: the strain of the mid-point configuration (the plain
-    /// mid-point rule; momenta still conserved, energy not).
-    MidpointStrain,
 }
 
 /// Per-step constants shared by all elements.

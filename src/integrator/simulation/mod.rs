@@ -27,9 +27,8 @@ mod strategy;
 
 use std::sync::Arc;
 
-use crate::element::strain::Config;
 use crate::element::{
-    g_idx, strains6, th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
+    g_idx, th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
 use crate::integrator::evaluate::{ElementBackend, EvalPort};
@@ -123,24 +122,7 @@ impl Simulation {
         model: Model,
         params: IntegratorParams,
     ) -> Result<Self, crate::linsolve::LinsolveError> {
-        let data: Vec<ElementData> = model
-            .elements
-            .iter()
-            .map(|e| {
-                let cfg = Config {
-                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
-                    d: e.ref_triad,
-                };
-                ElementData {
-                    props: e.props.clone(),
-                    eps0: strains6(&cfg, e.props.h),
-                    rot_free: [
-                        !model.supports[e.nodes[0]].rotation,
-                        !model.supports[e.nodes[1]].rotation,
-                    ],
-                }
-            })
-            .collect();
+        let data = ElementData::for_model(&model);
         let trans_diss = params.scheme.translational_dissipation();
         let dofs = DofMap::new(&model, trans_diss);
         let mut pattern = dofs.pattern();
