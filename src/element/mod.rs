@@ -25,10 +25,13 @@ use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
 
 pub use crate::scheme::StressRule;
 use crate::scheme::Scheme;
-use crate::math::{cay, hat, inv_i_minus_half_hat};
+use crate::math::{cay_with_factor, hat};
 use crate::model::{ElementProps, Mat3, Vec3};
 use dissipation::{local_scalars, LocalInputs, LocalScalars};
-use strain::{raw_strains, strain_gradient, stress_hessian, Config, A0, B0, NFIELDS, R0, R1};
+use strain::{
+    raw_strains, strain_gradient, stress_hessian, Config, A0, B0, GRADIENT_FIELDS, NFIELDS, R0,
+    R1,
+};
 
 /// Unknowns of one element: per end `u` (3), `θ` (3); then per end `g` (3).
 pub const NDOF: usize = 18;
@@ -233,7 +236,9 @@ pub fn kinematics(
     dt: f64,
 ) -> Kinematics {
     let p = &data.props;
-    let rot = [cay(&inc.theta[0]), cay(&inc.theta[1])];
+    let (rot0, amat0) = cay_with_factor(&inc.theta[0]);
+    let (rot1, amat1) = cay_with_factor(&inc.theta[1]);
+    let rot = [rot0, rot1];
     let cfg1 = Config {
         r: [st.cfg.r[0] + inc.u[0], st.cfg.r[1] + inc.u[1]],
         d: [rot[0] * st.cfg.d[0], rot[1] * st.cfg.d[1]],
@@ -279,10 +284,7 @@ pub fn kinematics(
     Kinematics {
         cfg1,
         mid,
-        amat: [
-            inv_i_minus_half_hat(&inc.theta[0]),
-            inv_i_minus_half_hat(&inc.theta[1]),
-        ],
+        amat: [amat0, amat1],
         eps_n: *eps_n,
         eps1,
         v1,
@@ -375,8 +377,8 @@ pub fn stress_force_floor(
     let m = p.c_omega.abs() * e.fixed_rows::<3>(3);
     let gross = [n.x, n.y, n.z, m.x, m.y, m.z];
     let mut f = [0.0f64; NFIELDS];
-    for (row, gk) in b.iter().zip(gross) {
-        for q in 0..NFIELDS {
+    for ((row, gk), fields) in b.iter().zip(gross).zip(GRADIENT_FIELDS) {
+        for q in fields {
             f[q] += GROSS_WEIGHT * row[q].amax() * p.h * gk;
         }
     }
@@ -386,9 +388,9 @@ pub fn stress_force_floor(
 /// Generalized stress forces `h Bᵀ S` on the eight vector fields of an element
 /// (one-point rule).
 pub fn field_forces(b: &strain::StrainGradient, s: &Vector6<f64>, h: f64) -> [Vec3; NFIELDS] {
-    let mut f = [Vec3::zeros(); NFIELDS];
-    for (row, &sk) in b.iter().zip(s.iter()) {
-        for q in 0..NFIELDS {
+    let mut f = [strain::ZERO3; NFIELDS];
+    for ((row, &sk), fields) in b.iter().zip(s.iter()).zip(GRADIENT_FIELDS) {
+        for q in fields {
             f[q] += row[q] * (h * sk);
         }
     }
@@ -655,7 +657,7 @@ fn tangent(
     let mut bt_mid = SMatrix::<f64, 6, 12>::zeros();
     let mut bt_1 = SMatrix::<f64, 6, 12>::zeros();
     for kk in 0..6 {
-        for q in 0..NFIELDS {
+        for q in GRADIENT_FIELDS[kk] {
             let (c0, dir) = field_block(q);
             let (a, b) = match dir {
                 None => (b_mid[kk][q], b1[kk][q]),
