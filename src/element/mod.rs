@@ -499,35 +499,6 @@ pub fn residual_tangent_into(
     want_tangent: bool,
     out: &mut ElementEval,
 ) {
-    let parts = element_residual(data, st, kin, s, k, trans_diss, out);
-    if want_tangent {
-        element_tangent(data, kin, s, k, trans_diss, &parts, &mut out.k);
-    }
-}
-
-/// What the tangent of an element needs from its residual evaluation besides the
-/// kinematics: the stresses `S*` and the generalized forces on the eight fields (inertia
-/// included). Kept by the assembly between a residual pass and the tangent pass that
-/// follows it only when Newton has not converged.
-#[derive(Clone, Copy, Debug)]
-pub struct TangentInputs {
-    /// Generalized stresses `S*`.
-    pub sstar: Vector6<f64>,
-    /// Generalized forces on the eight fields.
-    pub f: [Vec3; NFIELDS],
-}
-
-/// The residual half of [`residual_tangent_into`]: `out.r` and `out.scale` are
-/// overwritten (`out.k` is untouched); returns what [`element_tangent`] needs.
-pub fn element_residual(
-    data: &ElementData,
-    st: &ElementState,
-    kin: &Kinematics,
-    s: &FrozenScalars,
-    k: &StepConsts,
-    trans_diss: bool,
-    out: &mut ElementEval,
-) -> TangentInputs {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
     let sstar = stresses(data, kin, s, k.scheme.stress_rule());
@@ -627,23 +598,10 @@ pub fn element_residual(
         }
     }
 
-    TangentInputs { sstar, f }
-}
-
-/// The tangent half of [`residual_tangent_into`]: overwrites `kt` with the element
-/// tangent at the kinematics and residual parts of [`element_residual`].
-pub fn element_tangent(
-    data: &ElementData,
-    kin: &Kinematics,
-    s: &FrozenScalars,
-    k: &StepConsts,
-    trans_diss: bool,
-    parts: &TangentInputs,
-    kt: &mut ElemMat,
-) {
-    *kt = ElemMat::zeros();
-    let b_mid = strain_gradient(&kin.mid, data.props.h);
-    tangent(data, kin, s, k, trans_diss, &parts.sstar, &b_mid, &parts.f, kt);
+    if want_tangent {
+        out.k = ElemMat::zeros();
+        tangent(data, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut out.k);
+    }
 }
 
 /// The `g` an element end carries, recovered from `v_{n+1} = 2u/Δt − v_n − 2g`

@@ -6,46 +6,44 @@
 
 use std::time::Instant;
 
-use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation, Tangent};
+use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::{
-    consistent_scalars, element_residual, element_tangent, kinematics, monolithic_correction,
-    ElemMat, ElemVec, ElementEval, NDOF,
+    consistent_scalars, kinematics, monolithic_correction, residual_tangent_into, ElemMat,
+    ElemVec, ElementEval, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest};
 use crate::integrator::links;
 
 impl Simulation {
-    /// Assembles residual `r`, the row scales and (as `want` asks) the matrix values.
-    /// Returns the relative residual `max_i |R_i| / scale(kind of i)`, the per-kind
-    /// scales (u, θ, g) and whether the matrix values were assembled.
-    ///
-    /// On the CPU kernel the residual of every element is computed first and what its
-    /// tangent needs is kept; the tangent pass follows only when it is wanted — with
-    /// [`Tangent::UnlessBelow`], only when the residual is not already below the Newton
-    /// tolerance (the iteration that converges builds no tangent it would never use).
+    /// Assembles residual `r`, the row scales and (if `tangent`) the matrix values.
+    /// Returns the relative residual `max_i |R_i| / scale(kind of i)` and the per-kind
+    /// scales (u, θ, g).
     ///
     /// Frozen-scalar element evaluation goes to the attached evaluator, if any (a
-    /// lockstep driver's answer is awaited here: the one point where a step can wait);
-    /// it answers with the tangent whenever one may be wanted. An evaluator error makes
-    /// the residual NaN (the Newton solve fails).
+    /// lockstep driver's answer is awaited here: the one point where a step can wait).
+    /// An evaluator error makes the residual NaN (the Newton solve fails).
     pub(super) async fn assemble(
         &mut self,
         q: &[f64],
         mode: Mode,
-        want: Tangent,
+        tangent: bool,
         r: &mut [f64],
-    ) -> (f64, [f64; 3], bool) {
+    ) -> (f64, [f64; 3]) {
+        let k = self.consts();
+        let dt = k.dt;
         r.iter_mut().for_each(|x| *x = 0.0);
         let mut scale = [0.0f64; 3]; // u, θ, g rows
+        if tangent {
+            // The values are about to change: the factorization no longer matches them
+            // (the solver checks each solve against the current values).
+            self.factored = None;
+            self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
+        }
         // With an evaluator the elements arrive already summed per node; the CPU kernel
-        // loops below are skipped.
+        // loop below is skipped.
         let external = mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
         if external {
-            let tangent = want != Tangent::No;
-            if tangent {
-                self.clear_values();
-            }
             let req = self.eval_request(q, tangent);
             let t0 = Instant::now();
             let answer = match &self.backend {
@@ -59,58 +57,22 @@ impl Simulation {
                 Err(_) => {
                     // The evaluator may not hold this state any more.
                     self.sent_version = None;
-                    return (f64::NAN, scale, false);
+                    return (f64::NAN, scale);
                 }
             }
+        }
+        let n_cpu = if external {
+            0
         } else {
-            self.element_residuals(q, mode, r, &mut scale);
-        }
-        self.nodal_residuals(q, r, &mut scale);
-        let mut worst: f64 = 0.0;
-        for (i, &ri) in r.iter().enumerate() {
-            let s = scale[self.row_kinds[i]].max(1e-300);
-            let rel = ri.abs() / s;
-            if !rel.is_finite() {
-                return (f64::INFINITY, scale, false);
-            }
-            worst = worst.max(rel);
-        }
-        let build = match want {
-            Tangent::No => false,
-            _ if external => true,
-            Tangent::Yes => true,
-            Tangent::UnlessBelow(tol) => worst > tol,
+            self.model.elements.len()
         };
-        if build {
-            if !external {
-                self.clear_values();
-                self.element_tangents(q, mode);
-            }
-            self.nodal_tangents(q);
-        }
-        (worst, scale, build)
-    }
-
-    /// The matrix values are about to change: the factorization no longer matches them
-    /// (the solver checks each solve against the current values).
-    fn clear_values(&mut self) {
-        self.factored = None;
-        self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
-    }
-
-    /// CPU kernel, first pass: every element's residual and row scales, scattered; what
-    /// each element's tangent needs is kept in `tangent_cache` for [`Self::element_tangents`].
-    fn element_residuals(&mut self, q: &[f64], mode: Mode, r: &mut [f64], scale: &mut [f64; 3]) {
-        let k = self.consts();
         // One element buffer for the whole loop (no per-element allocation or copy).
         let mut ev = ElementEval {
             r: ElemVec::zeros(),
             scale: ElemVec::zeros(),
             k: ElemMat::zeros(),
         };
-        let mut cache = std::mem::take(&mut self.tangent_cache);
-        cache.clear();
-        for e in 0..self.model.elements.len() {
+        for e in 0..n_cpu {
             let inc = self.gather(e, q);
             let st = self.state.element(&self.model, e);
             let eps_n = self.state.eps[e];
@@ -118,43 +80,21 @@ impl Simulation {
             let (s, kin) = match mode {
                 Mode::Frozen => {
                     let s = self.frozen[e];
-                    (s, kinematics(data, &st, &eps_n, &inc, s.c_nu, k.dt))
+                    (s, kinematics(data, &st, &eps_n, &inc, s.c_nu, dt))
                 }
                 Mode::Consistent => {
                     let (s, _, kin) = consistent_scalars(data, &st, &eps_n, &inc, &k);
                     (s, kin)
                 }
             };
-            let parts = element_residual(data, &st, &kin, &s, &k, self.trans_diss, &mut ev);
-            self.scatter(e, &ev, false, r, scale);
-            cache.push((kin, s, parts));
-        }
-        self.tangent_cache = cache;
-    }
-
-    /// CPU kernel, second pass: every element's tangent from the kinematics and forces
-    /// the residual pass kept (plus, for the monolithic strategy, the linearization of the
-    /// dissipation scalars), scattered into the matrix values.
-    fn element_tangents(&mut self, q: &[f64], mode: Mode) {
-        let k = self.consts();
-        let mut ev = ElementEval {
-            r: ElemVec::zeros(),
-            scale: ElemVec::zeros(),
-            k: ElemMat::zeros(),
-        };
-        let cache = std::mem::take(&mut self.tangent_cache);
-        for (e, (kin, s, parts)) in cache.iter().enumerate() {
-            let data = &self.data[e];
-            element_tangent(data, kin, s, &k, self.trans_diss, parts, &mut ev.k);
-            if mode == Mode::Consistent && k.scheme.is_dissipative() {
+            residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
+            if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() {
                 let map = &self.dofs.elements[e];
                 let active: [bool; NDOF] = std::array::from_fn(|i| map[i] != NONE);
-                let inc = self.gather(e, q);
-                let st = self.state.element(&self.model, e);
                 monolithic_correction(
                     data,
                     &st,
-                    &self.state.eps[e],
+                    &eps_n,
                     &inc,
                     &k,
                     self.trans_diss,
@@ -162,24 +102,27 @@ impl Simulation {
                     &mut ev.k,
                 );
             }
-            self.scatter_tangent(e, &ev);
+            self.scatter(e, &ev, tangent, r, &mut scale);
         }
-        self.tangent_cache = cache;
-    }
-
-    /// Nodal terms (point masses, external loads) and the rigid links' mid-point bar
-    /// forces (exactly energy-consistent, see `Link`): residual rows and scales.
-    fn nodal_residuals(&self, q: &[f64], r: &mut [f64], scale: &mut [f64; 3]) {
-        let dt = self.params.dt;
+        // Nodal terms: point masses and external loads.
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
             let m = self.model.point_mass[a];
             let u = gather3(q, &nd.u);
             let g = gather3(q, &nd.g);
             let inertia = m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt;
+            let s = self.node_slots[a];
             for c in 0..3 {
                 if nd.u[c] != NONE {
                     r[nd.u[c]] += inertia[c] - self.force[a][c];
                     scale[0] = scale[0].max(inertia[c].abs()).max(self.force[a][c].abs());
+                    if tangent && m != 0.0 {
+                        let vals = self.solver.values_mut();
+                        vals[s[0][c]] += 2.0 * m / (dt * dt);
+                        if s[1][c] != NONE {
+                            vals[s[1][c]] += -2.0 * m / dt;
+                            vals[s[3][c]] += m;
+                        }
+                    }
                 }
                 if nd.g[c] != NONE {
                     r[nd.g[c]] += m * g[c];
@@ -191,45 +134,7 @@ impl Simulation {
                 }
             }
         }
-        for (i, link) in self.model.links.iter().enumerate() {
-            let a = link.node;
-            let ix = self.dofs.nodes[a].u;
-            let bar = links::bar_terms(
-                link,
-                self.state.lambda[i],
-                &self.state.r[a],
-                &gather3(q, &ix),
-            );
-            for c in 0..3 {
-                if ix[c] != NONE {
-                    r[ix[c]] += bar.force[c];
-                    scale[0] = scale[0].max(bar.force[c].abs());
-                }
-            }
-        }
-    }
-
-    /// The matrix values of the nodal terms and the rigid links (added after the
-    /// elements').
-    fn nodal_tangents(&mut self, q: &[f64]) {
-        let dt = self.params.dt;
-        let vals = self.solver.values_mut();
-        for (a, nd) in self.dofs.nodes.iter().enumerate() {
-            let m = self.model.point_mass[a];
-            if m == 0.0 {
-                continue;
-            }
-            let s = self.node_slots[a];
-            for c in 0..3 {
-                if nd.u[c] != NONE {
-                    vals[s[0][c]] += 2.0 * m / (dt * dt);
-                    if s[1][c] != NONE {
-                        vals[s[1][c]] += -2.0 * m / dt;
-                        vals[s[3][c]] += m;
-                    }
-                }
-            }
-        }
+        // Rigid links: the mid-point bar force (exactly energy-consistent, see `Link`).
         for (i, link) in self.model.links.iter().enumerate() {
             let a = link.node;
             let ix = self.dofs.nodes[a].u;
@@ -243,13 +148,28 @@ impl Simulation {
                 if ix[c] == NONE {
                     continue;
                 }
-                for d in 0..3 {
-                    if ix[d] != NONE {
-                        vals[self.link_slots[i][c][d]] += bar.stiffness[(c, d)];
+                r[ix[c]] += bar.force[c];
+                scale[0] = scale[0].max(bar.force[c].abs());
+                if tangent {
+                    let vals = self.solver.values_mut();
+                    for d in 0..3 {
+                        if ix[d] != NONE {
+                            vals[self.link_slots[i][c][d]] += bar.stiffness[(c, d)];
+                        }
                     }
                 }
             }
         }
+        let mut worst: f64 = 0.0;
+        for (i, &ri) in r.iter().enumerate() {
+            let s = scale[self.row_kinds[i]].max(1e-300);
+            let rel = ri.abs() / s;
+            if !rel.is_finite() {
+                return (f64::INFINITY, scale);
+            }
+            worst = worst.max(rel);
+        }
+        (worst, scale)
     }
 
     /// What an evaluator needs for this iteration: the element states only when they
@@ -284,25 +204,19 @@ impl Simulation {
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) {
-        let (lo, hi) = (self.scatter_off[e].0, self.scatter_off[e + 1].0);
-        for &(i, g) in &self.row_map[lo..hi] {
+        let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
+        for &(i, g) in &self.row_map[lo.0..hi.0] {
             r[g] += ev.r[i];
             let kind = kind_of_local(i);
             scale[kind] = scale[kind].max(ev.scale[i]);
         }
         if tangent {
-            self.scatter_tangent(e, ev);
-        }
-    }
-
-    /// Adds one element's tangent into the matrix values: active (local, slot) pairs only,
-    /// in the element matrix's column-major order.
-    fn scatter_tangent(&mut self, e: usize, ev: &ElementEval) {
-        let (lo, hi) = (self.scatter_off[e].1, self.scatter_off[e + 1].1);
-        let ks = ev.k.as_slice();
-        let vals = self.solver.values_mut();
-        for &(src, dst) in &self.tangent_map[lo..hi] {
-            vals[dst] += ks[src];
+            // Active (local, slot) pairs only, in the element matrix's column-major order.
+            let ks = ev.k.as_slice();
+            let vals = self.solver.values_mut();
+            for &(src, dst) in &self.tangent_map[lo.1..hi.1] {
+                vals[dst] += ks[src];
+            }
         }
     }
 

@@ -28,8 +28,7 @@ mod strategy;
 use std::sync::Arc;
 
 use crate::element::{
-    g_idx, th_idx, u_idx, ElementData, FrozenScalars, Increment, Kinematics, StepConsts,
-    TangentInputs, NDOF,
+    g_idx, th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
 use crate::integrator::evaluate::{ElementBackend, EvalPort};
@@ -48,18 +47,6 @@ enum Mode {
     Frozen,
     /// Scalars re-evaluated from the iterate and linearized (monolithic).
     Consistent,
-}
-
-/// Whether an assembly builds the matrix values.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Tangent {
-    /// Residual only (modified Newton keeps its factorized tangent).
-    No,
-    /// Residual and tangent.
-    Yes,
-    /// The tangent only when the relative residual exceeds this tolerance (the
-    /// iteration that converges needs none).
-    UnlessBelow(f64),
 }
 
 /// Where frozen-scalar element evaluation runs (monolithic assembly always stays on the
@@ -101,9 +88,6 @@ pub struct Simulation {
     /// Per element: solver slots of its node-local off-diagonal blocks (end 0, end 1) and
     /// (end 1, end 0), [`NONE`] if inactive.
     off_block_slots: Vec<[[usize; 81]; 2]>,
-    /// Per element, from the last CPU residual pass: its kinematics, scalars and what its
-    /// tangent needs (the tangent pass that may follow reuses them).
-    tangent_cache: Vec<(Kinematics, FrozenScalars, TangentInputs)>,
     /// Residual of the last converged Newton solve (for the residual work in `check`).
     last_residual: Vec<f64>,
     /// Per rigid link: slots of its node's (u, u) block.
@@ -238,7 +222,6 @@ impl Simulation {
             dofs,
             solver,
             slots,
-            tangent_cache: Vec::with_capacity(scatter_off.len()),
             row_map,
             tangent_map,
             scatter_off,

@@ -6,7 +6,7 @@
 
 use std::time::Instant;
 
-use super::{Mode, Simulation, Tangent};
+use super::{Mode, Simulation};
 use crate::integrator::params::NewtonVariant;
 use crate::integrator::report::{StepFailure, ROUNDOFF_RESIDUAL};
 use crate::integrator::scaling;
@@ -36,16 +36,8 @@ impl Simulation {
             // Modified Newton keeps the factorized tangent of this mode (from an earlier
             // iteration, outer round or step) and evaluates the residual only.
             let reuse = modified && self.factored == Some(mode);
-            let want = if reuse {
-                Tangent::No
-            } else if scaling::may_accept(it) {
-                // The iterate that converges needs no tangent.
-                Tangent::UnlessBelow(tol)
-            } else {
-                Tangent::Yes
-            };
-            let (res, built) = self.timed_assemble(q, mode, want, &mut r).await;
-            let mut fresh = built;
+            let res = self.timed_assemble(q, mode, !reuse, &mut r).await;
+            let mut fresh = !reuse;
             let undo = last_kept
                 && !history
                     .last()
@@ -55,7 +47,7 @@ impl Simulation {
                 // astray): undo its correction and take a fresh tangent there (that
                 // iterate's residual is already in the history).
                 q.copy_from_slice(&q_prev);
-                self.timed_assemble(q, mode, Tangent::Yes, &mut r).await;
+                self.timed_assemble(q, mode, true, &mut r).await;
                 fresh = true;
             } else {
                 history.push(res);
@@ -79,12 +71,6 @@ impl Simulation {
             }
             if it == self.params.max_iter {
                 break;
-            }
-            if !fresh && !reuse {
-                // Skipped below the tolerance, yet not accepted (cannot happen: the
-                // acceptance above uses the same test): build it now.
-                self.timed_assemble(q, mode, Tangent::Yes, &mut r).await;
-                fresh = true;
             }
             r.iter_mut().for_each(|x| *x = -*x);
             // A reused tangent keeps its factorization too (modified Newton).
@@ -129,18 +115,12 @@ impl Simulation {
     }
 
     /// [`Self::assemble`] with its own time (not the wait for an evaluator) counted as
-    /// assembly. Returns the relative residual and whether the tangent was built.
-    async fn timed_assemble(
-        &mut self,
-        q: &[f64],
-        mode: Mode,
-        want: Tangent,
-        r: &mut [f64],
-    ) -> (f64, bool) {
+    /// assembly. Returns the relative residual.
+    async fn timed_assemble(&mut self, q: &[f64], mode: Mode, tangent: bool, r: &mut [f64]) -> f64 {
         let (t0, wait0) = (Instant::now(), self.timers.evaluate_wait_s);
-        let (res, _, built) = self.assemble(q, mode, want, r).await;
+        let (res, _) = self.assemble(q, mode, tangent, r).await;
         let waited = self.timers.evaluate_wait_s - wait0;
         self.timers.assemble_s += t0.elapsed().as_secs_f64() - waited;
-        (res, built)
+        res
     }
 }

@@ -2,7 +2,7 @@
 //! given increment (with the loads of the coming mid-step), and frozen scalars set by
 //! hand.
 
-use super::{Mode, Simulation, Tangent};
+use super::{Mode, Simulation};
 use crate::element::{FrozenScalars, NDOF};
 use crate::integrator::dofs::NONE;
 use crate::integrator::evaluate::now;
@@ -18,7 +18,7 @@ impl Simulation {
         } else {
             Mode::Frozen
         };
-        now(self.assemble(q, mode, Tangent::Yes, &mut r));
+        now(self.assemble(q, mode, true, &mut r));
         r
     }
 
@@ -48,8 +48,7 @@ impl Simulation {
     pub fn frozen_system_at(&mut self, q: &[f64], tangent: bool) -> (Vec<f64>, [f64; 3], Vec<f64>) {
         let mut r = vec![0.0; self.dofs.n];
         self.mid_step_loads();
-        let want = if tangent { Tangent::Yes } else { Tangent::No };
-        let (_, scale, _) = now(self.assemble(q, Mode::Frozen, want, &mut r));
+        let (_, scale) = now(self.assemble(q, Mode::Frozen, tangent, &mut r));
         let values = if tangent {
             self.solver.values().to_vec()
         } else {
