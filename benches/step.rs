@@ -124,7 +124,9 @@ fn assembly(c: &mut Criterion) {
     }
     let n = sim.n_dofs();
     // A deterministic increment of the size a step takes (1e-3 of the element length).
-    let q: Vec<f64> = (0..n).map(|i| 1e-3 * ((i * 7919) % 13) as f64 / 13.0).collect();
+    let q: Vec<f64> = (0..n)
+        .map(|i| 1e-3 * ((i * 7919) % 13) as f64 / 13.0)
+        .collect();
     let mut g = c.benchmark_group("assembly");
     g.throughput(Throughput::Elements(scene.model.elements.len() as u64));
     for (label, tangent) in [("residual", false), ("tangent", true)] {

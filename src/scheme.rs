@@ -143,4 +143,3 @@ pub enum StressRule {
     /// mid-point rule; momenta still conserved, energy not).
     MidpointStrain,
 }
-

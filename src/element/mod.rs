@@ -23,14 +23,13 @@ pub mod strain;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
 
-pub use crate::scheme::StressRule;
-use crate::scheme::Scheme;
 use crate::math::{cay_with_factor, hat};
 use crate::model::{ElementProps, Mat3, Vec3};
+use crate::scheme::Scheme;
+pub use crate::scheme::StressRule;
 use dissipation::{local_scalars, LocalInputs, LocalScalars};
 use strain::{
-    raw_strains, strain_gradient, stress_hessian, Config, A0, B0, GRADIENT_FIELDS, NFIELDS, R0,
-    R1,
+    raw_strains, strain_gradient, stress_hessian, Config, A0, B0, GRADIENT_FIELDS, NFIELDS, R0, R1,
 };
 
 /// Unknowns of one element: per end `u` (3), `θ` (3); then per end `g` (3).
@@ -725,7 +724,9 @@ fn tangent(
         for m in 0..2 {
             let rm = if m == 0 { R0 } else { R1 };
             let vsum = |pf: usize| -> Vec3 {
-                (0..3).fold(Vec3::zeros(), |acc, j| acc + gs[(pf, field_of(m, j))] * dcol[m][j])
+                (0..3).fold(Vec3::zeros(), |acc, j| {
+                    acc + gs[(pf, field_of(m, j))] * dcol[m][j]
+                })
             };
             // (u_l, u_m)
             let g_uu = gs[(rl, rm)];
@@ -733,7 +734,9 @@ fn tangent(
                 kt[(u_idx(l) + c, u_idx(m) + c)] += g_uu;
             }
             // (θ_l, u_m)
-            let w = (0..3).fold(Vec3::zeros(), |acc, i| acc + gs[(field_of(l, i), rm)] * dcol[l][i]);
+            let w = (0..3).fold(Vec3::zeros(), |acc, i| {
+                acc + gs[(field_of(l, i), rm)] * dcol[l][i]
+            });
             let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), u_idx(m));
             view += hat(&w);
             // (u_l, θ_m)

@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::{
-    consistent_scalars, kinematics, monolithic_correction, residual_tangent_into, ElemMat,
-    ElemVec, ElementEval, NDOF,
+    consistent_scalars, kinematics, monolithic_correction, residual_tangent_into, ElemMat, ElemVec,
+    ElementEval, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest};

@@ -323,7 +323,11 @@ impl Simulation {
     fn scatter_maps(
         dofs: &DofMap,
         slots: &[Vec<usize>],
-    ) -> (Vec<(usize, usize)>, Vec<(usize, usize)>, Vec<(usize, usize)>) {
+    ) -> (
+        Vec<(usize, usize)>,
+        Vec<(usize, usize)>,
+        Vec<(usize, usize)>,
+    ) {
         let (mut rows, mut tan, mut off) = (Vec::new(), Vec::new(), Vec::new());
         for (map, sl) in dofs.elements.iter().zip(slots) {
             off.push((rows.len(), tan.len()));
