@@ -684,8 +684,9 @@ fn tangent(
     let co = (0.5 * h * (1.0 + s.beta_omega)) * p.c_omega;
     let om = co * bt_1.fixed_rows::<3>(3);
     db.fixed_rows_mut::<3>(3).copy_from(&om);
-    let km = bt_mid.transpose() * db;
-    kt.fixed_view_mut::<12, 12>(0, 0).copy_from(&km);
+    // Written in place (no 12×12 temporary, no transposed copy).
+    kt.fixed_view_mut::<12, 12>(0, 0)
+        .gemm_tr(1.0, &bt_mid, &db, 0.0);
 
     // Scalar field couplings G_s ⊗ I₃: geometric stiffness ½ h H(S*) and inertia.
     let mut gs = stress_hessian(sstar, h) * (0.5 * h);
