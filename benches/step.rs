@@ -7,10 +7,16 @@
 //! * `planar_vs_3d`: whole runs of the planar arch and mechanism with the planar unknowns
 //!   only and with the full 3D system (same results to round-off, see
 //!   `tests/paper_examples.rs`).
-//! * `assembly+solve` breakdown: residual/tangent assembly vs sparse LU for the cantilever.
+//! * `assembly/cantilever50/{residual,tangent}`: the element kernel + scatter over the 50
+//!   elements of the cantilever at a mid-size increment, residual only (a modified-Newton
+//!   iteration that keeps its tangent) and residual + tangent (a full-Newton iteration);
+//!   throughput in elements, so criterion's time per element is the per-element cost
+//!   (the tangent variant includes one copy of the matrix values, ≈ 5k numbers).
 //!
 //! Throughput in rods·elements·steps per second is printed by criterion as
 //! "elements" throughput (1 rod).
+
+use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
@@ -27,6 +33,18 @@ fn cantilever(c: &mut Criterion) {
             if sim.step().is_err() {
                 sim = Simulation::new(scene.model.clone(), scene.params).unwrap();
             }
+        })
+    });
+    // The same step in this thread's CPU time (see `thread_cpu_ns`).
+    g.bench_function("cantilever50/cpu", |b| {
+        b.iter_custom(|iters| {
+            let t0 = thread_cpu_ns();
+            for _ in 0..iters {
+                if sim.step().is_err() {
+                    sim = Simulation::new(scene.model.clone(), scene.params).unwrap();
+                }
+            }
+            Duration::from_nanos(thread_cpu_ns().saturating_sub(t0))
         })
     });
     g.finish();
@@ -96,5 +114,53 @@ fn planar(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, cantilever, frame, planar);
+/// Element kernel + scatter of the cantilever's 50 elements at a fixed increment (what one
+/// Newton iteration assembles), with and without the tangent.
+fn assembly(c: &mut Criterion) {
+    let scene = load_scene("cantilever").unwrap();
+    let mut sim = Simulation::new(scene.model.clone(), scene.params).unwrap();
+    for _ in 0..5 {
+        sim.step().unwrap();
+    }
+    let n = sim.n_dofs();
+    // A deterministic increment of the size a step takes (1e-3 of the element length).
+    let q: Vec<f64> = (0..n)
+        .map(|i| 1e-3 * ((i * 7919) % 13) as f64 / 13.0)
+        .collect();
+    let mut g = c.benchmark_group("assembly");
+    g.throughput(Throughput::Elements(scene.model.elements.len() as u64));
+    for (label, tangent) in [("residual", false), ("tangent", true)] {
+        g.bench_function(format!("cantilever50/{label}"), |b| {
+            b.iter(|| sim.frozen_system_at(&q, tangent).0[0])
+        });
+        // The same in this thread's CPU time: on a shared machine the wall time above also
+        // counts the time other processes hold the core.
+        g.bench_function(format!("cantilever50/{label}/cpu"), |b| {
+            b.iter_custom(|iters| {
+                let t0 = thread_cpu_ns();
+                for _ in 0..iters {
+                    std::hint::black_box(sim.frozen_system_at(&q, tangent).0[0]);
+                }
+                Duration::from_nanos(thread_cpu_ns().saturating_sub(t0))
+            })
+        });
+    }
+    g.finish();
+}
+
+/// This thread's CPU time in ns (`CLOCK_THREAD_CPUTIME_ID`).
+fn thread_cpu_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec for the duration of the call.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return 0;
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+criterion_group!(benches, cantilever, frame, planar, assembly);
 criterion_main!(benches);

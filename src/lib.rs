@@ -42,5 +42,6 @@ pub mod output;
 pub mod paths;
 pub mod reproduce;
 pub mod scene;
+pub mod scheme;
 pub mod study;
 pub mod sweep;

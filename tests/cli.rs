@@ -140,8 +140,9 @@ fn check_and_scenes_describe_the_builtin_frame() {
     assert!(String::from_utf8_lossy(&st.stdout).contains("frame"));
 }
 
-/// `study work-precision` and `study stability` write their CSV and PNG (small grids on
-/// the frame; the physics of the studies is pinned in tests/study.rs).
+/// `study work-precision` and `study stability` write their CSV and PNG and record their
+/// solver settings in `summary.json` (small grids on the frame; the physics of the
+/// studies is pinned in tests/study.rs).
 #[test]
 fn study_commands_write_csv_and_png() {
     let dir = tempfile::tempdir().unwrap();
@@ -157,6 +158,8 @@ fn study_commands_write_csv_and_png() {
             "0.1,0.05",
             "--t-end",
             "0.4",
+            "--newton",
+            "modified",
             "--out",
         ])
         .arg(&out)
@@ -167,6 +170,11 @@ fn study_commands_write_csv_and_png() {
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
+    // The shared solver settings are recorded.
+    let s = summary(&out);
+    assert_eq!(s["study"], "work-precision");
+    assert_eq!(s["params"]["newton"], "modified");
+    assert_eq!(s["t_end"], 0.4);
     for f in ["work_precision.csv", "work_precision.png"] {
         assert!(std::fs::metadata(out.join(f)).unwrap().len() > 100, "{f}");
     }

@@ -631,9 +631,11 @@ fn default_jobs(jobs: Option<usize>) -> usize {
         .max(1)
 }
 
-/// Loads a study's scene, with `--newton-tol` applied to its integrator parameters, and
-/// creates the output directory.
-fn study_scene(c: &StudyCommon) -> Result<Scene> {
+/// Loads a study's scene, with `--newton-tol` applied to its integrator parameters,
+/// creates the output directory and records the solver settings every run of the study
+/// shares in its `summary.json` (`study`, `scene`, `params`: the integrator parameters
+/// with `newton`, `newton_tol`, `fallback`, `cutback`).
+fn study_scene(c: &StudyCommon, study: &str) -> Result<Scene> {
     let mut scene = load_scene(&c.scene)?;
     create_out(&c.out)?;
     if let Some(tol) = c.newton_tol {
@@ -651,6 +653,15 @@ fn study_scene(c: &StudyCommon) -> Result<Scene> {
     if let Some(n) = c.cutback {
         scene.params.cutback = n.into();
     }
+    let summary = serde_json::json!({
+        "study": study,
+        "scene": scene.name,
+        "t_end": c.t_end.unwrap_or(scene.params.t_end),
+        "params": scene.params,
+    });
+    let path = c.out.join("summary.json");
+    std::fs::write(&path, format!("{summary:#}\n"))
+        .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(scene)
 }
 
@@ -660,7 +671,7 @@ fn create_out(out: &Path) -> Result<()> {
 }
 
 fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
-    let scene = study_scene(&a.common)?;
+    let scene = study_scene(&a.common, "work-precision")?;
     let schemes = a
         .schemes
         .iter()
@@ -762,7 +773,7 @@ fn damping_command(a: &DampingArgs) -> Result<ExitCode> {
 }
 
 fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
-    let scene = study_scene(&a.common)?;
+    let scene = study_scene(&a.common, "stability")?;
     let kinds = a
         .schemes
         .iter()

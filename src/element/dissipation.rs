@@ -7,7 +7,7 @@
 
 use nalgebra::{Matrix4, Vector4};
 
-use crate::integrator::params::Scheme;
+use crate::scheme::Scheme;
 
 /// Inputs of the local dissipation law at one quadrature point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

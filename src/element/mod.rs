@@ -24,11 +24,14 @@ pub mod strain;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
 
-use crate::integrator::params::Scheme;
-use crate::math::{cay, hat, inv_i_minus_half_hat};
+use crate::math::{cay_with_factor, hat};
 use crate::model::{ElementProps, Mat3, Vec3};
+use crate::scheme::Scheme;
+pub use crate::scheme::StressRule;
 use dissipation::{local_scalars, LocalInputs, LocalScalars};
-use strain::{raw_strains, strain_gradient, stress_hessian, Config, A0, B0, NFIELDS, R0, R1};
+use strain::{
+    raw_strains, strain_gradient, stress_hessian, Config, A0, B0, GRADIENT_FIELDS, NFIELDS, R0, R1,
+};
 
 /// Unknowns of one element: per end `u` (3), `θ` (3); then per end `g` (3).
 pub const NDOF: usize = 18;
@@ -69,6 +72,29 @@ pub struct ElementData {
 }
 
 impl ElementData {
+    /// The constant data of every element of `model`, in element order: section
+    /// constants, reference strains of the reference configuration, end rotations free.
+    pub fn for_model(model: &crate::model::Model) -> Vec<ElementData> {
+        model
+            .elements
+            .iter()
+            .map(|e| {
+                let cfg = Config {
+                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
+                    d: e.ref_triad,
+                };
+                ElementData {
+                    props: e.props.clone(),
+                    eps0: strains6(&cfg, e.props.h),
+                    rot_free: [
+                        !model.supports[e.nodes[0]].rotation,
+                        !model.supports[e.nodes[1]].rotation,
+                    ],
+                }
+            })
+            .collect()
+    }
+
     /// Director-dissipation mass factors `κ_l` (DESIGN §4): `g_α^l = κ_l w_α` keeps
     /// `M_e g = ∫ N_l w` on the free ends: 1 on both ends when both are free, 1.5 on the
     /// free end of an element whose other end is clamped, 0 on a clamped end.
@@ -164,18 +190,6 @@ pub struct Kinematics {
     pub inputs: LocalInputs,
 }
 
-/// Which strains the element stresses are formed from: the only difference between the
-/// energy–momentum scheme and the plain implicit mid-point rule on this discretization.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StressRule {
-    /// `S = C(½(ε_n + ε_{n+1}) − ε°)`: the mean of the strains (EM, EDMC-1, EDMC-2;
-    /// energy-consistent because `B_{n+½}(Φ_{n+1} − Φ_n) = ε_{n+1} − ε_n`).
-    MeanOfStrains,
-    /// `S = C(ε(Φ_{n+½}) − ε°)`: the strain of the mid-point configuration (the plain
-    /// mid-point rule; momenta still conserved, energy not).
-    MidpointStrain,
-}
-
 /// Per-step constants shared by all elements.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepConsts {
@@ -222,7 +236,9 @@ pub fn kinematics(
     dt: f64,
 ) -> Kinematics {
     let p = &data.props;
-    let rot = [cay(&inc.theta[0]), cay(&inc.theta[1])];
+    let (rot0, amat0) = cay_with_factor(&inc.theta[0]);
+    let (rot1, amat1) = cay_with_factor(&inc.theta[1]);
+    let rot = [rot0, rot1];
     let cfg1 = Config {
         r: [st.cfg.r[0] + inc.u[0], st.cfg.r[1] + inc.u[1]],
         d: [rot[0] * st.cfg.d[0], rot[1] * st.cfg.d[1]],
@@ -268,10 +284,7 @@ pub fn kinematics(
     Kinematics {
         cfg1,
         mid,
-        amat: [
-            inv_i_minus_half_hat(&inc.theta[0]),
-            inv_i_minus_half_hat(&inc.theta[1]),
-        ],
+        amat: [amat0, amat1],
         eps_n: *eps_n,
         eps1,
         v1,
@@ -367,8 +380,8 @@ pub fn stress_force_floor(
     let m = p.c_omega.abs() * e.fixed_rows::<3>(3);
     let gross = [n.x, n.y, n.z, m.x, m.y, m.z];
     let mut f = [0.0f64; NFIELDS];
-    for (row, gk) in b.iter().zip(gross) {
-        for q in 0..NFIELDS {
+    for ((row, gk), fields) in b.iter().zip(gross).zip(GRADIENT_FIELDS) {
+        for q in fields {
             f[q] += GROSS_WEIGHT * row[q].amax() * p.h * gk;
         }
     }
@@ -378,9 +391,9 @@ pub fn stress_force_floor(
 /// Generalized stress forces `h Bᵀ S` on the eight vector fields of an element
 /// (one-point rule).
 pub fn field_forces(b: &strain::StrainGradient, s: &Vector6<f64>, h: f64) -> [Vec3; NFIELDS] {
-    let mut f = [Vec3::zeros(); NFIELDS];
-    for (row, &sk) in b.iter().zip(s.iter()) {
-        for q in 0..NFIELDS {
+    let mut f = [strain::ZERO3; NFIELDS];
+    for ((row, &sk), fields) in b.iter().zip(s.iter()).zip(GRADIENT_FIELDS) {
+        for q in fields {
             f[q] += row[q] * (h * sk);
         }
     }
@@ -466,6 +479,29 @@ pub fn residual_tangent(
     trans_diss: bool,
     want_tangent: bool,
 ) -> ElementEval {
+    let mut out = ElementEval {
+        r: ElemVec::zeros(),
+        scale: ElemVec::zeros(),
+        k: ElemMat::zeros(),
+    };
+    residual_tangent_into(data, st, kin, s, k, trans_diss, want_tangent, &mut out);
+    out
+}
+
+/// [`residual_tangent`] into a caller's buffer (the assembly loop reuses one): `out.r`
+/// and `out.scale` are overwritten, and `out.k` too when `want_tangent` (otherwise it is
+/// left as it was).
+#[allow(clippy::too_many_arguments)]
+pub fn residual_tangent_into(
+    data: &ElementData,
+    st: &ElementState,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+    trans_diss: bool,
+    want_tangent: bool,
+    out: &mut ElementEval,
+) {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
     let sstar = stresses(data, kin, s, k.scheme.stress_rule());
@@ -479,7 +515,8 @@ pub fn residual_tangent(
     // EA = 2e8, load 1.25) otherwise never reach a relative tolerance measured against
     // the load alone.
     let f_gross = stress_force_floor(data, &b_mid, &(0.5 * (kin.eps_n + kin.eps1)));
-    let mut scale = ElemVec::zeros();
+    let scale = &mut out.scale;
+    *scale = ElemVec::zeros();
     let stress_scale = [f[R0].amax().max(f_gross[R0]), f[R1].amax().max(f_gross[R1])];
     let mut inertia_r = [Vec3::zeros(); 2];
     for l in 0..2 {
@@ -509,7 +546,8 @@ pub fn residual_tangent(
         fd_scale[l] = fd_scale[l].max(f[base + 2].amax()).max(f_gross[base + 2]);
     }
 
-    let mut r = ElemVec::zeros();
+    let r = &mut out.r;
+    *r = ElemVec::zeros();
     let dmid = [kin.mid.d[0], kin.mid.d[1]];
     for l in 0..2 {
         let fr = f[if l == 0 { R0 } else { R1 }] + inertia_r[l];
@@ -563,11 +601,10 @@ pub fn residual_tangent(
         }
     }
 
-    let mut kt = ElemMat::zeros();
     if want_tangent {
-        tangent(data, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut kt);
+        out.k = ElemMat::zeros();
+        tangent(data, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut out.k);
     }
-    ElementEval { r, scale, k: kt }
 }
 
 /// The `g` an element end carries, recovered from `v_{n+1} = 2u/Δt − v_n − 2g`
@@ -609,42 +646,51 @@ fn tangent(
         StressRule::MeanOfStrains => strain_gradient(&kin.cfg1, h),
         StressRule::MidpointStrain => *b_mid,
     };
-    let dmid = [kin.mid.d[0], kin.mid.d[1]];
+    // Mid-point directors d_{l,i} and the transposed Cayley factors A_lᵀ.
+    let dcol: [[Vec3; 3]; 2] =
+        std::array::from_fn(|l| std::array::from_fn(|i| kin.mid.d[l].column(i).into_owned()));
+    let amat = kin.amat;
+    let at = [amat[0].transpose(), amat[1].transpose()];
 
     // Test-side map T (δΦ = T δq) and trial-side map J (dΦ_{n+1} = J dq) per field:
-    // positions: T = J = I; directors: T = −\hat{d_½}, J = A_l (−\hat{d_½}).
-    let tmat: [Mat3; NFIELDS] = std::array::from_fn(|q| match field_block(q).1 {
-        None => Mat3::identity(),
-        Some((l, i)) => -hat(&dmid[l].column(i).into_owned()),
-    });
-    let jmat: [Mat3; NFIELDS] = std::array::from_fn(|q| match field_block(q).1 {
-        None => Mat3::identity(),
-        Some((l, _)) => kin.amat[l] * tmat[q],
-    });
-
+    // positions: T = J = I; directors: T = −\hat{d_½}, J = A_l (−\hat{d_½}). They are
+    // never formed: Tᵀ b = d_½ × b and Jᵀ b = d_½ × (A_lᵀ b).
+    //
     // Reduced strain gradients B̃ = B T (mid) and B J (n+1), 6 rows × 12 columns.
     let mut bt_mid = SMatrix::<f64, 6, 12>::zeros();
     let mut bt_1 = SMatrix::<f64, 6, 12>::zeros();
     for kk in 0..6 {
-        for q in 0..NFIELDS {
-            let (c0, _) = field_block(q);
-            let a = tmat[q].transpose() * b_mid[kk][q];
-            let b = jmat[q].transpose() * b1[kk][q];
+        for q in GRADIENT_FIELDS[kk] {
+            let (c0, dir) = field_block(q);
+            let (a, b) = match dir {
+                None => (b_mid[kk][q], b1[kk][q]),
+                Some((l, i)) => (
+                    dcol[l][i].cross(&b_mid[kk][q]),
+                    dcol[l][i].cross(&(at[l] * b1[kk][q])),
+                ),
+            };
             for c in 0..3 {
                 bt_mid[(kk, c0 + c)] += a[c];
                 bt_1[(kk, c0 + c)] += b[c];
             }
         }
     }
-    // Material part: h B̃_½ᵀ (∂S*/∂ε) B̃_trial, ∂S*/∂ε = ½(1+β) C.
-    let mut dmat = nalgebra::Matrix6::<f64>::zeros();
+    // Material part: h B̃_½ᵀ (∂S*/∂ε) B̃_trial, ∂S*/∂ε = ½(1+β) C (diagonal on Γ, a 3×3
+    // block on Ω: applied by rows instead of as a 6×6 product).
+    let mut db = bt_1;
+    let cg = 0.5 * h * (1.0 + s.beta_gamma);
     for i in 0..3 {
-        dmat[(i, i)] = 0.5 * (1.0 + s.beta_gamma) * p.c_gamma[i];
+        let f = cg * p.c_gamma[i];
+        for c in 0..12 {
+            db[(i, c)] *= f;
+        }
     }
-    dmat.fixed_view_mut::<3, 3>(3, 3)
-        .copy_from(&(0.5 * (1.0 + s.beta_omega) * p.c_omega));
-    let km = h * bt_mid.transpose() * dmat * bt_1;
-    kt.fixed_view_mut::<12, 12>(0, 0).copy_from(&km);
+    let co = (0.5 * h * (1.0 + s.beta_omega)) * p.c_omega;
+    let om = co * bt_1.fixed_rows::<3>(3);
+    db.fixed_rows_mut::<3>(3).copy_from(&om);
+    // Written in place (no 12×12 temporary, no transposed copy).
+    kt.fixed_view_mut::<12, 12>(0, 0)
+        .gemm_tr(1.0, &bt_mid, &db, 0.0);
 
     // Scalar field couplings G_s ⊗ I₃: geometric stiffness ½ h H(S*) and inertia.
     let mut gs = stress_hessian(sstar, h) * (0.5 * h);
@@ -674,17 +720,40 @@ fn tangent(
             }
         }
     }
-    for pf in 0..NFIELDS {
-        let (r0, _) = field_block(pf);
-        for qf in 0..NFIELDS {
-            let gpq = gs[(pf, qf)];
-            if gpq == 0.0 {
-                continue;
+    // Σ_{p∈rows(l), q∈cols(m)} g_pq T_pᵀ J_q, summed over the fields of a column block
+    // first (T and J are linear in the directors):
+    //   (u_l, u_m) = g I,  (θ_l, u_m) = \hat{Σ_i g d_li},  (u_l, θ_m) = −A_m \hat{Σ_j g d_mj},
+    //   (θ_l, θ_m) = −Σ_i \hat{d_li} A_m \hat{Σ_j g d_mj}.
+    for l in 0..2 {
+        let rl = if l == 0 { R0 } else { R1 };
+        for m in 0..2 {
+            let rm = if m == 0 { R0 } else { R1 };
+            let vsum = |pf: usize| -> Vec3 {
+                (0..3).fold(Vec3::zeros(), |acc, j| {
+                    acc + gs[(pf, field_of(m, j))] * dcol[m][j]
+                })
+            };
+            // (u_l, u_m)
+            let g_uu = gs[(rl, rm)];
+            for c in 0..3 {
+                kt[(u_idx(l) + c, u_idx(m) + c)] += g_uu;
             }
-            let (c0, _) = field_block(qf);
-            let blk = (tmat[pf].transpose() * jmat[qf]) * gpq;
-            let mut view = kt.fixed_view_mut::<3, 3>(r0, c0);
-            view += blk;
+            // (θ_l, u_m)
+            let w = (0..3).fold(Vec3::zeros(), |acc, i| {
+                acc + gs[(field_of(l, i), rm)] * dcol[l][i]
+            });
+            let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), u_idx(m));
+            view += hat(&w);
+            // (u_l, θ_m)
+            let mut view = kt.fixed_view_mut::<3, 3>(u_idx(l), th_idx(m));
+            view -= amat[m] * hat(&vsum(rl));
+            // (θ_l, θ_m)
+            let mut blk = Mat3::zeros();
+            for i in 0..3 {
+                blk += hat(&dcol[l][i]) * (amat[m] * hat(&vsum(field_of(l, i))));
+            }
+            let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
+            view -= blk;
         }
     }
     // Projection term: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.
@@ -692,7 +761,7 @@ fn tangent(
         let base = if l == 0 { A0 } else { B0 };
         let mut blk = Mat3::zeros();
         for i in 0..3 {
-            blk += hat(&f[base + i]) * kin.amat[l] * hat(&dmid[l].column(i).into_owned());
+            blk += hat(&f[base + i]) * amat[l] * hat(&dcol[l][i]);
         }
         let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), th_idx(l));
         view += 0.5 * blk;

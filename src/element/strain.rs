@@ -28,6 +28,9 @@ pub const B0: usize = 5;
 /// Number of vector fields.
 pub const NFIELDS: usize = 8;
 
+/// The zero vector as a constant (an array of it is a plain zero fill, not 48 copies).
+pub(crate) const ZERO3: Vec3 = Vec3::new(0.0, 0.0, 0.0);
+
 /// Element end a field belongs to.
 #[inline]
 pub fn field_end(p: usize) -> usize {
@@ -101,7 +104,7 @@ pub type StrainGradient = [[Vec3; NFIELDS]; 6];
 
 /// `B(Φ)` for the bilinear strains of [`raw_strains`].
 pub fn strain_gradient(c: &Config, h: f64) -> StrainGradient {
-    let mut bm = [[Vec3::zeros(); NFIELDS]; 6];
+    let mut bm = [[ZERO3; NFIELDS]; 6];
     let dr = (c.r[1] - c.r[0]) / h;
     let a = &c.d[0];
     let b = &c.d[1];
@@ -127,6 +130,18 @@ pub fn strain_gradient(c: &Config, h: f64) -> StrainGradient {
 
 /// The even permutations `(k, i, j)` of `(0, 1, 2)` (where `ε_kij = +1`).
 const EPS_POSITIVE: [(usize, usize, usize); 3] = [(0, 1, 2), (1, 2, 0), (2, 0, 1)];
+
+/// The fields on which each strain row of [`strain_gradient`] can be nonzero (the other
+/// four entries of a row are exact zeros): `Γ_i` depends on `r_0, r_1, a_i, b_i`, `Ω_k`
+/// on the two directors of each end other than the `k`-th.
+pub const GRADIENT_FIELDS: [[usize; 4]; 6] = [
+    [R0, R1, A0, B0],
+    [R0, R1, A0 + 1, B0 + 1],
+    [R0, R1, A0 + 2, B0 + 2],
+    [A0 + 1, A0 + 2, B0 + 1, B0 + 2],
+    [A0, A0 + 2, B0, B0 + 2],
+    [A0, A0 + 1, B0, B0 + 1],
+];
 
 /// Hessian of `S·ε(Φ)` with respect to the fields, as the scalar 8×8 matrix `H_s` with
 /// `∂²(S·ε)/∂Φ_p∂Φ_q = H_s[p, q] I₃`. `s = (N, M)`. Constant in Φ because ε is bilinear.
@@ -197,6 +212,18 @@ mod tests {
     fn strains6(c: &Config, h: f64) -> Vector6<f64> {
         let (g, o) = raw_strains(c, h);
         Vector6::new(g.x, g.y, g.z, o.x, o.y, o.z)
+    }
+
+    #[test]
+    fn gradient_vanishes_off_its_listed_fields() {
+        let bm = strain_gradient(&sample(0.6), 0.8);
+        for (k, row) in bm.iter().enumerate() {
+            for (q, b) in row.iter().enumerate() {
+                if !GRADIENT_FIELDS[k].contains(&q) {
+                    assert_eq!(*b, Vec3::zeros(), "row {k} field {q}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -862,16 +862,11 @@ mod tests {
         for (a, w) in m.omega0.iter_mut().enumerate() {
             *w = Vec3::new(0.1 * a as f64, -0.05, 0.02 * (a % 3) as f64);
         }
-        let mut p = scene.params;
-        p.scheme = crate::integrator::Scheme::GenAlpha { rho_inf: 0.7 };
-        p.dt = 0.05;
-        let mut sim = crate::integrator::Simulation::new(scene.model.clone(), p).unwrap();
-        for _ in 0..3 {
-            sim.step().unwrap();
-        }
-        let model = sim.model().clone();
-        let data = sim.element_data().to_vec();
-        let state = sim.state().clone();
+        // The state at t = 0 (spinning, loaded): this module's own data only, no
+        // simulation (which drives this module) in its tests.
+        let model = scene.model.clone();
+        let data = ElementData::for_model(&model);
+        let state = State::initial(&model, &data);
         let nn = model.n_nodes();
         let f = vec![Vec3::new(0.3, -0.2, 0.1); nn];
         let mo = vec![Vec3::new(-0.1, 0.05, 0.2); nn];

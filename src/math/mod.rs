@@ -29,6 +29,20 @@ pub fn inv_i_minus_half_hat(theta: &Vec3) -> Mat3 {
     Mat3::identity() + (0.5 * t + 0.25 * t * t) * s
 }
 
+/// [`cay`] and [`inv_i_minus_half_hat`] of the same θ at the cost of one (they share
+/// `θ̂²` and the factor `1/(1 + ¼|θ|²)`; bit-identical to the two calls: the factors ½ and
+/// ¼ are exact in binary).
+#[inline]
+pub fn cay_with_factor(theta: &Vec3) -> (Mat3, Mat3) {
+    let t = hat(theta);
+    let tt = t * t;
+    let s = 1.0 / (1.0 + 0.25 * theta.norm_squared());
+    (
+        Mat3::identity() + (t + 0.5 * tt) * s,
+        Mat3::identity() + (0.5 * t + 0.25 * tt) * s,
+    )
+}
+
 /// Inverse Cayley map: the θ with `cay(θ) = R` for a rotation `R` (no half-turns),
 /// `θ̂ = 2 (R − I)(R + I)⁻¹`.
 pub fn cay_inv(r: &Mat3) -> Vec3 {

@@ -26,9 +26,13 @@ impl Simulation {
             let (sc, loc, kin_c) = consistent_scalars(data, &st, &eps_n, &inc, &k);
             diss += data.props.h * loc.dissipation_density(&kin_c.inputs, data.props.a_rho);
             consistent.push(sc);
+            // The frozen kinematics differ from the consistent ones only through c_ν
+            // (equal, e.g. always for EM: nothing to recompute).
             let kin = match mode {
-                Mode::Consistent => kin_c,
-                Mode::Frozen => kinematics(data, &st, &eps_n, &inc, self.frozen[e].c_nu, dt),
+                Mode::Frozen if self.frozen[e].c_nu != sc.c_nu => {
+                    kinematics(data, &st, &eps_n, &inc, self.frozen[e].c_nu, dt)
+                }
+                _ => kin_c,
             };
             next.d[e] = kin.cfg1.d;
             next.vd[e] = kin.vd1;

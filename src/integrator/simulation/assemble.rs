@@ -8,7 +8,8 @@ use std::time::Instant;
 
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::{
-    consistent_scalars, kinematics, monolithic_correction, residual_tangent, ElementEval, NDOF,
+    consistent_scalars, kinematics, monolithic_correction, residual_tangent_into, ElemMat, ElemVec,
+    ElementEval, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest};
@@ -65,6 +66,12 @@ impl Simulation {
         } else {
             self.model.elements.len()
         };
+        // One element buffer for the whole loop (no per-element allocation or copy).
+        let mut ev = ElementEval {
+            r: ElemVec::zeros(),
+            scale: ElemVec::zeros(),
+            k: ElemMat::zeros(),
+        };
         for e in 0..n_cpu {
             let inc = self.gather(e, q);
             let st = self.state.element(&self.model, e);
@@ -80,9 +87,9 @@ impl Simulation {
                     (s, kin)
                 }
             };
-            let mut ev = residual_tangent(data, &st, &kin, &s, &k, self.trans_diss, tangent);
-            let map = &self.dofs.elements[e];
+            residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
             if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() {
+                let map = &self.dofs.elements[e];
                 let active: [bool; NDOF] = std::array::from_fn(|i| map[i] != NONE);
                 monolithic_correction(
                     data,
@@ -197,22 +204,18 @@ impl Simulation {
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) {
-        let map = &self.dofs.elements[e];
-        for i in 0..NDOF {
-            if map[i] == NONE {
-                continue;
-            }
-            r[map[i]] += ev.r[i];
+        let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
+        for &(i, g) in &self.row_map[lo.0..hi.0] {
+            r[g] += ev.r[i];
             let kind = kind_of_local(i);
             scale[kind] = scale[kind].max(ev.scale[i]);
-            if tangent {
-                let vals = self.solver.values_mut();
-                let srow = &self.slots[e][i * NDOF..(i + 1) * NDOF];
-                for j in 0..NDOF {
-                    if srow[j] != NONE {
-                        vals[srow[j]] += ev.k[(i, j)];
-                    }
-                }
+        }
+        if tangent {
+            // Active (local, slot) pairs only, in the element matrix's column-major order.
+            let ks = ev.k.as_slice();
+            let vals = self.solver.values_mut();
+            for &(src, dst) in &self.tangent_map[lo.1..hi.1] {
+                vals[dst] += ks[src];
             }
         }
     }

@@ -27,9 +27,8 @@ mod strategy;
 
 use std::sync::Arc;
 
-use crate::element::strain::Config;
 use crate::element::{
-    g_idx, strains6, th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
+    g_idx, th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
 use crate::integrator::evaluate::{ElementBackend, EvalPort};
@@ -71,6 +70,15 @@ pub struct Simulation {
     solver: SparseSolver,
     /// Per element: solver slot of each element-local (i, j) pair, [`NONE`] if inactive.
     slots: Vec<Vec<usize>>,
+    /// Active rows of every element, `(local row, global row)`, element after element
+    /// (element `e`'s from `scatter_off[e].0`).
+    row_map: Vec<(usize, usize)>,
+    /// Active tangent entries of every element, `(column-major index into the 18×18
+    /// element matrix, solver slot)`, element after element (from `scatter_off[e].1`).
+    tangent_map: Vec<(usize, usize)>,
+    /// Start of each element's entries in `row_map` and `tangent_map` (one past the last
+    /// element at the end).
+    scatter_off: Vec<(usize, usize)>,
     /// Per node: slots of the diagonal entries of the (u,u), (u,g), (g,u), (g,g) blocks.
     node_slots: Vec<[[usize; 3]; 4]>,
     /// Per node: solver slot of each entry of its node-local 9×9 diagonal block
@@ -123,24 +131,7 @@ impl Simulation {
         model: Model,
         params: IntegratorParams,
     ) -> Result<Self, crate::linsolve::LinsolveError> {
-        let data: Vec<ElementData> = model
-            .elements
-            .iter()
-            .map(|e| {
-                let cfg = Config {
-                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
-                    d: e.ref_triad,
-                };
-                ElementData {
-                    props: e.props.clone(),
-                    eps0: strains6(&cfg, e.props.h),
-                    rot_free: [
-                        !model.supports[e.nodes[0]].rotation,
-                        !model.supports[e.nodes[1]].rotation,
-                    ],
-                }
-            })
-            .collect();
+        let data = ElementData::for_model(&model);
         let trans_diss = params.scheme.translational_dissipation();
         let dofs = DofMap::new(&model, trans_diss);
         let mut pattern = dofs.pattern();
@@ -156,7 +147,7 @@ impl Simulation {
             }
         }
         let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
-        let slots = dofs
+        let slots: Vec<Vec<usize>> = dofs
             .elements
             .iter()
             .map(|m| {
@@ -171,6 +162,7 @@ impl Simulation {
                 s
             })
             .collect();
+        let (row_map, tangent_map, scatter_off) = Self::scatter_maps(&dofs, &slots);
         let node_slots = dofs
             .nodes
             .iter()
@@ -230,6 +222,9 @@ impl Simulation {
             dofs,
             solver,
             slots,
+            row_map,
+            tangent_map,
+            scatter_off,
             node_slots,
             node_block_slots,
             off_block_slots,
@@ -319,6 +314,34 @@ impl Simulation {
     /// The numbering of the Newton unknowns.
     pub fn dof_map(&self) -> &DofMap {
         &self.dofs
+    }
+
+    /// The compact scatter lists of the elements (see the fields `row_map`,
+    /// `tangent_map`, `scatter_off`): only active entries, so the assembly loop has no
+    /// tests for removed unknowns.
+    #[allow(clippy::type_complexity)]
+    fn scatter_maps(
+        dofs: &DofMap,
+        slots: &[Vec<usize>],
+    ) -> (
+        Vec<(usize, usize)>,
+        Vec<(usize, usize)>,
+        Vec<(usize, usize)>,
+    ) {
+        let (mut rows, mut tan, mut off) = (Vec::new(), Vec::new(), Vec::new());
+        for (map, sl) in dofs.elements.iter().zip(slots) {
+            off.push((rows.len(), tan.len()));
+            rows.extend((0..NDOF).filter(|&i| map[i] != NONE).map(|i| (i, map[i])));
+            for j in 0..NDOF {
+                for i in 0..NDOF {
+                    if sl[i * NDOF + j] != NONE {
+                        tan.push((j * NDOF + i, sl[i * NDOF + j]));
+                    }
+                }
+            }
+        }
+        off.push((rows.len(), tan.len()));
+        (rows, tan, off)
     }
 
     /// Solver slots of the node-local blocks: each node's 9×9 diagonal block (entries
