@@ -19,6 +19,7 @@
 //! ([`monolithic_correction`]).
 
 pub mod dissipation;
+pub mod planar;
 pub mod strain;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector6};

@@ -21,6 +21,7 @@
 mod accept;
 mod assemble;
 mod newton;
+mod planar;
 mod probe;
 mod step;
 mod strategy;
@@ -114,6 +115,8 @@ pub struct Simulation {
     /// Set when the current step's staggered loop failed and the monolithic fallback
     /// solved it (reset at the start of every step).
     fell_back: bool,
+    /// The planar element kernel of a planar model (`None` for a 3D model).
+    planar: Option<planar::PlanarKernel>,
 }
 
 impl Simulation {
@@ -156,7 +159,7 @@ impl Simulation {
             }
         }
         let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
-        let slots = dofs
+        let slots: Vec<Vec<usize>> = dofs
             .elements
             .iter()
             .map(|m| {
@@ -205,6 +208,7 @@ impl Simulation {
                 })
             })
             .collect();
+        let planar = planar::PlanarKernel::new(&model, &data, &dofs, &slots);
         let state = State::initial(&model, &data);
         let inv = invariants(&model, &data, &state);
         let nn = model.n_nodes();
@@ -243,6 +247,7 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
+            planar,
         })
     }
 
