@@ -358,14 +358,15 @@ pub struct PKinematics {
 
 /// `cay(θ n)` on the plane: `(c, s)` with `c = (1 − θ²/4)/(1 + θ²/4)`, `s = θ/(1 + θ²/4)`.
 #[inline]
-fn cay2(theta: f64) -> (f64, f64) {
+pub fn cay2(theta: f64) -> (f64, f64) {
     let q = 0.25 * theta * theta;
     let den = 1.0 / (1.0 + q);
     ((1.0 - q) * den, theta * den)
 }
 
+/// Rotates an in-plane vector by `(cos φ, sin φ)`.
 #[inline]
-fn rotate(cs: (f64, f64), a: &V2) -> V2 {
+pub fn rotate(cs: (f64, f64), a: &V2) -> V2 {
     V2::new(cs.0 * a.x - cs.1 * a.y, cs.1 * a.x + cs.0 * a.y)
 }
 

@@ -7,12 +7,15 @@
 use nalgebra::Vector3;
 
 use super::{Mode, Simulation};
+use crate::element::dissipation::LocalScalars;
 use crate::element::planar::{
     self, full_index, pkind, planar_data, PElemMat, PIncrement, PState, PlanarData, NDOF_P,
 };
 use crate::element::strain::Config;
-use crate::element::{ElementData, NDOF};
+use crate::element::{strains6, ElementData, FrozenScalars, NDOF};
 use crate::integrator::dofs::{DofMap, NONE};
+use crate::integrator::state::State;
+use crate::model::Mat3;
 use crate::model::Model;
 
 /// Planar kernel data of a simulation.
@@ -90,17 +93,8 @@ impl Simulation {
         }
     }
 
-    /// The element loop of [`Simulation::assemble`] with the planar kernel.
-    pub(super) fn assemble_planar(
-        &mut self,
-        q: &[f64],
-        mode: Mode,
-        tangent: bool,
-        r: &mut [f64],
-        scale: &mut [f64; 3],
-    ) {
-        let k = self.consts();
-        let dt = k.dt;
+    /// Refreshes the planar view of the element states at `n` (once per step).
+    fn planar_states(&mut self) {
         let Some(pk) = self.planar.as_mut() else {
             return;
         };
@@ -113,16 +107,105 @@ impl Simulation {
             }
             pk.version = Some(self.state_version);
         }
+    }
+
+    /// [`Simulation::advance`] with the planar kernel: the new 3D state (positions,
+    /// velocities, triads turned about the normal, director velocities, 3D strains for the
+    /// observers), the predicted dissipation and the consistent scalars. `None` when the
+    /// planar view of the state is not current (the caller uses the 3D kernel).
+    pub(super) fn advance_planar(
+        &self,
+        q: &[f64],
+        mode: Mode,
+    ) -> Option<(State, f64, Vec<FrozenScalars>)> {
+        let pk = self.planar.as_ref().filter(|p| p.enabled)?;
+        if pk.version != Some(self.state_version) || pk.states.len() != pk.data.len() {
+            return None;
+        }
+        let k = self.consts();
+        let dt = k.dt;
+        let mut next = self.state.clone();
+        next.t = self.state.t + dt;
+        let mut diss = 0.0;
+        let mut consistent = Vec::with_capacity(pk.data.len());
+        let mut node_done = vec![false; self.model.n_nodes()];
+        for (e, pd) in pk.data.iter().enumerate() {
+            let inc = PIncrement::from_local(&gather_planar(&pk.dofs[e], q));
+            let (st, eps_n) = &pk.states[e];
+            let (sc, loc, kin_c): (FrozenScalars, LocalScalars, _) =
+                planar::consistent_scalars(pd, st, eps_n, &inc, &k);
+            diss += pd.h * loc.dissipation_density(&kin_c.inputs, pd.a_rho);
+            consistent.push(sc);
+            let (kin, c_nu) = match mode {
+                Mode::Consistent => (kin_c, sc.c_nu),
+                Mode::Frozen => {
+                    let c = self.frozen[e].c_nu;
+                    (planar::kinematics(pd, st, eps_n, &inc, c, dt), c)
+                }
+            };
+            let map = &pd.map;
+            let nodes = self.model.elements[e].nodes;
+            // Triads: each column turned in the plane by cay(θ n); normal parts unchanged.
+            let d_n = self.state.d[e];
+            let d1: [Mat3; 2] = std::array::from_fn(|l| {
+                let cs = planar::cay2(inc.theta[l]);
+                let mut m = d_n[l];
+                for i in 0..3 {
+                    let col = d_n[l].column(i).into_owned();
+                    let c = map.v3(&planar::rotate(cs, &map.v2(&col)), col[map.normal]);
+                    m.set_column(i, &c);
+                }
+                m
+            });
+            let kappa = pd.kappa;
+            let ksum = kappa[0] + kappa[1];
+            for a in 0..2 {
+                let dd = [
+                    d1[0].column(a) - d_n[0].column(a),
+                    d1[1].column(a) - d_n[1].column(a),
+                ];
+                let w = (dd[0] + dd[1]) / dt * (c_nu / (1.0 + ksum * c_nu));
+                for l in 0..2 {
+                    next.vd[e][l][a] =
+                        2.0 * dd[l] / dt - self.state.vd[e][l][a] - 2.0 * kappa[l] * w;
+                }
+            }
+            next.d[e] = d1;
+            for l in 0..2 {
+                let a = nodes[l];
+                if !node_done[a] {
+                    node_done[a] = true;
+                    let r = &self.state.r[a];
+                    next.r[a] = map.v3(&kin.cfg1.r[l], r[map.normal]);
+                    next.v[a] = map.v3(&kin.v1[l], -self.state.v[a][map.normal]);
+                }
+            }
+        }
+        for e in 0..pk.data.len() {
+            next.eps[e] = strains6(&next.config(&self.model, e), self.data[e].props.h);
+        }
+        Some((next, diss, consistent))
+    }
+
+    /// The element loop of [`Simulation::assemble`] with the planar kernel.
+    pub(super) fn assemble_planar(
+        &mut self,
+        q: &[f64],
+        mode: Mode,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        let k = self.consts();
+        let dt = k.dt;
+        self.planar_states();
+        let Some(pk) = self.planar.as_ref() else {
+            return;
+        };
         let vals = self.solver.values_mut();
         for (e, pd) in pk.data.iter().enumerate() {
             let map = &pk.dofs[e];
-            let mut x = planar::PElemVec::zeros();
-            for i in 0..NDOF_P {
-                if map[i] != NONE {
-                    x[i] = q[map[i]];
-                }
-            }
-            let inc = PIncrement::from_local(&x);
+            let inc = PIncrement::from_local(&gather_planar(map, q));
             let (st, eps_n) = &pk.states[e];
             let (s, kin) = match mode {
                 Mode::Frozen => {
@@ -168,4 +251,10 @@ impl Simulation {
             }
         }
     }
+}
+
+/// The planar element-local increment vector (zero for removed unknowns).
+#[inline]
+fn gather_planar(map: &[usize; NDOF_P], q: &[f64]) -> planar::PElemVec {
+    planar::PElemVec::from_fn(|i, _| if map[i] == NONE { 0.0 } else { q[map[i]] })
 }
