@@ -379,6 +379,39 @@ pub fn kinematics(
     c_nu: f64,
     dt: f64,
 ) -> PKinematics {
+    let mut kin = kinematics_core(pd, st, eps_n, inc, c_nu, dt);
+    kin.inputs = local_inputs(pd, st, &kin);
+    kin
+}
+
+/// The local dissipation inputs of a kinematic update (speeds, strain-increment energies).
+fn local_inputs(pd: &PlanarData, st: &PState, kin: &PKinematics) -> LocalInputs {
+    let vh_n = 0.5 * (st.v[0] + st.v[1]);
+    let vh_1 = 0.5 * (kin.v1[0] + kin.v1[1]);
+    let vsh_n = 0.5 * (st.vs[0] + st.vs[1]);
+    let vsh_1 = 0.5 * (kin.vs1[0] + kin.vs1[1]);
+    let de = kin.eps1 - kin.eps_n;
+    let nu = |x: &V2| ((pd.i_s * x.dot(x)).max(0.0) / pd.a_rho).sqrt();
+    LocalInputs {
+        v_n: vh_n.norm(),
+        v_n1: vh_1.norm(),
+        nu_n: nu(&vsh_n),
+        nu_n1: nu(&vsh_1),
+        x_gamma: pd.c[0] * de[0] * de[0] + pd.c[1] * de[1] * de[1],
+        x_omega: pd.c[2] * de[2] * de[2],
+    }
+}
+
+/// [`kinematics`] without the local dissipation inputs (left at their default): what the
+/// frozen-scalar residual and tangent need.
+pub fn kinematics_core(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    c_nu: f64,
+    dt: f64,
+) -> PKinematics {
     let rot = [cay2(inc.theta[0]), cay2(inc.theta[1])];
     let cfg1 = PConfig {
         r: [st.cfg.r[0] + inc.u[0], st.cfg.r[1] + inc.u[1]],
@@ -399,23 +432,9 @@ pub fn kinematics(
         2.0 * dd[0] / dt - st.vs[0] - 2.0 * kappa[0] * w,
         2.0 * dd[1] / dt - st.vs[1] - 2.0 * kappa[1] * w,
     ];
-    let vh_n = 0.5 * (st.v[0] + st.v[1]);
-    let vh_1 = 0.5 * (v1[0] + v1[1]);
-    let vsh_n = 0.5 * (st.vs[0] + st.vs[1]);
-    let vsh_1 = 0.5 * (vs1[0] + vs1[1]);
-    let de = eps1 - eps_n;
-    let nu = |x: &V2| ((pd.i_s * x.dot(x)).max(0.0) / pd.a_rho).sqrt();
-    let inputs = LocalInputs {
-        v_n: vh_n.norm(),
-        v_n1: vh_1.norm(),
-        nu_n: nu(&vsh_n),
-        nu_n1: nu(&vsh_1),
-        x_gamma: pd.c[0] * de[0] * de[0] + pd.c[1] * de[1] * de[1],
-        x_omega: pd.c[2] * de[2] * de[2],
-    };
+    // (I − ½θ n̂)⁻¹ on the plane, from the Cayley factors: 1/(1 + θ²/4) = (1 + c)/2.
     let amat = std::array::from_fn(|l| {
-        let th = inc.theta[l];
-        let den = 1.0 / (1.0 + 0.25 * th * th);
+        let (den, th) = (0.5 * (1.0 + rot[l].0), inc.theta[l]);
         Matrix2::new(den, -0.5 * th * den, 0.5 * th * den, den)
     });
     PKinematics {
@@ -427,7 +446,7 @@ pub fn kinematics(
         v1,
         vs1,
         w,
-        inputs,
+        inputs: LocalInputs::default(),
     }
 }
 

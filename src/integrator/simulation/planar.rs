@@ -210,7 +210,7 @@ impl Simulation {
             let (s, kin) = match mode {
                 Mode::Frozen => {
                     let s = self.frozen[e];
-                    (s, planar::kinematics(pd, st, eps_n, &inc, s.c_nu, dt))
+                    (s, planar::kinematics_core(pd, st, eps_n, &inc, s.c_nu, dt))
                 }
                 Mode::Consistent => {
                     let (s, _, kin) = planar::consistent_scalars(pd, st, eps_n, &inc, &k);
