@@ -9,7 +9,8 @@
 //!
 //! All three give the same trajectory to round-off (`tests/planar_kernel.rs`).
 //!
-//! Before criterion runs, `side by side` prints the three interleaved (one step of each in
+//! Before criterion runs, `side by side` prints the three (and the planar and 3D kernels
+//! with `--newton modified`) interleaved (one step of each in
 //! turn, 3000 steps each, the scene's 1000 steps repeated): the best, 10th-percentile and
 //! median step time and their ratios to the planar kernel's. On a shared machine the
 //! interleaving keeps load changes out of the ratios, and the best/10th-percentile figures
@@ -19,18 +20,28 @@ use criterion::{criterion_group, Criterion, Throughput};
 
 use std::time::Instant;
 
-use cosserat::integrator::Simulation;
+use cosserat::integrator::{NewtonVariant, Simulation};
 use cosserat::scene::load_scene;
 
-const KINDS: [&str; 3] = ["planar", "3d-kernel", "full-3d"];
+const KINDS: [&str; 5] = [
+    "planar",
+    "3d-kernel",
+    "full-3d",
+    "planar+modified",
+    "3d-kernel+modified",
+];
 
 fn fresh(scene: &cosserat::scene::Scene, kind: &str) -> Simulation {
     let mut model = scene.model.clone();
     if kind == "full-3d" {
         model.planar = None;
     }
-    let mut sim = Simulation::new(model, scene.params).unwrap();
-    sim.set_planar_kernel(kind == "planar");
+    let mut params = scene.params;
+    if kind.ends_with("+modified") {
+        params.newton = NewtonVariant::Modified;
+    }
+    let mut sim = Simulation::new(model, params).unwrap();
+    sim.set_planar_kernel(kind.starts_with("planar"));
     sim
 }
 
@@ -64,7 +75,7 @@ fn side_by_side() {
         let [b, p, m] = stats[i];
         let [b0, p0, m0] = stats[0];
         println!(
-            "  {k:>10}: {b:7.1} / {p:7.1} / {m:7.1}   ratio to planar {:.2} / {:.2} / {:.2}   {:.2} Newton iterations per step",
+            "  {k:>18}: {b:7.1} / {p:7.1} / {m:7.1}   ratio to planar {:.2} / {:.2} / {:.2}   {:.2} Newton iterations per step",
             b / b0,
             p / p0,
             m / m0,
@@ -77,7 +88,7 @@ fn cantilever(c: &mut Criterion) {
     let scene = load_scene("cantilever_planar").unwrap();
     let mut g = c.benchmark_group("planar_kernel");
     g.throughput(Throughput::Elements(scene.model.elements.len() as u64));
-    for kind in KINDS {
+    for kind in &KINDS[..3] {
         let mut sim = fresh(&scene, kind);
         g.bench_function(format!("cantilever50/{kind}"), |b| {
             b.iter(|| {
