@@ -520,20 +520,23 @@ pub fn residual_tangent(
         pd.c[2] * (mean[2] + 0.5 * s.beta_omega * de[2]),
     );
     let b_mid = gradient(&kin.mid, h);
+    // Stress forces h Bᵀ S* and their round-off floor (as `stress_force_floor`), over the
+    // nonzero entries of B only.
+    let eps_abs = (0.5 * (kin.eps_n + kin.eps1)).abs() + pd.eps0.abs();
+    let gross = pd.c.component_mul(&eps_abs) * (GROSS_WEIGHT * h);
     let mut f = [V2::zeros(); NF];
-    for (row, &sk) in b_mid.iter().zip(sstar.iter()) {
-        for q in 0..NF {
-            f[q] += row[q] * (h * sk);
+    let mut f_gross = [0.0f64; NF];
+    for i in 0..2 {
+        let (hs, g) = (h * sstar[i], gross[i]);
+        for p in [R0, R1, dfield(0, i), dfield(1, i)] {
+            f[p] += b_mid[i][p] * hs;
+            f_gross[p] += amax2(&b_mid[i][p]) * g;
         }
     }
-    // Round-off floor of the stress forces (as `stress_force_floor`).
-    let eps_abs = (0.5 * (kin.eps_n + kin.eps1)).abs() + pd.eps0.abs();
-    let gross = pd.c.component_mul(&eps_abs);
-    let mut f_gross = [0.0f64; NF];
-    for (row, gk) in b_mid.iter().zip(gross.iter()) {
-        for q in 0..NF {
-            f_gross[q] += GROSS_WEIGHT * row[q].amax() * h * gk;
-        }
+    let (hs, g) = (h * sstar[2], gross[2]);
+    for p in 2..NF {
+        f[p] += b_mid[2][p] * hs;
+        f_gross[p] += amax2(&b_mid[2][p]) * g;
     }
     let stress_scale = [f[R0].amax().max(f_gross[R0]), f[R1].amax().max(f_gross[R1])];
     let mut inertia_r = [V2::zeros(); 2];
@@ -604,6 +607,11 @@ pub fn residual_tangent(
         tangent(pd, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut kt);
     }
     PElementEval { r, scale, k: kt }
+}
+
+#[inline]
+fn amax2(v: &V2) -> f64 {
+    v.x.abs().max(v.y.abs())
 }
 
 /// Local column of field `p`'s unknown: positions 2 columns at `pu_idx`, directors the
