@@ -298,7 +298,12 @@ impl Scene {
             6 * m.n_nodes(),
         );
         if let Some(p) = m.planar {
-            let _ = writeln!(s, "planar: {} (normal e{})", p.name(), p.normal + 1);
+            let _ = writeln!(
+                s,
+                "planar: {} (normal e{}; CPU path: planar element kernel, 3 unknowns per free node)",
+                p.name(),
+                p.normal + 1
+            );
         }
         let _ = writeln!(
             s,
