@@ -112,7 +112,7 @@ fn max_abs(v: &[f64]) -> f64 {
 #[test]
 fn planar_rows_equal_the_3d_kernel() {
     let mut worst_r: f64 = 0.0;
-    let mut worst_k: f64 = 0.0;
+    let mut worst_k = [0.0f64; 2];
     for supported in [false, true] {
         for (name, scheme) in schemes() {
             let mut p = advanced(planar_frame(supported), scheme, true);
@@ -141,19 +141,17 @@ fn planar_rows_equal_the_3d_kernel() {
                     .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
                 let label = format!("{name} supported={supported} consistent={consistent}");
                 worst_r = worst_r.max(dr / scale);
-                worst_k = worst_k.max(dk / kmax);
+                let slot = usize::from(consistent && scheme.is_dissipative());
+                worst_k[slot] = worst_k[slot].max(dk / kmax);
                 assert!(
-                    dr <= 1e-12 * scale,
+                    dr <= 3e-13 * scale, // measured 3.0e-14
                     "{label}: residual differs {:e}",
                     dr / scale
                 );
                 // The monolithic linearization is a central difference of the scalars
-                // (step 1e-7): the two kernels' differences agree to its round-off.
-                let ktol = if consistent && scheme.is_dissipative() {
-                    1e-7
-                } else {
-                    1e-12
-                };
+                // (step 1e-7) that amplifies the kernels' round-off: measured 4.7e-11.
+                // Frozen: measured 5.9e-16.
+                let ktol = if slot == 1 { 5e-10 } else { 5e-15 };
                 assert!(
                     dk <= ktol * kmax,
                     "{label}: tangent differs {:e}",
@@ -162,7 +160,10 @@ fn planar_rows_equal_the_3d_kernel() {
             }
         }
     }
-    eprintln!("planar vs 3D kernel: residual {worst_r:.1e}, tangent {worst_k:.1e} (relative)");
+    eprintln!(
+        "planar vs 3D kernel: residual {worst_r:.1e}, tangent {:.1e} (frozen), {:.1e} (monolithic)",
+        worst_k[0], worst_k[1]
+    );
 }
 
 #[test]
