@@ -20,6 +20,7 @@
 
 pub mod director_factor;
 pub mod dissipation;
+pub mod planar;
 pub mod strain;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector6};

@@ -21,6 +21,7 @@ pub mod assemble;
 pub mod context;
 pub mod kernel;
 pub mod layout;
+pub mod planar;
 
 pub use assemble::Assembler;
 pub use context::{GpuContext, Precision};

@@ -80,6 +80,11 @@ static BUILTINS: &[BuiltinScene] = &[
         toml: include_str!("../../scenes/cantilever.toml"),
     },
     BuiltinScene {
+        name: "cantilever_planar",
+        description: "clamped 50-element cantilever moving in the e1-e2 plane (planar kernel speed benchmark)",
+        toml: include_str!("../../scenes/cantilever_planar.toml"),
+    },
+    BuiltinScene {
         name: "arch",
         description: "shallow arch snap-through under a ramped apex load (paper §5.2; reconstruction in docs/theory.md)",
         toml: include_str!("../../scenes/arch.toml"),
@@ -293,7 +298,12 @@ impl Scene {
             6 * m.n_nodes(),
         );
         if let Some(p) = m.planar {
-            let _ = writeln!(s, "planar: {} (normal e{})", p.name(), p.normal + 1);
+            let _ = writeln!(
+                s,
+                "planar: {} (normal e{}; CPU path: planar element kernel, 3 unknowns per free node)",
+                p.name(),
+                p.normal + 1
+            );
         }
         let _ = writeln!(
             s,

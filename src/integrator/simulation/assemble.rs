@@ -63,6 +63,9 @@ impl Simulation {
         }
         let n_cpu = if external {
             0
+        } else if self.planar_kernel() {
+            self.assemble_planar(q, mode, tangent, r, &mut scale);
+            0
         } else {
             self.model.elements.len()
         };

@@ -21,6 +21,7 @@
 mod accept;
 mod assemble;
 mod newton;
+mod planar;
 mod probe;
 mod step;
 mod strategy;
@@ -122,6 +123,8 @@ pub struct Simulation {
     /// Set when the current step's staggered loop failed and the monolithic fallback
     /// solved it (reset at the start of every step).
     fell_back: bool,
+    /// The planar element kernel of a planar model (`None` for a 3D model).
+    planar: Option<planar::PlanarKernel>,
 }
 
 impl Simulation {
@@ -197,6 +200,7 @@ impl Simulation {
                 })
             })
             .collect();
+        let planar = planar::PlanarKernel::new(&model, &data, &dofs, &slots);
         let state = State::initial(&model, &data);
         let inv = invariants(&model, &data, &state);
         let nn = model.n_nodes();
@@ -238,6 +242,7 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
+            planar,
         })
     }
 

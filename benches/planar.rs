@@ -1,0 +1,110 @@
+//! Speed of the planar element kernel against the 3D kernel on the same planar scene
+//! (criterion): one EM step of the built-in `cantilever_planar` (50 elements, Δt = 1e-2)
+//!
+//! * `planar_kernel/cantilever50/planar`: the planar kernel (the default for a planar
+//!   scene on the CPU path);
+//! * `…/3d-kernel`: the same planar model with the 3D kernel (out-of-plane unknowns
+//!   removed from the Newton system, elements still 3D);
+//! * `…/full-3d`: the same scene without `planar` (6 unknowns per node).
+//!
+//! All three give the same trajectory to round-off (`tests/planar_kernel.rs`).
+//!
+//! Before criterion runs, `side by side` prints the three (and the planar and 3D kernels
+//! with `--newton modified`) interleaved (one step of each in
+//! turn, 3000 steps each, the scene's 1000 steps repeated): the best, 10th-percentile and
+//! median step time and their ratios to the planar kernel's. On a shared machine the
+//! interleaving keeps load changes out of the ratios, and the best/10th-percentile figures
+//! estimate the unloaded cost (a step is ~0.1–1 ms, shorter than a scheduler slice).
+
+use criterion::{criterion_group, Criterion, Throughput};
+
+use std::time::Instant;
+
+use cosserat::integrator::{NewtonVariant, Simulation};
+use cosserat::scene::load_scene;
+
+const KINDS: [&str; 5] = [
+    "planar",
+    "3d-kernel",
+    "full-3d",
+    "planar+modified",
+    "3d-kernel+modified",
+];
+
+fn fresh(scene: &cosserat::scene::Scene, kind: &str) -> Simulation {
+    let mut model = scene.model.clone();
+    if kind == "full-3d" {
+        model.planar = None;
+    }
+    let mut params = scene.params;
+    if kind.ends_with("+modified") {
+        params.newton = NewtonVariant::Modified;
+    }
+    let mut sim = Simulation::new(model, params).unwrap();
+    sim.set_planar_kernel(kind.starts_with("planar"));
+    sim
+}
+
+/// The three variants interleaved step by step; prints µs per step.
+fn side_by_side() {
+    let scene = load_scene("cantilever_planar").unwrap();
+    let mut sims: Vec<Simulation> = KINDS.iter().map(|k| fresh(&scene, k)).collect();
+    let mut blocks: Vec<Vec<f64>> = vec![Vec::new(); KINDS.len()];
+    let mut iters = vec![0usize; KINDS.len()];
+    for _ in 0..3000 {
+        for (i, sim) in sims.iter_mut().enumerate() {
+            if sim.state().t >= scene.params.t_end - 1e-9 {
+                *sim = fresh(&scene, KINDS[i]);
+            }
+            let t0 = Instant::now();
+            iters[i] += sim.step().expect("cantilever_planar step").newton_iters;
+            blocks[i].push(t0.elapsed().as_secs_f64() * 1e6);
+        }
+    }
+    let stats: Vec<[f64; 3]> = blocks
+        .iter_mut()
+        .map(|b| {
+            b.sort_by(f64::total_cmp);
+            [b[0], b[b.len() / 10], b[b.len() / 2]]
+        })
+        .collect();
+    println!(
+        "side by side (cantilever_planar, EM, 50 elements, µs per step: best / p10 / median):"
+    );
+    for (i, k) in KINDS.iter().enumerate() {
+        let [b, p, m] = stats[i];
+        let [b0, p0, m0] = stats[0];
+        println!(
+            "  {k:>18}: {b:7.1} / {p:7.1} / {m:7.1}   ratio to planar {:.2} / {:.2} / {:.2}   {:.2} Newton iterations per step",
+            b / b0,
+            p / p0,
+            m / m0,
+            iters[i] as f64 / 3000.0,
+        );
+    }
+}
+
+fn cantilever(c: &mut Criterion) {
+    let scene = load_scene("cantilever_planar").unwrap();
+    let mut g = c.benchmark_group("planar_kernel");
+    g.throughput(Throughput::Elements(scene.model.elements.len() as u64));
+    for kind in &KINDS[..3] {
+        let mut sim = fresh(&scene, kind);
+        g.bench_function(format!("cantilever50/{kind}"), |b| {
+            b.iter(|| {
+                if sim.state().t >= scene.params.t_end - 1e-9 || sim.step().is_err() {
+                    sim = fresh(&scene, kind);
+                }
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, cantilever);
+
+fn main() {
+    side_by_side();
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -1,0 +1,802 @@
+//! The planar element kernel: the exact restriction of the 3D kernel ([`super`]) to a
+//! rod that moves in a coordinate plane.
+//!
+//! In a planar model (the scene's `planar = "e1e2"` …) every position, velocity and
+//! load lies in the plane and every rotation is about its normal `n`; the scene checks
+//! that `n` is a principal axis of every section (or the section is isotropic). Then, per
+//! element end, one director is `±n` for all time and the other two — the tangent
+//! director `t = d_3` and the transverse director `s` (`d_1` or `d_2`, or for an
+//! isotropic section the combination of both that lies in the plane) — stay in the plane.
+//! Of the six strains only three are not identically zero:
+//!
+//! ```text
+//! Γ_s = ½ (s_0 + s_1)·(r_1 − r_0)/h      (shear)
+//! Γ_t = ½ (t_0 + t_1)·(r_1 − r_0)/h      (axial)
+//! κ   = (t_0·s_1 − s_0·t_1)/(2h)          (bending about n)
+//! ```
+//!
+//! and the element works with 2-vectors: per end the in-plane position, the in-plane
+//! translational velocity, the two in-plane directors and the velocity of `s` (the normal
+//! director has none). The unknowns per end are `u` (2), the scalar Cayley increment `θ`
+//! about `n` (`cay(θ n)` rotates the plane by `φ`, `tan(φ/2) = θ/2`) and, with
+//! translational dissipation, `g` (2): 10 per element instead of 18. Every formula below is
+//! the 3D one with the out-of-plane components dropped (they are zero, not neglected), so
+//! the residual rows and the tangent equal the planar rows/columns of the 3D kernel to
+//! round-off, for every scheme (EM, EDMC-1, EDMC-2, the mid-point baseline) and both
+//! dissipation strategies.
+
+use nalgebra::{Matrix2, SMatrix, SVector, Vector2, Vector3};
+
+use super::dissipation::{local_scalars, LocalInputs, LocalScalars};
+use super::strain::Config;
+use super::{ElementData, ElementState, FrozenScalars, StepConsts, StressRule, M2};
+use crate::model::{Plane, Vec3};
+
+/// 2-vector of `f64` (in-plane components along the plane's two axes).
+pub type V2 = Vector2<f64>;
+/// Unknowns of one planar element: per end `u` (2), `θ` (1); then per end `g` (2).
+pub const NDOF_P: usize = 10;
+/// Planar element residual.
+pub type PElemVec = SVector<f64, NDOF_P>;
+/// Planar element tangent.
+pub type PElemMat = SMatrix<f64, NDOF_P, NDOF_P>;
+
+/// Local row/column of planar `u^l` component 0.
+#[inline]
+pub const fn pu_idx(l: usize) -> usize {
+    3 * l
+}
+/// Local row/column of planar `θ^l`.
+#[inline]
+pub const fn pth_idx(l: usize) -> usize {
+    3 * l + 2
+}
+/// Local row/column of planar `g^l` component 0.
+#[inline]
+pub const fn pg_idx(l: usize) -> usize {
+    6 + 2 * l
+}
+
+/// Kind of a planar element-local row: 0 = u, 1 = θ, 2 = g.
+#[inline]
+pub const fn pkind(i: usize) -> usize {
+    if i >= 6 {
+        2
+    } else if i % 3 == 2 {
+        1
+    } else {
+        0
+    }
+}
+
+/// Vector fields of a planar element: positions, then per end `(s, t)`.
+const R0: usize = 0;
+const R1: usize = 1;
+/// Field of director `s` (0) or `t` (1) of end `l`.
+#[inline]
+const fn dfield(l: usize, i: usize) -> usize {
+    2 + 2 * l + i
+}
+const NF: usize = 6;
+
+/// `a × b · n` for in-plane `a, b` (the plane's axes are ordered so `e_i × e_j = n`).
+#[inline]
+fn cross2(a: &V2, b: &V2) -> f64 {
+    a.x * b.y - a.y * b.x
+}
+/// `n × a`: the in-plane vector `a` turned by +90°.
+#[inline]
+fn perp(a: &V2) -> V2 {
+    V2::new(-a.y, a.x)
+}
+
+/// How an element's 3D data map to the plane: the plane's axes and the combination
+/// `s = c_1 d_1 + c_2 d_2` that is the in-plane transverse director.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarMap {
+    /// Global axes `(i, j)` of the plane, ordered so that `e_i × e_j = n`.
+    pub axes: [usize; 2],
+    /// The normal axis.
+    pub normal: usize,
+    /// `s = coef[0] d_1 + coef[1] d_2`.
+    pub coef: [f64; 2],
+}
+
+impl PlanarMap {
+    /// In-plane components of a 3-vector.
+    #[inline]
+    pub fn v2(&self, v: &Vec3) -> V2 {
+        V2::new(v[self.axes[0]], v[self.axes[1]])
+    }
+    /// The 3-vector with in-plane components `a` and normal component `z`.
+    #[inline]
+    pub fn v3(&self, a: &V2, z: f64) -> Vec3 {
+        let mut v = Vec3::zeros();
+        v[self.axes[0]] = a.x;
+        v[self.axes[1]] = a.y;
+        v[self.normal] = z;
+        v
+    }
+}
+
+/// Constant data of one planar element.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanarData {
+    /// Element reference length.
+    pub h: f64,
+    /// `Aρ`.
+    pub a_rho: f64,
+    /// Director inertia `Iρ` of `s`.
+    pub i_s: f64,
+    /// Largest entry of the 3D `Iρ` (round-off floor of the θ rows, as in 3D).
+    pub i_amax: f64,
+    /// Stiffnesses of `(Γ_s, Γ_t, κ)`: `G A_s, E A, E I_n`.
+    pub c: Vector3<f64>,
+    /// Reference strains `(Γ_s°, Γ_t°, κ°)`.
+    pub eps0: Vector3<f64>,
+    /// Whether the rotation of each end node is free.
+    pub rot_free: [bool; 2],
+    /// Director-dissipation mass factors (as [`ElementData::kappa`]).
+    pub kappa: [f64; 2],
+    /// The map from 3D.
+    pub map: PlanarMap,
+}
+
+/// Configuration of a planar element: end positions and in-plane directors `s`, `t`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PConfig {
+    /// Positions.
+    pub r: [V2; 2],
+    /// Directors `[l][0] = s`, `[l][1] = t`.
+    pub d: [[V2; 2]; 2],
+}
+
+impl PConfig {
+    fn mean(&self, o: &PConfig) -> PConfig {
+        PConfig {
+            r: [0.5 * (self.r[0] + o.r[0]), 0.5 * (self.r[1] + o.r[1])],
+            d: std::array::from_fn(|l| std::array::from_fn(|i| 0.5 * (self.d[l][i] + o.d[l][i]))),
+        }
+    }
+}
+
+/// State of a planar element at time level `n`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PState {
+    /// Configuration.
+    pub cfg: PConfig,
+    /// Translational end velocities.
+    pub v: [V2; 2],
+    /// Velocity of director `s` per end.
+    pub vs: [V2; 2],
+}
+
+/// Increment of a planar element.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PIncrement {
+    /// `u^l`.
+    pub u: [V2; 2],
+    /// Cayley increments about the normal.
+    pub theta: [f64; 2],
+    /// Dissipative velocity corrections.
+    pub g: [V2; 2],
+}
+
+impl PIncrement {
+    /// Reads the increment from a planar element-local vector.
+    pub fn from_local(x: &PElemVec) -> Self {
+        let v = |i: usize| V2::new(x[i], x[i + 1]);
+        Self {
+            u: [v(pu_idx(0)), v(pu_idx(1))],
+            theta: [x[pth_idx(0)], x[pth_idx(1)]],
+            g: [v(pg_idx(0)), v(pg_idx(1))],
+        }
+    }
+    /// Writes the increment into a planar element-local vector.
+    pub fn to_local(&self) -> PElemVec {
+        let mut x = PElemVec::zeros();
+        for l in 0..2 {
+            x.fixed_rows_mut::<2>(pu_idx(l)).copy_from(&self.u[l]);
+            x[pth_idx(l)] = self.theta[l];
+            x.fixed_rows_mut::<2>(pg_idx(l)).copy_from(&self.g[l]);
+        }
+        x
+    }
+}
+
+/// Builds the planar data of an element of a planar model (the scene has checked that the
+/// plane's normal is a principal axis of the section, or that the section is isotropic).
+pub fn planar_data(data: &ElementData, reference: &Config, plane: Plane) -> PlanarData {
+    let ref_triad = &reference.d[0];
+    let k = plane.normal;
+    let map0 = PlanarMap {
+        axes: [(k + 1) % 3, (k + 2) % 3],
+        normal: k,
+        coef: [1.0, 0.0],
+    };
+    let p = &data.props;
+    // Components of the normal along d1, d2: the transverse director is the other one.
+    let (n1, n2) = (ref_triad[(k, 0)], ref_triad[(k, 1)]);
+    let isotropic = p.c_omega[(0, 1)] == 0.0
+        && p.c_omega[(0, 0)] == p.c_omega[(1, 1)]
+        && p.c_gamma[0] == p.c_gamma[1]
+        && p.i_rho[(0, 1)] == 0.0
+        && p.i_rho[(0, 0)] == p.i_rho[(1, 1)];
+    let (coef, m) = if n1.abs() <= 1e-9 {
+        ([1.0, 0.0], 0) // d1 in the plane, d2 = ±n
+    } else if n2.abs() <= 1e-9 {
+        ([0.0, 1.0], 1) // d2 in the plane, d1 = ±n
+    } else {
+        assert!(
+            isotropic,
+            "planar element with a tilted anisotropic section"
+        );
+        // Isotropic and tilted: s = unit in-plane combination of d1, d2 (⊥ n).
+        let nn = (n1 * n1 + n2 * n2).sqrt();
+        ([-n2 / nn, n1 / nn], 0)
+    };
+    let nidx = 1 - m;
+    let map = PlanarMap { coef, ..map0 };
+    let (i_s, ei) = (p.i_rho[(m, m)], p.c_omega[(nidx, nidx)]);
+    let mut pd = PlanarData {
+        h: p.h,
+        a_rho: p.a_rho,
+        i_s,
+        i_amax: p.i_rho.amax(),
+        c: Vector3::new(p.c_gamma[m], p.c_gamma[2], ei),
+        eps0: Vector3::zeros(),
+        rot_free: data.rot_free,
+        kappa: data.kappa(),
+        map,
+    };
+    pd.eps0 = strains3(&pd.config(reference), pd.h);
+    pd
+}
+
+impl PlanarData {
+    /// The planar view of a 3D configuration.
+    pub fn config(&self, c: &Config) -> PConfig {
+        let m = &self.map;
+        let s3 = |l: usize| m.coef[0] * c.d[l].column(0) + m.coef[1] * c.d[l].column(1);
+        PConfig {
+            r: [m.v2(&c.r[0]), m.v2(&c.r[1])],
+            d: std::array::from_fn(|l| [m.v2(&s3(l)), m.v2(&c.d[l].column(2).into_owned())]),
+        }
+    }
+
+    /// The planar view of a 3D element state.
+    pub fn state(&self, st: &ElementState) -> PState {
+        let m = &self.map;
+        let vs3 = |l: usize| m.coef[0] * st.vd[l][0] + m.coef[1] * st.vd[l][1];
+        PState {
+            cfg: self.config(&st.cfg),
+            v: [m.v2(&st.v[0]), m.v2(&st.v[1])],
+            vs: [m.v2(&vs3(0)), m.v2(&vs3(1))],
+        }
+    }
+}
+
+/// Planar strains `(Γ_s, Γ_t, κ)` of a configuration (raw, reference not subtracted).
+pub fn strains3(c: &PConfig, h: f64) -> Vector3<f64> {
+    let dr = (c.r[1] - c.r[0]) / h;
+    let (a, b) = (&c.d[0], &c.d[1]);
+    Vector3::new(
+        0.5 * (a[0] + b[0]).dot(&dr),
+        0.5 * (a[1] + b[1]).dot(&dr),
+        (a[1].dot(&b[0]) - a[0].dot(&b[1])) * (0.5 / h),
+    )
+}
+
+/// `B = ∂(Γ_s, Γ_t, κ)/∂Φ`: row `k`, field `p` gives a 2-vector.
+type PGrad = [[V2; NF]; 3];
+
+fn gradient(c: &PConfig, h: f64) -> PGrad {
+    let z = V2::zeros();
+    let mut bm = [[z; NF]; 3];
+    let dr = (c.r[1] - c.r[0]) / h;
+    let (a, b) = (&c.d[0], &c.d[1]);
+    for i in 0..2 {
+        let di = 0.5 * (a[i] + b[i]);
+        bm[i][R0] = -di / h;
+        bm[i][R1] = di / h;
+        bm[i][dfield(0, i)] = 0.5 * dr;
+        bm[i][dfield(1, i)] = 0.5 * dr;
+    }
+    // κ = (t_0·s_1 − s_0·t_1)/(2h)
+    let s = 0.5 / h;
+    bm[2][dfield(0, 1)] = s * b[0];
+    bm[2][dfield(1, 0)] = s * a[1];
+    bm[2][dfield(0, 0)] = -s * b[1];
+    bm[2][dfield(1, 1)] = -s * a[0];
+    bm
+}
+
+/// Hessian of `S·ε` (scalar 6×6, times `I₂`).
+fn hessian(sv: &Vector3<f64>, h: f64) -> SMatrix<f64, NF, NF> {
+    let mut hs = SMatrix::<f64, NF, NF>::zeros();
+    let c = 0.5 / h;
+    for i in 0..2 {
+        let n = sv[i] * c;
+        for p in [dfield(0, i), dfield(1, i)] {
+            hs[(R1, p)] += n;
+            hs[(p, R1)] += n;
+            hs[(R0, p)] -= n;
+            hs[(p, R0)] -= n;
+        }
+    }
+    let m = sv[2] * c;
+    let (t0, s1, s0, t1) = (dfield(0, 1), dfield(1, 0), dfield(0, 0), dfield(1, 1));
+    hs[(t0, s1)] += m;
+    hs[(s1, t0)] += m;
+    hs[(s0, t1)] -= m;
+    hs[(t1, s0)] -= m;
+    hs
+}
+
+/// What the planar kinematic update gives.
+#[derive(Clone, Copy, Debug)]
+pub struct PKinematics {
+    /// Configuration at `n+1`.
+    pub cfg1: PConfig,
+    /// Mid-point configuration.
+    pub mid: PConfig,
+    /// `(I − ½θ n̂)⁻¹` restricted to the plane, per end.
+    pub amat: [Matrix2<f64>; 2],
+    /// Planar strains at `n`.
+    pub eps_n: Vector3<f64>,
+    /// Planar strains at `n+1`.
+    pub eps1: Vector3<f64>,
+    /// Translational velocities at `n+1`.
+    pub v1: [V2; 2],
+    /// Velocities of `s` at `n+1`.
+    pub vs1: [V2; 2],
+    /// Director dissipative velocity `w` of `s`.
+    pub w: V2,
+    /// Local dissipation inputs.
+    pub inputs: LocalInputs,
+}
+
+/// `cay(θ n)` on the plane: `(c, s)` with `c = (1 − θ²/4)/(1 + θ²/4)`, `s = θ/(1 + θ²/4)`.
+#[inline]
+pub fn cay2(theta: f64) -> (f64, f64) {
+    let q = 0.25 * theta * theta;
+    let den = 1.0 / (1.0 + q);
+    ((1.0 - q) * den, theta * den)
+}
+
+/// Rotates an in-plane vector by `(cos φ, sin φ)`.
+#[inline]
+pub fn rotate(cs: (f64, f64), a: &V2) -> V2 {
+    V2::new(cs.0 * a.x - cs.1 * a.y, cs.1 * a.x + cs.0 * a.y)
+}
+
+/// Planar kinematic update (the restriction of [`super::kinematics`]).
+pub fn kinematics(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    c_nu: f64,
+    dt: f64,
+) -> PKinematics {
+    let mut kin = kinematics_core(pd, st, eps_n, inc, c_nu, dt);
+    kin.inputs = local_inputs(pd, st, &kin);
+    kin
+}
+
+/// The local dissipation inputs of a kinematic update (speeds, strain-increment energies).
+fn local_inputs(pd: &PlanarData, st: &PState, kin: &PKinematics) -> LocalInputs {
+    let vh_n = 0.5 * (st.v[0] + st.v[1]);
+    let vh_1 = 0.5 * (kin.v1[0] + kin.v1[1]);
+    let vsh_n = 0.5 * (st.vs[0] + st.vs[1]);
+    let vsh_1 = 0.5 * (kin.vs1[0] + kin.vs1[1]);
+    let de = kin.eps1 - kin.eps_n;
+    let nu = |x: &V2| ((pd.i_s * x.dot(x)).max(0.0) / pd.a_rho).sqrt();
+    LocalInputs {
+        v_n: vh_n.norm(),
+        v_n1: vh_1.norm(),
+        nu_n: nu(&vsh_n),
+        nu_n1: nu(&vsh_1),
+        x_gamma: pd.c[0] * de[0] * de[0] + pd.c[1] * de[1] * de[1],
+        x_omega: pd.c[2] * de[2] * de[2],
+    }
+}
+
+/// [`kinematics`] without the local dissipation inputs (left at their default): what the
+/// frozen-scalar residual and tangent need.
+pub fn kinematics_core(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    c_nu: f64,
+    dt: f64,
+) -> PKinematics {
+    let rot = [cay2(inc.theta[0]), cay2(inc.theta[1])];
+    let cfg1 = PConfig {
+        r: [st.cfg.r[0] + inc.u[0], st.cfg.r[1] + inc.u[1]],
+        d: std::array::from_fn(|l| std::array::from_fn(|i| rotate(rot[l], &st.cfg.d[l][i]))),
+    };
+    let mid = st.cfg.mean(&cfg1);
+    let eps1 = strains3(&cfg1, pd.h);
+    let v1 = [
+        2.0 * inc.u[0] / dt - st.v[0] - 2.0 * inc.g[0],
+        2.0 * inc.u[1] / dt - st.v[1] - 2.0 * inc.g[1],
+    ];
+    let kappa = pd.kappa;
+    let ksum = kappa[0] + kappa[1];
+    let dd = [cfg1.d[0][0] - st.cfg.d[0][0], cfg1.d[1][0] - st.cfg.d[1][0]];
+    let y = (dd[0] + dd[1]) / dt;
+    let w = y * (c_nu / (1.0 + ksum * c_nu));
+    let vs1 = [
+        2.0 * dd[0] / dt - st.vs[0] - 2.0 * kappa[0] * w,
+        2.0 * dd[1] / dt - st.vs[1] - 2.0 * kappa[1] * w,
+    ];
+    // (I − ½θ n̂)⁻¹ on the plane, from the Cayley factors: 1/(1 + θ²/4) = (1 + c)/2.
+    let amat = std::array::from_fn(|l| {
+        let (den, th) = (0.5 * (1.0 + rot[l].0), inc.theta[l]);
+        Matrix2::new(den, -0.5 * th * den, 0.5 * th * den, den)
+    });
+    PKinematics {
+        cfg1,
+        mid,
+        amat,
+        eps_n: *eps_n,
+        eps1,
+        v1,
+        vs1,
+        w,
+        inputs: LocalInputs::default(),
+    }
+}
+
+/// Planar twin of [`super::consistent_scalars`].
+pub fn consistent_scalars(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    k: &StepConsts,
+) -> (FrozenScalars, LocalScalars, PKinematics) {
+    let dt_h = k.dt / pd.h;
+    let mut c_nu = 0.0;
+    let mut kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
+    let mut loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
+    if k.scheme.director_dissipation() {
+        for _ in 0..200 {
+            let next = loc.c_nu(&kin.inputs);
+            let done = (next - c_nu).abs() <= 1e-15 * (1.0 + c_nu.abs());
+            c_nu = next;
+            kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
+            loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
+            if done {
+                break;
+            }
+        }
+    }
+    let frozen = FrozenScalars {
+        beta_gamma: loc.beta_gamma,
+        beta_omega: loc.beta_omega,
+        c_v: loc.c_v(&kin.inputs),
+        c_nu,
+    };
+    (frozen, loc, kin)
+}
+
+/// Gross-force weight (as the 3D kernel's `GROSS_WEIGHT`).
+const GROSS_WEIGHT: f64 = 1e-4;
+
+/// Output of [`residual_tangent`].
+#[derive(Clone, Debug)]
+pub struct PElementEval {
+    /// Residual.
+    pub r: PElemVec,
+    /// Row scales (as the 3D kernel's).
+    pub scale: PElemVec,
+    /// Tangent (zero when not requested).
+    pub k: PElemMat,
+}
+
+/// Planar element residual (and tangent if `want_tangent`) for frozen scalars: the
+/// planar rows of [`super::residual_tangent`].
+pub fn residual_tangent(
+    pd: &PlanarData,
+    st: &PState,
+    kin: &PKinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+    trans_diss: bool,
+    want_tangent: bool,
+) -> PElementEval {
+    let (h, dt) = (pd.h, k.dt);
+    let mean = match k.scheme.stress_rule() {
+        StressRule::MeanOfStrains => 0.5 * (kin.eps_n + kin.eps1),
+        StressRule::MidpointStrain => strains3(&kin.mid, h),
+    } - pd.eps0;
+    let de = kin.eps1 - kin.eps_n;
+    let sstar = Vector3::new(
+        pd.c[0] * (mean[0] + 0.5 * s.beta_gamma * de[0]),
+        pd.c[1] * (mean[1] + 0.5 * s.beta_gamma * de[1]),
+        pd.c[2] * (mean[2] + 0.5 * s.beta_omega * de[2]),
+    );
+    let b_mid = gradient(&kin.mid, h);
+    // Stress forces h Bᵀ S* and their round-off floor (as `stress_force_floor`), over the
+    // nonzero entries of B only.
+    let eps_abs = (0.5 * (kin.eps_n + kin.eps1)).abs() + pd.eps0.abs();
+    let gross = pd.c.component_mul(&eps_abs) * (GROSS_WEIGHT * h);
+    let mut f = [V2::zeros(); NF];
+    let mut f_gross = [0.0f64; NF];
+    for i in 0..2 {
+        let (hs, g) = (h * sstar[i], gross[i]);
+        for p in [R0, R1, dfield(0, i), dfield(1, i)] {
+            f[p] += b_mid[i][p] * hs;
+            f_gross[p] += amax2(&b_mid[i][p]) * g;
+        }
+    }
+    let (hs, g) = (h * sstar[2], gross[2]);
+    for p in 2..NF {
+        f[p] += b_mid[2][p] * hs;
+        f_gross[p] += amax2(&b_mid[2][p]) * g;
+    }
+    let stress_scale = [f[R0].amax().max(f_gross[R0]), f[R1].amax().max(f_gross[R1])];
+    let mut inertia_r = [V2::zeros(); 2];
+    for l in 0..2 {
+        for m in 0..2 {
+            inertia_r[l] += (pd.a_rho * h * M2[l][m] / dt) * (kin.v1[m] - st.v[m]);
+        }
+    }
+    let mut fd_scale = [0.0f64; 2];
+    for l in 0..2 {
+        let fs = dfield(l, 0);
+        let mut fi = V2::zeros();
+        for m in 0..2 {
+            fi += (h * M2[l][m] * pd.i_s / dt) * (kin.vs1[m] - st.vs[m]);
+        }
+        let rate = h * pd.i_amax * (st.vs[l].amax() + kin.vs1[l].amax()) / dt;
+        fd_scale[l] = fi
+            .amax()
+            .max(f[fs].amax())
+            .max(rate)
+            .max(f_gross[fs])
+            .max(f[dfield(l, 1)].amax())
+            .max(f_gross[dfield(l, 1)]);
+        f[fs] += fi;
+    }
+    let mut r = PElemVec::zeros();
+    let mut scale = PElemVec::zeros();
+    for l in 0..2 {
+        let fr = f[l] + inertia_r[l];
+        r.fixed_rows_mut::<2>(pu_idx(l)).copy_from(&fr);
+        let dm = &kin.mid.d[l];
+        r[pth_idx(l)] = cross2(&dm[0], &f[dfield(l, 0)]) + cross2(&dm[1], &f[dfield(l, 1)]);
+        let momentum_rate = pd.a_rho * h * (st.v[l].amax() + kin.v1[l].amax()) / dt;
+        let su = stress_scale[l].max(inertia_r[l].amax()).max(momentum_rate);
+        // The normal director (norm 1) is among the 3D kernel's mid-point directors.
+        let dnorm = dm[0].norm().max(dm[1].norm()).max(1.0);
+        scale[pu_idx(l)] = su;
+        scale[pu_idx(l) + 1] = su;
+        scale[pth_idx(l)] = fd_scale[l] * dnorm;
+    }
+    if trans_diss {
+        let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
+        let b = 0.5 * h * pd.a_rho * s.c_v * vsum;
+        let gm: [V2; 2] = std::array::from_fn(|m| {
+            (kin.cfg1.r[m] - st.cfg.r[m]) / dt - 0.5 * (st.v[m] + kin.v1[m])
+        });
+        let pieces = 0.5
+            * h
+            * pd.a_rho
+            * s.c_v.abs()
+            * (0..2)
+                .map(|m| ((kin.cfg1.r[m] - st.cfg.r[m]) / dt).amax() + gm[m].amax())
+                .sum::<f64>();
+        for l in 0..2 {
+            let mut mg = V2::zeros();
+            for m in 0..2 {
+                mg += pd.a_rho * h * M2[l][m] * gm[m];
+            }
+            r.fixed_rows_mut::<2>(pg_idx(l)).copy_from(&(mg - b));
+            let momentum = (0.5 * pd.a_rho * h * st.v[l].amax().max(kin.v1[l].amax())).max(pieces);
+            let sc = mg.amax().max(b.amax()).max(momentum);
+            scale[pg_idx(l)] = sc;
+            scale[pg_idx(l) + 1] = sc;
+        }
+    }
+    let mut kt = PElemMat::zeros();
+    if want_tangent {
+        tangent(pd, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut kt);
+    }
+    PElementEval { r, scale, k: kt }
+}
+
+#[inline]
+fn amax2(v: &V2) -> f64 {
+    v.x.abs().max(v.y.abs())
+}
+
+/// Local column of field `p`'s unknown: positions 2 columns at `pu_idx`, directors the
+/// single `θ` column of their end.
+#[inline]
+fn field_end(p: usize) -> usize {
+    match p {
+        R0 => 0,
+        R1 => 1,
+        _ => (p - 2) / 2,
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn tangent(
+    pd: &PlanarData,
+    kin: &PKinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+    trans_diss: bool,
+    sstar: &Vector3<f64>,
+    b_mid: &PGrad,
+    f: &[V2; NF],
+    kt: &mut PElemMat,
+) {
+    let (h, dt) = (pd.h, k.dt);
+    let b1 = match k.scheme.stress_rule() {
+        StressRule::MeanOfStrains => gradient(&kin.cfg1, h),
+        StressRule::MidpointStrain => *b_mid,
+    };
+    // Director fields: test map T = n × d_½ (δd = δθ n × d_½), trial map J = A_l T.
+    let tvec: [V2; NF] = std::array::from_fn(|p| {
+        if p < 2 {
+            V2::zeros()
+        } else {
+            perp(&kin.mid.d[(p - 2) / 2][(p - 2) % 2])
+        }
+    });
+    let jvec: [V2; NF] = std::array::from_fn(|p| {
+        if p < 2 {
+            V2::zeros()
+        } else {
+            kin.amat[(p - 2) / 2] * tvec[p]
+        }
+    });
+    // Reduced gradients: 3 rows × 6 columns (u0 u0 θ0 u1 u1 θ1).
+    let mut bt_mid = SMatrix::<f64, 3, 6>::zeros();
+    let mut bt_1 = SMatrix::<f64, 3, 6>::zeros();
+    for kk in 0..3 {
+        for l in 0..2 {
+            for c in 0..2 {
+                bt_mid[(kk, pu_idx(l) + c)] = b_mid[kk][l][c];
+                bt_1[(kk, pu_idx(l) + c)] = b1[kk][l][c];
+            }
+        }
+        for p in 2..NF {
+            let col = pth_idx(field_end(p));
+            bt_mid[(kk, col)] += b_mid[kk][p].dot(&tvec[p]);
+            bt_1[(kk, col)] += b1[kk][p].dot(&jvec[p]);
+        }
+    }
+    let dmat = Vector3::new(
+        0.5 * (1.0 + s.beta_gamma) * pd.c[0],
+        0.5 * (1.0 + s.beta_gamma) * pd.c[1],
+        0.5 * (1.0 + s.beta_omega) * pd.c[2],
+    );
+    let km = h * bt_mid.transpose() * SMatrix::<f64, 3, 3>::from_diagonal(&dmat) * bt_1;
+    kt.fixed_view_mut::<6, 6>(0, 0).copy_from(&km);
+
+    let mut gs = hessian(sstar, h) * (0.5 * h);
+    let two_dt2 = 2.0 / (dt * dt);
+    for l in 0..2 {
+        for m in 0..2 {
+            gs[(l, m)] += two_dt2 * pd.a_rho * h * M2[l][m];
+        }
+    }
+    let kappa = pd.kappa;
+    let ksum = kappa[0] + kappa[1];
+    let dw = s.c_nu / (dt * (1.0 + ksum * s.c_nu));
+    for l in 0..2 {
+        for m in 0..2 {
+            let mass = h * M2[l][m] * pd.i_s / dt;
+            let (pl, qm) = (dfield(l, 0), dfield(m, 0));
+            gs[(pl, qm)] += mass * 2.0 / dt;
+            for qq in 0..2 {
+                if pd.rot_free[qq] {
+                    gs[(pl, dfield(qq, 0))] -= mass * 2.0 * kappa[m] * dw;
+                }
+            }
+        }
+    }
+    for pf in 0..NF {
+        for qf in 0..NF {
+            let g = gs[(pf, qf)];
+            if g == 0.0 {
+                continue;
+            }
+            let (lp, lq) = (field_end(pf), field_end(qf));
+            match (pf < 2, qf < 2) {
+                (true, true) => {
+                    kt[(pu_idx(lp), pu_idx(lq))] += g;
+                    kt[(pu_idx(lp) + 1, pu_idx(lq) + 1)] += g;
+                }
+                (true, false) => {
+                    for c in 0..2 {
+                        kt[(pu_idx(lp) + c, pth_idx(lq))] += g * jvec[qf][c];
+                    }
+                }
+                (false, true) => {
+                    for c in 0..2 {
+                        kt[(pth_idx(lp), pu_idx(lq) + c)] += g * tvec[pf][c];
+                    }
+                }
+                (false, false) => {
+                    kt[(pth_idx(lp), pth_idx(lq))] += g * tvec[pf].dot(&jvec[qf]);
+                }
+            }
+        }
+    }
+    // Projection term: d/dθ of Σ_i (d_{i,½} × f_i)·n at fixed f.
+    for l in 0..2 {
+        let mut x = 0.0;
+        for i in 0..2 {
+            x += cross2(&(kin.amat[l] * perp(&kin.mid.d[l][i])), &f[dfield(l, i)]);
+        }
+        kt[(pth_idx(l), pth_idx(l))] += 0.5 * x;
+    }
+    if trans_diss {
+        let cv = 0.5 * h * pd.a_rho * s.c_v;
+        for l in 0..2 {
+            for m in 0..2 {
+                let mm = pd.a_rho * h * M2[l][m];
+                for c in 0..2 {
+                    kt[(pu_idx(l) + c, pg_idx(m) + c)] += -2.0 * mm / dt;
+                    kt[(pg_idx(l) + c, pu_idx(m) + c)] += -cv / dt;
+                    kt[(pg_idx(l) + c, pg_idx(m) + c)] += mm + cv;
+                }
+            }
+        }
+    }
+}
+
+/// Planar twin of [`super::monolithic_correction`] (central differences of the scalars
+/// over the planar unknowns marked `active`).
+#[allow(clippy::too_many_arguments)]
+pub fn monolithic_correction(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    k: &StepConsts,
+    trans_diss: bool,
+    active: &[bool; NDOF_P],
+    kt: &mut PElemMat,
+) {
+    let x0 = inc.to_local();
+    for j in 0..NDOF_P {
+        if !active[j] {
+            continue;
+        }
+        let hstep = 1e-7 * (1.0 + x0[j].abs());
+        let mut col = PElemVec::zeros();
+        for (sign, w) in [(1.0, 0.5 / hstep), (-1.0, -0.5 / hstep)] {
+            let mut x = x0;
+            x[j] += sign * hstep;
+            let (sj, _, _) = consistent_scalars(pd, st, eps_n, &PIncrement::from_local(&x), k);
+            let kin_s = kinematics(pd, st, eps_n, inc, sj.c_nu, k.dt);
+            col += residual_tangent(pd, st, &kin_s, &sj, k, trans_diss, false).r * w;
+        }
+        let mut c = kt.column_mut(j);
+        c += col;
+    }
+}
+
+/// The 3D element-local index (of the 18) each planar local unknown stands for.
+pub fn full_index(map: &PlanarMap) -> [usize; NDOF_P] {
+    use super::{g_idx, th_idx, u_idx};
+    std::array::from_fn(|i| {
+        if i >= 6 {
+            let l = (i - 6) / 2;
+            g_idx(l) + map.axes[(i - 6) % 2]
+        } else if i % 3 == 2 {
+            th_idx(i / 3) + map.normal
+        } else {
+            u_idx(i / 3) + map.axes[i % 3]
+        }
+    })
+}

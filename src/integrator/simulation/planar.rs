@@ -1,0 +1,260 @@
+//! The planar element kernel in a simulation (stage 4 for planar models): a planar model
+//! evaluated on the CPU runs [`crate::element::planar`] (10 unknowns per element instead
+//! of 18) instead of the 3D kernel with its out-of-plane unknowns removed. The state stays
+//! 3D (observers, outputs and the acceptance stage are unchanged); the planar view of each
+//! element's state at `n` is taken once per step.
+
+use nalgebra::Vector3;
+
+use super::{Mode, Simulation};
+use crate::element::dissipation::LocalScalars;
+use crate::element::planar::{
+    self, full_index, pkind, planar_data, PElemMat, PIncrement, PState, PlanarData, NDOF_P,
+};
+use crate::element::strain::Config;
+use crate::element::{strains6, ElementData, FrozenScalars, NDOF};
+use crate::integrator::dofs::{DofMap, NONE};
+use crate::integrator::state::State;
+use crate::model::Mat3;
+use crate::model::Model;
+
+/// Planar kernel data of a simulation.
+pub(super) struct PlanarKernel {
+    /// Whether assembly uses it (on by default for planar models).
+    pub(super) enabled: bool,
+    data: Vec<PlanarData>,
+    /// Per element: global unknown of each planar local unknown ([`NONE`] if removed).
+    dofs: Vec<[usize; NDOF_P]>,
+    /// Per element: solver slot of each planar local (i, j) pair.
+    slots: Vec<[usize; NDOF_P * NDOF_P]>,
+    /// Planar view of the element states at `n` and their strains, for `version`.
+    states: Vec<(PState, Vector3<f64>)>,
+    version: Option<u64>,
+}
+
+impl PlanarKernel {
+    /// The planar kernel of a planar model (`None` for a 3D model).
+    pub(super) fn new(
+        model: &Model,
+        data: &[ElementData],
+        dofs: &DofMap,
+        slots: &[Vec<usize>],
+    ) -> Option<Self> {
+        let plane = model.planar?;
+        let pdata: Vec<PlanarData> = model
+            .elements
+            .iter()
+            .zip(data)
+            .map(|(e, d)| {
+                let cfg = Config {
+                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
+                    d: e.ref_triad,
+                };
+                planar_data(d, &cfg, plane)
+            })
+            .collect();
+        let mut pdofs = Vec::with_capacity(pdata.len());
+        let mut pslots = Vec::with_capacity(pdata.len());
+        for (e, pd) in pdata.iter().enumerate() {
+            let full = full_index(&pd.map);
+            let m = &dofs.elements[e];
+            pdofs.push(std::array::from_fn(|i| m[full[i]]));
+            pslots.push(std::array::from_fn(|ij| {
+                slots[e][full[ij / NDOF_P] * NDOF + full[ij % NDOF_P]]
+            }));
+        }
+        Some(Self {
+            enabled: true,
+            data: pdata,
+            dofs: pdofs,
+            slots: pslots,
+            states: Vec::new(),
+            version: None,
+        })
+    }
+}
+
+impl Simulation {
+    /// Whether element assembly runs the planar kernel (a planar model on the CPU kernel).
+    pub fn planar_kernel(&self) -> bool {
+        self.planar.as_ref().is_some_and(|p| p.enabled)
+    }
+
+    /// Switches the planar kernel of a planar model on (the default) or off (the 3D kernel
+    /// with the out-of-plane unknowns removed, the same scheme to round-off). Returns
+    /// whether the model has a planar kernel at all.
+    pub fn set_planar_kernel(&mut self, on: bool) -> bool {
+        match &mut self.planar {
+            Some(p) => {
+                p.enabled = on;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Refreshes the planar view of the element states at `n` (once per step).
+    fn planar_states(&mut self) {
+        let Some(pk) = self.planar.as_mut() else {
+            return;
+        };
+        if pk.version != Some(self.state_version) || pk.states.len() != pk.data.len() {
+            pk.states.clear();
+            for (e, pd) in pk.data.iter().enumerate() {
+                let st = pd.state(&self.state.element(&self.model, e));
+                let eps = planar::strains3(&st.cfg, pd.h);
+                pk.states.push((st, eps));
+            }
+            pk.version = Some(self.state_version);
+        }
+    }
+
+    /// [`Simulation::advance`] with the planar kernel: the new 3D state (positions,
+    /// velocities, triads turned about the normal, director velocities, 3D strains for the
+    /// observers), the predicted dissipation and the consistent scalars. `None` when the
+    /// planar view of the state is not current (the caller uses the 3D kernel).
+    pub(super) fn advance_planar(
+        &self,
+        q: &[f64],
+        mode: Mode,
+    ) -> Option<(State, f64, Vec<FrozenScalars>)> {
+        let pk = self.planar.as_ref().filter(|p| p.enabled)?;
+        if pk.version != Some(self.state_version) || pk.states.len() != pk.data.len() {
+            return None;
+        }
+        let k = self.consts();
+        let dt = k.dt;
+        let mut next = self.state.clone();
+        next.t = self.state.t + dt;
+        let mut diss = 0.0;
+        let mut consistent = Vec::with_capacity(pk.data.len());
+        let mut node_done = vec![false; self.model.n_nodes()];
+        for (e, pd) in pk.data.iter().enumerate() {
+            let inc = PIncrement::from_local(&gather_planar(&pk.dofs[e], q));
+            let (st, eps_n) = &pk.states[e];
+            let (sc, loc, kin_c): (FrozenScalars, LocalScalars, _) =
+                planar::consistent_scalars(pd, st, eps_n, &inc, &k);
+            diss += pd.h * loc.dissipation_density(&kin_c.inputs, pd.a_rho);
+            consistent.push(sc);
+            let (kin, c_nu) = match mode {
+                Mode::Consistent => (kin_c, sc.c_nu),
+                Mode::Frozen => {
+                    let c = self.frozen[e].c_nu;
+                    (planar::kinematics(pd, st, eps_n, &inc, c, dt), c)
+                }
+            };
+            let map = &pd.map;
+            let nodes = self.model.elements[e].nodes;
+            // Triads: each column turned in the plane by cay(θ n); normal parts unchanged.
+            let d_n = self.state.d[e];
+            let d1: [Mat3; 2] = std::array::from_fn(|l| {
+                let cs = planar::cay2(inc.theta[l]);
+                let mut m = d_n[l];
+                for i in 0..3 {
+                    let col = d_n[l].column(i).into_owned();
+                    let c = map.v3(&planar::rotate(cs, &map.v2(&col)), col[map.normal]);
+                    m.set_column(i, &c);
+                }
+                m
+            });
+            let kappa = pd.kappa;
+            let ksum = kappa[0] + kappa[1];
+            for a in 0..2 {
+                let dd = [
+                    d1[0].column(a) - d_n[0].column(a),
+                    d1[1].column(a) - d_n[1].column(a),
+                ];
+                let w = (dd[0] + dd[1]) / dt * (c_nu / (1.0 + ksum * c_nu));
+                for l in 0..2 {
+                    next.vd[e][l][a] =
+                        2.0 * dd[l] / dt - self.state.vd[e][l][a] - 2.0 * kappa[l] * w;
+                }
+            }
+            next.d[e] = d1;
+            for l in 0..2 {
+                let a = nodes[l];
+                if !node_done[a] {
+                    node_done[a] = true;
+                    let r = &self.state.r[a];
+                    next.r[a] = map.v3(&kin.cfg1.r[l], r[map.normal]);
+                    next.v[a] = map.v3(&kin.v1[l], -self.state.v[a][map.normal]);
+                }
+            }
+        }
+        for e in 0..pk.data.len() {
+            next.eps[e] = strains6(&next.config(&self.model, e), self.data[e].props.h);
+        }
+        Some((next, diss, consistent))
+    }
+
+    /// The element loop of [`Simulation::assemble`] with the planar kernel.
+    pub(super) fn assemble_planar(
+        &mut self,
+        q: &[f64],
+        mode: Mode,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        let k = self.consts();
+        let dt = k.dt;
+        self.planar_states();
+        let Some(pk) = self.planar.as_ref() else {
+            return;
+        };
+        let vals = self.solver.values_mut();
+        for (e, pd) in pk.data.iter().enumerate() {
+            let map = &pk.dofs[e];
+            let inc = PIncrement::from_local(&gather_planar(map, q));
+            let (st, eps_n) = &pk.states[e];
+            let (s, kin) = match mode {
+                Mode::Frozen => {
+                    let s = self.frozen[e];
+                    (s, planar::kinematics_core(pd, st, eps_n, &inc, s.c_nu, dt))
+                }
+                Mode::Consistent => {
+                    let (s, _, kin) = planar::consistent_scalars(pd, st, eps_n, &inc, &k);
+                    (s, kin)
+                }
+            };
+            let mut ev = planar::residual_tangent(pd, st, &kin, &s, &k, self.trans_diss, tangent);
+            if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() {
+                let active: [bool; NDOF_P] = std::array::from_fn(|i| map[i] != NONE);
+                planar::monolithic_correction(
+                    pd,
+                    st,
+                    eps_n,
+                    &inc,
+                    &k,
+                    self.trans_diss,
+                    &active,
+                    &mut ev.k,
+                );
+            }
+            let slots = &pk.slots[e];
+            let kmat: &PElemMat = &ev.k;
+            for i in 0..NDOF_P {
+                if map[i] == NONE {
+                    continue;
+                }
+                r[map[i]] += ev.r[i];
+                let kind = pkind(i);
+                scale[kind] = scale[kind].max(ev.scale[i]);
+                if tangent {
+                    for j in 0..NDOF_P {
+                        let s = slots[i * NDOF_P + j];
+                        if s != NONE {
+                            vals[s] += kmat[(i, j)];
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The planar element-local increment vector (zero for removed unknowns).
+#[inline]
+fn gather_planar(map: &[usize; NDOF_P], q: &[f64]) -> planar::PElemVec {
+    planar::PElemVec::from_fn(|i, _| if map[i] == NONE { 0.0 } else { q[map[i]] })
+}
