@@ -460,20 +460,18 @@ pub fn consistent_scalars(
 ) -> (FrozenScalars, LocalScalars, PKinematics) {
     let dt_h = k.dt / pd.h;
     let mut c_nu = 0.0;
-    let mut kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
-    let mut loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
     if k.scheme.director_dissipation() {
-        for _ in 0..200 {
-            let next = loc.c_nu(&kin.inputs);
-            let done = (next - c_nu).abs() <= 1e-15 * (1.0 + c_nu.abs());
-            c_nu = next;
-            kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
-            loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
-            if done {
-                break;
-            }
-        }
+        // The same root solve as the 3D kernel (plain iteration oscillates at reversals).
+        let law = |c: f64| {
+            let kin = kinematics(pd, st, eps_n, inc, c, k.dt);
+            local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h).c_nu(&kin.inputs)
+        };
+        let ksum = pd.kappa[0] + pd.kappa[1];
+        let c_min = if ksum > 0.0 { -1.0 / ksum } else { f64::NEG_INFINITY };
+        c_nu = super::director_factor::solve_fixed_point(law, c_min);
     }
+    let kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
+    let loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
     let frozen = FrozenScalars {
         beta_gamma: loc.beta_gamma,
         beta_omega: loc.beta_omega,
