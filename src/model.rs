@@ -204,12 +204,73 @@ pub struct Model {
     pub links: Vec<Link>,
     /// The plane of a planar model (`None`: full 3D).
     pub planar: Option<Plane>,
+    /// Where the initial state departs from the stress-free reference (initial
+    /// positions and rotations, intrinsic curvature); the default is "none".
+    pub shape: ShapeSetup,
+}
+
+/// How the initial configuration and the stress-free shape depart from the reference
+/// polyline ([`Model::nodes`] with the element triads). Empty vectors mean "as the
+/// reference": every node starts at its reference position with the identity rotation,
+/// and every element is stress-free in its straight reference shape.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ShapeSetup {
+    /// Initial position of every node (empty: the reference positions).
+    pub positions: Vec<Vec3>,
+    /// Initial rotation `Λ^A_0` of every node, carrying the reference triads to the
+    /// initial directors `d = Λ^A_0 Λ_o^{(e)l}` (empty: identity).
+    pub rotations: Vec<Mat3>,
+    /// Intrinsic curvature and twist `[κ1, κ2, τ]` of every element (material components,
+    /// per unit reference length), added to the reference strains `Ω°` (empty: none).
+    pub curvature: Vec<Vec3>,
+}
+
+impl ShapeSetup {
+    /// True when the initial state is the reference and there is no intrinsic curvature.
+    pub fn is_reference(&self) -> bool {
+        self.positions.is_empty() && self.rotations.is_empty() && self.curvature.is_empty()
+    }
 }
 
 impl Model {
     /// Number of nodes.
     pub fn n_nodes(&self) -> usize {
         self.nodes.len()
+    }
+
+    /// Initial position of node `a` (the reference position unless the scene gives an
+    /// initial configuration).
+    pub fn initial_position(&self, a: usize) -> Vec3 {
+        self.shape
+            .positions
+            .get(a)
+            .copied()
+            .unwrap_or(self.nodes[a])
+    }
+
+    /// Initial rotation `Λ^A_0` of node `a` (identity unless the scene gives one).
+    pub fn initial_rotation(&self, a: usize) -> Mat3 {
+        self.shape
+            .rotations
+            .get(a)
+            .copied()
+            .unwrap_or_else(Mat3::identity)
+    }
+
+    /// Initial director triads of element `e`, per end: `Λ^A_0 Λ_o^{(e)l}`.
+    pub fn initial_triads(&self, e: usize) -> [Mat3; 2] {
+        let el = &self.elements[e];
+        std::array::from_fn(|l| self.initial_rotation(el.nodes[l]) * el.ref_triad[l])
+    }
+
+    /// Intrinsic curvature of element `e` added to its reference `Ω°` (zero unless the
+    /// scene gives one).
+    pub fn intrinsic_curvature(&self, e: usize) -> Vec3 {
+        self.shape
+            .curvature
+            .get(e)
+            .copied()
+            .unwrap_or_else(Vec3::zeros)
     }
 
     /// True when nothing holds or pushes the model: no supports, no loads, no gravity.

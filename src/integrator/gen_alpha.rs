@@ -227,10 +227,11 @@ impl GenAlpha {
         }
         let vel: Vec<Node6> = (0..nn)
             .map(|a| {
+                // Material angular velocity W = Λ_0ᵀ ω of the spatial initial spin.
                 let w = if model.supports[a].rotation {
                     Vec3::zeros()
                 } else {
-                    model.omega0[a]
+                    model.initial_rotation(a).transpose() * model.omega0[a]
                 };
                 [state.v[a], w]
             })
@@ -242,7 +243,7 @@ impl GenAlpha {
             solver,
             row_kind,
             groups,
-            lam: vec![Mat3::identity(); nn],
+            lam: (0..nn).map(|a| model.initial_rotation(a)).collect(),
             vel,
             acc: vec![[Vec3::zeros(); 2]; nn],
             pseudo: vec![[Vec3::zeros(); 2]; nn],
@@ -945,6 +946,7 @@ mod tests {
             rods: vec![],
             links: vec![],
             planar: None,
+            shape: Default::default(),
         };
         let colour = colour_nodes(&model);
         let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);

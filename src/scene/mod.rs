@@ -376,6 +376,33 @@ impl Scene {
             let _ = writeln!(s, "gravity: {}", fmt_vec(&m.gravity));
         }
 
+        let sh = &m.shape;
+        if sh.positions.is_empty() {
+            let _ = writeln!(s, "initial configuration: the reference");
+        } else {
+            let (mut dx, mut dphi, mut moved) = (0.0f64, 0.0f64, 0usize);
+            for a in 0..m.n_nodes() {
+                let d = (m.initial_position(a) - m.nodes[a]).norm();
+                let phi = ((m.initial_rotation(a).trace() - 1.0) / 2.0)
+                    .clamp(-1.0, 1.0)
+                    .acos();
+                dx = dx.max(d);
+                dphi = dphi.max(phi);
+                moved += usize::from(d > 0.0 || phi > 0.0);
+            }
+            let _ = writeln!(
+                s,
+                "initial configuration: {moved} of {} nodes away from the reference (largest displacement {}, largest rotation {} rad)",
+                m.n_nodes(),
+                fmt_num(dx),
+                fmt_num(dphi)
+            );
+        }
+        let curved = sh.curvature.iter().filter(|k| **k != Vec3::zeros()).count();
+        if curved > 0 {
+            let _ = writeln!(s, "intrinsic curvature: on {curved} elements");
+        }
+
         let moving: Vec<usize> = (0..m.n_nodes())
             .filter(|&a| m.velocity0[a] != Vec3::zeros() || m.omega0[a] != Vec3::zeros())
             .collect();

@@ -93,6 +93,22 @@ pub(crate) struct RawRod {
     /// An integer or an array of integers; checked by hand for a clearer message.
     pub elements: Option<toml::Value>,
     pub d1: Option<Vec<f64>>,
+    pub curvature: Option<Vec<f64>>,
+    pub initial: Option<RawInitialShape>,
+}
+
+/// `[rod.initial]`: the rod's initial configuration apart from its reference shape.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawInitialShape {
+    pub positions: Option<Vec<Vec<f64>>>,
+    pub rotations: Option<Vec<Vec<f64>>>,
+    pub stretch: Option<f64>,
+    pub origin: Option<Vec<f64>>,
+    pub displacement: Option<Vec<Vec<f64>>>,
+    pub rotation: Option<Vec<f64>>,
+    pub center: Option<Vec<f64>>,
+    pub translation: Option<Vec<f64>>,
 }
 
 /// `[[clamp]]` and `[[pin]]`.
@@ -137,6 +153,10 @@ pub(crate) struct RawLink {
 pub(crate) struct RawInitialVelocity {
     pub at: Option<Vec<f64>>,
     pub all: Option<bool>,
+    pub rod: Option<String>,
+    pub segment: Option<i64>,
+    pub v_nodes: Option<Vec<Vec<f64>>>,
+    pub omega_nodes: Option<Vec<Vec<f64>>>,
     pub center: Option<Vec<f64>>,
     pub v: Option<Vec<f64>>,
     pub omega: Option<Vec<f64>>,

@@ -76,6 +76,7 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         rods: infos,
         links: vec![],
         planar: None,
+        shape: Default::default(),
     }
 }
 

@@ -126,19 +126,14 @@ impl Simulation {
         let data: Vec<ElementData> = model
             .elements
             .iter()
-            .map(|e| {
-                let cfg = Config {
-                    r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
-                    d: e.ref_triad,
-                };
-                ElementData {
-                    props: e.props.clone(),
-                    eps0: strains6(&cfg, e.props.h),
-                    rot_free: [
-                        !model.supports[e.nodes[0]].rotation,
-                        !model.supports[e.nodes[1]].rotation,
-                    ],
-                }
+            .enumerate()
+            .map(|(ie, e)| ElementData {
+                props: e.props.clone(),
+                eps0: reference_strains(&model, ie),
+                rot_free: [
+                    !model.supports[e.nodes[0]].rotation,
+                    !model.supports[e.nodes[1]].rotation,
+                ],
             })
             .collect();
         let trans_diss = params.scheme.translational_dissipation();
@@ -401,6 +396,23 @@ impl Simulation {
             scheme: self.params.scheme,
         }
     }
+}
+
+/// Reference strains `(Γ°, Ω°)` of element `e`: the raw strains of its stress-free
+/// reference configuration (reference positions and triads) plus its intrinsic curvature
+/// ([`Model::intrinsic_curvature`]). The energy and the stresses are measured from them.
+pub fn reference_strains(model: &Model, e: usize) -> nalgebra::Vector6<f64> {
+    let el = &model.elements[e];
+    let cfg = Config {
+        r: [model.nodes[el.nodes[0]], model.nodes[el.nodes[1]]],
+        d: el.ref_triad,
+    };
+    let mut eps0 = strains6(&cfg, el.props.h);
+    let k = model.intrinsic_curvature(e);
+    for c in 0..3 {
+        eps0[3 + c] += k[c];
+    }
+    eps0
 }
 
 /// The components `idx` of `q` as a vector (zero where removed).
