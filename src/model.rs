@@ -107,6 +107,29 @@ pub struct NodalLoad {
     pub table: TimeTable,
 }
 
+/// A distributed force and moment per unit reference length on a set of elements, scaled
+/// by a time table: `f(t)·force`, `f(t)·moment`.
+///
+/// A dead load keeps its spatial direction and enters like gravity, through the
+/// consistent load vector `∫ N_l f dS = f h/2` on each element end. A follower load is
+/// given in the director frame (components along `d1, d2, d3`) and turns with the rod:
+/// on each element end it is `(h/2) Σ_i f_i d_{i,n+½}`, the directors of that end at the
+/// mid-step, so the work it does over a step is exactly the `F·u + M·θ` that enters the
+/// energy balance.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LineLoad {
+    /// Elements it acts on.
+    pub elements: Vec<usize>,
+    /// Force per unit length at factor 1 (spatial; director components when `follower`).
+    pub force: Vec3,
+    /// Moment per unit length at factor 1 (spatial; director components when `follower`).
+    pub moment: Vec3,
+    /// Whether the load follows the directors.
+    pub follower: bool,
+    /// Time factor.
+    pub table: TimeTable,
+}
+
 /// The coordinate plane a planar scene lives in, named by the axis normal to it.
 ///
 /// A planar model keeps only the unknowns the plane can excite: the two in-plane
@@ -207,6 +230,8 @@ pub struct Model {
     /// Where the initial state departs from the stress-free reference (initial
     /// positions and rotations, intrinsic curvature); the default is "none".
     pub shape: ShapeSetup,
+    /// Distributed loads per unit length (`[[line_load]]`).
+    pub line_loads: Vec<LineLoad>,
 }
 
 /// How the initial configuration and the stress-free shape depart from the reference
@@ -279,11 +304,38 @@ impl Model {
         self.supports.iter().all(|s| !s.translation && !s.rotation)
             && self.links.is_empty()
             && self.loads.is_empty()
+            && self.line_loads.is_empty()
             && self.gravity == Vec3::zeros()
     }
 
-    /// External force and moment at node level at time `t` (nodal loads and gravity on the
-    /// consistent mass of the elements and on point masses).
+    /// True when some line load follows the directors (its nodal values depend on the
+    /// configuration: see [`Self::follower_loads`]).
+    pub fn has_follower_loads(&self) -> bool {
+        self.line_loads.iter().any(|l| l.follower)
+    }
+
+    /// Adds the nodal forces and moments of the follower line loads at time `t` for the
+    /// per-element-end director triads `d` (`[e][l]`, the mid-step triads in a step).
+    pub fn follower_loads(&self, t: f64, d: &[[Mat3; 2]], force: &mut [Vec3], moment: &mut [Vec3]) {
+        for ll in self.line_loads.iter().filter(|l| l.follower) {
+            let s = ll.table.eval(t);
+            if s == 0.0 {
+                continue;
+            }
+            for &e in &ll.elements {
+                let el = &self.elements[e];
+                let w = 0.5 * el.props.h * s;
+                for l in 0..2 {
+                    force[el.nodes[l]] += d[e][l] * ll.force * w;
+                    moment[el.nodes[l]] += d[e][l] * ll.moment * w;
+                }
+            }
+        }
+    }
+
+    /// External force and moment at node level at time `t` (nodal loads, dead line loads,
+    /// and gravity on the consistent mass of the elements and on point masses; follower
+    /// line loads are not included, see [`Self::follower_loads`]).
     pub fn external_loads(&self, t: f64, force: &mut [Vec3], moment: &mut [Vec3]) {
         force.iter_mut().for_each(|f| *f = Vec3::zeros());
         moment.iter_mut().for_each(|m| *m = Vec3::zeros());
@@ -303,6 +355,18 @@ impl Model {
             let s = load.table.eval(t);
             force[load.node] += load.force * s;
             moment[load.node] += load.moment * s;
+        }
+        for ll in self.line_loads.iter().filter(|l| !l.follower) {
+            let s = ll.table.eval(t);
+            for &e in &ll.elements {
+                let el = &self.elements[e];
+                // ∫ N_l f dS = f h/2 on each end.
+                let w = 0.5 * el.props.h * s;
+                for &a in &el.nodes {
+                    force[a] += ll.force * w;
+                    moment[a] += ll.moment * w;
+                }
+            }
         }
     }
 }

@@ -947,6 +947,7 @@ mod tests {
             links: vec![],
             planar: None,
             shape: Default::default(),
+            line_loads: vec![],
         };
         let colour = colour_nodes(&model);
         let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);

@@ -8,15 +8,15 @@ use std::fmt::Display;
 use nalgebra::Matrix2;
 
 use super::raw::{
-    RawInitialVelocity, RawIntegrator, RawLink, RawLoad, RawMaterial, RawProbe, RawRod, RawScene,
-    RawSection,
+    RawInitialVelocity, RawIntegrator, RawLineLoad, RawLink, RawLoad, RawMaterial, RawProbe,
+    RawRod, RawScene, RawSection,
 };
 use super::span::{Doc, KeyPath};
 use super::{fmt_num, key_name, Probe, Scene, SceneError};
 use crate::integrator::params::{IntegratorParams, NewtonVariant, Scheme, Strategy};
 use crate::model::{
-    Element, ElementProps, Link, Mat3, Model, NodalLoad, Plane, RodInfo, ShapeSetup, Support,
-    TimeTable, Vec3,
+    Element, ElementProps, LineLoad, Link, Mat3, Model, NodalLoad, Plane, RodInfo, ShapeSetup,
+    Support, TimeTable, Vec3,
 };
 
 type Result<T> = std::result::Result<T, SceneError>;
@@ -476,7 +476,23 @@ fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalL
             "required key missing (give `force`, `moment` or both)",
         ));
     }
-    let table = match (&l.time, &l.factor) {
+    let table = time_table(cx, path, &l.time, &l.factor)?;
+    Ok(NodalLoad {
+        node,
+        force: force.unwrap_or_else(Vec3::zeros),
+        moment: moment.unwrap_or_else(Vec3::zeros),
+        table,
+    })
+}
+
+/// A `time`/`factor` pair of keys under `path`: both or neither (constant factor 1).
+fn time_table(
+    cx: &Ctx,
+    path: &KeyPath,
+    time: &Option<Vec<f64>>,
+    factor: &Option<Vec<f64>>,
+) -> Result<TimeTable> {
+    Ok(match (time, factor) {
         (None, None) => TimeTable::constant_one(),
         (Some(_), None) => {
             return Err(cx.err(
@@ -525,12 +541,70 @@ fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalL
                 values: values.clone(),
             }
         }
+    })
+}
+
+/// The elements a `rod` (and optional `segment`) key pair names.
+fn rod_elements(
+    cx: &Ctx,
+    path: &KeyPath,
+    rod: &Option<String>,
+    segment: Option<i64>,
+    plans: &[RodPlan],
+    rods: &[RodInfo],
+) -> Result<Vec<usize>> {
+    let rp = path.key("rod");
+    let rod = cx.required(&rp, rod.as_ref())?;
+    let Some(ri) = rods.iter().position(|r| &r.name == rod) else {
+        let names: Vec<&str> = rods.iter().map(|r| r.name.as_str()).collect();
+        return Err(cx.err(
+            &rp,
+            format!("no rod named `{rod}` (rods: {})", names.join(", ")),
+        ));
     };
-    Ok(NodalLoad {
-        node,
+    let range = rods[ri].elements.clone();
+    match segment {
+        None => Ok(range.collect()),
+        Some(sg) => {
+            let counts = &plans[ri].counts;
+            if sg < 0 || sg as usize >= counts.len() {
+                return Err(cx.err(
+                    &path.key("segment"),
+                    format!(
+                        "rod `{rod}` has segments 0..{} (got {sg})",
+                        counts.len() - 1
+                    ),
+                ));
+            }
+            let sg = sg as usize;
+            let start = range.start + counts[..sg].iter().sum::<usize>();
+            Ok((start..start + counts[sg]).collect())
+        }
+    }
+}
+
+fn line_load(
+    cx: &Ctx,
+    path: &KeyPath,
+    l: &RawLineLoad,
+    plans: &[RodPlan],
+    rods: &[RodInfo],
+) -> Result<LineLoad> {
+    let elements = rod_elements(cx, path, &l.rod, l.segment, plans, rods)?;
+    let force = cx.opt_vec3(&path.key("force"), &l.force)?;
+    let moment = cx.opt_vec3(&path.key("moment"), &l.moment)?;
+    if force.is_none() && moment.is_none() {
+        return Err(cx.err(
+            &path.key("force"),
+            "required key missing (give `force`, `moment` or both)",
+        ));
+    }
+    Ok(LineLoad {
+        elements,
         force: force.unwrap_or_else(Vec3::zeros),
         moment: moment.unwrap_or_else(Vec3::zeros),
-        table,
+        follower: l.follower.unwrap_or(false),
+        table: time_table(cx, path, &l.time, &l.factor)?,
     })
 }
 
@@ -1444,6 +1518,46 @@ fn check_planar_shape(
     Ok(())
 }
 
+/// A planar scene's line loads push in the plane and turn about its normal (follower
+/// loads: checked in the reference frame of every element they act on).
+fn check_planar_line_loads(
+    cx: &Ctx,
+    p: Plane,
+    elements: &[Element],
+    line_loads: &[LineLoad],
+) -> Result<()> {
+    let k = p.normal;
+    let off = |v: &Vec3| v[k].abs() > MERGE_TOL * v.norm().max(1.0);
+    let tilted = |v: &Vec3| (0..3).any(|c| c != k && v[c].abs() > MERGE_TOL * v.norm().max(1.0));
+    for (i, ll) in line_loads.iter().enumerate() {
+        let path = KeyPath::root().key("line_load").idx(i);
+        for &e in &ll.elements {
+            let q = if ll.follower {
+                elements[e].ref_triad[0]
+            } else {
+                Mat3::identity()
+            };
+            let (f, m) = (q * ll.force, q * ll.moment);
+            let why = |what: &str| format!("scene is planar = \"{}\" but {what}", p.name());
+            if off(&f) {
+                return Err(cx.err(
+                    &path.key("force"),
+                    why(&format!("the force leaves the plane (on element {e})")),
+                ));
+            }
+            if tilted(&m) {
+                return Err(cx.err(
+                    &path.key("moment"),
+                    why(&format!(
+                        "the moment is not about the normal (on element {e})"
+                    )),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A supported node cannot start moving in the directions its support fixes.
 fn check_supported(
     cx: &Ctx,
@@ -1607,6 +1721,21 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         &rods,
     )?;
 
+    let line_loads = raw
+        .line_load
+        .iter()
+        .enumerate()
+        .map(|(i, l)| line_load(&cx, &root.key("line_load").idx(i), l, &plans, &rods))
+        .collect::<Result<Vec<_>>>()?;
+    if let Some(i) = line_loads.iter().position(|l| l.follower) {
+        if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+            return Err(cx.err(
+                &root.key("line_load").idx(i).key("follower"),
+                "gen-alpha does not support follower loads; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
+    }
+
     let links = raw
         .link
         .iter()
@@ -1628,6 +1757,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
                 &cx, p, &nodes, &elements, &loads, &links, &velocity0, &omega0, &gravity,
             )?;
             check_planar_shape(&cx, p, &plans, &elements, &rods, &shape)?;
+            check_planar_line_loads(&cx, p, &elements, &line_loads)?;
             Some(p)
         }
     };
@@ -1658,6 +1788,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         links,
         planar,
         shape,
+        line_loads,
     };
     Ok(Scene {
         name,

@@ -370,6 +370,27 @@ impl Scene {
             )
         });
 
+        if !m.line_loads.is_empty() {
+            let _ = writeln!(s, "line loads: {}", m.line_loads.len());
+            list(&mut s, m.line_loads.iter(), |l| {
+                format!(
+                    "{} on {} elements: force {} and moment {} per length{}",
+                    if l.follower {
+                        "follower (director components)"
+                    } else {
+                        "dead"
+                    },
+                    l.elements.len(),
+                    fmt_vec(&l.force),
+                    fmt_vec(&l.moment),
+                    if l.table == crate::model::TimeTable::constant_one() {
+                        ""
+                    } else {
+                        ", scaled by a time table"
+                    },
+                )
+            });
+        }
         if m.gravity == Vec3::zeros() {
             let _ = writeln!(s, "gravity: none");
         } else {

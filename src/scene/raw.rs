@@ -29,6 +29,8 @@ pub(crate) struct RawScene {
     #[serde(default)]
     pub load: Vec<RawLoad>,
     #[serde(default)]
+    pub line_load: Vec<RawLineLoad>,
+    #[serde(default)]
     pub link: Vec<RawLink>,
     #[serde(default)]
     pub initial_velocity: Vec<RawInitialVelocity>,
@@ -133,6 +135,19 @@ pub(crate) struct RawLoad {
     pub at: Option<Vec<f64>>,
     pub force: Option<Vec<f64>>,
     pub moment: Option<Vec<f64>>,
+    pub time: Option<Vec<f64>>,
+    pub factor: Option<Vec<f64>>,
+}
+
+/// `[[line_load]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawLineLoad {
+    pub rod: Option<String>,
+    pub segment: Option<i64>,
+    pub force: Option<Vec<f64>>,
+    pub moment: Option<Vec<f64>>,
+    pub follower: Option<bool>,
     pub time: Option<Vec<f64>>,
     pub factor: Option<Vec<f64>>,
 }

@@ -77,6 +77,7 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         links: vec![],
         planar: None,
         shape: Default::default(),
+        line_loads: vec![],
     }
 }
 

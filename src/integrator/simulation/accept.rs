@@ -51,7 +51,7 @@ impl Simulation {
             w += self.force[a].dot(&gather3(q, &nd.u));
             w += self.moment[a].dot(&gather3(q, &nd.th));
         }
-        w
+        w + self.follower_work(q)
     }
 
     /// Checks energy and the dissipation identity of a converged increment; on success

@@ -20,6 +20,7 @@
 
 mod accept;
 mod assemble;
+mod follower;
 mod newton;
 mod probe;
 mod step;

@@ -100,6 +100,12 @@ impl Simulation {
                     residuals: vec![],
                 });
             }
+            if self.model.has_follower_loads() {
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support follower loads ([[line_load]] follower = true); use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
             return self.step_gen_alpha();
         }
         self.fell_back = false;
