@@ -94,6 +94,76 @@ impl TimeTable {
     }
 }
 
+/// How a support's motion factor is interpolated between the entries of its table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ramp {
+    /// Piecewise linear.
+    Linear,
+    /// Smoothstep `3τ² − 2τ³` between consecutive entries: the factor's rate is zero at
+    /// every entry (no velocity jump at the start or end of a ramp).
+    Smooth,
+}
+
+/// Prescribed motion of a supported node (a driven clamp or pin): relative to where the
+/// node starts, its position follows `r(t) = r_0 + (s(t) − s(0)) displacement` and its
+/// rotation `Λ(t) = exp((s(t) − s(0)) φ̂) Λ_0`, imposed exactly at every time level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SupportDrive {
+    /// The node (its translation, and its rotation when `rotation` is nonzero, are held
+    /// by a support).
+    pub node: usize,
+    /// Displacement at factor 1.
+    pub displacement: Vec3,
+    /// Rotation vector `φ` (axis × angle) at factor 1.
+    pub rotation: Vec3,
+    /// Motion factor `s(t)`.
+    pub table: TimeTable,
+    /// Interpolation of the table.
+    pub ramp: Ramp,
+}
+
+impl SupportDrive {
+    /// The motion factor at `t`.
+    pub fn factor(&self, t: f64) -> f64 {
+        match self.ramp {
+            Ramp::Linear => self.table.eval(t),
+            Ramp::Smooth => {
+                let tt = &self.table;
+                let n = tt.times.len();
+                if n == 0 || t < tt.times[0] {
+                    return tt.values.first().copied().unwrap_or(0.0);
+                }
+                let k = tt.times.partition_point(|&x| x <= t) - 1;
+                if k + 1 >= n {
+                    return tt.values[n - 1];
+                }
+                let (t0, t1) = (tt.times[k], tt.times[k + 1]);
+                let (f0, f1) = (tt.values[k], tt.values[k + 1]);
+                if t1 <= t0 {
+                    return f1;
+                }
+                let x = (t - t0) / (t1 - t0);
+                f0 + (f1 - f0) * x * x * (3.0 - 2.0 * x)
+            }
+        }
+    }
+
+    /// The node's increment `(u, θ)` from `t0` to `t1`: `u = Δs displacement` and the
+    /// Cayley increment `θ = cay⁻¹(exp(Δs φ̂))` (exact: the axis is fixed).
+    pub fn increment(&self, t0: f64, t1: f64) -> (Vec3, Vec3) {
+        let ds = self.factor(t1) - self.factor(t0);
+        let phi = self.rotation * ds;
+        let angle = phi.norm();
+        // cay(θ) = exp(φ̂) for θ = 2 tan(|φ|/2) φ/|φ|.
+        let theta = if angle > 0.0 {
+            phi * (2.0 * (0.5 * angle).tan() / angle)
+        } else {
+            Vec3::zeros()
+        };
+        (self.displacement * ds, theta)
+    }
+}
+
 /// A nodal force and/or moment scaled by a time table: `F(t) = f(t)·force`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodalLoad {
@@ -232,6 +302,8 @@ pub struct Model {
     pub shape: ShapeSetup,
     /// Distributed loads per unit length (`[[line_load]]`).
     pub line_loads: Vec<LineLoad>,
+    /// Prescribed motion of supported nodes (driven clamps and pins).
+    pub drives: Vec<SupportDrive>,
 }
 
 /// How the initial configuration and the stress-free shape depart from the reference
@@ -306,6 +378,19 @@ impl Model {
             && self.loads.is_empty()
             && self.line_loads.is_empty()
             && self.gravity == Vec3::zeros()
+    }
+
+    /// The first scene feature the GPU batch path does not implement, by name (`None`:
+    /// the model runs there). The GPU kernels evaluate the elements from increments of
+    /// the Newton unknowns only; a prescribed support motion moves nodes that are not
+    /// unknowns.
+    pub fn gpu_unsupported(&self) -> Option<&'static str> {
+        if !self.drives.is_empty() {
+            return Some(
+                "prescribed support motion (a [[clamp]] or [[pin]] with `displacement`/`rotation`)",
+            );
+        }
+        None
     }
 
     /// True when some line load follows the directors (its nodal values depend on the

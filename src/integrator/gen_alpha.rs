@@ -948,6 +948,7 @@ mod tests {
             planar: None,
             shape: Default::default(),
             line_loads: vec![],
+            drives: vec![],
         };
         let colour = colour_nodes(&model);
         let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);

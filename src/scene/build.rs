@@ -9,14 +9,14 @@ use nalgebra::Matrix2;
 
 use super::raw::{
     RawInitialVelocity, RawIntegrator, RawLineLoad, RawLink, RawLoad, RawMaterial, RawProbe,
-    RawRod, RawScene, RawSection,
+    RawRod, RawScene, RawSection, RawSupport,
 };
 use super::span::{Doc, KeyPath};
 use super::{fmt_num, key_name, Probe, Scene, SceneError};
 use crate::integrator::params::{IntegratorParams, NewtonVariant, Scheme, Strategy};
 use crate::model::{
-    Element, ElementProps, LineLoad, Link, Mat3, Model, NodalLoad, Plane, RodInfo, ShapeSetup,
-    Support, TimeTable, Vec3,
+    Element, ElementProps, LineLoad, Link, Mat3, Model, NodalLoad, Plane, Ramp, RodInfo,
+    ShapeSetup, Support, SupportDrive, TimeTable, Vec3,
 };
 
 type Result<T> = std::result::Result<T, SceneError>;
@@ -483,6 +483,63 @@ fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalL
         moment: moment.unwrap_or_else(Vec3::zeros),
         table,
     })
+}
+
+/// The prescribed motion of a `[[clamp]]` / `[[pin]]` entry, if it moves.
+fn support_drive(
+    cx: &Ctx,
+    path: &KeyPath,
+    kind: &str,
+    node: usize,
+    c: &RawSupport,
+) -> Result<Option<SupportDrive>> {
+    let displacement = cx.opt_vec3(&path.key("displacement"), &c.displacement)?;
+    let rotation = cx.opt_vec3(&path.key("rotation"), &c.rotation)?;
+    if kind == "pin" && rotation.is_some() {
+        return Err(cx.err(
+            &path.key("rotation"),
+            "a pin leaves the rotation free: drive a rotation with a [[clamp]]",
+        ));
+    }
+    if displacement.is_none() && rotation.is_none() {
+        for (key, present) in [
+            ("time", c.time.is_some()),
+            ("factor", c.factor.is_some()),
+            ("ramp", c.ramp.is_some()),
+        ] {
+            if present {
+                return Err(cx.err(
+                    &path.key(key),
+                    "only for a moving support (give `displacement` or `rotation`)",
+                ));
+            }
+        }
+        return Ok(None);
+    }
+    if c.time.is_none() && c.factor.is_none() {
+        return Err(cx.err(
+            &path.key("time"),
+            "required key missing: a moving support needs its `time` and `factor` table",
+        ));
+    }
+    let table = time_table(cx, path, &c.time, &c.factor)?;
+    let ramp = match c.ramp.as_deref() {
+        None | Some("linear") => Ramp::Linear,
+        Some("smooth") => Ramp::Smooth,
+        Some(other) => {
+            return Err(cx.err(
+                &path.key("ramp"),
+                format!("unknown ramp `{other}` (expected \"linear\" or \"smooth\")"),
+            ))
+        }
+    };
+    Ok(Some(SupportDrive {
+        node,
+        displacement: displacement.unwrap_or_else(Vec3::zeros),
+        rotation: rotation.unwrap_or_else(Vec3::zeros),
+        table,
+        ramp,
+    }))
 }
 
 /// A `time`/`factor` pair of keys under `path`: both or neither (constant factor 1).
@@ -1558,6 +1615,39 @@ fn check_planar_line_loads(
     Ok(())
 }
 
+/// A planar scene's moving supports move in the plane and turn about its normal.
+fn check_planar_drives(cx: &Ctx, p: Plane, raw: &RawScene, drives: &[SupportDrive]) -> Result<()> {
+    let k = p.normal;
+    let off = |v: &Vec3| v[k].abs() > MERGE_TOL * v.norm().max(1.0);
+    let tilted = |v: &Vec3| (0..3).any(|c| c != k && v[c].abs() > MERGE_TOL * v.norm().max(1.0));
+    let why = |what: &str| format!("scene is planar = \"{}\" but {what}", p.name());
+    // Drives come in scene order: clamps with a motion, then pins with a motion.
+    let moving = |list: &[RawSupport], kind: &'static str| -> Vec<KeyPath> {
+        list.iter()
+            .enumerate()
+            .filter(|(_, c)| c.displacement.is_some() || c.rotation.is_some())
+            .map(|(i, _)| KeyPath::root().key(kind).idx(i))
+            .collect()
+    };
+    let mut paths = moving(&raw.clamp, "clamp");
+    paths.extend(moving(&raw.pin, "pin"));
+    for (d, path) in drives.iter().zip(paths) {
+        if off(&d.displacement) {
+            return Err(cx.err(
+                &path.key("displacement"),
+                why("the support moves out of the plane"),
+            ));
+        }
+        if tilted(&d.rotation) {
+            return Err(cx.err(
+                &path.key("rotation"),
+                why("the support turns about an in-plane axis"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// A supported node cannot start moving in the directions its support fixes.
 fn check_supported(
     cx: &Ctx,
@@ -1680,15 +1770,31 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
     let n = nodes.nodes.len();
 
     let mut supports = vec![Support::default(); n];
-    for (i, c) in raw.clamp.iter().enumerate() {
-        let a = node_at(&cx, &nodes, &root.key("clamp").idx(i).key("at"), &c.at)?;
-        supports[a].translation = true;
-        supports[a].rotation = true;
+    let mut drives: Vec<SupportDrive> = Vec::new();
+    let mut driven_by: HashMap<usize, KeyPath> = HashMap::new();
+    for (kind, list) in [("clamp", &raw.clamp), ("pin", &raw.pin)] {
+        for (i, c) in list.iter().enumerate() {
+            let path = root.key(kind).idx(i);
+            let a = node_at(&cx, &nodes, &path.key("at"), &c.at)?;
+            supports[a].translation = true;
+            supports[a].rotation |= kind == "clamp";
+            if let Some(d) = support_drive(&cx, &path, kind, a, c)? {
+                if let Some(other) = driven_by.get(&a) {
+                    return Err(cx.err(
+                        &path,
+                        format!(
+                            "node {a} is already driven by {}; give one moving support per node",
+                            key_name(other)
+                        ),
+                    ));
+                }
+                driven_by.insert(a, path.clone());
+                drives.push(d);
+            }
+        }
     }
-    for (i, c) in raw.pin.iter().enumerate() {
-        let a = node_at(&cx, &nodes, &root.key("pin").idx(i).key("at"), &c.at)?;
-        supports[a].translation = true;
-    }
+    // A pin driven with a rotation would need a clamp; a clamp and a pin on one node give a
+    // clamp, which holds the rotation the drive leaves at zero.
 
     let mut point_mass = vec![0.0; n];
     for (i, pm) in raw.point_mass.iter().enumerate() {
@@ -1758,6 +1864,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             )?;
             check_planar_shape(&cx, p, &plans, &elements, &rods, &shape)?;
             check_planar_line_loads(&cx, p, &elements, &line_loads)?;
+            check_planar_drives(&cx, p, &raw, &drives)?;
             Some(p)
         }
     };
@@ -1789,6 +1896,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         planar,
         shape,
         line_loads,
+        drives,
     };
     Ok(Scene {
         name,

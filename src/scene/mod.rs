@@ -321,6 +321,25 @@ impl Scene {
             format!("{kind} at node {a} {}", fmt_vec(&m.nodes[*a]))
         });
 
+        if !m.drives.is_empty() {
+            let _ = writeln!(s, "moving supports: {}", m.drives.len());
+            list(&mut s, m.drives.iter(), |d| {
+                format!(
+                    "node {} {}: displacement {}, rotation {} at factor 1, {} ramp over t = {} … {}",
+                    d.node,
+                    fmt_vec(&m.nodes[d.node]),
+                    fmt_vec(&d.displacement),
+                    fmt_vec(&d.rotation),
+                    match d.ramp {
+                        crate::model::Ramp::Linear => "linear",
+                        crate::model::Ramp::Smooth => "smooth",
+                    },
+                    fmt_num(d.table.times[0]),
+                    fmt_num(*d.table.times.last().unwrap_or(&0.0))
+                )
+            });
+        }
+
         let masses: Vec<(usize, f64)> = m
             .point_mass
             .iter()

@@ -118,6 +118,11 @@ pub(crate) struct RawInitialShape {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawSupport {
     pub at: Option<Vec<f64>>,
+    pub displacement: Option<Vec<f64>>,
+    pub rotation: Option<Vec<f64>>,
+    pub time: Option<Vec<f64>>,
+    pub factor: Option<Vec<f64>>,
+    pub ramp: Option<String>,
 }
 
 /// `[[point_mass]]`.

@@ -5,7 +5,7 @@
 //! `A = (I − ½θ̂)⁻¹`) and its work `F·u + M·θ` all come from the same expression, so
 //! the energy balance of a converged step closes with that work.
 
-use super::{gather3, Simulation};
+use super::Simulation;
 use crate::integrator::dofs::NONE;
 use crate::math::{cay, hat, inv_i_minus_half_hat};
 use crate::model::{Mat3, Vec3};
@@ -63,7 +63,7 @@ impl Simulation {
                 for l in 0..2 {
                     let a = el.nodes[l];
                     let nd = self.dofs.nodes[a];
-                    let th = gather3(q, &nd.th);
+                    let (_, th) = self.node_increment(a, q);
                     let x = end_load(&self.state.d[e][l], &th, &ll.force, &ll.moment, w, tangent);
                     for c in 0..3 {
                         if nd.u[c] != NONE {
@@ -96,6 +96,32 @@ impl Simulation {
         }
     }
 
+    /// Nodal forces and moments of the follower line loads at increment `q` (zero without
+    /// follower loads).
+    pub(super) fn follower_node_loads(&self, q: &[f64]) -> (Vec<Vec3>, Vec<Vec3>) {
+        let n = self.model.n_nodes();
+        let (mut f, mut m) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
+        if !self.model.has_follower_loads() {
+            return (f, m);
+        }
+        let t = self.state.t + 0.5 * self.params.dt;
+        for ll in self.model.line_loads.iter().filter(|l| l.follower) {
+            let s = ll.table.eval(t);
+            for &e in &ll.elements {
+                let el = &self.model.elements[e];
+                let w = 0.5 * el.props.h * s;
+                for l in 0..2 {
+                    let a = el.nodes[l];
+                    let (_, th) = self.node_increment(a, q);
+                    let x = end_load(&self.state.d[e][l], &th, &ll.force, &ll.moment, w, false);
+                    f[a] += x.force;
+                    m[a] += x.moment;
+                }
+            }
+        }
+        (f, m)
+    }
+
     /// Work `Σ F·u + M·θ` of the follower line loads over the step at increment `q`.
     pub(super) fn follower_work(&self, q: &[f64]) -> f64 {
         if !self.model.has_follower_loads() {
@@ -109,8 +135,7 @@ impl Simulation {
                 let el = &self.model.elements[e];
                 let w = 0.5 * el.props.h * s;
                 for l in 0..2 {
-                    let nd = &self.dofs.nodes[el.nodes[l]];
-                    let (u, th) = (gather3(q, &nd.u), gather3(q, &nd.th));
+                    let (u, th) = self.node_increment(el.nodes[l], q);
                     let x = end_load(&self.state.d[e][l], &th, &ll.force, &ll.moment, w, false);
                     work += x.force.dot(&u) + x.moment.dot(&th);
                 }
