@@ -28,6 +28,9 @@ pub struct ElementProps {
     pub c_gamma: Vec3,
     /// `C_Ω = [[E I11, E I12, 0], [E I12, E I22, 0], [0, 0, G J]]`.
     pub c_omega: Mat3,
+    /// Kelvin–Voigt retardation time `η` (s): viscous stresses `η C ε̇`, entering a step
+    /// as `½ β C Δε` with `β = 2η/Δt` (0: no material damping).
+    pub damping: f64,
 }
 
 /// One two-node element.
@@ -378,6 +381,11 @@ impl Model {
             && self.loads.is_empty()
             && self.line_loads.is_empty()
             && self.gravity == Vec3::zeros()
+    }
+
+    /// True when some element has Kelvin–Voigt material damping.
+    pub fn has_material_damping(&self) -> bool {
+        self.elements.iter().any(|e| e.props.damping != 0.0)
     }
 
     /// The first scene feature the GPU batch path does not implement, by name (`None`:

@@ -280,6 +280,12 @@ pub fn kinematics(
     }
 }
 
+/// The stress-dissipation factor `β = 2η/Δt` of Kelvin–Voigt material damping with
+/// retardation time `η` ([`ElementProps::damping`]): `½ β C Δε = η C Δε/Δt`.
+pub fn kelvin_voigt_beta(p: &ElementProps, dt: f64) -> f64 {
+    2.0 * p.damping / dt
+}
+
 /// Evaluates the scheme's local law at the state an increment produces and returns the
 /// scalars consistent with it (what the staggered loop converges to and what the
 /// monolithic Newton uses). The director factor `c_ν` enters the director speeds it is
@@ -309,6 +315,11 @@ pub fn consistent_scalars(
             }
         }
     }
+    // Kelvin–Voigt material damping: viscous stresses η C Δε/Δt = ½ (2η/Δt) C Δε add to
+    // the scheme's β (its work ½ β X is part of the dissipation D).
+    let kv = kelvin_voigt_beta(p, k.dt);
+    loc.beta_gamma += kv;
+    loc.beta_omega += kv;
     let frozen = FrozenScalars {
         beta_gamma: loc.beta_gamma,
         beta_omega: loc.beta_omega,

@@ -925,6 +925,7 @@ mod tests {
             i_rho: nalgebra::Matrix2::identity(),
             c_gamma: Vec3::repeat(1.0),
             c_omega: Mat3::identity(),
+            damping: 0.0,
         };
         let model = Model {
             nodes: vec![Vec3::zeros(); n],

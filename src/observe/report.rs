@@ -126,7 +126,7 @@ pub fn model_report(
         }
     }
 
-    let dissipation = match params.scheme {
+    let mut dissipation: Vec<String> = match params.scheme {
         Scheme::Em => vec![],
         Scheme::Midpoint => vec!["none (baseline: energy is not controlled)".into()],
         Scheme::GenAlpha { rho_inf } => vec![format!(
@@ -165,6 +165,17 @@ pub fn model_report(
         })
         .collect(),
     };
+    let eta = model
+        .elements
+        .iter()
+        .fold(0.0f64, |m, e| m.max(e.props.damping));
+    if eta > 0.0 {
+        let w = omega_max.0;
+        dissipation.push(format!(
+            "Kelvin–Voigt material damping, η up to {eta:e} s: modal ratio ζ = η ω/2 (ζ = {:.3e} at the highest frequency)",
+            0.5 * eta * w
+        ));
+    }
 
     let steps = params.n_steps();
     let (n, ne, nl) = (

@@ -119,6 +119,7 @@ struct Material {
     e: f64,
     g: f64,
     density: f64,
+    damping: f64,
 }
 
 /// A validated section.
@@ -156,7 +157,13 @@ fn material(cx: &Ctx, path: &KeyPath, m: &RawMaterial) -> Result<Material> {
         }
         (None, Some(g)) => cx.positive(&path.key("G"), g)?,
     };
-    Ok(Material { e, g, density })
+    let damping = cx.opt_non_negative(&path.key("damping"), m.damping)?;
+    Ok(Material {
+        e,
+        g,
+        density,
+        damping,
+    })
 }
 
 fn section(cx: &Ctx, path: &KeyPath, s: &RawSection) -> Result<Section> {
@@ -906,6 +913,7 @@ fn element_props(mat: &Material, sec: &Section, h: f64) -> ElementProps {
             0.0,
             g * sec.j,
         ),
+        damping: mat.damping,
     }
 }
 
@@ -1833,6 +1841,14 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         .enumerate()
         .map(|(i, l)| line_load(&cx, &root.key("line_load").idx(i), l, &plans, &rods))
         .collect::<Result<Vec<_>>>()?;
+    if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        if let Some((name, _)) = materials.iter().find(|(_, m)| m.damping != 0.0) {
+            return Err(cx.err(
+                &root.key("material").key(name).key("damping"),
+                "gen-alpha does not support material damping; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
+    }
     if let Some(i) = line_loads.iter().position(|l| l.follower) {
         if matches!(params.scheme, Scheme::GenAlpha { .. }) {
             return Err(cx.err(

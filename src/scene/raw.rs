@@ -60,6 +60,7 @@ pub(crate) struct RawMaterial {
     #[serde(rename = "G")]
     pub g: Option<f64>,
     pub density: Option<f64>,
+    pub damping: Option<f64>,
 }
 
 /// `[section.NAME]`.

@@ -90,7 +90,8 @@ impl Simulation {
                 growth / href
             ));
         }
-        if self.params.scheme.is_dissipative() {
+        let damped = self.params.scheme.controls_energy() && self.model.has_material_damping();
+        if self.params.scheme.is_dissipative() || damped {
             let miss = (h0 - h1 + w - diss).abs();
             if miss > self.params.outer_tol * href + residual_work {
                 return Err(format!(

@@ -102,6 +102,12 @@ impl Simulation {
                     residuals: vec![],
                 });
             }
+            if self.model.has_material_damping() {
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support material damping ([material] damping); use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
             if self.model.has_follower_loads() {
                 return Err(StepFailure {
                     reason: "gen-alpha does not support follower loads ([[line_load]] follower = true); use em, edmc1, edmc2 or midpoint".into(),
