@@ -31,6 +31,9 @@ pub struct ElementProps {
     /// Kelvin–Voigt retardation time `η` (s): viscous stresses `η C ε̇`, entering a step
     /// as `½ β C Δε` with `β = 2η/Δt` (0: no material damping).
     pub damping: f64,
+    /// Drag per unit length `c` (N·s/m²): a force `−c (r_{n+1} − r_n)/Δt` on the
+    /// centerline, through the consistent mass pattern (0: none).
+    pub drag: f64,
 }
 
 /// One two-node element.
@@ -381,11 +384,17 @@ impl Model {
             && self.loads.is_empty()
             && self.line_loads.is_empty()
             && self.gravity == Vec3::zeros()
+            && !self.has_drag()
     }
 
     /// True when some element has Kelvin–Voigt material damping.
     pub fn has_material_damping(&self) -> bool {
         self.elements.iter().any(|e| e.props.damping != 0.0)
+    }
+
+    /// True when some element has drag.
+    pub fn has_drag(&self) -> bool {
+        self.elements.iter().any(|e| e.props.drag != 0.0)
     }
 
     /// The first scene feature the GPU batch path does not implement, by name (`None`:

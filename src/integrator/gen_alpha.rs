@@ -926,6 +926,7 @@ mod tests {
             c_gamma: Vec3::repeat(1.0),
             c_omega: Mat3::identity(),
             damping: 0.0,
+            drag: 0.0,
         };
         let model = Model {
             nodes: vec![Vec3::zeros(); n],

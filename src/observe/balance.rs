@@ -13,6 +13,7 @@
 //! drift). Follower line loads act with the mid-step directors `½(d_n + d_{n+1})`, the
 //! same ones the step used.
 
+use crate::element::M2;
 use crate::integrator::state::State;
 use crate::math::scaled_norm;
 use crate::model::{Mat3, Model, Vec3};
@@ -107,6 +108,18 @@ impl BalanceObserver {
                 .collect();
             model.follower_loads(t_mid, &d_mid, &mut self.force, &mut self.moment);
             self.d_prev.clone_from(&state.d);
+        }
+        // Drag: −(c h/Δt) M2 (r_{n+1} − r_n) on the element ends, an external force.
+        for el in model.elements.iter().filter(|e| e.props.drag != 0.0) {
+            let k = el.props.drag * el.props.h / self.dt;
+            let du = [
+                state.r[el.nodes[0]] - self.r_prev[el.nodes[0]],
+                state.r[el.nodes[1]] - self.r_prev[el.nodes[1]],
+            ];
+            for l in 0..2 {
+                let f = -(du[0] * M2[l][0] + du[1] * M2[l][1]) * k;
+                self.force[el.nodes[l]] += f;
+            }
         }
         for (a, (f, m)) in self.force.iter().zip(&self.moment).enumerate() {
             let r_mid = 0.5 * (self.r_prev[a] + state.r[a]);

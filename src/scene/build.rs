@@ -257,6 +257,7 @@ struct RodPlan {
     counts: Vec<usize>,
     d1: Option<Vec3>,
     curvature: Vec3,
+    drag: f64,
     props_key: (String, String),
     path: KeyPath,
 }
@@ -361,12 +362,14 @@ fn plan_rod(
     let curvature = cx
         .opt_vec3(&path.key("curvature"), &r.curvature)?
         .unwrap_or_else(Vec3::zeros);
+    let drag = cx.opt_non_negative(&path.key("drag"), r.drag)?;
     Ok(RodPlan {
         name,
         points,
         counts,
         d1,
         curvature,
+        drag,
         props_key: (mat, sec),
         path: path.clone(),
     })
@@ -895,7 +898,7 @@ fn rod_triads(cx: &Ctx, plan: &RodPlan, tol: f64) -> Result<Vec<Mat3>> {
 }
 
 /// The continuum constants of an element of length `h`.
-fn element_props(mat: &Material, sec: &Section, h: f64) -> ElementProps {
+fn element_props(mat: &Material, sec: &Section, h: f64, drag: f64) -> ElementProps {
     let (e, g) = (mat.e, mat.g);
     ElementProps {
         h,
@@ -914,6 +917,7 @@ fn element_props(mat: &Material, sec: &Section, h: f64) -> ElementProps {
             g * sec.j,
         ),
         damping: mat.damping,
+        drag,
     }
 }
 
@@ -935,7 +939,7 @@ fn mesh(
         for (s, w) in plan.points.windows(2).enumerate() {
             let n = plan.counts[s];
             let h = (w[1] - w[0]).norm() / n as f64;
-            let props = element_props(mat, sec, h);
+            let props = element_props(mat, sec, h, plan.drag);
             let triad = triads[ri][s];
             let point = |j: usize| {
                 if j == n {
@@ -1842,6 +1846,12 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         .map(|(i, l)| line_load(&cx, &root.key("line_load").idx(i), l, &plans, &rods))
         .collect::<Result<Vec<_>>>()?;
     if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        if let Some(i) = plans.iter().position(|p| p.drag != 0.0) {
+            return Err(cx.err(
+                &root.key("rod").idx(i).key("drag"),
+                "gen-alpha does not support drag; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
         if let Some((name, _)) = materials.iter().find(|(_, m)| m.damping != 0.0) {
             return Err(cx.err(
                 &root.key("material").key(name).key("damping"),

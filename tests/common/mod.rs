@@ -14,6 +14,7 @@ pub fn props(e: f64, nu: f64, rho: f64, a: f64, i: f64, j: f64, h: f64) -> Eleme
         c_gamma: Vec3::new(g * a, g * a, e * a),
         c_omega: Matrix3::new(e * i, 0.0, 0.0, 0.0, e * i, 0.0, 0.0, 0.0, g * j),
         damping: 0.0,
+        drag: 0.0,
     }
 }
 

@@ -42,6 +42,7 @@ impl Simulation {
                 }
             }
         }
+        diss += self.drag_dissipation(q);
         (next, diss, consistent)
     }
 
@@ -90,7 +91,8 @@ impl Simulation {
                 growth / href
             ));
         }
-        let damped = self.params.scheme.controls_energy() && self.model.has_material_damping();
+        let damped = self.params.scheme.controls_energy()
+            && (self.model.has_material_damping() || self.model.has_drag());
         if self.params.scheme.is_dissipative() || damped {
             let miss = (h0 - h1 + w - diss).abs();
             if miss > self.params.outer_tol * href + residual_work {

@@ -20,6 +20,7 @@
 
 mod accept;
 mod assemble;
+mod drag;
 mod drive;
 mod follower;
 mod newton;

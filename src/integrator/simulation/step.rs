@@ -102,9 +102,9 @@ impl Simulation {
                     residuals: vec![],
                 });
             }
-            if self.model.has_material_damping() {
+            if self.model.has_material_damping() || self.model.has_drag() {
                 return Err(StepFailure {
-                    reason: "gen-alpha does not support material damping ([material] damping); use em, edmc1, edmc2 or midpoint".into(),
+                    reason: "gen-alpha does not support material damping or drag; use em, edmc1, edmc2 or midpoint".into(),
                     residuals: vec![],
                 });
             }
