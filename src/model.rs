@@ -310,6 +310,21 @@ pub struct Model {
     pub line_loads: Vec<LineLoad>,
     /// Prescribed motion of supported nodes (driven clamps and pins).
     pub drives: Vec<SupportDrive>,
+    /// Sliding clamps: clamped nodes that are free to translate along a coordinate axis
+    /// (and optionally to turn about it).
+    pub slides: Vec<Slide>,
+}
+
+/// A sliding clamp: the node's rotation and its translation across `axis` are held; the
+/// translation along `axis` (and, with `spin`, the rotation about it) stays an unknown.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Slide {
+    /// The node (marked clamped in [`Model::supports`]).
+    pub node: usize,
+    /// The coordinate axis (0, 1, 2) it slides along.
+    pub axis: usize,
+    /// Whether the rotation about `axis` is free.
+    pub spin: bool,
 }
 
 /// How the initial configuration and the stress-free shape depart from the reference

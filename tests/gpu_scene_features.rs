@@ -1,7 +1,8 @@
 //! The GPU batch path runs the scene features that enter the element kernel through data
 //! it already receives — an initial configuration apart from the reference, intrinsic
 //! curvature (the reference strains), Kelvin–Voigt damping (the frozen scalars), line
-//! loads (nodal terms on the CPU) — with CPU parity; a feature it does not cover (moving
+//! loads and drag (nodal terms on the CPU), sliding clamps (the unknown numbering) — with
+//! CPU parity; a feature it does not cover (moving
 //! supports) refuses the whole batch by name.
 //!
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
@@ -40,6 +41,7 @@ points = [[0, 0, 0], [1, 0, 0]]
 elements = 8
 d1 = [0, 0, 1]
 curvature = [0.3, 0.1, 0.2]
+drag = 0.3
 
 [rod.initial]
 stretch = 1.001
@@ -102,13 +104,16 @@ fn run(ms: &[Member], exec: &Executor) -> Result<Vec<MemberResult>, String> {
 #[test]
 fn gpu_runs_reference_shapes_damping_and_line_loads_like_the_cpu() {
     let Some(exec) = gpu() else { return };
-    let ms = members("");
+    let mut ms = members("");
+    // The same with the free end guided by a clamp sliding along e3 (a different set of
+    // unknowns: the GPU's row masks come from the same numbering).
+    ms.extend(members("[[clamp]]\nat = [1, 0, 0]\nslide = [0, 0, 1]"));
     let cpu = run(&ms, &Executor::Cpu).unwrap();
     let gpu = run(&ms, &exec).unwrap();
     let mut worst = 0.0f64;
     for (c, g) in cpu.iter().zip(&gpu) {
         assert_eq!(c.outcome.status, g.outcome.status, "{:?}", g.outcome.reason);
-        assert_eq!(c.outcome.steps, 10);
+        assert_eq!(c.outcome.steps, 10, "{:?}", c.outcome.reason);
         assert_eq!(c.outcome.steps, g.outcome.steps);
         let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
         let scale = sc.r.iter().fold(0.0f64, |m, x| m.max(x.amax()));

@@ -951,6 +951,7 @@ mod tests {
             shape: Default::default(),
             line_loads: vec![],
             drives: vec![],
+            slides: vec![],
         };
         let colour = colour_nodes(&model);
         let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);

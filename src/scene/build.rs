@@ -16,7 +16,7 @@ use super::{fmt_num, key_name, Probe, Scene, SceneError};
 use crate::integrator::params::{IntegratorParams, NewtonVariant, Scheme, Strategy};
 use crate::model::{
     Element, ElementProps, LineLoad, Link, Mat3, Model, NodalLoad, Plane, Ramp, RodInfo,
-    ShapeSetup, Support, SupportDrive, TimeTable, Vec3,
+    ShapeSetup, Slide, Support, SupportDrive, TimeTable, Vec3,
 };
 
 type Result<T> = std::result::Result<T, SceneError>;
@@ -493,6 +493,59 @@ fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalL
         moment: moment.unwrap_or_else(Vec3::zeros),
         table,
     })
+}
+
+/// The sliding axis of a `[[clamp]]` entry (`slide`, `spin`), if it slides.
+fn slide(
+    cx: &Ctx,
+    path: &KeyPath,
+    kind: &str,
+    node: usize,
+    c: &RawSupport,
+    params: &IntegratorParams,
+) -> Result<Option<Slide>> {
+    let Some(v) = &c.slide else {
+        if c.spin.is_some() {
+            return Err(cx.err(&path.key("spin"), "only with `slide`"));
+        }
+        return Ok(None);
+    };
+    let sp = path.key("slide");
+    if kind == "pin" {
+        return Err(cx.err(
+            &sp,
+            "a sliding support is a [[clamp]] (it holds the rotation); a pin that slides needs no support across the axis either",
+        ));
+    }
+    let v = cx.vec3(&sp, v)?;
+    let n = v.norm();
+    let axis = (0..3).find(|&k| n > 0.0 && (v[k].abs() - n).abs() <= 1e-12 * n);
+    let Some(axis) = axis else {
+        return Err(cx.err(
+            &sp,
+            format!(
+                "{} is not along a coordinate axis: sliding clamps slide along e1, e2 or e3",
+                fmt_v(&v)
+            ),
+        ));
+    };
+    if c.displacement.is_some() || c.rotation.is_some() {
+        return Err(cx.err(&sp, "a sliding clamp cannot also be driven"));
+    }
+    let spin = c.spin.unwrap_or(false);
+    if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        return Err(cx.err(
+            &sp,
+            "gen-alpha does not support sliding clamps; use em, edmc1, edmc2 or midpoint",
+        ));
+    }
+    if spin && params.scheme.director_dissipation() {
+        return Err(cx.err(
+            &path.key("spin"),
+            "a spinning sliding clamp is not supported with director dissipation (chi_nu, alpha_gn, alpha_on)",
+        ));
+    }
+    Ok(Some(Slide { node, axis, spin }))
 }
 
 /// The prescribed motion of a `[[clamp]]` / `[[pin]]` entry, if it moves.
@@ -1783,6 +1836,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
 
     let mut supports = vec![Support::default(); n];
     let mut drives: Vec<SupportDrive> = Vec::new();
+    let mut slides: Vec<Slide> = Vec::new();
     let mut driven_by: HashMap<usize, KeyPath> = HashMap::new();
     for (kind, list) in [("clamp", &raw.clamp), ("pin", &raw.pin)] {
         for (i, c) in list.iter().enumerate() {
@@ -1790,6 +1844,9 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             let a = node_at(&cx, &nodes, &path.key("at"), &c.at)?;
             supports[a].translation = true;
             supports[a].rotation |= kind == "clamp";
+            if let Some(sl) = slide(&cx, &path, kind, a, c, &params)? {
+                slides.push(sl);
+            }
             if let Some(d) = support_drive(&cx, &path, kind, a, c)? {
                 if let Some(other) = driven_by.get(&a) {
                     return Err(cx.err(
@@ -1923,6 +1980,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         shape,
         line_loads,
         drives,
+        slides,
     };
     Ok(Scene {
         name,

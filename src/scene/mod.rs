@@ -318,7 +318,18 @@ impl Scene {
         let n_pin = supports.iter().filter(|x| x.1 == "pin").count();
         let _ = writeln!(s, "supports: {n_clamp} clamps, {n_pin} pins");
         list(&mut s, supports.iter(), |(a, kind)| {
-            format!("{kind} at node {a} {}", fmt_vec(&m.nodes[*a]))
+            let slide = m
+                .slides
+                .iter()
+                .find(|sl| sl.node == *a)
+                .map_or_else(String::new, |sl| {
+                    format!(
+                        ", sliding along e{}{}",
+                        sl.axis + 1,
+                        if sl.spin { " and turning about it" } else { "" }
+                    )
+                });
+            format!("{kind} at node {a} {}{slide}", fmt_vec(&m.nodes[*a]))
         });
 
         if !m.drives.is_empty() {

@@ -125,6 +125,8 @@ pub(crate) struct RawSupport {
     pub time: Option<Vec<f64>>,
     pub factor: Option<Vec<f64>>,
     pub ramp: Option<String>,
+    pub slide: Option<Vec<f64>>,
+    pub spin: Option<bool>,
 }
 
 /// `[[point_mass]]`.

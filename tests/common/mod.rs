@@ -81,6 +81,7 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         shape: Default::default(),
         line_loads: vec![],
         drives: vec![],
+        slides: vec![],
     }
 }
 
