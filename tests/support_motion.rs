@@ -238,6 +238,20 @@ fn bad_support_motions_are_named() {
             "clamp[0].slide: a sliding clamp cannot also be driven",
         ),
     ];
+    let ga = parse_scene(
+        &scene(
+            4,
+            "[[clamp]]\nat = [0, 0, 0]\nrotation = [1, 0, 0]\ntime = [0, 1]\nfactor = [0, 1]",
+            "scheme = \"gen-alpha\"\ndt = 0.01\nt_end = 1",
+        ),
+        "bad.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        ga.contains("clamp[0]: gen-alpha does not support moving supports"),
+        "{ga}"
+    );
     for (extra, want) in cases.into_iter().chain(slides) {
         let err = parse_scene(&scene(4, extra, em), "bad.toml")
             .expect_err(extra)

@@ -1903,6 +1903,12 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         .map(|(i, l)| line_load(&cx, &root.key("line_load").idx(i), l, &plans, &rods))
         .collect::<Result<Vec<_>>>()?;
     if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        if let Some((_, path)) = driven_by.iter().min_by_key(|(a, _)| **a) {
+            return Err(cx.err(
+                path,
+                "gen-alpha does not support moving supports; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
         if let Some(i) = plans.iter().position(|p| p.drag != 0.0) {
             return Err(cx.err(
                 &root.key("rod").idx(i).key("drag"),

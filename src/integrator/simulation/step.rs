@@ -102,6 +102,12 @@ impl Simulation {
                     residuals: vec![],
                 });
             }
+            if !self.model.drives.is_empty() {
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support moving supports; use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
             if self.model.has_material_damping() || self.model.has_drag() {
                 return Err(StepFailure {
                     reason: "gen-alpha does not support material damping or drag; use em, edmc1, edmc2 or midpoint".into(),
