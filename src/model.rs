@@ -28,6 +28,12 @@ pub struct ElementProps {
     pub c_gamma: Vec3,
     /// `C_Ω = [[E I11, E I12, 0], [E I12, E I22, 0], [0, 0, G J]]`.
     pub c_omega: Mat3,
+    /// Kelvin–Voigt retardation time `η` (s): viscous stresses `η C ε̇`, entering a step
+    /// as `½ β C Δε` with `β = 2η/Δt` (0: no material damping).
+    pub damping: f64,
+    /// Drag per unit length `c` (N·s/m²): a force `−c (r_{n+1} − r_n)/Δt` on the
+    /// centerline, through the consistent mass pattern (0: none).
+    pub drag: f64,
 }
 
 /// One two-node element.
@@ -94,6 +100,76 @@ impl TimeTable {
     }
 }
 
+/// How a support's motion factor is interpolated between the entries of its table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ramp {
+    /// Piecewise linear.
+    Linear,
+    /// Smoothstep `3τ² − 2τ³` between consecutive entries: the factor's rate is zero at
+    /// every entry (no velocity jump at the start or end of a ramp).
+    Smooth,
+}
+
+/// Prescribed motion of a supported node (a driven clamp or pin): relative to where the
+/// node starts, its position follows `r(t) = r_0 + (s(t) − s(0)) displacement` and its
+/// rotation `Λ(t) = exp((s(t) − s(0)) φ̂) Λ_0`, imposed exactly at every time level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SupportDrive {
+    /// The node (its translation, and its rotation when `rotation` is nonzero, are held
+    /// by a support).
+    pub node: usize,
+    /// Displacement at factor 1.
+    pub displacement: Vec3,
+    /// Rotation vector `φ` (axis × angle) at factor 1.
+    pub rotation: Vec3,
+    /// Motion factor `s(t)`.
+    pub table: TimeTable,
+    /// Interpolation of the table.
+    pub ramp: Ramp,
+}
+
+impl SupportDrive {
+    /// The motion factor at `t`.
+    pub fn factor(&self, t: f64) -> f64 {
+        match self.ramp {
+            Ramp::Linear => self.table.eval(t),
+            Ramp::Smooth => {
+                let tt = &self.table;
+                let n = tt.times.len();
+                if n == 0 || t < tt.times[0] {
+                    return tt.values.first().copied().unwrap_or(0.0);
+                }
+                let k = tt.times.partition_point(|&x| x <= t) - 1;
+                if k + 1 >= n {
+                    return tt.values[n - 1];
+                }
+                let (t0, t1) = (tt.times[k], tt.times[k + 1]);
+                let (f0, f1) = (tt.values[k], tt.values[k + 1]);
+                if t1 <= t0 {
+                    return f1;
+                }
+                let x = (t - t0) / (t1 - t0);
+                f0 + (f1 - f0) * x * x * (3.0 - 2.0 * x)
+            }
+        }
+    }
+
+    /// The node's increment `(u, θ)` from `t0` to `t1`: `u = Δs displacement` and the
+    /// Cayley increment `θ = cay⁻¹(exp(Δs φ̂))` (exact: the axis is fixed).
+    pub fn increment(&self, t0: f64, t1: f64) -> (Vec3, Vec3) {
+        let ds = self.factor(t1) - self.factor(t0);
+        let phi = self.rotation * ds;
+        let angle = phi.norm();
+        // cay(θ) = exp(φ̂) for θ = 2 tan(|φ|/2) φ/|φ|.
+        let theta = if angle > 0.0 {
+            phi * (2.0 * (0.5 * angle).tan() / angle)
+        } else {
+            Vec3::zeros()
+        };
+        (self.displacement * ds, theta)
+    }
+}
+
 /// A nodal force and/or moment scaled by a time table: `F(t) = f(t)·force`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodalLoad {
@@ -103,6 +179,29 @@ pub struct NodalLoad {
     pub force: Vec3,
     /// Moment vector at factor 1.
     pub moment: Vec3,
+    /// Time factor.
+    pub table: TimeTable,
+}
+
+/// A distributed force and moment per unit reference length on a set of elements, scaled
+/// by a time table: `f(t)·force`, `f(t)·moment`.
+///
+/// A dead load keeps its spatial direction and enters like gravity, through the
+/// consistent load vector `∫ N_l f dS = f h/2` on each element end. A follower load is
+/// given in the director frame (components along `d1, d2, d3`) and turns with the rod:
+/// on each element end it is `(h/2) Σ_i f_i d_{i,n+½}`, the directors of that end at the
+/// mid-step, so the work it does over a step is exactly the `F·u + M·θ` that enters the
+/// energy balance.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LineLoad {
+    /// Elements it acts on.
+    pub elements: Vec<usize>,
+    /// Force per unit length at factor 1 (spatial; director components when `follower`).
+    pub force: Vec3,
+    /// Moment per unit length at factor 1 (spatial; director components when `follower`).
+    pub moment: Vec3,
+    /// Whether the load follows the directors.
+    pub follower: bool,
     /// Time factor.
     pub table: TimeTable,
 }
@@ -204,6 +303,51 @@ pub struct Model {
     pub links: Vec<Link>,
     /// The plane of a planar model (`None`: full 3D).
     pub planar: Option<Plane>,
+    /// Where the initial state departs from the stress-free reference (initial
+    /// positions and rotations, intrinsic curvature); the default is "none".
+    pub shape: ShapeSetup,
+    /// Distributed loads per unit length (`[[line_load]]`).
+    pub line_loads: Vec<LineLoad>,
+    /// Prescribed motion of supported nodes (driven clamps and pins).
+    pub drives: Vec<SupportDrive>,
+    /// Sliding clamps: clamped nodes that are free to translate along a coordinate axis
+    /// (and optionally to turn about it).
+    pub slides: Vec<Slide>,
+}
+
+/// A sliding clamp: the node's rotation and its translation across `axis` are held; the
+/// translation along `axis` (and, with `spin`, the rotation about it) stays an unknown.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Slide {
+    /// The node (marked clamped in [`Model::supports`]).
+    pub node: usize,
+    /// The coordinate axis (0, 1, 2) it slides along.
+    pub axis: usize,
+    /// Whether the rotation about `axis` is free.
+    pub spin: bool,
+}
+
+/// How the initial configuration and the stress-free shape depart from the reference
+/// polyline ([`Model::nodes`] with the element triads). Empty vectors mean "as the
+/// reference": every node starts at its reference position with the identity rotation,
+/// and every element is stress-free in its straight reference shape.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ShapeSetup {
+    /// Initial position of every node (empty: the reference positions).
+    pub positions: Vec<Vec3>,
+    /// Initial rotation `Λ^A_0` of every node, carrying the reference triads to the
+    /// initial directors `d = Λ^A_0 Λ_o^{(e)l}` (empty: identity).
+    pub rotations: Vec<Mat3>,
+    /// Intrinsic curvature and twist `[κ1, κ2, τ]` of every element (material components,
+    /// per unit reference length), added to the reference strains `Ω°` (empty: none).
+    pub curvature: Vec<Vec3>,
+}
+
+impl ShapeSetup {
+    /// True when the initial state is the reference and there is no intrinsic curvature.
+    pub fn is_reference(&self) -> bool {
+        self.positions.is_empty() && self.rotations.is_empty() && self.curvature.is_empty()
+    }
 }
 
 impl Model {
@@ -212,17 +356,125 @@ impl Model {
         self.nodes.len()
     }
 
+    /// Initial position of node `a` (the reference position unless the scene gives an
+    /// initial configuration).
+    pub fn initial_position(&self, a: usize) -> Vec3 {
+        self.shape
+            .positions
+            .get(a)
+            .copied()
+            .unwrap_or(self.nodes[a])
+    }
+
+    /// Initial rotation `Λ^A_0` of node `a` (identity unless the scene gives one).
+    pub fn initial_rotation(&self, a: usize) -> Mat3 {
+        self.shape
+            .rotations
+            .get(a)
+            .copied()
+            .unwrap_or_else(Mat3::identity)
+    }
+
+    /// Initial director triads of element `e`, per end: `Λ^A_0 Λ_o^{(e)l}`.
+    pub fn initial_triads(&self, e: usize) -> [Mat3; 2] {
+        let el = &self.elements[e];
+        std::array::from_fn(|l| self.initial_rotation(el.nodes[l]) * el.ref_triad[l])
+    }
+
+    /// Intrinsic curvature of element `e` added to its reference `Ω°` (zero unless the
+    /// scene gives one).
+    pub fn intrinsic_curvature(&self, e: usize) -> Vec3 {
+        self.shape
+            .curvature
+            .get(e)
+            .copied()
+            .unwrap_or_else(Vec3::zeros)
+    }
+
+    /// The first feature of this model the planar element kernel does not cover (a planar
+    /// model with it runs the 3D kernel with the out-of-plane unknowns removed), or `None`.
+    pub fn planar_kernel_unsupported(&self) -> Option<&'static str> {
+        if (0..self.elements.len()).any(|e| self.intrinsic_curvature(e) != Vec3::zeros()) {
+            return Some("intrinsic curvature");
+        }
+        if self
+            .elements
+            .iter()
+            .any(|e| e.props.damping != 0.0 || e.props.drag != 0.0)
+        {
+            return Some("material damping or drag");
+        }
+        if !self.line_loads.is_empty() {
+            return Some("line loads");
+        }
+        if !self.drives.is_empty() || !self.slides.is_empty() {
+            return Some("moving or sliding supports");
+        }
+        None
+    }
+
     /// True when nothing holds or pushes the model: no supports, no loads, no gravity.
     /// Momenta are then conserved by every scheme.
     pub fn is_free_flight(&self) -> bool {
         self.supports.iter().all(|s| !s.translation && !s.rotation)
             && self.links.is_empty()
             && self.loads.is_empty()
+            && self.line_loads.is_empty()
             && self.gravity == Vec3::zeros()
+            && !self.has_drag()
     }
 
-    /// External force and moment at node level at time `t` (nodal loads and gravity on the
-    /// consistent mass of the elements and on point masses).
+    /// True when some element has Kelvin–Voigt material damping.
+    pub fn has_material_damping(&self) -> bool {
+        self.elements.iter().any(|e| e.props.damping != 0.0)
+    }
+
+    /// True when some element has drag.
+    pub fn has_drag(&self) -> bool {
+        self.elements.iter().any(|e| e.props.drag != 0.0)
+    }
+
+    /// The first scene feature the GPU batch path does not implement, by name (`None`:
+    /// the model runs there). The GPU kernels evaluate the elements from increments of
+    /// the Newton unknowns only; a prescribed support motion moves nodes that are not
+    /// unknowns.
+    pub fn gpu_unsupported(&self) -> Option<&'static str> {
+        if !self.drives.is_empty() {
+            return Some(
+                "prescribed support motion (a [[clamp]] or [[pin]] with `displacement`/`rotation`)",
+            );
+        }
+        None
+    }
+
+    /// True when some line load follows the directors (its nodal values depend on the
+    /// configuration: see [`Self::follower_loads`]).
+    pub fn has_follower_loads(&self) -> bool {
+        self.line_loads.iter().any(|l| l.follower)
+    }
+
+    /// Adds the nodal forces and moments of the follower line loads at time `t` for the
+    /// per-element-end director triads `d` (`[e][l]`, the mid-step triads in a step).
+    pub fn follower_loads(&self, t: f64, d: &[[Mat3; 2]], force: &mut [Vec3], moment: &mut [Vec3]) {
+        for ll in self.line_loads.iter().filter(|l| l.follower) {
+            let s = ll.table.eval(t);
+            if s == 0.0 {
+                continue;
+            }
+            for &e in &ll.elements {
+                let el = &self.elements[e];
+                let w = 0.5 * el.props.h * s;
+                for l in 0..2 {
+                    force[el.nodes[l]] += d[e][l] * ll.force * w;
+                    moment[el.nodes[l]] += d[e][l] * ll.moment * w;
+                }
+            }
+        }
+    }
+
+    /// External force and moment at node level at time `t` (nodal loads, dead line loads,
+    /// and gravity on the consistent mass of the elements and on point masses; follower
+    /// line loads are not included, see [`Self::follower_loads`]).
     pub fn external_loads(&self, t: f64, force: &mut [Vec3], moment: &mut [Vec3]) {
         force.iter_mut().for_each(|f| *f = Vec3::zeros());
         moment.iter_mut().for_each(|m| *m = Vec3::zeros());
@@ -242,6 +494,18 @@ impl Model {
             let s = load.table.eval(t);
             force[load.node] += load.force * s;
             moment[load.node] += load.moment * s;
+        }
+        for ll in self.line_loads.iter().filter(|l| !l.follower) {
+            let s = ll.table.eval(t);
+            for &e in &ll.elements {
+                let el = &self.elements[e];
+                // ∫ N_l f dS = f h/2 on each end.
+                let w = 0.5 * el.props.h * s;
+                for &a in &el.nodes {
+                    force[a] += ll.force * w;
+                    moment[a] += ll.moment * w;
+                }
+            }
         }
     }
 }

@@ -83,6 +83,8 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
             0.0,
             0.8 * e * i1,
         ),
+        damping: 0.0,
+        drag: 0.0,
     };
     let tri0 = cay(&rng.v3(1.0));
     let r0 = rng.v3(1.0);

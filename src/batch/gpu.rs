@@ -92,6 +92,11 @@ impl GpuEvaluator {
     /// Uploads the element constants and the node incidence of `sim` into `slot` (once per
     /// member; a slot is reused by the next member after [`Self::detach`]).
     pub fn register(&mut self, slot: usize, sim: &Simulation) -> Result<(), GpuError> {
+        if let Some(feature) = sim.model().gpu_unsupported() {
+            return Err(GpuError::Unsupported {
+                feature: feature.into(),
+            });
+        }
         let k = StepConsts {
             dt: sim.params().dt,
             scheme: sim.params().scheme,

@@ -47,6 +47,17 @@ pub(super) fn run(
     if members.is_empty() {
         return Ok(stats);
     }
+    // A feature the kernels do not implement refuses the whole batch, by name, before
+    // anything runs (members of schemes without a GPU kernel run on the CPU anyway).
+    if let Some(feature) = members
+        .iter()
+        .filter(|m| m.params.scheme.has_gpu_kernel())
+        .find_map(|m| m.model.gpu_unsupported())
+    {
+        return Err(GpuError::Unsupported {
+            feature: feature.into(),
+        });
+    }
     let per_slot = members
         .iter()
         .map(|m| m.model.elements.len())

@@ -377,6 +377,16 @@ fn check_command(spec: &str) -> Result<ExitCode> {
         &sim.linear_solver().0.to_string(),
     );
     print!("{report}");
+    let inv = sim.invariants();
+    let v3 = |v: &cosserat::model::Vec3| format!("({:.6e}, {:.6e}, {:.6e})", v.x, v.y, v.z);
+    println!(
+        "  initial state: energy H = {:.9e} (kinetic {:.9e}, stored {:.9e}); L = {}; J = {} (about the origin)",
+        inv.total(),
+        inv.kinetic,
+        inv.potential,
+        v3(&inv.l),
+        v3(&inv.j)
+    );
     // Time estimate: a few trial steps of the real run (debug builds are ≈ 50× slower).
     let trial = scene.params.n_steps().min(5);
     let start = std::time::Instant::now();

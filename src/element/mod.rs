@@ -79,14 +79,21 @@ impl ElementData {
         model
             .elements
             .iter()
-            .map(|e| {
+            .enumerate()
+            .map(|(ie, e)| {
                 let cfg = Config {
                     r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
                     d: e.ref_triad,
                 };
+                // Raw reference strains plus the rod's intrinsic curvature and twist.
+                let mut eps0 = strains6(&cfg, e.props.h);
+                let k = model.intrinsic_curvature(ie);
+                for c in 0..3 {
+                    eps0[3 + c] += k[c];
+                }
                 ElementData {
                     props: e.props.clone(),
-                    eps0: strains6(&cfg, e.props.h),
+                    eps0,
                     rot_free: [
                         !model.supports[e.nodes[0]].rotation,
                         !model.supports[e.nodes[1]].rotation,
@@ -295,6 +302,12 @@ pub fn kinematics(
     }
 }
 
+/// The stress-dissipation factor `β = 2η/Δt` of Kelvin–Voigt material damping with
+/// retardation time `η` ([`ElementProps::damping`]): `½ β C Δε = η C Δε/Δt`.
+pub fn kelvin_voigt_beta(p: &ElementProps, dt: f64) -> f64 {
+    2.0 * p.damping / dt
+}
+
 /// Evaluates the scheme's local law at the state an increment produces and returns the
 /// scalars consistent with it (what the staggered loop converges to and what the
 /// monolithic Newton uses). The director factor `c_ν` enters the director speeds it is
@@ -326,7 +339,12 @@ pub fn consistent_scalars(
         c_nu = director_factor::solve_fixed_point(law, c_min);
     }
     let kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
-    let loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
+    let mut loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
+    // Kelvin–Voigt material damping: viscous stresses η C Δε/Δt = ½ (2η/Δt) C Δε add to
+    // the scheme's β (its work ½ β X is part of the dissipation D).
+    let kv = kelvin_voigt_beta(p, k.dt);
+    loc.beta_gamma += kv;
+    loc.beta_omega += kv;
     let frozen = FrozenScalars {
         beta_gamma: loc.beta_gamma,
         beta_omega: loc.beta_omega,

@@ -467,7 +467,11 @@ pub fn consistent_scalars(
             local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h).c_nu(&kin.inputs)
         };
         let ksum = pd.kappa[0] + pd.kappa[1];
-        let c_min = if ksum > 0.0 { -1.0 / ksum } else { f64::NEG_INFINITY };
+        let c_min = if ksum > 0.0 {
+            -1.0 / ksum
+        } else {
+            f64::NEG_INFINITY
+        };
         c_nu = super::director_factor::solve_fixed_point(law, c_min);
     }
     let kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);

@@ -71,6 +71,12 @@ pub enum GpuError {
         /// Largest batch that fits.
         max: usize,
     },
+    /// The scene uses a feature the GPU kernels do not implement.
+    #[error("the GPU path does not support {feature}; run it with --backend cpu")]
+    Unsupported {
+        /// The feature, by name ([`crate::model::Model::gpu_unsupported`]).
+        feature: String,
+    },
 }
 
 /// Whether tests that need an adapter must fail when none exists (`COSSERAT_REQUIRE_GPU`

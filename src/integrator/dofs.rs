@@ -1,5 +1,6 @@
 //! Numbering of the Newton unknowns: per node `u` (3, unless the translation is
-//! supported), `θ` (3, unless clamped), `g` (3, only with translational dissipation and a
+//! supported; a sliding clamp keeps the component along its axis), `θ` (3, unless
+//! clamped; a spinning sliding clamp keeps the one about its axis), `g` (3, only with translational dissipation and a
 //! free translation). A planar model also drops the out-of-plane translation (and its
 //! `g`) and the two rotations about in-plane axes. Removed unknowns are zero.
 
@@ -60,13 +61,26 @@ impl DofMap {
         let plane = model.planar;
         let in_plane = |c: usize| plane.is_none_or(|p| p.keeps_translation(c));
         let about_normal = |c: usize| plane.is_none_or(|p| p.keeps_rotation(c));
+        // Sliding clamps free single components of a clamped node.
+        let mut slide_u = vec![[false; 3]; model.supports.len()];
+        let mut slide_th = vec![[false; 3]; model.supports.len()];
+        for sl in &model.slides {
+            slide_u[sl.node][sl.axis] = true;
+            slide_th[sl.node][sl.axis] = sl.spin;
+        }
         let nodes: Vec<NodeDofs> = model
             .supports
             .iter()
-            .map(|s| NodeDofs {
-                u: std::array::from_fn(|c| take(!s.translation && in_plane(c))),
-                th: std::array::from_fn(|c| take(!s.rotation && about_normal(c))),
-                g: std::array::from_fn(|c| take(with_g && !s.translation && in_plane(c))),
+            .enumerate()
+            .map(|(a, s)| {
+                let free_u = |c: usize| (!s.translation || slide_u[a][c]) && in_plane(c);
+                NodeDofs {
+                    u: std::array::from_fn(|c| take(free_u(c))),
+                    th: std::array::from_fn(|c| {
+                        take((!s.rotation || slide_th[a][c]) && about_normal(c))
+                    }),
+                    g: std::array::from_fn(|c| take(with_g && free_u(c))),
+                }
             })
             .collect();
         let elements = model

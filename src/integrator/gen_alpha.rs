@@ -227,10 +227,11 @@ impl GenAlpha {
         }
         let vel: Vec<Node6> = (0..nn)
             .map(|a| {
+                // Material angular velocity W = Λ_0ᵀ ω of the spatial initial spin.
                 let w = if model.supports[a].rotation {
                     Vec3::zeros()
                 } else {
-                    model.omega0[a]
+                    model.initial_rotation(a).transpose() * model.omega0[a]
                 };
                 [state.v[a], w]
             })
@@ -242,7 +243,7 @@ impl GenAlpha {
             solver,
             row_kind,
             groups,
-            lam: vec![Mat3::identity(); nn],
+            lam: (0..nn).map(|a| model.initial_rotation(a)).collect(),
             vel,
             acc: vec![[Vec3::zeros(); 2]; nn],
             pseudo: vec![[Vec3::zeros(); 2]; nn],
@@ -919,6 +920,8 @@ mod tests {
             i_rho: nalgebra::Matrix2::identity(),
             c_gamma: Vec3::repeat(1.0),
             c_omega: Mat3::identity(),
+            damping: 0.0,
+            drag: 0.0,
         };
         let model = Model {
             nodes: vec![Vec3::zeros(); n],
@@ -940,6 +943,10 @@ mod tests {
             rods: vec![],
             links: vec![],
             planar: None,
+            shape: Default::default(),
+            line_loads: vec![],
+            drives: vec![],
+            slides: vec![],
         };
         let colour = colour_nodes(&model);
         let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);

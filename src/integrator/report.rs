@@ -23,8 +23,10 @@ pub struct StepReport {
     pub residual: f64,
     /// Dissipation predicted by DESIGN §4 at the accepted state.
     pub dissipation: f64,
-    /// Work of the external loads over the step.
+    /// Work of the external loads over the step, including the work of driven supports.
     pub external_work: f64,
+    /// The part of `external_work` done by driven supports (prescribed motion).
+    pub support_work: f64,
     /// Acceleration norms over the step.
     pub acc_trans: f64,
     /// Director acceleration norm.

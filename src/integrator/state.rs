@@ -26,14 +26,19 @@ pub struct State {
 }
 
 impl State {
-    /// The initial state of a model: reference configuration, given nodal velocities and
-    /// director velocities `ω × d` from the nodal angular velocities.
+    /// The initial state of a model: its initial configuration (the reference unless the
+    /// scene gives another, [`Model::initial_position`], [`Model::initial_triads`]), given
+    /// nodal velocities and director velocities `ω × d` from the nodal angular velocities.
     pub fn initial(model: &Model, data: &[ElementData]) -> Self {
-        let d: Vec<[Mat3; 2]> = model.elements.iter().map(|e| e.ref_triad).collect();
+        let d: Vec<[Mat3; 2]> = (0..model.elements.len())
+            .map(|e| model.initial_triads(e))
+            .collect();
         let vd = rigid_director_velocities(model, &d, |a| model.omega0[a]);
         let mut s = Self {
             t: 0.0,
-            r: model.nodes.clone(),
+            r: (0..model.n_nodes())
+                .map(|a| model.initial_position(a))
+                .collect(),
             v: model.velocity0.clone(),
             d,
             vd,

@@ -10,11 +10,13 @@
 //! therefore round-off for a model without supports and links (EM, EDMC, mid-point), and
 //! the reactions' impulse otherwise. Generalized-α applies its loads at `t_{n+1}` with its
 //! own weights, so its residual also contains that difference of quadrature (and its J
-//! drift).
+//! drift). Follower line loads act with the mid-step directors `½(d_n + d_{n+1})`, the
+//! same ones the step used.
 
+use crate::element::M2;
 use crate::integrator::state::State;
 use crate::math::scaled_norm;
-use crate::model::{Model, Vec3};
+use crate::model::{Mat3, Model, Vec3};
 use crate::observe::record::{EnergyBalance, ImpulseBalance};
 
 /// Accumulates the applied impulse and the momentum residuals over accepted steps. Feed
@@ -30,6 +32,9 @@ pub struct BalanceObserver {
     impulse_l: Vec3,
     impulse_j: Vec3,
     r_prev: Vec<Vec3>,
+    /// Director triads of the previous level (only with follower loads, which act with
+    /// the mid-step directors).
+    d_prev: Vec<[Mat3; 2]>,
     force: Vec<Vec3>,
     moment: Vec<Vec3>,
     last_step: usize,
@@ -54,6 +59,11 @@ impl BalanceObserver {
             impulse_l: Vec3::zeros(),
             impulse_j: Vec3::zeros(),
             r_prev: state.r.clone(),
+            d_prev: if model.has_follower_loads() {
+                state.d.clone()
+            } else {
+                Vec::new()
+            },
             force: vec![Vec3::zeros(); n],
             moment: vec![Vec3::zeros(); n],
             last_step: 0,
@@ -89,6 +99,28 @@ impl BalanceObserver {
         debug_assert_eq!(step, self.last_step + 1, "balance needs every step");
         let t_mid = self.t0 + (step as f64 - 0.5) * self.dt;
         model.external_loads(t_mid, &mut self.force, &mut self.moment);
+        if model.has_follower_loads() {
+            let d_mid: Vec<[Mat3; 2]> = self
+                .d_prev
+                .iter()
+                .zip(&state.d)
+                .map(|(a, b)| [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])])
+                .collect();
+            model.follower_loads(t_mid, &d_mid, &mut self.force, &mut self.moment);
+            self.d_prev.clone_from(&state.d);
+        }
+        // Drag: −(c h/Δt) M2 (r_{n+1} − r_n) on the element ends, an external force.
+        for el in model.elements.iter().filter(|e| e.props.drag != 0.0) {
+            let k = el.props.drag * el.props.h / self.dt;
+            let du = [
+                state.r[el.nodes[0]] - self.r_prev[el.nodes[0]],
+                state.r[el.nodes[1]] - self.r_prev[el.nodes[1]],
+            ];
+            for l in 0..2 {
+                let f = -(du[0] * M2[l][0] + du[1] * M2[l][1]) * k;
+                self.force[el.nodes[l]] += f;
+            }
+        }
         for (a, (f, m)) in self.force.iter().zip(&self.moment).enumerate() {
             let r_mid = 0.5 * (self.r_prev[a] + state.r[a]);
             self.impulse_l += self.dt * f;

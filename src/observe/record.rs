@@ -24,8 +24,11 @@ pub struct StepRecord {
     pub j: Vec3,
     /// Dissipation D predicted by DESIGN §4 for the step that ended here (0 at row 0).
     pub dissipation: f64,
-    /// Work of the external loads over the step that ended here.
+    /// Work of the external loads over the step that ended here (driven supports
+    /// included).
     pub external_work: f64,
+    /// The part of `external_work` done by driven supports (prescribed motion).
+    pub support_work: f64,
     /// Work of the external loads from row 0 to here (sum of `external_work` over every
     /// accepted step, thinned or not).
     pub work_total: f64,

@@ -59,7 +59,10 @@ pub fn model_report(
     let mut second = nalgebra::Matrix3::<f64>::zeros();
     for el in &model.elements {
         let m = el.props.a_rho * el.props.h;
-        let (a, b) = (model.nodes[el.nodes[0]], model.nodes[el.nodes[1]]);
+        let (a, b) = (
+            model.initial_position(el.nodes[0]),
+            model.initial_position(el.nodes[1]),
+        );
         mass += m;
         first += m * 0.5 * (a + b);
         // ∫₀¹ (a + s(b−a))(a + s(b−a))ᵀ ds = (a aᵀ + b bᵀ)/3 + (a bᵀ + b aᵀ)/6.
@@ -69,8 +72,9 @@ pub fn model_report(
     }
     for (a, &m) in model.point_mass.iter().enumerate() {
         mass += m;
-        first += m * model.nodes[a];
-        second += m * model.nodes[a] * model.nodes[a].transpose();
+        let x = model.initial_position(a);
+        first += m * x;
+        second += m * x * x.transpose();
     }
     let com = if mass > 0.0 {
         first / mass
@@ -122,7 +126,7 @@ pub fn model_report(
         }
     }
 
-    let dissipation = match params.scheme {
+    let mut dissipation: Vec<String> = match params.scheme {
         Scheme::Em => vec![],
         Scheme::Midpoint => vec!["none (baseline: energy is not controlled)".into()],
         Scheme::GenAlpha { rho_inf } => vec![format!(
@@ -161,6 +165,17 @@ pub fn model_report(
         })
         .collect(),
     };
+    let eta = model
+        .elements
+        .iter()
+        .fold(0.0f64, |m, e| m.max(e.props.damping));
+    if eta > 0.0 {
+        let w = omega_max.0;
+        dissipation.push(format!(
+            "Kelvin–Voigt material damping, η up to {eta:e} s: modal ratio ζ = η ω/2 (ζ = {:.3e} at the highest frequency)",
+            0.5 * eta * w
+        ));
+    }
 
     let steps = params.n_steps();
     let (n, ne, nl) = (

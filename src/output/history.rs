@@ -37,6 +37,7 @@ pub const HISTORY_COLUMNS: &[&str] = &[
     "dissipation_total",
     "fallback",
     "substeps",
+    "support_work",
 ];
 
 /// Streams `history.csv`: the header is written on [`create`](Self::create), one row per
@@ -128,7 +129,9 @@ fn format_row(r: &StepRecord, out: &mut String) {
         out.push(',');
         fmt_f64(v, out);
     }
-    let _ = writeln!(out, ",{},{}", u8::from(r.fallback), r.substeps);
+    let _ = write!(out, ",{},{},", u8::from(r.fallback), r.substeps);
+    fmt_f64(r.support_work, out);
+    out.push('\n');
 }
 
 /// Reads a `history.csv` written by [`HistoryWriter`] back. The header must equal
@@ -224,6 +227,7 @@ fn parse_row(line: &str) -> Result<StepRecord, String> {
             other => return Err(format!("column 22 `fallback`: `{other}` is not 0 or 1")),
         },
         substeps: int(22)?,
+        support_work: flt(23)?,
     })
 }
 
@@ -242,6 +246,7 @@ mod tests {
             j: Vec3::new(f64::MIN_POSITIVE, f64::MAX, -seed / 7.0),
             dissipation: 5e-324,
             external_work: -1.0e-5 * seed,
+            support_work: 2.5e-7 * seed,
             work_total: -3.0e-5 * seed * seed,
             dissipation_total: 0.1 * step as f64 + 1e-17,
             acc_trans: 0.1 + 0.2,
@@ -325,7 +330,7 @@ mod tests {
         drop(HistoryWriter::create(&path).unwrap());
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text, format!("{}\n", HISTORY_COLUMNS.join(",")));
-        assert_eq!(HISTORY_COLUMNS.len(), 23);
+        assert_eq!(HISTORY_COLUMNS.len(), 24);
         assert!(read_history(&path).unwrap().is_empty());
     }
 

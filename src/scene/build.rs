@@ -8,14 +8,15 @@ use std::fmt::Display;
 use nalgebra::Matrix2;
 
 use super::raw::{
-    RawInitialVelocity, RawIntegrator, RawLink, RawLoad, RawMaterial, RawProbe, RawRod, RawScene,
-    RawSection,
+    RawInitialVelocity, RawIntegrator, RawLineLoad, RawLink, RawLoad, RawMaterial, RawProbe,
+    RawRod, RawScene, RawSection, RawSupport,
 };
 use super::span::{Doc, KeyPath};
 use super::{fmt_num, key_name, Probe, Scene, SceneError};
 use crate::integrator::params::{IntegratorParams, NewtonVariant, Scheme, Strategy};
 use crate::model::{
-    Element, ElementProps, Link, Mat3, Model, NodalLoad, Plane, RodInfo, Support, TimeTable, Vec3,
+    Element, ElementProps, LineLoad, Link, Mat3, Model, NodalLoad, Plane, Ramp, RodInfo,
+    ShapeSetup, Slide, Support, SupportDrive, TimeTable, Vec3,
 };
 
 type Result<T> = std::result::Result<T, SceneError>;
@@ -118,6 +119,7 @@ struct Material {
     e: f64,
     g: f64,
     density: f64,
+    damping: f64,
 }
 
 /// A validated section.
@@ -155,7 +157,13 @@ fn material(cx: &Ctx, path: &KeyPath, m: &RawMaterial) -> Result<Material> {
         }
         (None, Some(g)) => cx.positive(&path.key("G"), g)?,
     };
-    Ok(Material { e, g, density })
+    let damping = cx.opt_non_negative(&path.key("damping"), m.damping)?;
+    Ok(Material {
+        e,
+        g,
+        density,
+        damping,
+    })
 }
 
 fn section(cx: &Ctx, path: &KeyPath, s: &RawSection) -> Result<Section> {
@@ -248,6 +256,8 @@ struct RodPlan {
     points: Vec<Vec3>,
     counts: Vec<usize>,
     d1: Option<Vec3>,
+    curvature: Vec3,
+    drag: f64,
     props_key: (String, String),
     path: KeyPath,
 }
@@ -349,11 +359,17 @@ fn plan_rod(
         points.len() - 1,
     )?;
     let d1 = cx.opt_vec3(&path.key("d1"), &r.d1)?;
+    let curvature = cx
+        .opt_vec3(&path.key("curvature"), &r.curvature)?
+        .unwrap_or_else(Vec3::zeros);
+    let drag = cx.opt_non_negative(&path.key("drag"), r.drag)?;
     Ok(RodPlan {
         name,
         points,
         counts,
         d1,
+        curvature,
+        drag,
         props_key: (mat, sec),
         path: path.clone(),
     })
@@ -470,7 +486,133 @@ fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalL
             "required key missing (give `force`, `moment` or both)",
         ));
     }
-    let table = match (&l.time, &l.factor) {
+    let table = time_table(cx, path, &l.time, &l.factor)?;
+    Ok(NodalLoad {
+        node,
+        force: force.unwrap_or_else(Vec3::zeros),
+        moment: moment.unwrap_or_else(Vec3::zeros),
+        table,
+    })
+}
+
+/// The sliding axis of a `[[clamp]]` entry (`slide`, `spin`), if it slides.
+fn slide(
+    cx: &Ctx,
+    path: &KeyPath,
+    kind: &str,
+    node: usize,
+    c: &RawSupport,
+    params: &IntegratorParams,
+) -> Result<Option<Slide>> {
+    let Some(v) = &c.slide else {
+        if c.spin.is_some() {
+            return Err(cx.err(&path.key("spin"), "only with `slide`"));
+        }
+        return Ok(None);
+    };
+    let sp = path.key("slide");
+    if kind == "pin" {
+        return Err(cx.err(
+            &sp,
+            "a sliding support is a [[clamp]] (it holds the rotation); a pin that slides needs no support across the axis either",
+        ));
+    }
+    let v = cx.vec3(&sp, v)?;
+    let n = v.norm();
+    let axis = (0..3).find(|&k| n > 0.0 && (v[k].abs() - n).abs() <= 1e-12 * n);
+    let Some(axis) = axis else {
+        return Err(cx.err(
+            &sp,
+            format!(
+                "{} is not along a coordinate axis: sliding clamps slide along e1, e2 or e3",
+                fmt_v(&v)
+            ),
+        ));
+    };
+    if c.displacement.is_some() || c.rotation.is_some() {
+        return Err(cx.err(&sp, "a sliding clamp cannot also be driven"));
+    }
+    let spin = c.spin.unwrap_or(false);
+    if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        return Err(cx.err(
+            &sp,
+            "gen-alpha does not support sliding clamps; use em, edmc1, edmc2 or midpoint",
+        ));
+    }
+    if spin && params.scheme.director_dissipation() {
+        return Err(cx.err(
+            &path.key("spin"),
+            "a spinning sliding clamp is not supported with director dissipation (chi_nu, alpha_gn, alpha_on)",
+        ));
+    }
+    Ok(Some(Slide { node, axis, spin }))
+}
+
+/// The prescribed motion of a `[[clamp]]` / `[[pin]]` entry, if it moves.
+fn support_drive(
+    cx: &Ctx,
+    path: &KeyPath,
+    kind: &str,
+    node: usize,
+    c: &RawSupport,
+) -> Result<Option<SupportDrive>> {
+    let displacement = cx.opt_vec3(&path.key("displacement"), &c.displacement)?;
+    let rotation = cx.opt_vec3(&path.key("rotation"), &c.rotation)?;
+    if kind == "pin" && rotation.is_some() {
+        return Err(cx.err(
+            &path.key("rotation"),
+            "a pin leaves the rotation free: drive a rotation with a [[clamp]]",
+        ));
+    }
+    if displacement.is_none() && rotation.is_none() {
+        for (key, present) in [
+            ("time", c.time.is_some()),
+            ("factor", c.factor.is_some()),
+            ("ramp", c.ramp.is_some()),
+        ] {
+            if present {
+                return Err(cx.err(
+                    &path.key(key),
+                    "only for a moving support (give `displacement` or `rotation`)",
+                ));
+            }
+        }
+        return Ok(None);
+    }
+    if c.time.is_none() && c.factor.is_none() {
+        return Err(cx.err(
+            &path.key("time"),
+            "required key missing: a moving support needs its `time` and `factor` table",
+        ));
+    }
+    let table = time_table(cx, path, &c.time, &c.factor)?;
+    let ramp = match c.ramp.as_deref() {
+        None | Some("linear") => Ramp::Linear,
+        Some("smooth") => Ramp::Smooth,
+        Some(other) => {
+            return Err(cx.err(
+                &path.key("ramp"),
+                format!("unknown ramp `{other}` (expected \"linear\" or \"smooth\")"),
+            ))
+        }
+    };
+    Ok(Some(SupportDrive {
+        node,
+        displacement: displacement.unwrap_or_else(Vec3::zeros),
+        rotation: rotation.unwrap_or_else(Vec3::zeros),
+        table,
+        ramp,
+    }))
+}
+
+/// A `time`/`factor` pair of keys under `path`: both or neither (constant factor 1).
+fn time_table(
+    cx: &Ctx,
+    path: &KeyPath,
+    time: &Option<Vec<f64>>,
+    factor: &Option<Vec<f64>>,
+) -> Result<TimeTable> {
+    Ok(match (time, factor) {
         (None, None) => TimeTable::constant_one(),
         (Some(_), None) => {
             return Err(cx.err(
@@ -519,12 +661,70 @@ fn load(cx: &Ctx, nodes: &NodeSet, path: &KeyPath, l: &RawLoad) -> Result<NodalL
                 values: values.clone(),
             }
         }
+    })
+}
+
+/// The elements a `rod` (and optional `segment`) key pair names.
+fn rod_elements(
+    cx: &Ctx,
+    path: &KeyPath,
+    rod: &Option<String>,
+    segment: Option<i64>,
+    plans: &[RodPlan],
+    rods: &[RodInfo],
+) -> Result<Vec<usize>> {
+    let rp = path.key("rod");
+    let rod = cx.required(&rp, rod.as_ref())?;
+    let Some(ri) = rods.iter().position(|r| &r.name == rod) else {
+        let names: Vec<&str> = rods.iter().map(|r| r.name.as_str()).collect();
+        return Err(cx.err(
+            &rp,
+            format!("no rod named `{rod}` (rods: {})", names.join(", ")),
+        ));
     };
-    Ok(NodalLoad {
-        node,
+    let range = rods[ri].elements.clone();
+    match segment {
+        None => Ok(range.collect()),
+        Some(sg) => {
+            let counts = &plans[ri].counts;
+            if sg < 0 || sg as usize >= counts.len() {
+                return Err(cx.err(
+                    &path.key("segment"),
+                    format!(
+                        "rod `{rod}` has segments 0..{} (got {sg})",
+                        counts.len() - 1
+                    ),
+                ));
+            }
+            let sg = sg as usize;
+            let start = range.start + counts[..sg].iter().sum::<usize>();
+            Ok((start..start + counts[sg]).collect())
+        }
+    }
+}
+
+fn line_load(
+    cx: &Ctx,
+    path: &KeyPath,
+    l: &RawLineLoad,
+    plans: &[RodPlan],
+    rods: &[RodInfo],
+) -> Result<LineLoad> {
+    let elements = rod_elements(cx, path, &l.rod, l.segment, plans, rods)?;
+    let force = cx.opt_vec3(&path.key("force"), &l.force)?;
+    let moment = cx.opt_vec3(&path.key("moment"), &l.moment)?;
+    if force.is_none() && moment.is_none() {
+        return Err(cx.err(
+            &path.key("force"),
+            "required key missing (give `force`, `moment` or both)",
+        ));
+    }
+    Ok(LineLoad {
+        elements,
         force: force.unwrap_or_else(Vec3::zeros),
         moment: moment.unwrap_or_else(Vec3::zeros),
-        table,
+        follower: l.follower.unwrap_or(false),
+        table: time_table(cx, path, &l.time, &l.factor)?,
     })
 }
 
@@ -751,7 +951,7 @@ fn rod_triads(cx: &Ctx, plan: &RodPlan, tol: f64) -> Result<Vec<Mat3>> {
 }
 
 /// The continuum constants of an element of length `h`.
-fn element_props(mat: &Material, sec: &Section, h: f64) -> ElementProps {
+fn element_props(mat: &Material, sec: &Section, h: f64, drag: f64) -> ElementProps {
     let (e, g) = (mat.e, mat.g);
     ElementProps {
         h,
@@ -769,6 +969,8 @@ fn element_props(mat: &Material, sec: &Section, h: f64) -> ElementProps {
             0.0,
             g * sec.j,
         ),
+        damping: mat.damping,
+        drag,
     }
 }
 
@@ -790,7 +992,7 @@ fn mesh(
         for (s, w) in plan.points.windows(2).enumerate() {
             let n = plan.counts[s];
             let h = (w[1] - w[0]).norm() / n as f64;
-            let props = element_props(mat, sec, h);
+            let props = element_props(mat, sec, h, plan.drag);
             let triad = triads[ri][s];
             let point = |j: usize| {
                 if j == n {
@@ -825,12 +1027,301 @@ fn mesh(
     Ok((elements, rods))
 }
 
-/// Initial nodal velocities and angular velocities from the `[[initial_velocity]]` entries.
+/// The nodes of a rod in order along it (`N` elements: `N + 1` entries; a closed rod
+/// repeats its first node at the end).
+fn rod_chain(elements: &[Element], info: &RodInfo) -> Vec<usize> {
+    let els = &elements[info.elements.clone()];
+    let mut chain = Vec::with_capacity(els.len() + 1);
+    chain.push(els[0].nodes[0]);
+    chain.extend(els.iter().map(|e| e.nodes[1]));
+    chain
+}
+
+/// A per-node table of vectors: exactly `n` entries.
+fn node_table(
+    cx: &Ctx,
+    path: &KeyPath,
+    rows: &[Vec<f64>],
+    n: usize,
+    what: &str,
+) -> Result<Vec<Vec3>> {
+    if rows.len() != n {
+        return Err(cx.err(
+            path,
+            format!(
+                "expected one vector per node of {what}: {n} (got {})",
+                rows.len()
+            ),
+        ));
+    }
+    rows.iter()
+        .enumerate()
+        .map(|(i, v)| cx.vec3(&path.idx(i), v))
+        .collect()
+}
+
+/// Unit tangents at the nodes of a chain of elements with unit chord directions `chord`:
+/// the bisector of the two chords at an interior node, and at an end the chord reflected
+/// about the bisector next to it (exact on a circular arc, second order on a smooth curve).
+/// A zero vector marks a node where the chain turns back on itself.
+fn node_tangents(chord: &[Vec3]) -> Vec<Vec3> {
+    let n = chord.len();
+    let unit = |v: Vec3| {
+        let l = v.norm();
+        if l > 1e-12 {
+            v / l
+        } else {
+            Vec3::zeros()
+        }
+    };
+    let mut t = Vec::with_capacity(n + 1);
+    t.push(chord[0]);
+    for j in 1..n {
+        t.push(unit(chord[j - 1] + chord[j]));
+    }
+    t.push(chord[n - 1]);
+    if n >= 2 {
+        for (end, c, inner) in [(0, chord[0], t[1]), (n, chord[n - 1], t[n - 1])] {
+            if inner != Vec3::zeros() {
+                t[end] = unit(2.0 * c.dot(&inner) * c - inner);
+            }
+        }
+    }
+    t
+}
+
+/// The rotation taking unit vector `a` onto unit vector `b` about `a × b` (the identity
+/// when they are equal); `None` when they are opposite.
+fn minimal_rotation(a: &Vec3, b: &Vec3) -> Option<Mat3> {
+    if a.norm() < 0.5 || b.norm() < 0.5 {
+        return None;
+    }
+    let c = a.dot(b);
+    if c <= -1.0 + 1e-12 {
+        return None;
+    }
+    let k = a.cross(b);
+    let kx = crate::math::hat(&k);
+    Some(Mat3::identity() + kx + kx * kx / (1.0 + c))
+}
+
+/// Initial configuration and intrinsic curvature of every rod (`[rod.initial]`,
+/// `curvature`), checked for consistency where rods share nodes.
+#[allow(clippy::too_many_arguments)]
+fn shape_setup(
+    cx: &Ctx,
+    raw: &[RawRod],
+    plans: &[RodPlan],
+    elements: &[Element],
+    rods: &[RodInfo],
+    nodes: &NodeSet,
+) -> Result<ShapeSetup> {
+    let n = nodes.nodes.len();
+    let mut curvature = vec![Vec3::zeros(); elements.len()];
+    for (plan, info) in plans.iter().zip(rods) {
+        for k in &mut curvature[info.elements.clone()] {
+            *k = plan.curvature;
+        }
+    }
+    let mut positions = nodes.nodes.clone();
+    let mut rotations = vec![Mat3::identity(); n];
+    // Which rod's `[rod.initial]` set each node.
+    let mut set_by: Vec<Option<usize>> = vec![None; n];
+    let mut any = false;
+    for (ri, (r, info)) in raw.iter().zip(rods).enumerate() {
+        let Some(init) = &r.initial else { continue };
+        any = true;
+        let path = plans[ri].path.key("initial");
+        let chain = rod_chain(elements, info);
+        let nn = chain.len();
+        let what = format!("rod `{}`", info.name);
+        let reference: Vec<Vec3> = chain.iter().map(|&a| nodes.nodes[a]).collect();
+        let table = |key: &str, v: &Option<Vec<Vec<f64>>>| -> Result<Option<Vec<Vec3>>> {
+            v.as_deref()
+                .map(|rows| node_table(cx, &path.key(key), rows, nn, &what))
+                .transpose()
+        };
+        let given = table("positions", &init.positions)?;
+        let displacement = table("displacement", &init.displacement)?;
+        let rot_table = table("rotations", &init.rotations)?;
+        if given.is_some() {
+            for (key, present) in [
+                ("stretch", init.stretch.is_some()),
+                ("origin", init.origin.is_some()),
+                ("displacement", init.displacement.is_some()),
+            ] {
+                if present {
+                    return Err(cx.err(
+                        &path.key(key),
+                        "not with `positions` (a table of positions is the whole initial shape)",
+                    ));
+                }
+            }
+        }
+        if init.origin.is_some() && init.stretch.is_none() {
+            return Err(cx.err(&path.key("origin"), "only with `stretch`"));
+        }
+        if init.center.is_some() && init.rotation.is_none() {
+            return Err(cx.err(&path.key("center"), "only with `rotation`"));
+        }
+        let mut x: Vec<Vec3> = match &given {
+            Some(p) => p.clone(),
+            None => {
+                let mut x = reference.clone();
+                if let Some(l) = init.stretch {
+                    let l = cx.positive(&path.key("stretch"), l)?;
+                    let o = cx
+                        .opt_vec3(&path.key("origin"), &init.origin)?
+                        .unwrap_or(plans[ri].points[0]);
+                    x.iter_mut().for_each(|p| *p = o + (*p - o) * l);
+                }
+                if let Some(d) = &displacement {
+                    x.iter_mut().zip(d).for_each(|(p, d)| *p += d);
+                }
+                x
+            }
+        };
+        // Nodal rotations: the table, or directors following the tangent.
+        let els = &elements[info.elements.clone()];
+        let mut lam: Vec<Mat3> = match &rot_table {
+            Some(t) => t.iter().map(crate::math::exp_so3).collect(),
+            None => {
+                let key = if given.is_some() {
+                    "positions"
+                } else {
+                    "displacement"
+                };
+                let mut chord = Vec::with_capacity(els.len());
+                for (j, w) in x.windows(2).enumerate() {
+                    let len = (w[1] - w[0]).norm();
+                    if len <= nodes.tol {
+                        return Err(cx.err(
+                            &path.key(key),
+                            format!("element {j} of {what} has zero length in the initial configuration"),
+                        ));
+                    }
+                    chord.push((w[1] - w[0]) / len);
+                }
+                let reference: Vec<Vec3> = els
+                    .iter()
+                    .map(|e| e.ref_triad[0].column(2).into_owned())
+                    .collect();
+                let (t0, t1) = (node_tangents(&reference), node_tangents(&chord));
+                let mut lam = Vec::with_capacity(nn);
+                for j in 0..nn {
+                    let rot = minimal_rotation(&t0[j], &t1[j]).ok_or_else(|| {
+                        cx.err(
+                            &path.key(key),
+                            format!("the rod turns back on itself at node {j} of {what}: the directors cannot follow its tangent (give `rotations`)"),
+                        )
+                    })?;
+                    lam.push(rot);
+                }
+                lam
+            }
+        };
+        if let Some(phi) = cx.opt_vec3(&path.key("rotation"), &init.rotation)? {
+            let c = cx
+                .opt_vec3(&path.key("center"), &init.center)?
+                .unwrap_or_else(Vec3::zeros);
+            let q = crate::math::exp_so3(&phi);
+            x.iter_mut().for_each(|p| *p = c + q * (*p - c));
+            lam.iter_mut().for_each(|l| *l = q * *l);
+        }
+        if let Some(t) = cx.opt_vec3(&path.key("translation"), &init.translation)? {
+            x.iter_mut().for_each(|p| *p += t);
+        }
+        for (j, w) in x.windows(2).enumerate() {
+            if (w[1] - w[0]).norm() <= nodes.tol {
+                return Err(cx.err(
+                    &path,
+                    format!("element {j} of {what} has zero length in the initial configuration"),
+                ));
+            }
+        }
+        for (j, &a) in chain.iter().enumerate() {
+            match set_by[a] {
+                Some(other)
+                    if (positions[a] - x[j]).norm() > nodes.tol
+                        || (rotations[a] - lam[j]).amax() > 1e-9 =>
+                {
+                    let whose = if other == ri {
+                        "the rod's own first node (a closed rod must close in its initial configuration too)".to_string()
+                    } else {
+                        format!("rod[{other}] `{}`", rods[other].name)
+                    };
+                    return Err(cx.err(
+                        &path,
+                        format!(
+                            "node {a} (reference {}) gets initial position {} here but {} from {whose}; rods meeting at a node must agree on its initial position and rotation",
+                            fmt_v(&nodes.nodes[a]),
+                            fmt_v(&x[j]),
+                            fmt_v(&positions[a])
+                        ),
+                    ));
+                }
+                _ => {
+                    positions[a] = x[j];
+                    rotations[a] = lam[j];
+                    set_by[a] = Some(ri);
+                }
+            }
+        }
+    }
+    // A rod without `[rod.initial]` keeps its nodes at the reference: a node it shares
+    // with a moved rod must not have moved.
+    if any {
+        for (ri, (r, info)) in raw.iter().zip(rods).enumerate() {
+            if r.initial.is_some() {
+                continue;
+            }
+            for a in rod_chain(elements, info) {
+                if let Some(other) = set_by[a] {
+                    if (positions[a] - nodes.nodes[a]).norm() > nodes.tol
+                        || (rotations[a] - Mat3::identity()).amax() > 1e-9
+                    {
+                        return Err(cx.err(
+                            &plans[other].path.key("initial"),
+                            format!(
+                                "moves node {a} (reference {}), which rod[{ri}] `{}` shares but does not move (it has no [rod.initial]); rods meeting at a node must agree on its initial position and rotation",
+                                fmt_v(&nodes.nodes[a]),
+                                info.name
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    let (positions, rotations) = if any {
+        (positions, rotations)
+    } else {
+        (vec![], vec![])
+    };
+    let curvature = if curvature.iter().any(|k| *k != Vec3::zeros()) {
+        curvature
+    } else {
+        vec![]
+    };
+    Ok(ShapeSetup {
+        positions,
+        rotations,
+        curvature,
+    })
+}
+
+/// Initial nodal velocities and angular velocities from the `[[initial_velocity]]`
+/// entries; rigid motions act about the nodes' initial positions `x0`.
+#[allow(clippy::too_many_arguments)]
 fn initial_velocities(
     cx: &Ctx,
     entries: &[RawInitialVelocity],
     nodes: &NodeSet,
+    x0: &[Vec3],
     supports: &[Support],
+    plans: &[RodPlan],
+    elements: &[Element],
+    rods: &[RodInfo],
 ) -> Result<(Vec<Vec3>, Vec<Vec3>)> {
     let root = KeyPath::root();
     let n = nodes.nodes.len();
@@ -845,38 +1336,115 @@ fn initial_velocities(
             .opt_vec3(&path.key("omega"), &iv.omega)?
             .unwrap_or_else(Vec3::zeros);
         let center = cx.opt_vec3(&path.key("center"), &iv.center)?;
-        match (iv.all, &iv.at) {
-            (Some(true), Some(_)) => {
-                return Err(cx.err(
-                    &path.key("all"),
-                    "give either `at` or `all = true`, not both",
-                ))
-            }
-            (Some(true), None) => {
-                let c = center.unwrap_or_else(Vec3::zeros);
-                for a in 0..n {
-                    let va = v + w.cross(&(nodes.nodes[a] - c));
-                    check_supported(cx, &path.key("all"), a, nodes, supports[a], &va, &w)?;
-                    velocity0[a] += va;
-                    omega0[a] += w;
+        let all = iv.all == Some(true);
+        let targets = [
+            ("at", iv.at.is_some()),
+            ("all", all),
+            ("rod", iv.rod.is_some()),
+        ];
+        let given: Vec<&str> = targets.iter().filter(|t| t.1).map(|t| t.0).collect();
+        if given.len() > 1 {
+            return Err(cx.err(
+                &path.key(given[1]),
+                format!(
+                    "give one of `at`, `all = true` and `rod`, not `{}` and `{}`",
+                    given[0], given[1]
+                ),
+            ));
+        }
+        if iv.rod.is_none() {
+            for (key, present) in [
+                ("segment", iv.segment.is_some()),
+                ("v_nodes", iv.v_nodes.is_some()),
+                ("omega_nodes", iv.omega_nodes.is_some()),
+            ] {
+                if present {
+                    return Err(cx.err(&path.key(key), "only with `rod`"));
                 }
-            }
-            (_, at) => {
-                if center.is_some() {
-                    return Err(cx.err(&path.key("center"), "only allowed with `all = true`"));
-                }
-                if at.is_none() {
-                    return Err(cx.err(
-                        &path.key("at"),
-                        "required key missing (or give `all = true`)",
-                    ));
-                }
-                let a = node_at(cx, nodes, &path.key("at"), at)?;
-                check_supported(cx, &path.key("at"), a, nodes, supports[a], &v, &w)?;
-                velocity0[a] += v;
-                omega0[a] += w;
             }
         }
+        if let Some(rod) = &iv.rod {
+            let rp = path.key("rod");
+            let Some(ri) = rods.iter().position(|r| &r.name == rod) else {
+                let names: Vec<&str> = rods.iter().map(|r| r.name.as_str()).collect();
+                return Err(cx.err(
+                    &rp,
+                    format!("no rod named `{rod}` (rods: {})", names.join(", ")),
+                ));
+            };
+            let chain = rod_chain(elements, &rods[ri]);
+            let (sel, what) = match iv.segment {
+                None => (chain, format!("rod `{rod}`")),
+                Some(sg) => {
+                    let counts = &plans[ri].counts;
+                    if sg < 0 || sg as usize >= counts.len() {
+                        return Err(cx.err(
+                            &path.key("segment"),
+                            format!(
+                                "rod `{rod}` has segments 0..{} (got {sg})",
+                                counts.len() - 1
+                            ),
+                        ));
+                    }
+                    let sg = sg as usize;
+                    let start: usize = counts[..sg].iter().sum();
+                    (
+                        chain[start..=start + counts[sg]].to_vec(),
+                        format!("segment {sg} of rod `{rod}`"),
+                    )
+                }
+            };
+            let vt = iv
+                .v_nodes
+                .as_deref()
+                .map(|t| node_table(cx, &path.key("v_nodes"), t, sel.len(), &what))
+                .transpose()?;
+            let wt = iv
+                .omega_nodes
+                .as_deref()
+                .map(|t| node_table(cx, &path.key("omega_nodes"), t, sel.len(), &what))
+                .transpose()?;
+            let c = center.unwrap_or_else(Vec3::zeros);
+            // A node listed twice (a closed rod) gets its share once.
+            let mut seen = std::collections::HashSet::new();
+            for (j, &a) in sel.iter().enumerate() {
+                if !seen.insert(a) {
+                    continue;
+                }
+                let wa = w + wt.as_ref().map_or(Vec3::zeros(), |t| t[j]);
+                let va = v + w.cross(&(x0[a] - c)) + vt.as_ref().map_or(Vec3::zeros(), |t| t[j]);
+                check_supported(cx, &rp, a, nodes, supports[a], &va, &wa)?;
+                velocity0[a] += va;
+                omega0[a] += wa;
+            }
+            continue;
+        }
+        if all {
+            let c = center.unwrap_or_else(Vec3::zeros);
+            for a in 0..n {
+                let va = v + w.cross(&(x0[a] - c));
+                check_supported(cx, &path.key("all"), a, nodes, supports[a], &va, &w)?;
+                velocity0[a] += va;
+                omega0[a] += w;
+            }
+            continue;
+        }
+        if center.is_some() {
+            return Err(cx.err(
+                &path.key("center"),
+                "only allowed with `all = true` or `rod`",
+            ));
+        }
+        if iv.at.is_none() {
+            return Err(cx.err(
+                &path.key("at"),
+                "required key missing (or give `all = true` or `rod`)",
+            ));
+        }
+        let a = node_at(cx, nodes, &path.key("at"), &iv.at)?;
+        check_supported(cx, &path.key("at"), a, nodes, supports[a], &v, &w)?;
+        velocity0[a] += v;
+        omega0[a] += w;
     }
 
     Ok((velocity0, omega0))
@@ -1021,6 +1589,130 @@ fn check_planar(
     Ok(())
 }
 
+/// A planar scene's initial configuration stays in the plane: positions in it, nodal
+/// rotations about its normal, intrinsic curvature about its normal.
+fn check_planar_shape(
+    cx: &Ctx,
+    p: Plane,
+    plans: &[RodPlan],
+    elements: &[Element],
+    rods: &[RodInfo],
+    shape: &ShapeSetup,
+) -> Result<()> {
+    let k = p.normal;
+    let why = |what: String| format!("scene is planar = \"{}\" but {what}", p.name());
+    let normal = Vec3::from_fn(|c, _| if c == k { 1.0 } else { 0.0 });
+    if let Some(x) = shape.positions.first() {
+        let plane_coord = x[k];
+        let scale = shape.positions.iter().fold(1.0f64, |m, x| m.max(x.norm()));
+        for (a, (x, r)) in shape.positions.iter().zip(&shape.rotations).enumerate() {
+            if (x[k] - plane_coord).abs() > MERGE_TOL * scale || (r * normal - normal).amax() > 1e-9
+            {
+                let rod = rods
+                    .iter()
+                    .position(|info| rod_chain(elements, info).contains(&a))
+                    .unwrap_or(0);
+                return Err(cx.err(
+                    &plans[rod].path.key("initial"),
+                    why(format!(
+                        "node {a} starts out of the plane or rotated about an in-plane axis (initial position {})",
+                        fmt_v(x)
+                    )),
+                ));
+            }
+        }
+    }
+    for (plan, info) in plans.iter().zip(rods) {
+        for el in &elements[info.elements.clone()] {
+            let spatial = el.ref_triad[0] * plan.curvature;
+            if (0..3).any(|c| c != k && spatial[c].abs() > 1e-12 * spatial.norm()) {
+                return Err(cx.err(
+                    &plan.path.key("curvature"),
+                    why(format!(
+                        "the intrinsic curvature {} bends about {} in space, not about the normal",
+                        fmt_v(&plan.curvature),
+                        fmt_v(&spatial)
+                    )),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A planar scene's line loads push in the plane and turn about its normal (follower
+/// loads: checked in the reference frame of every element they act on).
+fn check_planar_line_loads(
+    cx: &Ctx,
+    p: Plane,
+    elements: &[Element],
+    line_loads: &[LineLoad],
+) -> Result<()> {
+    let k = p.normal;
+    let off = |v: &Vec3| v[k].abs() > MERGE_TOL * v.norm().max(1.0);
+    let tilted = |v: &Vec3| (0..3).any(|c| c != k && v[c].abs() > MERGE_TOL * v.norm().max(1.0));
+    for (i, ll) in line_loads.iter().enumerate() {
+        let path = KeyPath::root().key("line_load").idx(i);
+        for &e in &ll.elements {
+            let q = if ll.follower {
+                elements[e].ref_triad[0]
+            } else {
+                Mat3::identity()
+            };
+            let (f, m) = (q * ll.force, q * ll.moment);
+            let why = |what: &str| format!("scene is planar = \"{}\" but {what}", p.name());
+            if off(&f) {
+                return Err(cx.err(
+                    &path.key("force"),
+                    why(&format!("the force leaves the plane (on element {e})")),
+                ));
+            }
+            if tilted(&m) {
+                return Err(cx.err(
+                    &path.key("moment"),
+                    why(&format!(
+                        "the moment is not about the normal (on element {e})"
+                    )),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A planar scene's moving supports move in the plane and turn about its normal.
+fn check_planar_drives(cx: &Ctx, p: Plane, raw: &RawScene, drives: &[SupportDrive]) -> Result<()> {
+    let k = p.normal;
+    let off = |v: &Vec3| v[k].abs() > MERGE_TOL * v.norm().max(1.0);
+    let tilted = |v: &Vec3| (0..3).any(|c| c != k && v[c].abs() > MERGE_TOL * v.norm().max(1.0));
+    let why = |what: &str| format!("scene is planar = \"{}\" but {what}", p.name());
+    // Drives come in scene order: clamps with a motion, then pins with a motion.
+    let moving = |list: &[RawSupport], kind: &'static str| -> Vec<KeyPath> {
+        list.iter()
+            .enumerate()
+            .filter(|(_, c)| c.displacement.is_some() || c.rotation.is_some())
+            .map(|(i, _)| KeyPath::root().key(kind).idx(i))
+            .collect()
+    };
+    let mut paths = moving(&raw.clamp, "clamp");
+    paths.extend(moving(&raw.pin, "pin"));
+    for (d, path) in drives.iter().zip(paths) {
+        if off(&d.displacement) {
+            return Err(cx.err(
+                &path.key("displacement"),
+                why("the support moves out of the plane"),
+            ));
+        }
+        if tilted(&d.rotation) {
+            return Err(cx.err(
+                &path.key("rotation"),
+                why("the support turns about an in-plane axis"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// A supported node cannot start moving in the directions its support fixes.
 fn check_supported(
     cx: &Ctx,
@@ -1143,15 +1835,35 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
     let n = nodes.nodes.len();
 
     let mut supports = vec![Support::default(); n];
-    for (i, c) in raw.clamp.iter().enumerate() {
-        let a = node_at(&cx, &nodes, &root.key("clamp").idx(i).key("at"), &c.at)?;
-        supports[a].translation = true;
-        supports[a].rotation = true;
+    let mut drives: Vec<SupportDrive> = Vec::new();
+    let mut slides: Vec<Slide> = Vec::new();
+    let mut driven_by: HashMap<usize, KeyPath> = HashMap::new();
+    for (kind, list) in [("clamp", &raw.clamp), ("pin", &raw.pin)] {
+        for (i, c) in list.iter().enumerate() {
+            let path = root.key(kind).idx(i);
+            let a = node_at(&cx, &nodes, &path.key("at"), &c.at)?;
+            supports[a].translation = true;
+            supports[a].rotation |= kind == "clamp";
+            if let Some(sl) = slide(&cx, &path, kind, a, c, &params)? {
+                slides.push(sl);
+            }
+            if let Some(d) = support_drive(&cx, &path, kind, a, c)? {
+                if let Some(other) = driven_by.get(&a) {
+                    return Err(cx.err(
+                        &path,
+                        format!(
+                            "node {a} is already driven by {}; give one moving support per node",
+                            key_name(other)
+                        ),
+                    ));
+                }
+                driven_by.insert(a, path.clone());
+                drives.push(d);
+            }
+        }
     }
-    for (i, c) in raw.pin.iter().enumerate() {
-        let a = node_at(&cx, &nodes, &root.key("pin").idx(i).key("at"), &c.at)?;
-        supports[a].translation = true;
-    }
+    // A pin driven with a rotation would need a clamp; a clamp and a pin on one node give a
+    // clamp, which holds the rotation the drive leaves at zero.
 
     let mut point_mass = vec![0.0; n];
     for (i, pm) in raw.point_mass.iter().enumerate() {
@@ -1167,7 +1879,57 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         .map(|(i, l)| load(&cx, &nodes, &root.key("load").idx(i), l))
         .collect::<Result<Vec<_>>>()?;
 
-    let (velocity0, omega0) = initial_velocities(&cx, &raw.initial_velocity, &nodes, &supports)?;
+    let shape = shape_setup(&cx, &raw.rod, &plans, &elements, &rods, &nodes)?;
+    let x0: Vec<Vec3> = if shape.positions.is_empty() {
+        nodes.nodes.clone()
+    } else {
+        shape.positions.clone()
+    };
+    let (velocity0, omega0) = initial_velocities(
+        &cx,
+        &raw.initial_velocity,
+        &nodes,
+        &x0,
+        &supports,
+        &plans,
+        &elements,
+        &rods,
+    )?;
+
+    let line_loads = raw
+        .line_load
+        .iter()
+        .enumerate()
+        .map(|(i, l)| line_load(&cx, &root.key("line_load").idx(i), l, &plans, &rods))
+        .collect::<Result<Vec<_>>>()?;
+    if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        if let Some((_, path)) = driven_by.iter().min_by_key(|(a, _)| **a) {
+            return Err(cx.err(
+                path,
+                "gen-alpha does not support moving supports; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
+        if let Some(i) = plans.iter().position(|p| p.drag != 0.0) {
+            return Err(cx.err(
+                &root.key("rod").idx(i).key("drag"),
+                "gen-alpha does not support drag; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
+        if let Some((name, _)) = materials.iter().find(|(_, m)| m.damping != 0.0) {
+            return Err(cx.err(
+                &root.key("material").key(name).key("damping"),
+                "gen-alpha does not support material damping; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
+    }
+    if let Some(i) = line_loads.iter().position(|l| l.follower) {
+        if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+            return Err(cx.err(
+                &root.key("line_load").idx(i).key("follower"),
+                "gen-alpha does not support follower loads; use em, edmc1, edmc2 or midpoint",
+            ));
+        }
+    }
 
     let links = raw
         .link
@@ -1189,6 +1951,9 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             check_planar(
                 &cx, p, &nodes, &elements, &loads, &links, &velocity0, &omega0, &gravity,
             )?;
+            check_planar_shape(&cx, p, &plans, &elements, &rods, &shape)?;
+            check_planar_line_loads(&cx, p, &elements, &line_loads)?;
+            check_planar_drives(&cx, p, &raw, &drives)?;
             Some(p)
         }
     };
@@ -1218,6 +1983,10 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         rods,
         links,
         planar,
+        shape,
+        line_loads,
+        drives,
+        slides,
     };
     Ok(Scene {
         name,

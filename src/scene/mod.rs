@@ -298,9 +298,13 @@ impl Scene {
             6 * m.n_nodes(),
         );
         if let Some(p) = m.planar {
+            let kernel = match m.planar_kernel_unsupported() {
+                None => "planar element kernel, 3 unknowns per free node".to_string(),
+                Some(why) => format!("3D element kernel ({why} is not in the planar kernel)"),
+            };
             let _ = writeln!(
                 s,
-                "planar: {} (normal e{}; CPU path: planar element kernel, 3 unknowns per free node)",
+                "planar: {} (normal e{}; CPU path: {kernel})",
                 p.name(),
                 p.normal + 1
             );
@@ -328,8 +332,38 @@ impl Scene {
         let n_pin = supports.iter().filter(|x| x.1 == "pin").count();
         let _ = writeln!(s, "supports: {n_clamp} clamps, {n_pin} pins");
         list(&mut s, supports.iter(), |(a, kind)| {
-            format!("{kind} at node {a} {}", fmt_vec(&m.nodes[*a]))
+            let slide = m
+                .slides
+                .iter()
+                .find(|sl| sl.node == *a)
+                .map_or_else(String::new, |sl| {
+                    format!(
+                        ", sliding along e{}{}",
+                        sl.axis + 1,
+                        if sl.spin { " and turning about it" } else { "" }
+                    )
+                });
+            format!("{kind} at node {a} {}{slide}", fmt_vec(&m.nodes[*a]))
         });
+
+        if !m.drives.is_empty() {
+            let _ = writeln!(s, "moving supports: {}", m.drives.len());
+            list(&mut s, m.drives.iter(), |d| {
+                format!(
+                    "node {} {}: displacement {}, rotation {} at factor 1, {} ramp over t = {} … {}",
+                    d.node,
+                    fmt_vec(&m.nodes[d.node]),
+                    fmt_vec(&d.displacement),
+                    fmt_vec(&d.rotation),
+                    match d.ramp {
+                        crate::model::Ramp::Linear => "linear",
+                        crate::model::Ramp::Smooth => "smooth",
+                    },
+                    fmt_num(d.table.times[0]),
+                    fmt_num(*d.table.times.last().unwrap_or(&0.0))
+                )
+            });
+        }
 
         let masses: Vec<(usize, f64)> = m
             .point_mass
@@ -380,10 +414,58 @@ impl Scene {
             )
         });
 
+        if !m.line_loads.is_empty() {
+            let _ = writeln!(s, "line loads: {}", m.line_loads.len());
+            list(&mut s, m.line_loads.iter(), |l| {
+                format!(
+                    "{} on {} elements: force {} and moment {} per length{}",
+                    if l.follower {
+                        "follower (director components)"
+                    } else {
+                        "dead"
+                    },
+                    l.elements.len(),
+                    fmt_vec(&l.force),
+                    fmt_vec(&l.moment),
+                    if l.table == crate::model::TimeTable::constant_one() {
+                        ""
+                    } else {
+                        ", scaled by a time table"
+                    },
+                )
+            });
+        }
         if m.gravity == Vec3::zeros() {
             let _ = writeln!(s, "gravity: none");
         } else {
             let _ = writeln!(s, "gravity: {}", fmt_vec(&m.gravity));
+        }
+
+        let sh = &m.shape;
+        if sh.positions.is_empty() {
+            let _ = writeln!(s, "initial configuration: the reference");
+        } else {
+            let (mut dx, mut dphi, mut moved) = (0.0f64, 0.0f64, 0usize);
+            for a in 0..m.n_nodes() {
+                let d = (m.initial_position(a) - m.nodes[a]).norm();
+                let phi = ((m.initial_rotation(a).trace() - 1.0) / 2.0)
+                    .clamp(-1.0, 1.0)
+                    .acos();
+                dx = dx.max(d);
+                dphi = dphi.max(phi);
+                moved += usize::from(d > 0.0 || phi > 0.0);
+            }
+            let _ = writeln!(
+                s,
+                "initial configuration: {moved} of {} nodes away from the reference (largest displacement {}, largest rotation {} rad)",
+                m.n_nodes(),
+                fmt_num(dx),
+                fmt_num(dphi)
+            );
+        }
+        let curved = sh.curvature.iter().filter(|k| **k != Vec3::zeros()).count();
+        if curved > 0 {
+            let _ = writeln!(s, "intrinsic curvature: on {curved} elements");
         }
 
         let moving: Vec<usize> = (0..m.n_nodes())

@@ -29,6 +29,8 @@ pub(crate) struct RawScene {
     #[serde(default)]
     pub load: Vec<RawLoad>,
     #[serde(default)]
+    pub line_load: Vec<RawLineLoad>,
+    #[serde(default)]
     pub link: Vec<RawLink>,
     #[serde(default)]
     pub initial_velocity: Vec<RawInitialVelocity>,
@@ -58,6 +60,7 @@ pub(crate) struct RawMaterial {
     #[serde(rename = "G")]
     pub g: Option<f64>,
     pub density: Option<f64>,
+    pub damping: Option<f64>,
 }
 
 /// `[section.NAME]`.
@@ -93,6 +96,23 @@ pub(crate) struct RawRod {
     /// An integer or an array of integers; checked by hand for a clearer message.
     pub elements: Option<toml::Value>,
     pub d1: Option<Vec<f64>>,
+    pub curvature: Option<Vec<f64>>,
+    pub drag: Option<f64>,
+    pub initial: Option<RawInitialShape>,
+}
+
+/// `[rod.initial]`: the rod's initial configuration apart from its reference shape.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawInitialShape {
+    pub positions: Option<Vec<Vec<f64>>>,
+    pub rotations: Option<Vec<Vec<f64>>>,
+    pub stretch: Option<f64>,
+    pub origin: Option<Vec<f64>>,
+    pub displacement: Option<Vec<Vec<f64>>>,
+    pub rotation: Option<Vec<f64>>,
+    pub center: Option<Vec<f64>>,
+    pub translation: Option<Vec<f64>>,
 }
 
 /// `[[clamp]]` and `[[pin]]`.
@@ -100,6 +120,13 @@ pub(crate) struct RawRod {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawSupport {
     pub at: Option<Vec<f64>>,
+    pub displacement: Option<Vec<f64>>,
+    pub rotation: Option<Vec<f64>>,
+    pub time: Option<Vec<f64>>,
+    pub factor: Option<Vec<f64>>,
+    pub ramp: Option<String>,
+    pub slide: Option<Vec<f64>>,
+    pub spin: Option<bool>,
 }
 
 /// `[[point_mass]]`.
@@ -121,6 +148,19 @@ pub(crate) struct RawLoad {
     pub factor: Option<Vec<f64>>,
 }
 
+/// `[[line_load]]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawLineLoad {
+    pub rod: Option<String>,
+    pub segment: Option<i64>,
+    pub force: Option<Vec<f64>>,
+    pub moment: Option<Vec<f64>>,
+    pub follower: Option<bool>,
+    pub time: Option<Vec<f64>>,
+    pub factor: Option<Vec<f64>>,
+}
+
 /// `[[link]]`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -137,6 +177,10 @@ pub(crate) struct RawLink {
 pub(crate) struct RawInitialVelocity {
     pub at: Option<Vec<f64>>,
     pub all: Option<bool>,
+    pub rod: Option<String>,
+    pub segment: Option<i64>,
+    pub v_nodes: Option<Vec<Vec<f64>>>,
+    pub omega_nodes: Option<Vec<Vec<f64>>>,
     pub center: Option<Vec<f64>>,
     pub v: Option<Vec<f64>>,
     pub omega: Option<Vec<f64>>,

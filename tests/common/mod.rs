@@ -13,6 +13,8 @@ pub fn props(e: f64, nu: f64, rho: f64, a: f64, i: f64, j: f64, h: f64) -> Eleme
         i_rho: Matrix2::new(rho * i, 0.0, 0.0, rho * i),
         c_gamma: Vec3::new(g * a, g * a, e * a),
         c_omega: Matrix3::new(e * i, 0.0, 0.0, 0.0, e * i, 0.0, 0.0, 0.0, g * j),
+        damping: 0.0,
+        drag: 0.0,
     }
 }
 
@@ -76,6 +78,10 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         rods: infos,
         links: vec![],
         planar: None,
+        shape: Default::default(),
+        line_loads: vec![],
+        drives: vec![],
+        slides: vec![],
     }
 }
 

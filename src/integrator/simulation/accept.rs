@@ -2,7 +2,7 @@
 //! step whose energy grows beyond the external work (energy-controlling schemes) or whose
 //! dissipation identity misses its tolerance is refused, never accepted.
 
-use super::{gather3, Mode, Simulation};
+use super::{Mode, Simulation};
 use crate::element::{consistent_scalars, kinematics, FrozenScalars};
 use crate::integrator::state::State;
 use crate::observe::{invariants, Invariants};
@@ -49,16 +49,21 @@ impl Simulation {
                 }
             }
         }
+        diss += self.drag_dissipation(q);
         (next, diss, consistent)
     }
 
-    pub(super) fn external_work(&self, q: &[f64]) -> f64 {
+    /// Work over the step at `q` of the loads (nodal, line, gravity) and of the driven
+    /// supports ([`Self::support_work`]).
+    pub(super) fn external_work(&self, q: &[f64], mode: Mode) -> f64 {
         let mut w = 0.0;
-        for (a, nd) in self.dofs.nodes.iter().enumerate() {
-            w += self.force[a].dot(&gather3(q, &nd.u));
-            w += self.moment[a].dot(&gather3(q, &nd.th));
+        for a in 0..self.dofs.nodes.len() {
+            // Loads at a driven support work on its prescribed motion.
+            let (u, th) = self.node_increment(a, q);
+            w += self.force[a].dot(&u);
+            w += self.moment[a].dot(&th);
         }
-        w
+        w + self.follower_work(q) + self.support_work(q, mode)
     }
 
     /// Checks energy and the dissipation identity of a converged increment; on success
@@ -70,7 +75,7 @@ impl Simulation {
     ) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), String> {
         let (next, diss, consistent) = self.advance(q, mode);
         let inv = invariants(&self.model, &self.data, &next);
-        let w = self.external_work(q);
+        let w = self.external_work(q, mode);
         let (h0, h1) = (self.inv.total(), inv.total());
         let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
         // The discrete energy identity holds exactly for an exact solution; a converged
@@ -93,7 +98,9 @@ impl Simulation {
                 growth / href
             ));
         }
-        if self.params.scheme.is_dissipative() {
+        let damped = self.params.scheme.controls_energy()
+            && (self.model.has_material_damping() || self.model.has_drag());
+        if self.params.scheme.is_dissipative() || damped {
             let miss = (h0 - h1 + w - diss).abs();
             if miss > self.params.outer_tol * href + residual_work {
                 return Err(format!(

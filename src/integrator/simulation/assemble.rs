@@ -137,6 +137,8 @@ impl Simulation {
                 }
             }
         }
+        self.add_follower_terms(q, tangent, r, &mut scale);
+        self.add_drag_terms(q, tangent, r, &mut scale);
         // Rigid links: the mid-point bar force (exactly energy-consistent, see `Link`).
         for (i, link) in self.model.links.iter().enumerate() {
             let a = link.node;

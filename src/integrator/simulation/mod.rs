@@ -20,6 +20,9 @@
 
 mod accept;
 mod assemble;
+mod drag;
+mod drive;
+mod follower;
 mod newton;
 mod planar;
 mod probe;
@@ -104,6 +107,9 @@ pub struct Simulation {
     frozen: Vec<FrozenScalars>,
     force: Vec<Vec3>,
     moment: Vec<Vec3>,
+    /// Prescribed increment `(u, θ)` of every node over the coming step (nonzero only at
+    /// driven supports; [`Model::drives`]).
+    prescribed: Vec<[Vec3; 2]>,
     /// The generalized-α baseline's own state and Newton machinery (only for
     /// [`Scheme::GenAlpha`], which steps through it instead of the element kernel's
     /// mid-point residual).
@@ -220,6 +226,7 @@ impl Simulation {
             last_residual: vec![0.0; dofs.n],
             force: vec![Vec3::zeros(); nn],
             moment: vec![Vec3::zeros(); nn],
+            prescribed: vec![[Vec3::zeros(); 2]; nn],
             model,
             params,
             data,
@@ -420,7 +427,32 @@ impl Simulation {
                 x[i] = q[m[i]];
             }
         }
+        if !self.model.drives.is_empty() {
+            // Removed unknowns of a driven support move by the prescribed increment.
+            for (l, &a) in self.model.elements[e].nodes.iter().enumerate() {
+                let [u, th] = self.prescribed[a];
+                for c in 0..3 {
+                    if m[u_idx(l) + c] == NONE {
+                        x[u_idx(l) + c] = u[c];
+                    }
+                    if m[th_idx(l) + c] == NONE {
+                        x[th_idx(l) + c] = th[c];
+                    }
+                }
+            }
+        }
         Increment::from_local(&x)
+    }
+
+    /// The increment `(u, θ)` of node `a` at `q`: the unknowns where they exist, the
+    /// prescribed motion of a driven support where they were removed.
+    fn node_increment(&self, a: usize, q: &[f64]) -> (Vec3, Vec3) {
+        let nd = &self.dofs.nodes[a];
+        let [pu, pt] = self.prescribed[a];
+        let pick = |idx: &[usize; 3], p: &Vec3| {
+            Vec3::from_fn(|c, _| if idx[c] == NONE { p[c] } else { q[idx[c]] })
+        };
+        (pick(&nd.u, &pu), pick(&nd.th, &pt))
     }
 
     fn consts(&self) -> StepConsts {

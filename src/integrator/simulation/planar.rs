@@ -41,6 +41,10 @@ impl PlanarKernel {
         slots: &[Vec<usize>],
     ) -> Option<Self> {
         let plane = model.planar?;
+        if model.planar_kernel_unsupported().is_some() {
+            // The 3D kernel (with the out-of-plane unknowns removed) runs such a model.
+            return None;
+        }
         let pdata: Vec<PlanarData> = model
             .elements
             .iter()

@@ -3,8 +3,9 @@
 //! round a complete checked solve ([`super::strategy`]) with the multipliers fixed. The
 //! generalized-α baseline steps through its own Newton loop instead.
 
-use super::{Backend, Simulation};
+use super::{Backend, Mode, Simulation};
 use crate::integrator::evaluate::now;
+use crate::integrator::params::Strategy;
 use crate::integrator::report::{StepFailure, StepReport};
 use crate::integrator::{finite, links};
 use crate::model::Vec3;
@@ -57,6 +58,7 @@ impl Simulation {
                         agg.residual = agg.residual.max(r.residual);
                         agg.dissipation += r.dissipation;
                         agg.external_work += r.external_work;
+                        agg.support_work += r.support_work;
                         agg.acc_trans = agg.acc_trans.max(r.acc_trans);
                         agg.acc_rot = agg.acc_rot.max(r.acc_rot);
                         agg.max_link_g = agg.max_link_g.max(r.max_link_g);
@@ -100,6 +102,24 @@ impl Simulation {
                     residuals: vec![],
                 });
             }
+            if !self.model.drives.is_empty() {
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support moving supports; use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
+            if self.model.has_material_damping() || self.model.has_drag() {
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support material damping or drag; use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
+            if self.model.has_follower_loads() {
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support follower loads ([[line_load]] follower = true); use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
             return self.step_gen_alpha();
         }
         self.fell_back = false;
@@ -140,6 +160,16 @@ impl Simulation {
                     .map(|l| l.strain(&next.r[l.node]))
                     .collect();
                 let max_link_g = g1.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+                // The driven supports' share of W, with the scalars the step was solved
+                // with (frozen, unless the monolithic strategy or fallback solved it).
+                let mode = if self.params.scheme.is_dissipative()
+                    && (self.params.strategy == Strategy::Monolithic || self.fell_back)
+                {
+                    Mode::Consistent
+                } else {
+                    Mode::Frozen
+                };
+                let support_work = self.support_work(&q, mode);
                 if multipliers.update(&self.model.links, &g1, &mut self.state.lambda) {
                     let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
                     let report = StepReport {
@@ -148,6 +178,7 @@ impl Simulation {
                         residual: res,
                         dissipation: diss,
                         external_work: w,
+                        support_work,
                         acc_trans: at,
                         acc_rot: ar,
                         max_link_g,
@@ -214,6 +245,7 @@ impl Simulation {
             residual: out.residual,
             dissipation: 0.0,
             external_work: out.external_work,
+            support_work: 0.0,
             acc_trans: at,
             acc_rot: ar,
             max_link_g: 0.0,
@@ -228,8 +260,9 @@ impl Simulation {
         Ok(report)
     }
 
-    /// The external loads at the middle of the coming step (the step uses them; so do the
-    /// test entry points of `probe`).
+    /// The external loads at the middle of the coming step and the prescribed motion of
+    /// driven supports over it (the step uses them; so do the test entry points of
+    /// `probe`).
     pub(super) fn mid_step_loads(&mut self) {
         let t_mid = self.state.t + 0.5 * self.params.dt;
         let (mut f, mut m) = (
@@ -239,5 +272,13 @@ impl Simulation {
         self.model.external_loads(t_mid, &mut f, &mut m);
         self.force = f;
         self.moment = m;
+        let t = self.state.t;
+        for p in &mut self.prescribed {
+            *p = [Vec3::zeros(); 2];
+        }
+        for d in &self.model.drives {
+            let (u, th) = d.increment(t, t + self.params.dt);
+            self.prescribed[d.node] = [u, th];
+        }
     }
 }

@@ -19,9 +19,16 @@ impl Simulation {
         total_iters: &mut usize,
     ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
         if !self.params.scheme.is_dissipative() {
-            self.frozen
-                .iter_mut()
-                .for_each(|s| *s = FrozenScalars::default());
+            // Only Kelvin–Voigt damping (a constant β = 2η/Δt) dissipates.
+            let dt = self.params.dt;
+            for (s, d) in self.frozen.iter_mut().zip(&self.data) {
+                let kv = crate::element::kelvin_voigt_beta(&d.props, dt);
+                *s = FrozenScalars {
+                    beta_gamma: kv,
+                    beta_omega: kv,
+                    ..FrozenScalars::default()
+                };
+            }
             return self.solve_once(q, Mode::Frozen, total_iters).await;
         }
         match self.params.strategy {
