@@ -66,6 +66,9 @@ struct Params {
 // ‖b − A x‖∞ / (‖A‖∞ ‖x‖∞ + ‖b‖∞).
 @group(0) @binding(8) var<storage, read_write> berr: array<Real>;
 @group(0) @binding(9) var<uniform> prm: Params;
+// Per node slot 9 values added to the stored residual before it becomes the right-hand
+// side (the host's nodal terms: external loads, moments).
+@group(0) @binding(10) var<storage, read> extra: array<Real>;
 
 fn fbase(m: u32) -> u32 { return m * 243u * prm.npn; }
 fn kbase(m: u32) -> u32 { return prm.k_start + m * prm.kpm; }
@@ -200,11 +203,11 @@ fn factor(m: u32, n: u32) -> u32 {
     return OK;
 }
 
-// The masked right-hand side entry r of node i of member m.
+// The masked right-hand side entry r of node i of member m: ± (stored residual + extra).
 fn rhs(m: u32, i: u32, r: u32) -> Real {
     let mi = mask[m * prm.npn + i];
     if ((mi >> r) & 1u) == 0u { return 0.0; }
-    let v = sys[m * prm.rpm + 9u * i + r];
+    let v = sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
     if prm.negate != 0u { return -v; }
     return v;
 }

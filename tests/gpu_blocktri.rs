@@ -273,7 +273,15 @@ fn twin(b: &Batch) -> Twin {
     for m in 0..members {
         status[m] = batched::factor(&b.l, &b.sys, &b.masks, m, b.nodes[m], &mut fac, &mut piv);
         if status[m] == OK {
-            let (s, e) = batched::solve(&b.l, &b.sys, &b.masks, m, b.nodes[m], &fac, &piv, &mut xs);
+            let io = batched::SolveIo {
+                l: &b.l,
+                sys: &b.sys,
+                mask: &b.masks,
+                extra: None,
+                fac: &fac,
+                piv: &piv,
+            };
+            let (s, e) = batched::solve(&io, m, b.nodes[m], &mut xs);
             status[m] = s;
             berr[m] = e;
         }
@@ -419,16 +427,15 @@ fn device_solver_matches_twin() {
     let ax = again.x.as_ref().unwrap();
     let mut xs2 = vec![0.0; xs.len()];
     for &(m, _) in &solve_only {
-        let (st, _) = batched::solve(
-            &b2.l,
-            &b2.sys,
-            &b2.masks,
-            m,
-            b2.nodes[m],
-            &fac,
-            &piv,
-            &mut xs2,
-        );
+        let io = batched::SolveIo {
+            l: &b2.l,
+            sys: &b2.sys,
+            mask: &b2.masks,
+            extra: None,
+            fac: &fac,
+            piv: &piv,
+        };
+        let (st, _) = batched::solve(&io, m, b2.nodes[m], &mut xs2);
         assert_eq!(again.status[m], st);
         let (a, rhs, dim) = dense(&b2, m);
         let x = &ax[m * 9 * NPN..m * 9 * NPN + dim];

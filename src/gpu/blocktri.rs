@@ -59,6 +59,9 @@ pub struct BlockTriSolver {
     status: wgpu::Buffer,
     berr: wgpu::Buffer,
     staging: wgpu::Buffer,
+    extra: wgpu::Buffer,
+    extra_host: Vec<f64>,
+    extra_dirty: Vec<bool>,
     /// Factors and pivots: only ever touched by the shader (kept alive with the solver).
     _fac_piv: [wgpu::Buffer; 2],
     mask_host: Vec<u32>,
@@ -151,6 +154,7 @@ impl BlockTriSolver {
                 entry(7, rw),
                 entry(8, rw),
                 entry(9, wgpu::BufferBindingType::Uniform),
+                entry(10, ro),
             ],
         });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -183,6 +187,9 @@ impl BlockTriSolver {
         let ops = storage(&device, "ops", 4 * members as u64, dst);
         let status = storage(&device, "status", 4 * members as u64, src | dst);
         let berr = storage(&device, "backward errors", 8 * members as u64, src);
+        let extra = storage(&device, "rhs extras", 8 * xn, dst);
+        ctx.queue
+            .write_buffer(&extra, 0, bytemuck::cast_slice(&vec![0.0f64; xn as usize]));
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("blocktri staging"),
             size: 8 * xn + 12 * members as u64,
@@ -208,7 +215,7 @@ impl BlockTriSolver {
         ctx.queue
             .write_buffer(&status, 0, bytemuck::cast_slice(&vec![0u32; members]));
         let bufs = [
-            sys, &fac, &piv, &xs, &mask, &member_n, &ops, &status, &berr, &params,
+            sys, &fac, &piv, &xs, &mask, &member_n, &ops, &status, &berr, &params, &extra,
         ];
         let entries: Vec<wgpu::BindGroupEntry> = bufs
             .iter()
@@ -239,6 +246,9 @@ impl BlockTriSolver {
             berr,
             staging,
             _fac_piv: [fac, piv],
+            extra,
+            extra_host: vec![0.0; xn as usize],
+            extra_dirty: vec![false; members],
             mask_host: vec![0; layout.npn * members],
             n_host: vec![0; members],
             topo_dirty: true,
@@ -273,6 +283,22 @@ impl BlockTriSolver {
         self.topo_dirty = true;
     }
 
+    /// Sets the values added to member `m`'s stored residual (node-local, one row of 9
+    /// per node) before it becomes the right-hand side; uploaded with the next
+    /// [`Self::encode`] where they changed.
+    pub fn set_extra(&mut self, m: usize, rows: &[[f64; 9]]) {
+        let npn = self.layout.npn;
+        let dst = &mut self.extra_host[9 * m * npn..9 * (m + 1) * npn];
+        let mut changed = false;
+        for (j, row) in rows.iter().enumerate().take(npn) {
+            for (k, &v) in row.iter().enumerate() {
+                changed |= dst[9 * j + k] != v;
+                dst[9 * j + k] = v;
+            }
+        }
+        self.extra_dirty[m] |= changed;
+    }
+
     /// Records the factor and solve passes into `enc` for the members of `ops`
     /// (`(slot, OP_FACTOR | OP_SOLVE)`; the others do nothing), uploading what changed.
     pub fn encode(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
@@ -282,6 +308,14 @@ impl BlockTriSolver {
             self.queue
                 .write_buffer(&self.member_n, 0, bytemuck::cast_slice(&self.n_host));
             self.topo_dirty = false;
+        }
+        let w = 9 * self.layout.npn;
+        for (lo, hi) in super::kernel::take_runs(&mut self.extra_dirty) {
+            self.queue.write_buffer(
+                &self.extra,
+                8 * (w * lo) as u64,
+                bytemuck::cast_slice(&self.extra_host[w * lo..w * hi]),
+            );
         }
         let mut new = vec![0u32; self.members];
         for &(m, o) in ops {
@@ -310,22 +344,51 @@ impl BlockTriSolver {
     }
 
     /// Encodes, submits and waits; reads back every member's status and backward error
-    /// and, with `read_x`, the solutions.
+    /// and, with `read_x`, every member's solution.
     pub fn run(&mut self, ops: &[(usize, u32)], read_x: bool) -> Result<Solved, GpuError> {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         self.encode(&mut enc, ops);
+        self.queue.submit(Some(enc.finish()));
+        let all: Vec<usize> = if read_x {
+            (0..self.members).collect()
+        } else {
+            Vec::new()
+        };
+        self.read(&all)
+    }
+
+    /// Reads back (after the work encoded with [`Self::encode`] was submitted) every
+    /// member's status and backward error (12 bytes per slot) and the solutions of the
+    /// member slots `x_of` (72 bytes per node slot); `Solved::x` is `None` when `x_of` is
+    /// empty, else holds the whole solution buffer with the other slots left zero.
+    pub fn read(&mut self, x_of: &[usize]) -> Result<Solved, GpuError> {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let mb = self.members as u64;
-        let xb = 8 * (self.layout.x_per_member() as u64) * mb;
+        let per = 8 * self.layout.x_per_member() as u64;
         enc.copy_buffer_to_buffer(&self.status, 0, &self.staging, 0, 4 * mb);
         enc.copy_buffer_to_buffer(&self.berr, 0, &self.staging, 4 * mb, 8 * mb);
-        let end = if read_x {
-            enc.copy_buffer_to_buffer(&self.xs, 0, &self.staging, 12 * mb, xb);
-            12 * mb + xb
-        } else {
-            12 * mb
-        };
+        let mut sorted = x_of.to_vec();
+        sorted.sort_unstable();
+        sorted.dedup();
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        for m in sorted {
+            match runs.last_mut() {
+                Some(last) if last.1 == m => last.1 = m + 1,
+                _ => runs.push((m, m + 1)),
+            }
+        }
+        let mut end = 12 * mb;
+        let mut down = 12 * mb;
+        for &(lo, hi) in &runs {
+            let (at, len) = (per * lo as u64, per * (hi - lo) as u64);
+            enc.copy_buffer_to_buffer(&self.xs, at, &self.staging, 12 * mb + at, len);
+            end = end.max(12 * mb + at + len);
+            down += len;
+        }
         self.queue.submit(Some(enc.finish()));
         let (tx, rx) = std::sync::mpsc::channel();
         self.staging
@@ -348,11 +411,21 @@ impl BlockTriSolver {
             let status: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[..4 * mb as usize]);
             let berr: Vec<f64> =
                 bytemuck::pod_collect_to_vec(&bytes[4 * mb as usize..12 * mb as usize]);
-            let x = read_x.then(|| bytemuck::pod_collect_to_vec(&bytes[12 * mb as usize..]));
+            let x = (!runs.is_empty()).then(|| {
+                let mut x = vec![0.0; self.layout.x_per_member() * self.members];
+                for &(lo, hi) in &runs {
+                    let (a, b) = (12 * mb + per * lo as u64, 12 * mb + per * hi as u64);
+                    let src: Vec<f64> =
+                        bytemuck::pod_collect_to_vec(&bytes[a as usize..b as usize]);
+                    let w = self.layout.x_per_member();
+                    x[w * lo..w * hi].copy_from_slice(&src);
+                }
+                x
+            });
             Solved { status, berr, x }
         };
         self.staging.unmap();
-        self.last_bytes_down = end;
+        self.last_bytes_down = down;
         Ok(out)
     }
 }

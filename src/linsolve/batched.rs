@@ -187,13 +187,15 @@ pub fn factor(
     OK
 }
 
-/// The masked right-hand side entry `r` of node `i` of member `m`.
+/// The masked right-hand side entry `r` of node `i` of member `m`: ± (stored residual +
+/// extra).
 #[inline]
-fn rhs(l: &BatchLayout, sys: &[f64], mask: &[u32], m: usize, i: usize, r: usize) -> f64 {
+fn rhs(io: &SolveIo, m: usize, i: usize, r: usize) -> f64 {
+    let (l, sys, mask) = (io.l, io.sys, io.mask);
     if (mask[m * l.npn + i] >> r) & 1 == 0 {
         return 0.0;
     }
-    let v = sys[m * l.rpm + 9 * i + r];
+    let v = sys[m * l.rpm + 9 * i + r] + io.extra.map_or(0.0, |e| e[9 * (m * l.npn + i) + r]);
     if l.negate {
         -v
     } else {
@@ -201,20 +203,28 @@ fn rhs(l: &BatchLayout, sys: &[f64], mask: &[u32], m: usize, i: usize, r: usize)
     }
 }
 
+/// The read-only inputs of a solve.
+#[derive(Clone, Copy, Debug)]
+pub struct SolveIo<'a> {
+    /// The layout.
+    pub l: &'a BatchLayout,
+    /// The system buffer.
+    pub sys: &'a [f64],
+    /// One mask per node slot.
+    pub mask: &'a [u32],
+    /// Per node slot 9 values added to the stored residual (`None`: zeros).
+    pub extra: Option<&'a [f64]>,
+    /// The factor buffer.
+    pub fac: &'a [f64],
+    /// The pivot buffer.
+    pub piv: &'a [u32],
+}
+
 /// Solves member `m` (`n` nodes) with its factors into its slice of `xs`. Returns the
 /// status ([`OK`] or [`NONFINITE`]) and the normwise backward error
 /// `‖b − A x‖∞ / (‖A‖∞ ‖x‖∞ + ‖b‖∞)` of the masked system.
-#[allow(clippy::too_many_arguments)]
-pub fn solve(
-    l: &BatchLayout,
-    sys: &[f64],
-    mask: &[u32],
-    m: usize,
-    n: usize,
-    fac: &[f64],
-    piv: &[u32],
-    xs: &mut [f64],
-) -> (u32, f64) {
+pub fn solve(io: &SolveIo, m: usize, n: usize, xs: &mut [f64]) -> (u32, f64) {
+    let (l, sys, mask, fac, piv) = (io.l, io.sys, io.mask, io.fac, io.piv);
     let npn = l.npn;
     let f = &fac[m * l.fac_per_member()..(m + 1) * l.fac_per_member()];
     let piv = &piv[m * l.x_per_member()..(m + 1) * l.x_per_member()];
@@ -222,7 +232,7 @@ pub fn solve(
     let a = l.k_start + m * l.kpm;
     for i in 0..n {
         for r in 0..9 {
-            let mut acc = rhs(l, sys, mask, m, i, r);
+            let mut acc = rhs(io, m, i, r);
             if i > 0 {
                 let lb = 81 * (2 * npn + i - 1);
                 for c in 0..9 {
@@ -248,7 +258,7 @@ pub fn solve(
     for i in 0..n {
         let mi = mask[m * npn + i];
         for r in 0..9 {
-            let b = rhs(l, sys, mask, m, i, r);
+            let b = rhs(io, m, i, r);
             let mut acc = b;
             let mut rs = 0.0;
             for c in 0..9 {
