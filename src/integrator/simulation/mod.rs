@@ -114,6 +114,11 @@ pub struct Simulation {
     /// Set when the current step's staggered loop failed and the monolithic fallback
     /// solved it (reset at the start of every step).
     fell_back: bool,
+    /// `--solve device`: the attached lockstep evaluator also solves each frozen-scalar
+    /// Newton system on the device ([`Self::set_device_solve`]).
+    device_solve: bool,
+    /// The device's solution of the last evaluation, when it solved one.
+    device_x: Option<crate::integrator::evaluate::DeviceSolution>,
 }
 
 impl Simulation {
@@ -243,6 +248,8 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
+            device_solve: false,
+            device_x: None,
         })
     }
 
@@ -281,6 +288,19 @@ impl Simulation {
     /// stepped by that driver ([`crate::batch`]), not by [`Self::step`].
     pub fn set_port(&mut self, port: EvalPort) -> bool {
         self.attach(Backend::Lockstep(port))
+    }
+
+    /// Whether the device solves this simulation's block-tridiagonal Newton systems
+    /// (`--solve device`); only meaningful with an evaluator attached, and only for a
+    /// member the device solver covers (see `crate::batch::gpu::GpuEvaluator::attach`).
+    pub fn set_device_solve(&mut self, on: bool) {
+        self.device_solve = on;
+        self.device_x = None;
+    }
+
+    /// Whether the device solves this simulation's Newton systems.
+    pub fn device_solve(&self) -> bool {
+        self.device_solve
     }
 
     fn attach(&mut self, backend: Backend) -> bool {
