@@ -41,6 +41,8 @@ pub struct SweepOptions {
     pub fallback: Option<bool>,
     /// Overrides every member's step cut-back when set (`IntegratorParams::cutback`).
     pub cutback: Option<usize>,
+    /// GPU path: where the Newton systems are solved (recorded in `sweep.json`).
+    pub solve: crate::batch::SolveMode,
 }
 
 /// One row of `members.csv`.
@@ -571,6 +573,7 @@ pub fn run_sweep(
             newton: opts.newton,
             fallback: opts.fallback,
             cutback: opts.cutback,
+            solve: opts.solve,
             ..Default::default()
         },
         |r: MemberResult| {
@@ -642,6 +645,7 @@ pub fn run_sweep(
         "skipped": summary.skipped,
         "repaired_bytes": summary.repaired_bytes,
         "backend": exec.describe(),
+        "solve": opts.solve.name(),
         "wall_s": summary.wall_s,
     });
     let path = out.join("sweep.json");
