@@ -69,7 +69,7 @@ struct Batch {
     kinds: Vec<Kind>,
 }
 
-const NPN: usize = 12;
+const NPN: usize = 60;
 const ALL: u32 = 0x1ff;
 
 fn build(seed: u64) -> Batch {

@@ -201,6 +201,15 @@ impl GpuEvaluator {
         self.register(slot, sim)?;
         let port = EvalPort::new(&self.adapter);
         sim.set_port(port.clone());
+        self.connect_device(slot, sim);
+        self.ports[slot] = Some(port);
+        Ok(true)
+    }
+
+    /// With a device solver: registers `slot`'s node masks and switches `sim` to device
+    /// solves when the solver covers it ([`device_solve_refusal`]); returns whether it
+    /// does.
+    fn connect_device(&mut self, slot: usize, sim: &mut Simulation) -> bool {
         let on = match &mut self.solver {
             Some(solver) if device_solve_refusal(sim).is_none() => {
                 let masks: Vec<u32> = sim
@@ -228,8 +237,7 @@ impl GpuEvaluator {
         };
         self.device[slot] = on;
         sim.set_device_solve(on);
-        self.ports[slot] = Some(port);
-        Ok(true)
+        on
     }
 
     /// Frees `slot` (its member finished).
@@ -420,6 +428,20 @@ impl GpuBatcher {
     /// See [`GpuEvaluator::register`].
     pub fn register(&self, slot: usize, sim: &Simulation) -> Result<(), GpuError> {
         self.lock().register(slot, sim)
+    }
+
+    /// `--solve device`: builds the device block solver ([`GpuEvaluator::enable_device_solve`]).
+    pub fn enable_device_solve(&self, ctx: &GpuContext) -> Result<(), GpuError> {
+        self.lock().enable_device_solve(ctx)
+    }
+
+    /// Registers `sim` in `slot` and, with a device solver that covers it, switches it to
+    /// device solves. Returns whether its systems are solved on the device; the reason
+    /// when not is [`device_solve_refusal`].
+    pub fn register_device(&self, slot: usize, sim: &mut Simulation) -> Result<bool, GpuError> {
+        let mut g = self.lock();
+        g.register(slot, sim)?;
+        Ok(g.connect_device(slot, sim))
     }
 
     /// Layout of the assembled buffer.

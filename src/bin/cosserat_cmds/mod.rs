@@ -102,11 +102,14 @@ pub fn attach(
     sim: &mut Simulation,
     backend: BackendArg,
     adapter: Option<&str>,
+    solve: SolveArg,
 ) -> Result<Option<Arc<GpuBatcher>>> {
     if backend == BackendArg::Cpu {
+        check_solve(solve, &Executor::Cpu)?;
         return Ok(None);
     }
     let exec = executor(backend, adapter)?;
+    let solve = check_solve(solve, &exec)?;
     println!("backend: {}", exec.describe());
     match exec {
         Executor::Cpu => Ok(None),
@@ -124,8 +127,16 @@ pub fn attach(
                 sim.model().elements.len(),
                 sim.model().n_nodes(),
             )?);
-            b.register(0, sim)?;
             let _ = sim.set_backend(b.clone(), 0);
+            if solve == SolveMode::Device {
+                b.enable_device_solve(&ctx)?;
+                if !b.register_device(0, sim)? {
+                    let why = cosserat::batch::gpu::device_solve_refusal(sim).unwrap_or("");
+                    bail!("--solve device: the device solver does not cover this scene ({why}); run it with --solve host");
+                }
+            } else {
+                b.register(0, sim)?;
+            }
             Ok(Some(b))
         }
     }
