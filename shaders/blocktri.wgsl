@@ -18,6 +18,13 @@
 // pivots of the real unknowns, and their solution is 0.
 //
 // f64 only (rational operations; the adapter must offer SHADER_F64).
+//
+// Chunks: a dispatch processes the nodes [lo, hi) of every member (the host dispatches the
+// chunks in order: factor and forward sweep ascending, backward sweep descending, the
+// backward error ascending), so that one invocation never runs more than a few ten
+// thousand loop iterations: Mesa's llvmpipe/lavapipe stops any invocation after 65 535
+// loop iterations (its infinite-loop guard), which cut the factorization of rods longer
+// than ≈ 44 nodes when one invocation did the whole member.
 
 alias Real = f64;
 
@@ -42,8 +49,9 @@ struct Params {
     rpm: u32,
     // 1: the right-hand side is minus the stored residual.
     negate: u32,
-    pad0: u32,
-    pad1: u32,
+    // This dispatch's node chunk [lo, hi) (see "Chunks" above).
+    lo: u32,
+    hi: u32,
 }
 
 @group(0) @binding(0) var<storage, read> sys: array<Real>;
@@ -69,6 +77,9 @@ struct Params {
 // Per node slot 9 values added to the stored residual before it becomes the right-hand
 // side (the host's nodal terms: external loads, moments).
 @group(0) @binding(10) var<storage, read> extra: array<Real>;
+// Per member slot: running backward-error terms (residual, ‖A‖, ‖x‖, ‖b‖; the last is
+// negative once a non-finite value was seen).
+@group(0) @binding(11) var<storage, read_write> acc: array<Real>;
 
 fn fbase(m: u32) -> u32 { return m * 243u * prm.npn; }
 fn kbase(m: u32) -> u32 { return prm.k_start + m * prm.kpm; }
@@ -129,35 +140,42 @@ fn lu_apply_x(s: u32, p: u32, at: u32) {
     }
 }
 
-// Factorizes member m (n nodes); returns its status.
-fn factor(m: u32, n: u32) -> u32 {
+// Copies node i's masked blocks: D_i into the S slot, U_i into the W slot, L_i into the
+// L slot.
+fn load_node(m: u32, n: u32, i: u32) {
     let f = fbase(m);
     let a = kbase(m);
     let npn = prm.npn;
-    let nodes = m * npn;
-    // Masked copies: D_i into the S slots, U_i into the W slots, L_i into the L slots.
-    for (var i = 0u; i < n; i++) {
-        let mi = mask[nodes + i];
+    let mi = mask[m * npn + i];
+    for (var r = 0u; r < 9u; r++) {
+        for (var c = 0u; c < 9u; c++) {
+            fac[f + 81u * i + 9u * r + c] =
+                masked(sys[a + 81u * i + 9u * r + c], mi, mi, r, c, true);
+        }
+    }
+    if i + 1u < n {
+        let mj = mask[m * npn + i + 1u];
+        let off = a + 81u * npn + 162u * i;
         for (var r = 0u; r < 9u; r++) {
             for (var c = 0u; c < 9u; c++) {
-                fac[f + 81u * i + 9u * r + c] =
-                    masked(sys[a + 81u * i + 9u * r + c], mi, mi, r, c, true);
-            }
-        }
-        if i + 1u < n {
-            let mj = mask[nodes + i + 1u];
-            let off = a + 81u * npn + 162u * i;
-            for (var r = 0u; r < 9u; r++) {
-                for (var c = 0u; c < 9u; c++) {
-                    fac[f + 81u * (npn + i) + 9u * r + c] =
-                        masked(sys[off + 9u * r + c], mi, mj, r, c, false);
-                    fac[f + 81u * (2u * npn + i) + 9u * r + c] =
-                        masked(sys[off + 81u + 9u * r + c], mj, mi, r, c, false);
-                }
+                fac[f + 81u * (npn + i) + 9u * r + c] =
+                    masked(sys[off + 9u * r + c], mi, mj, r, c, false);
+                fac[f + 81u * (2u * npn + i) + 9u * r + c] =
+                    masked(sys[off + 81u + 9u * r + c], mj, mi, r, c, false);
             }
         }
     }
-    for (var i = 0u; i < n; i++) {
+}
+
+// Factorization steps lo ≤ i < hi of member m (n nodes); returns its status. Step i
+// needs S_i (D_i minus the update of step i − 1), U_i, L_i and D_{i+1}: a chunk loads the
+// blocks of nodes lo + 1 … hi (and node 0 in the first chunk) before its steps.
+fn factor(m: u32, n: u32, lo: u32, hi: u32) -> u32 {
+    let f = fbase(m);
+    let npn = prm.npn;
+    if lo == 0u { load_node(m, n, 0u); }
+    for (var i = lo + 1u; i < min(hi + 1u, n); i++) { load_node(m, n, i); }
+    for (var i = lo; i < hi; i++) {
         let s = f + 81u * i;
         let p = m * 9u * npn + 9u * i;
         // LU of S_i with partial pivoting (first largest magnitude), rows swapped whole.
@@ -212,49 +230,71 @@ fn rhs(m: u32, i: u32, r: u32) -> Real {
     return v;
 }
 
-// Solves member m (n nodes) with its factors; returns NONFINITE for a non-finite solution
-// and writes the backward error.
-fn solve(m: u32, n: u32) -> u32 {
+// Forward sweep over nodes lo ≤ i < hi of member m: y_i = S_i⁻¹ (b_i − L_{i−1} y_{i−1}).
+fn forward(m: u32, lo: u32, hi: u32) {
+    let f = fbase(m);
+    let npn = prm.npn;
+    let x = m * 9u * npn;
+    for (var i = lo; i < hi; i++) {
+        for (var r = 0u; r < 9u; r++) {
+            var a = rhs(m, i, r);
+            if i > 0u {
+                let l = f + 81u * (2u * npn + i - 1u);
+                for (var c = 0u; c < 9u; c++) { a -= fac[l + 9u * r + c] * xs[x + 9u * (i - 1u) + c]; }
+            }
+            xs[x + 9u * i + r] = a;
+        }
+        lu_apply_x(f + 81u * i, m * 9u * npn + 9u * i, x + 9u * i);
+    }
+}
+
+// Backward sweep over nodes hi > i ≥ lo (i < n − 1) of member m: x_i = y_i − W_i x_{i+1}.
+fn backward(m: u32, n: u32, lo: u32, hi: u32) {
+    let f = fbase(m);
+    let npn = prm.npn;
+    let x = m * 9u * npn;
+    for (var ii = lo; ii < hi; ii++) {
+        let i = hi - 1u - (ii - lo);
+        if i + 1u >= n { continue; }
+        let w = f + 81u * (npn + i);
+        for (var r = 0u; r < 9u; r++) {
+            var a = xs[x + 9u * i + r];
+            for (var c = 0u; c < 9u; c++) { a -= fac[w + 9u * r + c] * xs[x + 9u * (i + 1u) + c]; }
+            xs[x + 9u * i + r] = a;
+        }
+    }
+}
+
+// Backward-error terms of nodes lo ≤ i < hi of member m against the masked system
+// (diagonal and upper blocks from `sys`, the masked lower blocks kept in `fac`),
+// accumulated in `acc`; the last chunk writes the backward error and returns the status.
+fn backward_error(m: u32, n: u32, lo: u32, hi: u32) -> u32 {
     let f = fbase(m);
     let a = kbase(m);
     let npn = prm.npn;
     let x = m * 9u * npn;
-    for (var i = 0u; i < n; i++) {
-        for (var r = 0u; r < 9u; r++) {
-            var acc = rhs(m, i, r);
-            if i > 0u {
-                let l = f + 81u * (2u * npn + i - 1u);
-                for (var c = 0u; c < 9u; c++) { acc -= fac[l + 9u * r + c] * xs[x + 9u * (i - 1u) + c]; }
-            }
-            xs[x + 9u * i + r] = acc;
-        }
-        lu_apply_x(f + 81u * i, m * 9u * npn + 9u * i, x + 9u * i);
-    }
-    for (var ii = 1u; ii < n; ii++) {
-        let i = n - 1u - ii;
-        let w = f + 81u * (npn + i);
-        for (var r = 0u; r < 9u; r++) {
-            var acc = xs[x + 9u * i + r];
-            for (var c = 0u; c < 9u; c++) { acc -= fac[w + 9u * r + c] * xs[x + 9u * (i + 1u) + c]; }
-            xs[x + 9u * i + r] = acc;
-        }
-    }
-    // Backward error against the masked system (diagonal and upper blocks from `sys`, the
-    // masked lower blocks kept in `fac`).
     var res: Real = 0.0;
     var anorm: Real = 0.0;
     var xnorm: Real = 0.0;
     var bnorm: Real = 0.0;
     var finite = true;
-    for (var i = 0u; i < n; i++) {
+    if lo > 0u {
+        res = acc[4u * m];
+        anorm = acc[4u * m + 1u];
+        xnorm = acc[4u * m + 2u];
+        bnorm = acc[4u * m + 3u];
+        finite = bnorm >= 0.0;
+        bnorm = abs(bnorm);
+    }
+    for (var i = lo; i < hi; i++) {
         let mi = mask[m * npn + i];
         for (var r = 0u; r < 9u; r++) {
             let b = rhs(m, i, r);
-            var acc = b;
+            var t = b;
             var rs: Real = 0.0;
             for (var c = 0u; c < 9u; c++) {
                 let v = masked(sys[a + 81u * i + 9u * r + c], mi, mi, r, c, true);
-                acc -= v * xs[x + 9u * i + c];
+                t -= v * xs[x + 9u * i + c];
                 rs += abs(v);
             }
             if i + 1u < n {
@@ -262,7 +302,7 @@ fn solve(m: u32, n: u32) -> u32 {
                 let off = a + 81u * npn + 162u * i;
                 for (var c = 0u; c < 9u; c++) {
                     let v = masked(sys[off + 9u * r + c], mi, mj, r, c, false);
-                    acc -= v * xs[x + 9u * (i + 1u) + c];
+                    t -= v * xs[x + 9u * (i + 1u) + c];
                     rs += abs(v);
                 }
             }
@@ -270,17 +310,24 @@ fn solve(m: u32, n: u32) -> u32 {
                 let l = f + 81u * (2u * npn + i - 1u);
                 for (var c = 0u; c < 9u; c++) {
                     let v = fac[l + 9u * r + c];
-                    acc -= v * xs[x + 9u * (i - 1u) + c];
+                    t -= v * xs[x + 9u * (i - 1u) + c];
                     rs += abs(v);
                 }
             }
             let xv = xs[x + 9u * i + r];
             finite = finite && is_finite(xv);
-            res = max(res, abs(acc));
+            res = max(res, abs(t));
             anorm = max(anorm, rs);
             xnorm = max(xnorm, abs(xv));
             bnorm = max(bnorm, abs(b));
         }
+    }
+    if hi < n {
+        acc[4u * m] = res;
+        acc[4u * m + 1u] = anorm;
+        acc[4u * m + 2u] = xnorm;
+        if finite { acc[4u * m + 3u] = bnorm; } else { acc[4u * m + 3u] = -bnorm - 1.0; }
+        return OK;
     }
     let den = anorm * xnorm + bnorm;
     var e: Real = 0.0;
@@ -290,20 +337,47 @@ fn solve(m: u32, n: u32) -> u32 {
     return OK;
 }
 
-@compute @workgroup_size(64)
-fn factor_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let m = gid.x;
-    if m >= prm.n_member { return; }
-    let n = member_n[m];
-    if n == 0u || (ops[m] & 1u) == 0u { return; }
-    status[m] = factor(m, n);
+// The member of this invocation and its chunk [lo, hi) clipped to its n nodes, or
+// n = 0 when it has nothing to do in this dispatch (bit: the operation).
+struct Job { m: u32, n: u32, lo: u32, hi: u32 }
+
+fn job(gid: u32, bit: u32) -> Job {
+    var j = Job(gid, 0u, 0u, 0u);
+    if gid >= prm.n_member { return j; }
+    let n = member_n[gid];
+    if n == 0u || (ops[gid] & bit) == 0u || prm.lo >= n { return j; }
+    j.n = n;
+    j.lo = prm.lo;
+    j.hi = min(prm.hi, n);
+    return j;
 }
 
 @compute @workgroup_size(64)
-fn solve_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let m = gid.x;
-    if m >= prm.n_member { return; }
-    let n = member_n[m];
-    if n == 0u || (ops[m] & 2u) == 0u || status[m] != OK { return; }
-    status[m] = solve(m, n);
+fn factor_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 1u);
+    if j.n == 0u { return; }
+    if j.lo == 0u { status[j.m] = OK; }
+    if status[j.m] != OK { return; }
+    status[j.m] = factor(j.m, j.n, j.lo, j.hi);
+}
+
+@compute @workgroup_size(64)
+fn forward_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 2u);
+    if j.n == 0u || status[j.m] != OK { return; }
+    forward(j.m, j.lo, j.hi);
+}
+
+@compute @workgroup_size(64)
+fn backward_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 2u);
+    if j.n == 0u || status[j.m] != OK { return; }
+    backward(j.m, j.n, j.lo, j.hi);
+}
+
+@compute @workgroup_size(64)
+fn berr_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 2u);
+    if j.n == 0u || status[j.m] != OK { return; }
+    status[j.m] = backward_error(j.m, j.n, j.lo, j.hi);
 }

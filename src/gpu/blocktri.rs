@@ -13,6 +13,11 @@ use crate::linsolve::batched::BatchLayout;
 /// The WGSL source (f64 only).
 pub const BLOCKTRI_WGSL: &str = include_str!("../../shaders/blocktri.wgsl");
 
+/// Nodes per dispatch: an invocation runs ≈ 2 200 loop iterations per node of a
+/// factorization, and lavapipe ends an invocation after 65 535 (shaders/blocktri.wgsl,
+/// "Chunks").
+pub const CHUNK_NODES: usize = 16;
+
 /// Per-member operation bit: factorize.
 pub const OP_FACTOR: u32 = 1;
 /// Per-member operation bit: solve with the factors.
@@ -27,7 +32,8 @@ struct Params {
     kpm: u32,
     rpm: u32,
     negate: u32,
-    pad: [u32; 2],
+    lo: u32,
+    hi: u32,
 }
 
 /// What one [`BlockTriSolver::run`] read back.
@@ -48,9 +54,10 @@ pub struct BlockTriSolver {
     members: usize,
     device: wgpu::Device,
     queue: wgpu::Queue,
-    factor_pipeline: wgpu::ComputePipeline,
-    solve_pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
+    /// `factor_main`, `forward_main`, `backward_main`, `berr_main`.
+    pipelines: [wgpu::ComputePipeline; 4],
+    /// One bind group per node chunk (each with its own `lo`, `hi`).
+    bind_groups: Vec<wgpu::BindGroup>,
     /// `[xs, mask, member_n, ops, status, berr]` (factors and pivots are never read back).
     xs: wgpu::Buffer,
     mask: wgpu::Buffer,
@@ -62,8 +69,9 @@ pub struct BlockTriSolver {
     extra: wgpu::Buffer,
     extra_host: Vec<f64>,
     extra_dirty: Vec<bool>,
-    /// Factors and pivots: only ever touched by the shader (kept alive with the solver).
-    _fac_piv: [wgpu::Buffer; 2],
+    /// Factors, pivots and backward-error terms: only ever touched by the shader (kept
+    /// alive with the solver).
+    _fac_piv: [wgpu::Buffer; 3],
     mask_host: Vec<u32>,
     n_host: Vec<u32>,
     topo_dirty: bool,
@@ -155,6 +163,7 @@ impl BlockTriSolver {
                 entry(8, rw),
                 entry(9, wgpu::BufferBindingType::Uniform),
                 entry(10, ro),
+                entry(11, rw),
             ],
         });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -172,8 +181,12 @@ impl BlockTriSolver {
                 cache: ctx.pipeline_cache(),
             })
         };
-        let factor_pipeline = pipe("factor_main");
-        let solve_pipeline = pipe("solve_main");
+        let pipelines = [
+            pipe("factor_main"),
+            pipe("forward_main"),
+            pipe("backward_main"),
+            pipe("berr_main"),
+        ];
         ctx.save_pipeline_cache();
         let none = wgpu::BufferUsages::empty();
         let dst = wgpu::BufferUsages::COPY_DST;
@@ -196,48 +209,54 @@ impl BlockTriSolver {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("blocktri params"),
-            size: std::mem::size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | dst,
-            mapped_at_creation: false,
-        });
-        let p = Params {
-            n_member: members as u32,
-            npn: layout.npn as u32,
-            k_start: layout.k_start as u32,
-            kpm: layout.kpm as u32,
-            rpm: layout.rpm as u32,
-            negate: layout.negate as u32,
-            pad: [0; 2],
-        };
-        ctx.queue.write_buffer(&params, 0, bytemuck::bytes_of(&p));
+        let acc = storage(&device, "backward-error terms", 32 * members as u64, none);
         ctx.queue
             .write_buffer(&status, 0, bytemuck::cast_slice(&vec![0u32; members]));
-        let bufs = [
-            sys, &fac, &piv, &xs, &mask, &member_n, &ops, &status, &berr, &params, &extra,
-        ];
-        let entries: Vec<wgpu::BindGroupEntry> = bufs
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
+        let bind_groups = (0..layout.npn.div_ceil(CHUNK_NODES).max(1))
+            .map(|c| {
+                let params = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("blocktri params"),
+                    size: std::mem::size_of::<Params>() as u64,
+                    usage: wgpu::BufferUsages::UNIFORM | dst,
+                    mapped_at_creation: false,
+                });
+                let p = Params {
+                    n_member: members as u32,
+                    npn: layout.npn as u32,
+                    k_start: layout.k_start as u32,
+                    kpm: layout.kpm as u32,
+                    rpm: layout.rpm as u32,
+                    negate: layout.negate as u32,
+                    lo: (c * CHUNK_NODES) as u32,
+                    hi: ((c + 1) * CHUNK_NODES) as u32,
+                };
+                ctx.queue.write_buffer(&params, 0, bytemuck::bytes_of(&p));
+                let bufs = [
+                    sys, &fac, &piv, &xs, &mask, &member_n, &ops, &status, &berr, &params, &extra,
+                    &acc,
+                ];
+                let entries: Vec<wgpu::BindGroupEntry> = bufs
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| wgpu::BindGroupEntry {
+                        binding: i as u32,
+                        resource: b.as_entire_binding(),
+                    })
+                    .collect();
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("blocktri"),
+                    layout: &bgl,
+                    entries: &entries,
+                })
             })
             .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("blocktri"),
-            layout: &bgl,
-            entries: &entries,
-        });
         Ok(Self {
             layout,
             members,
             device,
             queue: ctx.queue.clone(),
-            factor_pipeline,
-            solve_pipeline,
-            bind_group,
+            pipelines,
+            bind_groups,
             xs,
             mask,
             member_n,
@@ -245,7 +264,7 @@ impl BlockTriSolver {
             status,
             berr,
             staging,
-            _fac_piv: [fac, piv],
+            _fac_piv: [fac, piv, acc],
             extra,
             extra_host: vec![0.0; xn as usize],
             extra_dirty: vec![false; members],
@@ -332,14 +351,22 @@ impl BlockTriSolver {
             label: Some("blocktri"),
             timestamp_writes: None,
         });
-        pass.set_bind_group(0, &self.bind_group, &[]);
+        let chunks = self.bind_groups.len();
+        let run =
+            |pass: &mut wgpu::ComputePass, p: usize, order: &mut dyn Iterator<Item = usize>| {
+                pass.set_pipeline(&self.pipelines[p]);
+                for c in order {
+                    pass.set_bind_group(0, &self.bind_groups[c], &[]);
+                    pass.dispatch_workgroups(groups, 1, 1);
+                }
+            };
         if any(OP_FACTOR) {
-            pass.set_pipeline(&self.factor_pipeline);
-            pass.dispatch_workgroups(groups, 1, 1);
+            run(&mut pass, 0, &mut (0..chunks));
         }
         if any(OP_SOLVE) {
-            pass.set_pipeline(&self.solve_pipeline);
-            pass.dispatch_workgroups(groups, 1, 1);
+            run(&mut pass, 1, &mut (0..chunks));
+            run(&mut pass, 2, &mut (0..chunks).rev());
+            run(&mut pass, 3, &mut (0..chunks));
         }
     }
 
