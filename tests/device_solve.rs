@@ -12,6 +12,9 @@
 //! Newton iterations (full: equal; modified: as `tests/gpu_lockstep.rs`) — with its
 //! final positions, directors, velocities and energy history within `STATE_RTOL`.
 //!
+//! The paper's frame (EDMC-2, one rod numbered node by node) runs its first 15 steps
+//! with device solves to the same states and iteration counts as on the CPU path.
+//!
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case it fails.
 
@@ -193,4 +196,52 @@ fn device_solve_matches_cpu_member_by_member() {
         }
     }
     println!("largest relative difference device solve vs CPU: {worst:.3e}");
+}
+
+#[test]
+fn device_solve_frame_matches_cpu() {
+    let Some(exec) = gpu() else { return };
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .expect("the built-in frame scene exists")
+        .toml;
+    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
+    let mut params = scene.params;
+    params.t_end = 15.0 * params.dt;
+    let ms = vec![Member {
+        model: scene.model.clone(),
+        params,
+    }];
+    let (cpu, _) = run(&ms, &Executor::Cpu, NewtonVariant::Full, SolveMode::Host);
+    let (dev, stats) = run(&ms, &exec, NewtonVariant::Full, SolveMode::Device);
+    assert_eq!(stats.device_members, (1, 0), "the frame is covered");
+    let (c, g) = (&cpu[0], &dev[0]);
+    assert_eq!(
+        c.outcome.status,
+        RunStatus::Completed,
+        "{:?}",
+        c.outcome.reason
+    );
+    assert_eq!(c.outcome.status, g.outcome.status, "{:?}", g.outcome.reason);
+    assert_eq!(c.outcome.steps, 15);
+    assert_eq!(c.outcome.steps, g.outcome.steps);
+    assert_eq!(c.outcome.newton_iters_total, g.outcome.newton_iters_total);
+    let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
+    let pos = rel(
+        sc.r.iter().flat_map(|x| x.iter().copied()),
+        sg.r.iter().flat_map(|x| x.iter().copied()),
+    );
+    let vel = rel(
+        sc.v.iter().flat_map(|x| x.iter().copied()),
+        sg.v.iter().flat_map(|x| x.iter().copied()),
+    );
+    let energy = rel(
+        c.history.iter().map(|h| h.total),
+        g.history.iter().map(|h| h.total),
+    );
+    println!("frame, device solve vs CPU: positions {pos:.2e}, velocities {vel:.2e}, energy {energy:.2e}");
+    for (what, x) in [("positions", pos), ("velocities", vel), ("energy", energy)] {
+        assert!(x <= STATE_RTOL, "frame: {what} differ by {x:.3e}");
+    }
 }
