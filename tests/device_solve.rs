@@ -15,6 +15,11 @@
 //! The paper's frame (EDMC-2, one rod numbered node by node) runs its first 15 steps
 //! with device solves to the same states and iteration counts as on the CPU path.
 //!
+//! From the command line: `run --backend gpu --solve device` records `"solve": "device"`
+//! in `summary.json` and ends as the CPU run; `--solve device` without the GPU path and on
+//! a scene the device solver does not cover (rigid links) is refused with exit code 2
+//! and the reason, writing nothing.
+//!
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case it fails.
 
@@ -244,4 +249,77 @@ fn device_solve_frame_matches_cpu() {
     for (what, x) in [("positions", pos), ("velocities", vel), ("energy", energy)] {
         assert!(x <= STATE_RTOL, "frame: {what} differ by {x:.3e}");
     }
+}
+
+fn cosserat() -> std::process::Command {
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"));
+    c.env("NODEVICE_SELECT", "1");
+    c
+}
+
+#[test]
+fn device_solve_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    // Refused without the GPU path (no adapter needed to check that).
+    let out = cosserat()
+        .args(["run", "cantilever", "--solve", "device", "--out"])
+        .arg(dir.path().join("cpu"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--backend gpu"));
+    assert!(!dir.path().join("cpu").exists());
+    let Some(_) = gpu() else { return };
+    let out = cosserat()
+        .args([
+            "run",
+            "mechanism",
+            "--backend",
+            "gpu",
+            "--solve",
+            "device",
+            "--out",
+        ])
+        .arg(dir.path().join("mech"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rigid links"));
+    assert!(!dir.path().join("mech").exists());
+    let mut summaries = Vec::new();
+    for (name, extra) in [
+        ("host", &["--backend", "cpu"][..]),
+        ("device", &["--backend", "gpu", "--solve", "device"][..]),
+    ] {
+        let st = cosserat()
+            .args([
+                "run",
+                "cantilever",
+                "--set",
+                "integrator.t_end=0.05",
+                "--set",
+                "rod.beam.elements=20",
+            ])
+            .args(extra)
+            .arg("--out")
+            .arg(dir.path().join(name))
+            .status()
+            .unwrap();
+        assert!(st.success(), "{name}");
+        let text = std::fs::read_to_string(dir.path().join(name).join("summary.json")).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["solve"], name);
+        summaries.push(v);
+    }
+    let (c, d) = (&summaries[0], &summaries[1]);
+    assert_eq!(c["status"], d["status"]);
+    assert_eq!(c["newton_iters_total"], d["newton_iters_total"]);
+    let (ec, ed) = (
+        c["energy_final"].as_f64().unwrap(),
+        d["energy_final"].as_f64().unwrap(),
+    );
+    assert!(
+        (ec - ed).abs() <= STATE_RTOL * ec.abs(),
+        "energy {ec} vs {ed}"
+    );
 }
