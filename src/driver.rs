@@ -503,6 +503,7 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         accepted: o.accepted,
         backend: sim.backend_name(),
         linear_solver: sim.linear_solver().0.to_string(),
+        solve: if sim.device_solve() { "device" } else { "host" }.into(),
         linear_solver_fallbacks: sim.linear_solver().1,
         timers: o.timers,
     }

@@ -57,6 +57,7 @@ fn run(ms: &[Member], exec: &Executor, newton: NewtonVariant, slots: usize) -> V
             newton: Some(newton),
             fallback: None,
             cutback: None,
+            solve: Default::default(),
         },
         |r| {
             let i = r.index;

@@ -10,11 +10,16 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::element::StepConsts;
+use crate::gpu::blocktri::{OP_FACTOR, OP_SOLVE};
 use crate::gpu::kernel::KernelTimers;
 use crate::gpu::layout::AsmLayout;
-use crate::gpu::{Assembler, ElementKernel, GpuContext, GpuError};
-use crate::integrator::evaluate::{AssembledSystem, ElementBackend, EvalPort, EvalRequest};
+use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
+use crate::integrator::evaluate::{
+    AssembledSystem, DeviceSolution, ElementBackend, EvalPort, EvalRequest,
+};
 use crate::integrator::Simulation;
+use crate::linsolve::batched::{BatchLayout, NONFINITE, OK};
+use crate::linsolve::MAX_BACKWARD_ERROR;
 
 /// Host-side costs of serving requests (on top of the kernel's own stage timers).
 #[derive(Clone, Copy, Debug, Default)]
@@ -45,6 +50,66 @@ pub struct GpuEvaluator {
     adapter: String,
     /// Host-side serving costs.
     pub serve_timers: ServeTimers,
+    /// `--solve device`: the block solver over the assembled buffer.
+    solver: Option<BlockTriSolver>,
+    /// Per slot: its member's systems are solved on the device.
+    device: Vec<bool>,
+    /// Members attached with a device solve, and with a host solve although device
+    /// solves were asked for (a feature the device solver does not cover).
+    pub device_members: (u64, u64),
+}
+
+/// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
+/// rod numbered node by node (element `e` joins nodes `e` and `e + 1`), no point masses,
+/// rigid links, line loads or drag (whose tangent terms the host adds).
+pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
+    let model = sim.model();
+    if model.n_nodes() < 2
+        || model
+            .elements
+            .iter()
+            .enumerate()
+            .any(|(e, el)| el.nodes != [e, e + 1])
+    {
+        return Some("topology is not one rod numbered node by node (block-tridiagonal)");
+    }
+    if !model.links.is_empty() {
+        return Some("rigid links");
+    }
+    if model.point_mass.iter().any(|&m| m != 0.0) {
+        return Some("point masses");
+    }
+    // Their tangent terms are added on the host, after the element blocks.
+    if !model.line_loads.is_empty() {
+        return Some("line loads");
+    }
+    if model.elements.iter().any(|e| e.props.drag != 0.0) {
+        return Some("drag");
+    }
+    None
+}
+
+/// The host solver's message for a failed device solve (same wording as
+/// [`crate::linsolve::LinsolveError::Singular`]), or the solution.
+fn device_outcome(status: u32, berr: f64, x: &[f64], n_nodes: usize) -> DeviceSolution {
+    let fail = |why: String| Err(format!("singular or ill-conditioned tangent: {why}"));
+    if status == NONFINITE {
+        return fail("non-finite solution of the device block solve".into());
+    }
+    if status != OK {
+        return fail(format!(
+            "singular Schur complement of node block {}",
+            status - 1
+        ));
+    }
+    if berr > MAX_BACKWARD_ERROR {
+        return fail(format!(
+            "backward error {berr:.2e} of the device block solve exceeds {MAX_BACKWARD_ERROR:e}"
+        ));
+    }
+    Ok((0..n_nodes)
+        .map(|j| std::array::from_fn(|k| x[9 * j + k]))
+        .collect())
 }
 
 impl GpuEvaluator {
@@ -66,7 +131,31 @@ impl GpuEvaluator {
             ports: vec![None; slots],
             adapter: format!("gpu: {}", ctx.describe()),
             serve_timers: ServeTimers::default(),
+            solver: None,
+            device: vec![false; slots],
+            device_members: (0, 0),
         })
+    }
+
+    /// `--solve device`: builds the block solver over the assembled buffer; members
+    /// attached from now on that it covers ([`device_solve_refusal`]) are solved on the
+    /// device, the others on the host within the same batch.
+    pub fn enable_device_solve(&mut self, ctx: &GpuContext) -> Result<(), GpuError> {
+        let l = self.assembler.layout();
+        let layout = BatchLayout {
+            npn: l.nodes_per_slot,
+            k_start: l.tangent_start(),
+            kpm: l.tangent_per_member(),
+            rpm: l.residual_per_member(),
+            negate: true,
+        };
+        self.solver = Some(BlockTriSolver::new(
+            ctx,
+            l.members,
+            layout,
+            self.assembler.buffer(),
+        )?);
+        Ok(())
     }
 
     /// Largest number of slots of `per_slot` elements and `nodes_per_slot` nodes that fits
@@ -124,13 +213,49 @@ impl GpuEvaluator {
         self.register(slot, sim)?;
         let port = EvalPort::new(&self.adapter);
         sim.set_port(port.clone());
+        self.connect_device(slot, sim);
         self.ports[slot] = Some(port);
         Ok(true)
+    }
+
+    /// With a device solver: registers `slot`'s node masks and switches `sim` to device
+    /// solves when the solver covers it ([`device_solve_refusal`]); returns whether it
+    /// does.
+    fn connect_device(&mut self, slot: usize, sim: &mut Simulation) -> bool {
+        let on = match &mut self.solver {
+            Some(solver) if device_solve_refusal(sim).is_none() => {
+                let masks: Vec<u32> = sim
+                    .dof_map()
+                    .nodes
+                    .iter()
+                    .map(|nd| {
+                        let loc = [nd.u, nd.th, nd.g].concat();
+                        loc.iter()
+                            .enumerate()
+                            .filter(|(_, &i)| i != crate::integrator::dofs::NONE)
+                            .fold(0u32, |m, (k, _)| m | 1 << k)
+                    })
+                    .collect();
+                solver.set_member(slot, &masks);
+                self.device_members.0 += 1;
+                true
+            }
+            Some(solver) => {
+                solver.set_member(slot, &[]);
+                self.device_members.1 += 1;
+                false
+            }
+            None => false,
+        };
+        self.device[slot] = on;
+        sim.set_device_solve(on);
+        on
     }
 
     /// Frees `slot` (its member finished).
     pub fn detach(&mut self, slot: usize) {
         self.ports[slot] = None;
+        self.device[slot] = false;
     }
 
     /// Stage timers and traffic so far.
@@ -176,9 +301,21 @@ impl GpuEvaluator {
         let t0 = Instant::now();
         let mut answers = Vec::with_capacity(reqs.len());
         let mut pending = Vec::with_capacity(reqs.len());
+        let mut ops: Vec<(usize, u32)> = Vec::new();
         for (slot, req) in reqs {
             match self.pack(slot, &req) {
                 Ok(()) => {
+                    if let (Some(extra), Some(solver), true) =
+                        (&req.device_extra, &mut self.solver, self.device[slot])
+                    {
+                        solver.set_extra(slot, extra);
+                        let op = if req.tangent {
+                            OP_FACTOR | OP_SOLVE
+                        } else {
+                            OP_SOLVE
+                        };
+                        ops.push((slot, op));
+                    }
                     let n = self.sizes[slot].0 as u64;
                     let st = &mut self.serve_timers;
                     st.requests += 1;
@@ -196,13 +333,49 @@ impl GpuEvaluator {
         if pending.is_empty() {
             return answers;
         }
-        let res = self.assembler.run(&mut self.kernel, &pending);
+        let device = &self.device;
+        let mut res = match &mut self.solver {
+            Some(solver) if !ops.is_empty() => {
+                self.assembler
+                    .run_with(&mut self.kernel, &pending, &|m| !device[m], &mut |enc| {
+                        solver.encode(enc, &ops)
+                    })
+            }
+            _ => self.assembler.run(&mut self.kernel, &pending),
+        };
+        // Device solves: every slot's status and backward error, the solved members'
+        // corrections.
+        let mut solved = None;
+        if let (Ok(()), Some(solver), false) = (&res, &mut self.solver, ops.is_empty()) {
+            let t0 = Instant::now();
+            let slots: Vec<usize> = ops.iter().map(|o| o.0).collect();
+            match solver.read(&slots) {
+                Ok(s) => solved = Some(s),
+                Err(e) => res = Err(e),
+            }
+            self.kernel.timers.bytes_down += solver.last_bytes_down;
+            self.kernel.timers.readback_s += t0.elapsed().as_secs_f64();
+        }
         let t0 = Instant::now();
         // Unpacking is per member and independent: in parallel.
-        let (asm, sizes) = (&self.assembler, &self.sizes);
+        let (asm, sizes, device) = (&self.assembler, &self.sizes, &self.device);
+        let npn = self.assembler.layout().nodes_per_slot;
         answers.par_extend(pending.par_iter().map(|&(slot, tangent)| {
             let (n_elems, n_nodes) = sizes[slot];
             let out = match &res {
+                Ok(()) if device[slot] => {
+                    let mut sys = asm.system(slot, n_nodes, n_elems, false);
+                    sys.solution = solved.as_ref().map(|s| {
+                        let x = s.x.as_deref().unwrap_or(&[]);
+                        device_outcome(
+                            s.status[slot],
+                            s.berr[slot],
+                            &x[9 * npn * slot..9 * npn * (slot + 1)],
+                            n_nodes,
+                        )
+                    });
+                    Ok(sys)
+                }
                 Ok(()) => Ok(asm.system(slot, n_nodes, n_elems, tangent)),
                 Err(e) => Err(e.to_string()),
             };
@@ -267,6 +440,20 @@ impl GpuBatcher {
     /// See [`GpuEvaluator::register`].
     pub fn register(&self, slot: usize, sim: &Simulation) -> Result<(), GpuError> {
         self.lock().register(slot, sim)
+    }
+
+    /// `--solve device`: builds the device block solver ([`GpuEvaluator::enable_device_solve`]).
+    pub fn enable_device_solve(&self, ctx: &GpuContext) -> Result<(), GpuError> {
+        self.lock().enable_device_solve(ctx)
+    }
+
+    /// Registers `sim` in `slot` and, with a device solver that covers it, switches it to
+    /// device solves. Returns whether its systems are solved on the device; the reason
+    /// when not is [`device_solve_refusal`].
+    pub fn register_device(&self, slot: usize, sim: &mut Simulation) -> Result<bool, GpuError> {
+        let mut g = self.lock();
+        g.register(slot, sim)?;
+        Ok(g.connect_device(slot, sim))
     }
 
     /// Layout of the assembled buffer.

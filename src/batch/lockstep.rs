@@ -79,6 +79,9 @@ pub(super) fn run(
     let slots = want.min(cap).min(members.len()).max(1);
     let t0 = Instant::now();
     let mut gpu = GpuEvaluator::new(ctx, slots, per_slot, nodes_per_slot)?;
+    if opts.solve == super::SolveMode::Device {
+        gpu.enable_device_solve(ctx)?;
+    }
     stats.setup_s = t0.elapsed().as_secs_f64();
     stats.slots = slots;
 
@@ -168,5 +171,6 @@ pub(super) fn run(
     }
     stats.gpu = gpu.timers();
     stats.serve = gpu.serve_timers;
+    stats.device_members = gpu.device_members;
     Ok(stats)
 }

@@ -149,6 +149,31 @@ pub struct BatchOptions {
     /// Overrides every member's step cut-back when set (CPU path only; members on the
     /// GPU path do not cut back).
     pub cutback: Option<usize>,
+    /// GPU path: where the Newton systems are solved (`--solve`).
+    pub solve: SolveMode,
+}
+
+/// Where a GPU batch solves its members' Newton systems (`--solve host|device`,
+/// docs/gpu.md "Device solve").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SolveMode {
+    /// The host factorizes and solves each member's assembled system (default).
+    #[default]
+    Host,
+    /// The device factorizes and solves the assembled systems (block-tridiagonal LU) and
+    /// sends back the corrections instead of the blocks; members it does not cover are
+    /// solved on the host within the same batch.
+    Device,
+}
+
+impl SolveMode {
+    /// `host` or `device` (as on the command line and in `summary.json`).
+    pub fn name(self) -> &'static str {
+        match self {
+            SolveMode::Host => "host",
+            SolveMode::Device => "device",
+        }
+    }
 }
 
 /// Members in flight at once on the GPU path unless [`BatchOptions::workers`] says
@@ -177,6 +202,9 @@ pub struct BatchStats {
     pub slots: usize,
     /// Simulation set-up (linear solver analysis, GPU registration), wall time.
     pub admit_s: f64,
+    /// `--solve device`: members solved on the device, and members solved on the host
+    /// because the device solver does not cover them.
+    pub device_members: (u64, u64),
 }
 
 fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {

@@ -277,6 +277,9 @@ struct RunArgs {
     /// GPU adapter: first adapter whose name contains this (case-insensitive).
     #[arg(long)]
     adapter: Option<String>,
+    /// GPU path: where the Newton systems are solved (docs/gpu.md, "Device solve").
+    #[arg(long, value_enum, default_value_t = cmds::SolveArg::Host)]
+    solve: cmds::SolveArg,
 }
 
 /// `KEY=VALUE` of `--set`: VALUE must be a finite number.
@@ -339,6 +342,7 @@ fn main() -> ExitCode {
             sets: vec![],
             backend: cmds::BackendArg::Cpu,
             adapter: None,
+            solve: cmds::SolveArg::Host,
         }),
         Some(Command::Run(a)) => run_command(a),
         Some(Command::Check { scene }) => check_command(&scene),
@@ -574,7 +578,7 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
             )
         })?;
     // Keeps the GPU batch (if any) alive for the run.
-    let _gpu = cmds::attach(&mut sim, a.backend, a.adapter.as_deref())?;
+    let _gpu = cmds::attach(&mut sim, a.backend, a.adapter.as_deref(), a.solve)?;
     let result = run_sim_to_dir(&scene, &mut sim, &out, &opts)?;
     print_summary(&result.summary, &out);
     Ok(ExitCode::SUCCESS)

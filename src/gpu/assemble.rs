@@ -259,6 +259,11 @@ impl Assembler {
         })
     }
 
+    /// The assembled buffer on the device (laid out by [`Self::layout`]).
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.asm
+    }
+
     /// The buffer layout.
     pub fn layout(&self) -> AsmLayout {
         self.layout
@@ -352,6 +357,19 @@ impl Assembler {
         kernel: &mut ElementKernel,
         pending: &[(usize, bool)],
     ) -> Result<(), GpuError> {
+        self.run_with(kernel, pending, &|_| true, &mut |_| {})
+    }
+
+    /// [`Self::run`] with `more` encoded after the assembly pass (and before the
+    /// readback: the device block solver of [`crate::gpu::blocktri`]); the tangent blocks
+    /// of member slot `m` are read back only when `blocks_back(m)`.
+    pub fn run_with(
+        &mut self,
+        kernel: &mut ElementKernel,
+        pending: &[(usize, bool)],
+        blocks_back: &dyn Fn(usize) -> bool,
+        more: &mut dyn FnMut(&mut wgpu::CommandEncoder),
+    ) -> Result<(), GpuError> {
         let want_tangent = pending.iter().any(|p| p.1);
         let mut enc = self
             .device
@@ -434,6 +452,7 @@ impl Assembler {
             let threads = self.n_nodes.max(self.n_elems).max(l.members);
             pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
         }
+        more(&mut enc);
         // The waiting members' residual regions, and the tangent regions of those that
         // asked for it: one range per run of adjacent such members.
         let w = ElementKernel::width(self.precision) as u64;
@@ -441,12 +460,17 @@ impl Assembler {
         let residual = member_runs(pending.iter().map(|p| p.0))
             .into_iter()
             .map(|(lo, hi)| ((lo * r) as u64 * w, ((hi - lo) * r) as u64 * w));
-        let tangent = member_runs(pending.iter().filter(|p| p.1).map(|p| p.0))
-            .into_iter()
-            .map(|(lo, hi)| {
-                let at = l.tangent_start() + lo * k;
-                (at as u64 * w, ((hi - lo) * k) as u64 * w)
-            });
+        let tangent = member_runs(
+            pending
+                .iter()
+                .filter(|p| p.1 && blocks_back(p.0))
+                .map(|p| p.0),
+        )
+        .into_iter()
+        .map(|(lo, hi)| {
+            let at = l.tangent_start() + lo * k;
+            (at as u64 * w, ((hi - lo) * k) as u64 * w)
+        });
         let ranges: Vec<(u64, u64)> = residual.chain(tangent).collect();
         let rb = Readback {
             device: &self.device,
@@ -491,6 +515,7 @@ impl Assembler {
             node_k,
             off_k,
             scale,
+            solution: None,
         }
     }
 }

@@ -64,6 +64,7 @@ fn shader_hash() -> u64 {
         super::kernel::ELEMENT_WGSL,
         super::assemble::ASSEMBLE_WGSL,
         super::assemble::GATHER_WGSL,
+        super::blocktri::BLOCKTRI_WGSL,
         env!("CARGO_PKG_VERSION"),
     ] {
         for b in src.bytes() {

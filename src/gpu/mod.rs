@@ -12,18 +12,22 @@
 //! * [`assemble`]: the assembly pass run right after the element pass (node blocks,
 //!   residuals, off-diagonal blocks, per-member row scales), so that only assembled
 //!   systems are read back.
+//! * [`blocktri`]: batched block-tridiagonal LU and solve of the assembled systems on the
+//!   device (CPU twin: [`crate::linsolve::batched`]).
 //!
 //! f64 is used whenever the adapter offers `SHADER_F64`; otherwise the same shader runs in
 //! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (docs/gpu.md,
 //! "Kernels"); callers are told which precision they got, never silently.
 
 pub mod assemble;
+pub mod blocktri;
 pub mod context;
 pub mod kernel;
 pub mod layout;
 pub mod planar;
 
 pub use assemble::Assembler;
+pub use blocktri::BlockTriSolver;
 pub use context::{GpuContext, Precision};
 pub use kernel::ElementKernel;
 

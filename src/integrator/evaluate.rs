@@ -47,7 +47,18 @@ pub struct EvalRequest {
     pub increments: Vec<[f64; 9]>,
     /// Whether the tangent blocks are wanted (else residual rows and scales only).
     pub tangent: bool,
+    /// Device solve (`--solve device`): the evaluator also solves `K x = −(R + extra)`
+    /// with the assembled tangent `K` (factorized when `tangent`, else the factors it kept
+    /// from this member's last tangent) and answers the solution instead of the blocks.
+    /// Per node: `extra`, the host's nodal residual terms (loads, moments) in node-local
+    /// order. `None`: the host solves.
+    pub device_extra: Option<Vec<[f64; 9]>>,
 }
+
+/// The answer of a device solve: the Newton correction per node (node-local order,
+/// zero for removed unknowns), or why the solve failed (the message of the host
+/// solver's error for the same failure).
+pub type DeviceSolution = Result<Vec<[f64; 9]>, String>;
 
 /// The element contributions of one simulation summed into its block system, in
 /// node-local order `u0..2 θ0..2 g0..2` (removed unknowns included; the caller skips them).
@@ -63,6 +74,9 @@ pub struct AssembledSystem {
     pub off_k: Vec<[[f64; 81]; 2]>,
     /// Largest element row scale of each kind (u, θ, g) over the rows that are unknowns.
     pub scale: [f64; 3],
+    /// The solution of a device solve ([`EvalRequest::device_extra`]); then the blocks
+    /// are left empty.
+    pub solution: Option<DeviceSolution>,
 }
 
 /// Evaluates all elements of one simulation at once (frozen scalars), synchronously.

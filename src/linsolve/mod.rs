@@ -68,6 +68,7 @@ use faer::sparse::linalg::{LuError, SupernodalThreshold};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Conj, Mat, MatMut, Par};
 
+pub mod batched;
 mod block_tridiagonal;
 use block_tridiagonal::BlockLu;
 

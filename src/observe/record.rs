@@ -128,6 +128,9 @@ pub struct RunSummary {
     pub backend: String,
     /// The Newton linear solver (`dense`, `sparse`, `block-tridiagonal-B`).
     pub linear_solver: String,
+    /// Where the frozen-scalar Newton systems were solved: `host`, or `device`
+    /// (`--solve device`: the GPU's block-tridiagonal solver).
+    pub solve: String,
     /// Factorizations the block-tridiagonal solver handed to its pivoting fallback.
     pub linear_solver_fallbacks: usize,
     /// Where the Newton time went (assembly, factorizations, solves).

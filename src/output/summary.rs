@@ -59,6 +59,7 @@ mod tests {
             accepted: Default::default(),
             backend: "cpu".into(),
             linear_solver: "block-tridiagonal-6".into(),
+            solve: "host".into(),
             linear_solver_fallbacks: 0,
             timers: Default::default(),
             energy_initial: 9.166666666666666,

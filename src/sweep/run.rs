@@ -46,6 +46,8 @@ pub struct SweepOptions {
     /// `DIR/shards/I-of-N.{csv,id,json}` ([`crate::sweep::shard`]); `None`: every member
     /// into `DIR/members.csv`.
     pub shard: Option<Shard>,
+    /// GPU path: where the Newton systems are solved (recorded in `sweep.json`).
+    pub solve: crate::batch::SolveMode,
 }
 
 /// One row of `members.csv`.
@@ -661,6 +663,7 @@ pub fn run_sweep(
             newton: opts.newton,
             fallback: opts.fallback,
             cutback: opts.cutback,
+            solve: opts.solve,
             ..Default::default()
         },
         |r: MemberResult| {
@@ -733,6 +736,7 @@ pub fn run_sweep(
         "skipped": summary.skipped,
         "repaired_bytes": summary.repaired_bytes,
         "backend": exec.describe(),
+        "solve": opts.solve.name(),
         "wall_s": summary.wall_s,
     });
     write_atomic(&json_path, &format!("{info:#}\n"))

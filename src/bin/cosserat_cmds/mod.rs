@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use cosserat::batch::{
     bench_members, run_members, BackendChoice, BatchOptions, BatchStats, Executor, GpuBatcher,
+    SolveMode,
 };
 use cosserat::integrator::{NewtonVariant, Simulation, SolveTimers};
 use cosserat::observe::record::RunStatus;
@@ -61,6 +62,34 @@ impl NewtonArg {
     }
 }
 
+/// Where a GPU batch solves its Newton systems (`--solve`).
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum SolveArg {
+    /// The host factorizes and solves each member's assembled system.
+    Host,
+    /// The device factorizes and solves the block-tridiagonal systems; only corrections,
+    /// statuses and backward errors come back (docs/gpu.md, "Device solve").
+    Device,
+}
+
+impl SolveArg {
+    /// The batch option.
+    pub fn mode(self) -> SolveMode {
+        match self {
+            SolveArg::Host => SolveMode::Host,
+            SolveArg::Device => SolveMode::Device,
+        }
+    }
+}
+
+/// `--solve device` needs the GPU path: an error (exit 2) on the CPU path.
+pub fn check_solve(solve: SolveArg, exec: &Executor) -> Result<SolveMode> {
+    if solve == SolveArg::Device && matches!(exec, Executor::Cpu) {
+        bail!("--solve device: the device solve runs on the GPU path; add --backend gpu (or auto with a GPU present)");
+    }
+    Ok(solve.mode())
+}
+
 /// Resolves `--backend`/`--adapter`, printing the note of an `auto` fallback.
 pub fn executor(backend: BackendArg, adapter: Option<&str>) -> Result<Executor> {
     let (exec, note) = Executor::resolve(backend.choice(), adapter)?;
@@ -76,11 +105,14 @@ pub fn attach(
     sim: &mut Simulation,
     backend: BackendArg,
     adapter: Option<&str>,
+    solve: SolveArg,
 ) -> Result<Option<Arc<GpuBatcher>>> {
     if backend == BackendArg::Cpu {
+        check_solve(solve, &Executor::Cpu)?;
         return Ok(None);
     }
     let exec = executor(backend, adapter)?;
+    let solve = check_solve(solve, &exec)?;
     println!("backend: {}", exec.describe());
     match exec {
         Executor::Cpu => Ok(None),
@@ -98,8 +130,16 @@ pub fn attach(
                 sim.model().elements.len(),
                 sim.model().n_nodes(),
             )?);
-            b.register(0, sim)?;
             let _ = sim.set_backend(b.clone(), 0);
+            if solve == SolveMode::Device {
+                b.enable_device_solve(&ctx)?;
+                if !b.register_device(0, sim)? {
+                    let why = cosserat::batch::gpu::device_solve_refusal(sim).unwrap_or("");
+                    bail!("--solve device: the device solver does not cover this scene ({why}); run it with --solve host");
+                }
+            } else {
+                b.register(0, sim)?;
+            }
             Ok(Some(b))
         }
     }
@@ -137,11 +177,15 @@ pub struct MemberOpts {
     /// (default: each member's scene, else 0 = off).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
     pub cutback: Option<u8>,
+    /// GPU path: where the Newton systems are solved (docs/gpu.md, "Device solve").
+    #[arg(long, value_enum, default_value_t = SolveArg::Host)]
+    pub solve: SolveArg,
 }
 
 impl MemberOpts {
-    fn sweep_options(&self, resume: bool, shard: Option<Shard>) -> SweepOptions {
+    fn sweep_options(&self, resume: bool, shard: Option<Shard>, solve: SolveMode) -> SweepOptions {
         SweepOptions {
+            solve,
             resume,
             histories: self.histories,
             workers: 0,
@@ -170,6 +214,9 @@ impl MemberOpts {
         }
         if let Some(c) = self.cutback {
             a.extend(["--cutback".into(), c.to_string()]);
+        }
+        if self.solve == SolveArg::Device {
+            a.extend(["--solve".into(), "device".into()]);
         }
         a
     }
@@ -282,6 +329,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         ),
         None => format!("{} members", spec.len()),
     };
+    let solve = check_solve(a.member.solve, &exec)?;
     println!(
         "sweep {}: {scope} over {} ({}), backend {}",
         spec.source,
@@ -302,7 +350,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let (mut done, mut failed) = (0usize, 0usize);
-    let opts = a.member.sweep_options(a.resume, a.shard);
+    let opts = a.member.sweep_options(a.resume, a.shard, solve);
     let summary = run_sweep(&spec, &exec, out, &opts, |row| {
         done += 1;
         if row.status == RunStatus::Failed {
@@ -383,7 +431,7 @@ fn slurm_command(a: SlurmArgs) -> Result<ExitCode> {
             spec.len()
         );
     }
-    let opts = a.member.sweep_options(true, None);
+    let opts = a.member.sweep_options(true, None, a.member.solve.mode());
     check_shard_folder(&a.out, &spec, &opts, a.shards)?;
     let exe = match &a.exe {
         Some(e) => absolute(e, "--exe")?,
@@ -515,6 +563,21 @@ pub struct BenchArgs {
     /// GPU path: members in flight at once (default: as many as fit, at most 4096).
     #[arg(long, default_value_t = 0)]
     pub slots: usize,
+    /// GPU path: where the Newton systems are solved; `both` times the host-solve and the
+    /// device-solve GPU batches side by side (JSON: `gpu_*` and the `device` object).
+    #[arg(long, value_enum, default_value_t = BenchSolveArg::Host)]
+    pub solve: BenchSolveArg,
+}
+
+/// `bench --solve`.
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum BenchSolveArg {
+    /// Host solves.
+    Host,
+    /// Device solves.
+    Device,
+    /// Both, one after the other in this process.
+    Both,
 }
 
 /// One timed batch: its stats, Newton iterations, failed members, the members' summed
@@ -532,12 +595,14 @@ fn timed(
     exec: &Executor,
     newton: NewtonVariant,
     slots: usize,
+    solve: SolveMode,
 ) -> Result<Timed> {
     let (mut iters, mut failed) = (0usize, 0usize);
     let mut stages = SolveTimers::default();
     let opts = BatchOptions {
         newton: Some(newton),
         workers: slots,
+        solve,
         ..Default::default()
     };
     let stats = run_members(members, exec, opts, |r| {
@@ -624,6 +689,9 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
     obj["model_tangent_fraction"] = (sv.element_tangent_evals as f64 / evals).into();
     obj["model_bytes_up_per_element_eval"] = (k.bytes_up as f64 / evals).into();
     obj["model_bytes_down_per_element_eval"] = (k.bytes_down as f64 / evals).into();
+    let reqs = sv.requests.max(1) as f64;
+    obj["model_bytes_up_per_member_iteration"] = (k.bytes_up as f64 / reqs).into();
+    obj["model_bytes_down_per_member_iteration"] = (k.bytes_down as f64 / reqs).into();
     obj["model_evals_per_member_step"] = (sv.requests as f64 / member_steps).into();
     obj["model_dispatches_per_step"] = (k.dispatches as f64 / a.steps.max(1) as f64).into();
     obj["model_host_thread_us_per_member_poll"] =
@@ -666,7 +734,13 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let cpu = if a.gpu_only {
         None
     } else {
-        Some(timed(&members, &Executor::Cpu, newton, a.slots)?)
+        Some(timed(
+            &members,
+            &Executor::Cpu,
+            newton,
+            a.slots,
+            SolveMode::Host,
+        )?)
     };
     let cpu_rate = cpu.as_ref().map(|c| work / c.stats.wall_s);
     let gpu_exec = if a.cpu_only {
@@ -674,14 +748,33 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     } else {
         Executor::resolve(BackendChoice::Gpu, a.adapter.as_deref())
     };
-    let (adapter, f64_ok, gpu) = match &gpu_exec {
-        Ok((exec @ Executor::Gpu(ctx), _)) => {
-            let r = timed(&members, exec, newton, a.slots).context("GPU batch")?;
-            (ctx.describe(), ctx.is_f64(), Some(r))
-        }
-        Ok((Executor::Cpu, _)) => ("none".into(), false, None),
-        Err(e) => (format!("none ({e})"), false, None),
+    let (host_solve, device_solve) = match a.solve {
+        BenchSolveArg::Host => (true, false),
+        BenchSolveArg::Device => (false, true),
+        BenchSolveArg::Both => (true, true),
     };
+    let (adapter, f64_ok, gpu, dev) = match &gpu_exec {
+        Ok((exec @ Executor::Gpu(ctx), _)) => {
+            let r = if host_solve {
+                Some(timed(&members, exec, newton, a.slots, SolveMode::Host).context("GPU batch")?)
+            } else {
+                None
+            };
+            let d = if device_solve {
+                Some(
+                    timed(&members, exec, newton, a.slots, SolveMode::Device)
+                        .context("GPU batch, device solve")?,
+                )
+            } else {
+                None
+            };
+            (ctx.describe(), ctx.is_f64(), r, d)
+        }
+        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None),
+        Err(e) => (format!("none ({e})"), false, None, None),
+    };
+    let dev_rate = dev.as_ref().map(|g| work / g.stats.wall_s);
+    let dev_ratio = dev_rate.zip(cpu_rate).map(|(g, c)| g / c);
     let gpu_rate = gpu.as_ref().map(|g| work / g.stats.wall_s);
     let ratio = gpu_rate.zip(cpu_rate).map(|(g, c)| g / c);
     if a.json {
@@ -715,6 +808,18 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         }
         if let Some(g) = &gpu {
             gpu_model_json(&mut obj, g, &a);
+        }
+        if let Some(d) = &dev {
+            let mut o = serde_json::json!({
+                "solve": "device",
+                "element_steps_per_s": dev_rate,
+                "rod_steps_per_s": rod_steps / d.stats.wall_s,
+                "ratio": dev_ratio,
+                "members_device_solved": d.stats.device_members.0,
+                "members_host_solved": d.stats.device_members.1,
+            });
+            gpu_model_json(&mut o, d, &a);
+            obj["device"] = o;
         }
         println!("{obj}");
         return Ok(ExitCode::SUCCESS);
@@ -763,7 +868,34 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             );
             println!("gpu stages: {}", stages_line(&g.stages));
         }
-        _ => println!("gpu: not run ({adapter})"),
+        _ if host_solve => println!("gpu: not run ({adapter})"),
+        _ => {}
+    }
+    match (&dev, dev_rate) {
+        (Some(g), Some(rate)) => {
+            let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
+            let ratio =
+                dev_ratio.map_or_else(String::new, |r| format!("; ratio device/cpu {r:.2}"));
+            println!(
+                "gpu, device solve ({adapter}): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed{ratio}",
+                w.wall_s, rate, rod_steps / w.wall_s, g.iters, g.failed
+            );
+            let reqs = sv.requests.max(1) as f64;
+            println!(
+                "device solve: {} members on the device, {} on the host; {} dispatches; per member-iteration {:.0} B up, {:.0} B down; member phases {:.3} s, kernel+solve {:.3} s, readback {:.3} s",
+                w.device_members.0,
+                w.device_members.1,
+                k.dispatches,
+                k.bytes_up as f64 / reqs,
+                k.bytes_down as f64 / reqs,
+                w.host_s,
+                k.kernel_s,
+                k.readback_s
+            );
+            println!("device solve stages: {}", stages_line(&g.stages));
+        }
+        _ if device_solve => println!("gpu, device solve: not run ({adapter})"),
+        _ => {}
     }
     Ok(ExitCode::SUCCESS)
 }

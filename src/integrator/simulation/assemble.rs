@@ -34,17 +34,36 @@ impl Simulation {
         let dt = k.dt;
         r.iter_mut().for_each(|x| *x = 0.0);
         let mut scale = [0.0f64; 3]; // u, θ, g rows
+                                     // With an evaluator the elements arrive already summed per node; the CPU kernel
+                                     // loop below is skipped.
+        let external = mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+        // A device solve needs the nodal terms before the evaluation (they join the
+        // right-hand side on the device); the host then neither assembles nor
+        // factorizes the matrix.
+        let device = external && self.device_solve;
+        self.device_x = None;
         if tangent {
             // The values are about to change: the factorization no longer matches them
             // (the solver checks each solve against the current values).
             self.factored = None;
-            self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
+            if !device {
+                self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
+            }
         }
-        // With an evaluator the elements arrive already summed per node; the CPU kernel
-        // loop below is skipped.
-        let external = mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+        if device {
+            self.nodal_terms(q, false, r, &mut scale);
+        }
         if external {
-            let req = self.eval_request(q, tangent);
+            let mut req = self.eval_request(q, tangent);
+            if device {
+                req.device_extra = Some(
+                    self.dofs
+                        .nodes
+                        .iter()
+                        .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { r[i] }))
+                        .collect(),
+                );
+            }
             let t0 = Instant::now();
             let answer = match &self.backend {
                 Backend::Direct(b, slot) => b.evaluate_assembled(*slot, req),
@@ -53,7 +72,14 @@ impl Simulation {
             };
             self.timers.evaluate_wait_s += t0.elapsed().as_secs_f64();
             match answer {
-                Ok(sys) => self.scatter_assembled(&sys, tangent, r, &mut scale),
+                Ok(mut sys) => {
+                    if device {
+                        self.device_x = Some(sys.solution.take().unwrap_or_else(|| {
+                            Err("the evaluator did not solve on the device".into())
+                        }));
+                    }
+                    self.scatter_assembled(&sys, tangent && !device, r, &mut scale)
+                }
                 Err(_) => {
                     // The evaluator may not hold this state any more.
                     self.sent_version = None;
@@ -107,6 +133,25 @@ impl Simulation {
             }
             self.scatter(e, &ev, tangent, r, &mut scale);
         }
+        if !device {
+            self.nodal_terms(q, tangent, r, &mut scale);
+        }
+        let mut worst: f64 = 0.0;
+        for (i, &ri) in r.iter().enumerate() {
+            let s = scale[self.row_kinds[i]].max(1e-300);
+            let rel = ri.abs() / s;
+            if !rel.is_finite() {
+                return (f64::INFINITY, scale);
+            }
+            worst = worst.max(rel);
+        }
+        (worst, scale)
+    }
+
+    /// Adds the nodal terms (point masses, external loads and moments) and the rigid
+    /// links' bar forces to `r`, the scales and (if `tangent`) the matrix values.
+    fn nodal_terms(&mut self, q: &[f64], tangent: bool, r: &mut [f64], scale: &mut [f64; 3]) {
+        let dt = self.consts().dt;
         // Nodal terms: point masses and external loads.
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
             let m = self.model.point_mass[a];
@@ -137,8 +182,8 @@ impl Simulation {
                 }
             }
         }
-        self.add_follower_terms(q, tangent, r, &mut scale);
-        self.add_drag_terms(q, tangent, r, &mut scale);
+        self.add_follower_terms(q, tangent, r, scale);
+        self.add_drag_terms(q, tangent, r, scale);
         // Rigid links: the mid-point bar force (exactly energy-consistent, see `Link`).
         for (i, link) in self.model.links.iter().enumerate() {
             let a = link.node;
@@ -165,16 +210,6 @@ impl Simulation {
                 }
             }
         }
-        let mut worst: f64 = 0.0;
-        for (i, &ri) in r.iter().enumerate() {
-            let s = scale[self.row_kinds[i]].max(1e-300);
-            let rel = ri.abs() / s;
-            if !rel.is_finite() {
-                return (f64::INFINITY, scale);
-            }
-            worst = worst.max(rel);
-        }
-        (worst, scale)
     }
 
     /// What an evaluator needs for this iteration: the element states only when they
@@ -196,6 +231,7 @@ impl Simulation {
                 .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { q[i] }))
                 .collect(),
             tangent,
+            device_extra: None,
         }
     }
 

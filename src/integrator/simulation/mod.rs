@@ -131,6 +131,11 @@ pub struct Simulation {
     fell_back: bool,
     /// The planar element kernel of a planar model (`None` for a 3D model).
     planar: Option<planar::PlanarKernel>,
+    /// `--solve device`: the attached lockstep evaluator also solves each frozen-scalar
+    /// Newton system on the device ([`Self::set_device_solve`]).
+    device_solve: bool,
+    /// The device's solution of the last evaluation, when it solved one.
+    device_x: Option<crate::integrator::evaluate::DeviceSolution>,
 }
 
 impl Simulation {
@@ -250,6 +255,8 @@ impl Simulation {
             factored: None,
             fell_back: false,
             planar,
+            device_solve: false,
+            device_x: None,
         })
     }
 
@@ -288,6 +295,19 @@ impl Simulation {
     /// stepped by that driver ([`crate::batch`]), not by [`Self::step`].
     pub fn set_port(&mut self, port: EvalPort) -> bool {
         self.attach(Backend::Lockstep(port))
+    }
+
+    /// Whether the device solves this simulation's block-tridiagonal Newton systems
+    /// (`--solve device`); only meaningful with an evaluator attached, and only for a
+    /// member the device solver covers (see `crate::batch::gpu::GpuEvaluator::attach`).
+    pub fn set_device_solve(&mut self, on: bool) {
+        self.device_solve = on;
+        self.device_x = None;
+    }
+
+    /// Whether the device solves this simulation's Newton systems.
+    pub fn device_solve(&self) -> bool {
+        self.device_solve
     }
 
     fn attach(&mut self, backend: Backend) -> bool {

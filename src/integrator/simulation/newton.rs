@@ -7,6 +7,7 @@
 use std::time::Instant;
 
 use super::{Mode, Simulation};
+use crate::integrator::dofs::NONE;
 use crate::integrator::params::NewtonVariant;
 use crate::integrator::report::{StepFailure, ROUNDOFF_RESIDUAL};
 use crate::integrator::scaling;
@@ -75,19 +76,43 @@ impl Simulation {
             r.iter_mut().for_each(|x| *x = -*x);
             // A reused tangent keeps its factorization too (modified Newton).
             let t0 = Instant::now();
-            let factored = if fresh {
-                self.timers.factorizations += 1;
-                self.factored = None;
-                let f = self.solver.factor();
-                if f.is_ok() {
-                    self.factored = Some(mode);
+            let mut t1 = t0;
+            let solved = if let Some(sol) = self.device_x.take() {
+                // The device factorized (fresh tangent) or reused its factors, and solved
+                // with the same right-hand side: take its correction.
+                if fresh {
+                    self.timers.factorizations += 1;
+                    self.factored = None;
                 }
-                f
+                sol.map(|x| {
+                    if fresh {
+                        self.factored = Some(mode);
+                    }
+                    for (nd, xn) in self.dofs.nodes.iter().zip(&x) {
+                        for (&i, &v) in super::node_local(nd).iter().zip(xn) {
+                            if i != NONE {
+                                r[i] = v;
+                            }
+                        }
+                    }
+                })
             } else {
-                Ok(())
+                let factored = if fresh {
+                    self.timers.factorizations += 1;
+                    self.factored = None;
+                    let f = self.solver.factor();
+                    if f.is_ok() {
+                        self.factored = Some(mode);
+                    }
+                    f
+                } else {
+                    Ok(())
+                };
+                t1 = Instant::now();
+                factored
+                    .and_then(|_| self.solver.solve(&mut r))
+                    .map_err(|e| e.to_string())
             };
-            let t1 = Instant::now();
-            let solved = factored.and_then(|_| self.solver.solve(&mut r));
             self.timers.solves += 1;
             self.timers.factor_s += (t1 - t0).as_secs_f64();
             self.timers.solve_s += t1.elapsed().as_secs_f64();

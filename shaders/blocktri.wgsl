@@ -1,0 +1,383 @@
+// BATCHED BLOCK-TRIDIAGONAL LU AND SOLVE: one invocation per member (a rod numbered node by
+// node), block Thomas with partial pivoting inside the 9×9 diagonal blocks, the WGSL twin of
+// `src/linsolve/batched.rs` (same operations in the same order) and the device counterpart
+// of `src/linsolve/block_tridiagonal.rs`:
+//
+//   S_0 = D_0,   W_i = S_i⁻¹ U_i,   S_{i+1} = D_{i+1} − L_i W_i
+//   forward:  S_i y_i = b_i − L_{i−1} y_{i−1}
+//   backward: x_i = y_i − W_i x_{i+1}
+//
+// The system is read where the assembly pass writes it (`assemble.wgsl`, Rust twin
+// `AsmLayout`): member m's node j residual at m·RPM + 9 j, its diagonal block (row-major
+// 9×9) at K + m·KPM + 81 j, element e's off-diagonal blocks (0,1) = U_e and (1,0) = L_e at
+// K + m·KPM + 81 NPN + 81 (2 e + h): element e joins nodes e and e+1.
+//
+// Rows and columns that are not unknowns (bit k of the node's mask clear: a fixed degree of
+// freedom, an unused node slot) read as an identity row/column with a zero right-hand side,
+// exactly as the padded blocks of the CPU block LU: they change neither the solution nor the
+// pivots of the real unknowns, and their solution is 0.
+//
+// f64 only (rational operations; the adapter must offer SHADER_F64).
+//
+// Chunks: a dispatch processes the nodes [lo, hi) of every member (the host dispatches the
+// chunks in order: factor and forward sweep ascending, backward sweep descending, the
+// backward error ascending), so that one invocation never runs more than a few ten
+// thousand loop iterations: Mesa's llvmpipe/lavapipe stops any invocation after 65 535
+// loop iterations (its infinite-loop guard), which cut the factorization of rods longer
+// than ≈ 44 nodes when one invocation did the whole member.
+
+alias Real = f64;
+
+// Largest finite f64 (a pivot larger than this is +inf).
+const BIG: Real = 1.7976931348623157e308;
+
+// Status codes (per member; written by `factor_main`, `solve_main` may add NONFINITE).
+const OK: u32 = 0u;
+// 1 + i: singular (zero or non-finite pivot) Schur complement of node block i.
+const NONFINITE: u32 = 0x80000000u;
+
+struct Params {
+    // Member slots.
+    n_member: u32,
+    // Node slots per member (NPN).
+    npn: u32,
+    // Start of the tangent region of `sys` (K).
+    k_start: u32,
+    // Scalars per member of the tangent region (KPM).
+    kpm: u32,
+    // Scalars per member of the residual region (RPM).
+    rpm: u32,
+    // 1: the right-hand side is minus the stored residual.
+    negate: u32,
+    // This dispatch's node chunk [lo, hi) (see "Chunks" above).
+    lo: u32,
+    hi: u32,
+}
+
+@group(0) @binding(0) var<storage, read> sys: array<Real>;
+// Per member 3·81·NPN: the LU factors of S_i at 81 i (L unit lower, U upper, row-major),
+// W_i at 81 (NPN + i), the masked L_i at 81 (2 NPN + i).
+@group(0) @binding(1) var<storage, read_write> fac: array<Real>;
+// Per member 9·NPN: the row chosen at step k of block i's elimination at 9 i + k.
+@group(0) @binding(2) var<storage, read_write> piv: array<u32>;
+// Per member 9·NPN: the solution.
+@group(0) @binding(3) var<storage, read_write> xs: array<Real>;
+// Per node slot: bit k set when node-local unknown k is an unknown.
+@group(0) @binding(4) var<storage, read> mask: array<u32>;
+// Per member slot: its number of nodes (0: inactive).
+@group(0) @binding(5) var<storage, read> member_n: array<u32>;
+// Per member slot: bit 0 factorize, bit 1 solve in this dispatch.
+@group(0) @binding(6) var<storage, read> ops: array<u32>;
+// Per member slot: status code.
+@group(0) @binding(7) var<storage, read_write> status: array<u32>;
+// Per member slot: normwise backward error of the last solve,
+// ‖b − A x‖∞ / (‖A‖∞ ‖x‖∞ + ‖b‖∞).
+@group(0) @binding(8) var<storage, read_write> berr: array<Real>;
+@group(0) @binding(9) var<uniform> prm: Params;
+// Per node slot 9 values added to the stored residual before it becomes the right-hand
+// side (the host's nodal terms: external loads, moments).
+@group(0) @binding(10) var<storage, read> extra: array<Real>;
+// Per member slot: running backward-error terms (residual, ‖A‖, ‖x‖, ‖b‖; the last is
+// negative once a non-finite value was seen).
+@group(0) @binding(11) var<storage, read_write> acc: array<Real>;
+
+fn fbase(m: u32) -> u32 { return m * 243u * prm.npn; }
+fn kbase(m: u32) -> u32 { return prm.k_start + m * prm.kpm; }
+
+// Entry (r, c) of a block with row mask `mr` and column mask `mc` as the masked system
+// sees it: `diag` for diagonal blocks (identity where masked).
+fn masked(v: Real, mr: u32, mc: u32, r: u32, c: u32, diag: bool) -> Real {
+    if ((mr >> r) & 1u) != 0u && ((mc >> c) & 1u) != 0u { return v; }
+    if diag && r == c { return 1.0; }
+    return 0.0;
+}
+
+fn is_finite(v: Real) -> bool { return abs(v) <= BIG; }
+
+// Applies S_i⁻¹ (pivots, unit lower, upper) in place to the 9-vector of `fac` at `at` with
+// stride `st` (a column of W_i), or of `xs` when `in_x`.
+fn lu_apply_fac(s: u32, p: u32, at: u32, st: u32) {
+    for (var k = 0u; k < 9u; k++) {
+        let q = piv[p + k];
+        if q != k {
+            let t = fac[at + st * k];
+            fac[at + st * k] = fac[at + st * q];
+            fac[at + st * q] = t;
+        }
+    }
+    for (var r = 1u; r < 9u; r++) {
+        var acc = fac[at + st * r];
+        for (var c = 0u; c < r; c++) { acc -= fac[s + 9u * r + c] * fac[at + st * c]; }
+        fac[at + st * r] = acc;
+    }
+    for (var ri = 0u; ri < 9u; ri++) {
+        let r = 8u - ri;
+        var acc = fac[at + st * r];
+        for (var c = r + 1u; c < 9u; c++) { acc -= fac[s + 9u * r + c] * fac[at + st * c]; }
+        fac[at + st * r] = acc / fac[s + 9u * r + r];
+    }
+}
+
+fn lu_apply_x(s: u32, p: u32, at: u32) {
+    for (var k = 0u; k < 9u; k++) {
+        let q = piv[p + k];
+        if q != k {
+            let t = xs[at + k];
+            xs[at + k] = xs[at + q];
+            xs[at + q] = t;
+        }
+    }
+    for (var r = 1u; r < 9u; r++) {
+        var acc = xs[at + r];
+        for (var c = 0u; c < r; c++) { acc -= fac[s + 9u * r + c] * xs[at + c]; }
+        xs[at + r] = acc;
+    }
+    for (var ri = 0u; ri < 9u; ri++) {
+        let r = 8u - ri;
+        var acc = xs[at + r];
+        for (var c = r + 1u; c < 9u; c++) { acc -= fac[s + 9u * r + c] * xs[at + c]; }
+        xs[at + r] = acc / fac[s + 9u * r + r];
+    }
+}
+
+// Copies node i's masked blocks: D_i into the S slot, U_i into the W slot, L_i into the
+// L slot.
+fn load_node(m: u32, n: u32, i: u32) {
+    let f = fbase(m);
+    let a = kbase(m);
+    let npn = prm.npn;
+    let mi = mask[m * npn + i];
+    for (var r = 0u; r < 9u; r++) {
+        for (var c = 0u; c < 9u; c++) {
+            fac[f + 81u * i + 9u * r + c] =
+                masked(sys[a + 81u * i + 9u * r + c], mi, mi, r, c, true);
+        }
+    }
+    if i + 1u < n {
+        let mj = mask[m * npn + i + 1u];
+        let off = a + 81u * npn + 162u * i;
+        for (var r = 0u; r < 9u; r++) {
+            for (var c = 0u; c < 9u; c++) {
+                fac[f + 81u * (npn + i) + 9u * r + c] =
+                    masked(sys[off + 9u * r + c], mi, mj, r, c, false);
+                fac[f + 81u * (2u * npn + i) + 9u * r + c] =
+                    masked(sys[off + 81u + 9u * r + c], mj, mi, r, c, false);
+            }
+        }
+    }
+}
+
+// Factorization steps lo ≤ i < hi of member m (n nodes); returns its status. Step i
+// needs S_i (D_i minus the update of step i − 1), U_i, L_i and D_{i+1}: a chunk loads the
+// blocks of nodes lo + 1 … hi (and node 0 in the first chunk) before its steps.
+fn factor(m: u32, n: u32, lo: u32, hi: u32) -> u32 {
+    let f = fbase(m);
+    let npn = prm.npn;
+    if lo == 0u { load_node(m, n, 0u); }
+    for (var i = lo + 1u; i < min(hi + 1u, n); i++) { load_node(m, n, i); }
+    for (var i = lo; i < hi; i++) {
+        let s = f + 81u * i;
+        let p = m * 9u * npn + 9u * i;
+        // LU of S_i with partial pivoting (first largest magnitude), rows swapped whole.
+        for (var k = 0u; k < 9u; k++) {
+            var q = k;
+            var best = abs(fac[s + 9u * k + k]);
+            for (var r = k + 1u; r < 9u; r++) {
+                let v = abs(fac[s + 9u * r + k]);
+                if v > best { best = v; q = r; }
+            }
+            piv[p + k] = q;
+            if !(best > 0.0) || !is_finite(best) { return 1u + i; }
+            if q != k {
+                for (var c = 0u; c < 9u; c++) {
+                    let t = fac[s + 9u * k + c];
+                    fac[s + 9u * k + c] = fac[s + 9u * q + c];
+                    fac[s + 9u * q + c] = t;
+                }
+            }
+            let d = fac[s + 9u * k + k];
+            for (var r = k + 1u; r < 9u; r++) {
+                let l = fac[s + 9u * r + k] / d;
+                fac[s + 9u * r + k] = l;
+                for (var c = k + 1u; c < 9u; c++) {
+                    fac[s + 9u * r + c] -= l * fac[s + 9u * k + c];
+                }
+            }
+        }
+        if i + 1u < n {
+            let w = f + 81u * (npn + i);
+            for (var c = 0u; c < 9u; c++) { lu_apply_fac(s, p, w + c, 9u); }
+            let l = f + 81u * (2u * npn + i);
+            let s1 = s + 81u;
+            for (var r = 0u; r < 9u; r++) {
+                for (var c = 0u; c < 9u; c++) {
+                    var acc: Real = 0.0;
+                    for (var k = 0u; k < 9u; k++) { acc += fac[l + 9u * r + k] * fac[w + 9u * k + c]; }
+                    fac[s1 + 9u * r + c] -= acc;
+                }
+            }
+        }
+    }
+    return OK;
+}
+
+// The masked right-hand side entry r of node i of member m: ± (stored residual + extra).
+fn rhs(m: u32, i: u32, r: u32) -> Real {
+    let mi = mask[m * prm.npn + i];
+    if ((mi >> r) & 1u) == 0u { return 0.0; }
+    let v = sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
+    if prm.negate != 0u { return -v; }
+    return v;
+}
+
+// Forward sweep over nodes lo ≤ i < hi of member m: y_i = S_i⁻¹ (b_i − L_{i−1} y_{i−1}).
+fn forward(m: u32, lo: u32, hi: u32) {
+    let f = fbase(m);
+    let npn = prm.npn;
+    let x = m * 9u * npn;
+    for (var i = lo; i < hi; i++) {
+        for (var r = 0u; r < 9u; r++) {
+            var a = rhs(m, i, r);
+            if i > 0u {
+                let l = f + 81u * (2u * npn + i - 1u);
+                for (var c = 0u; c < 9u; c++) { a -= fac[l + 9u * r + c] * xs[x + 9u * (i - 1u) + c]; }
+            }
+            xs[x + 9u * i + r] = a;
+        }
+        lu_apply_x(f + 81u * i, m * 9u * npn + 9u * i, x + 9u * i);
+    }
+}
+
+// Backward sweep over nodes hi > i ≥ lo (i < n − 1) of member m: x_i = y_i − W_i x_{i+1}.
+fn backward(m: u32, n: u32, lo: u32, hi: u32) {
+    let f = fbase(m);
+    let npn = prm.npn;
+    let x = m * 9u * npn;
+    for (var ii = lo; ii < hi; ii++) {
+        let i = hi - 1u - (ii - lo);
+        if i + 1u >= n { continue; }
+        let w = f + 81u * (npn + i);
+        for (var r = 0u; r < 9u; r++) {
+            var a = xs[x + 9u * i + r];
+            for (var c = 0u; c < 9u; c++) { a -= fac[w + 9u * r + c] * xs[x + 9u * (i + 1u) + c]; }
+            xs[x + 9u * i + r] = a;
+        }
+    }
+}
+
+// Backward-error terms of nodes lo ≤ i < hi of member m against the masked system
+// (diagonal and upper blocks from `sys`, the masked lower blocks kept in `fac`),
+// accumulated in `acc`; the last chunk writes the backward error and returns the status.
+fn backward_error(m: u32, n: u32, lo: u32, hi: u32) -> u32 {
+    let f = fbase(m);
+    let a = kbase(m);
+    let npn = prm.npn;
+    let x = m * 9u * npn;
+    var res: Real = 0.0;
+    var anorm: Real = 0.0;
+    var xnorm: Real = 0.0;
+    var bnorm: Real = 0.0;
+    var finite = true;
+    if lo > 0u {
+        res = acc[4u * m];
+        anorm = acc[4u * m + 1u];
+        xnorm = acc[4u * m + 2u];
+        bnorm = acc[4u * m + 3u];
+        finite = bnorm >= 0.0;
+        bnorm = abs(bnorm);
+    }
+    for (var i = lo; i < hi; i++) {
+        let mi = mask[m * npn + i];
+        for (var r = 0u; r < 9u; r++) {
+            let b = rhs(m, i, r);
+            var t = b;
+            var rs: Real = 0.0;
+            for (var c = 0u; c < 9u; c++) {
+                let v = masked(sys[a + 81u * i + 9u * r + c], mi, mi, r, c, true);
+                t -= v * xs[x + 9u * i + c];
+                rs += abs(v);
+            }
+            if i + 1u < n {
+                let mj = mask[m * npn + i + 1u];
+                let off = a + 81u * npn + 162u * i;
+                for (var c = 0u; c < 9u; c++) {
+                    let v = masked(sys[off + 9u * r + c], mi, mj, r, c, false);
+                    t -= v * xs[x + 9u * (i + 1u) + c];
+                    rs += abs(v);
+                }
+            }
+            if i > 0u {
+                let l = f + 81u * (2u * npn + i - 1u);
+                for (var c = 0u; c < 9u; c++) {
+                    let v = fac[l + 9u * r + c];
+                    t -= v * xs[x + 9u * (i - 1u) + c];
+                    rs += abs(v);
+                }
+            }
+            let xv = xs[x + 9u * i + r];
+            finite = finite && is_finite(xv);
+            res = max(res, abs(t));
+            anorm = max(anorm, rs);
+            xnorm = max(xnorm, abs(xv));
+            bnorm = max(bnorm, abs(b));
+        }
+    }
+    if hi < n {
+        acc[4u * m] = res;
+        acc[4u * m + 1u] = anorm;
+        acc[4u * m + 2u] = xnorm;
+        if finite { acc[4u * m + 3u] = bnorm; } else { acc[4u * m + 3u] = -bnorm - 1.0; }
+        return OK;
+    }
+    let den = anorm * xnorm + bnorm;
+    var e: Real = 0.0;
+    if den > 0.0 { e = res / den; }
+    berr[m] = e;
+    if !finite || !is_finite(e) { return NONFINITE; }
+    return OK;
+}
+
+// The member of this invocation and its chunk [lo, hi) clipped to its n nodes, or
+// n = 0 when it has nothing to do in this dispatch (bit: the operation).
+struct Job { m: u32, n: u32, lo: u32, hi: u32 }
+
+fn job(gid: u32, bit: u32) -> Job {
+    var j = Job(gid, 0u, 0u, 0u);
+    if gid >= prm.n_member { return j; }
+    let n = member_n[gid];
+    if n == 0u || (ops[gid] & bit) == 0u || prm.lo >= n { return j; }
+    j.n = n;
+    j.lo = prm.lo;
+    j.hi = min(prm.hi, n);
+    return j;
+}
+
+@compute @workgroup_size(64)
+fn factor_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 1u);
+    if j.n == 0u { return; }
+    if j.lo == 0u { status[j.m] = OK; }
+    if status[j.m] != OK { return; }
+    status[j.m] = factor(j.m, j.n, j.lo, j.hi);
+}
+
+@compute @workgroup_size(64)
+fn forward_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 2u);
+    if j.n == 0u || status[j.m] != OK { return; }
+    forward(j.m, j.lo, j.hi);
+}
+
+@compute @workgroup_size(64)
+fn backward_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 2u);
+    if j.n == 0u || status[j.m] != OK { return; }
+    backward(j.m, j.n, j.lo, j.hi);
+}
+
+@compute @workgroup_size(64)
+fn berr_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = job(gid.x, 2u);
+    if j.n == 0u || status[j.m] != OK { return; }
+    status[j.m] = backward_error(j.m, j.n, j.lo, j.hi);
+}

@@ -1,0 +1,458 @@
+//! Batched block-tridiagonal LU and solve on the device (`shaders/blocktri.wgsl`; CPU twin
+//! [`crate::linsolve::batched`]): one invocation per member, block Thomas with partial
+//! pivoting inside the 9×9 node blocks. The system is read from a buffer laid out as the
+//! assembly pass's output ([`crate::gpu::layout::AsmLayout`], or any
+//! [`BatchLayout`]); the factors stay on the device between solves (modified Newton), and
+//! only what the caller asks for comes back: per member a status and a backward error
+//! (12 bytes), the solution when wanted.
+
+use super::context::{GpuContext, Precision};
+use super::GpuError;
+use crate::linsolve::batched::BatchLayout;
+
+/// The WGSL source (f64 only).
+pub const BLOCKTRI_WGSL: &str = include_str!("../../shaders/blocktri.wgsl");
+
+/// Nodes per dispatch: an invocation runs ≈ 2 200 loop iterations per node of a
+/// factorization, and lavapipe ends an invocation after 65 535 (shaders/blocktri.wgsl,
+/// "Chunks").
+pub const CHUNK_NODES: usize = 16;
+
+/// Per-member operation bit: factorize.
+pub const OP_FACTOR: u32 = 1;
+/// Per-member operation bit: solve with the factors.
+pub const OP_SOLVE: u32 = 2;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    n_member: u32,
+    npn: u32,
+    k_start: u32,
+    kpm: u32,
+    rpm: u32,
+    negate: u32,
+    lo: u32,
+    hi: u32,
+}
+
+/// What one [`BlockTriSolver::run`] read back.
+#[derive(Clone, Debug, Default)]
+pub struct Solved {
+    /// Per member slot: [`crate::linsolve::batched::OK`], `1 + i` (singular Schur
+    /// complement of node block `i`) or [`crate::linsolve::batched::NONFINITE`].
+    pub status: Vec<u32>,
+    /// Per member slot: backward error of its last solve.
+    pub berr: Vec<f64>,
+    /// The solutions (`9 · NPN` per member slot), when asked for.
+    pub x: Option<Vec<f64>>,
+}
+
+/// A batch of `members` block-tridiagonal systems on the device.
+pub struct BlockTriSolver {
+    layout: BatchLayout,
+    members: usize,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    /// `factor_main`, `forward_main`, `backward_main`, `berr_main`.
+    pipelines: [wgpu::ComputePipeline; 4],
+    /// One bind group per node chunk (each with its own `lo`, `hi`).
+    bind_groups: Vec<wgpu::BindGroup>,
+    /// `[xs, mask, member_n, ops, status, berr]` (factors and pivots are never read back).
+    xs: wgpu::Buffer,
+    mask: wgpu::Buffer,
+    member_n: wgpu::Buffer,
+    ops: wgpu::Buffer,
+    status: wgpu::Buffer,
+    berr: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    extra: wgpu::Buffer,
+    extra_host: Vec<f64>,
+    extra_dirty: Vec<bool>,
+    /// Factors, pivots and backward-error terms: only ever touched by the shader (kept
+    /// alive with the solver).
+    _fac_piv: [wgpu::Buffer; 3],
+    mask_host: Vec<u32>,
+    n_host: Vec<u32>,
+    topo_dirty: bool,
+    ops_host: Vec<u32>,
+    /// Bytes read back by the last [`Self::run`].
+    pub last_bytes_down: u64,
+}
+
+fn storage(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: u64,
+    extra: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(4),
+        usage: wgpu::BufferUsages::STORAGE | extra,
+        mapped_at_creation: false,
+    })
+}
+
+impl BlockTriSolver {
+    /// A storage buffer holding `data` (f64), usable as the system of [`Self::new`].
+    pub fn system_buffer(ctx: &GpuContext, data: &[f64]) -> wgpu::Buffer {
+        let b = storage(
+            &ctx.device,
+            "block system",
+            8 * data.len() as u64,
+            wgpu::BufferUsages::COPY_DST,
+        );
+        ctx.queue.write_buffer(&b, 0, bytemuck::cast_slice(data));
+        b
+    }
+
+    /// Builds the passes over `members` member slots of the system in `sys`, laid out by
+    /// `layout`. Needs `SHADER_F64`. Every member slot starts inactive (no nodes).
+    pub fn new(
+        ctx: &GpuContext,
+        members: usize,
+        layout: BatchLayout,
+        sys: &wgpu::Buffer,
+    ) -> Result<Self, GpuError> {
+        if ctx.precision != Precision::F64 {
+            return Err(GpuError::Kernel(
+                "the device block solver needs an adapter with SHADER_F64".into(),
+            ));
+        }
+        let members = members.max(1);
+        let fac_bytes = 8 * (layout.fac_per_member() * members) as u64;
+        let lim = ctx
+            .limits
+            .max_storage_buffer_binding_size
+            .min(ctx.limits.max_buffer_size);
+        if fac_bytes > lim {
+            return Err(GpuError::TooLarge {
+                elements: members * layout.npn,
+                max: (lim / (8 * layout.fac_per_member() as u64)) as usize * layout.npn,
+            });
+        }
+        let device = ctx.device.clone();
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("blocktri.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(BLOCKTRI_WGSL.into()),
+        });
+        let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let ro = wgpu::BufferBindingType::Storage { read_only: true };
+        let rw = wgpu::BufferBindingType::Storage { read_only: false };
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("blocktri"),
+            entries: &[
+                entry(0, ro),
+                entry(1, rw),
+                entry(2, rw),
+                entry(3, rw),
+                entry(4, ro),
+                entry(5, ro),
+                entry(6, ro),
+                entry(7, rw),
+                entry(8, rw),
+                entry(9, wgpu::BufferBindingType::Uniform),
+                entry(10, ro),
+                entry(11, rw),
+            ],
+        });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("blocktri"),
+            bind_group_layouts: &[Some(&bgl)],
+            immediate_size: 0,
+        });
+        let pipe = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: ctx.pipeline_cache(),
+            })
+        };
+        let pipelines = [
+            pipe("factor_main"),
+            pipe("forward_main"),
+            pipe("backward_main"),
+            pipe("berr_main"),
+        ];
+        ctx.save_pipeline_cache();
+        let none = wgpu::BufferUsages::empty();
+        let dst = wgpu::BufferUsages::COPY_DST;
+        let src = wgpu::BufferUsages::COPY_SRC;
+        let xn = (layout.x_per_member() * members) as u64;
+        let fac = storage(&device, "factors", fac_bytes, none);
+        let piv = storage(&device, "pivots", 4 * xn, none);
+        let xs = storage(&device, "solutions", 8 * xn, src);
+        let mask = storage(&device, "masks", 4 * (layout.npn * members) as u64, dst);
+        let member_n = storage(&device, "member nodes", 4 * members as u64, dst);
+        let ops = storage(&device, "ops", 4 * members as u64, dst);
+        let status = storage(&device, "status", 4 * members as u64, src | dst);
+        let berr = storage(&device, "backward errors", 8 * members as u64, src);
+        let extra = storage(&device, "rhs extras", 8 * xn, dst);
+        ctx.queue
+            .write_buffer(&extra, 0, bytemuck::cast_slice(&vec![0.0f64; xn as usize]));
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("blocktri staging"),
+            size: 8 * xn + 12 * members as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let acc = storage(&device, "backward-error terms", 32 * members as u64, none);
+        ctx.queue
+            .write_buffer(&status, 0, bytemuck::cast_slice(&vec![0u32; members]));
+        let bind_groups = (0..layout.npn.div_ceil(CHUNK_NODES).max(1))
+            .map(|c| {
+                let params = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("blocktri params"),
+                    size: std::mem::size_of::<Params>() as u64,
+                    usage: wgpu::BufferUsages::UNIFORM | dst,
+                    mapped_at_creation: false,
+                });
+                let p = Params {
+                    n_member: members as u32,
+                    npn: layout.npn as u32,
+                    k_start: layout.k_start as u32,
+                    kpm: layout.kpm as u32,
+                    rpm: layout.rpm as u32,
+                    negate: layout.negate as u32,
+                    lo: (c * CHUNK_NODES) as u32,
+                    hi: ((c + 1) * CHUNK_NODES) as u32,
+                };
+                ctx.queue.write_buffer(&params, 0, bytemuck::bytes_of(&p));
+                let bufs = [
+                    sys, &fac, &piv, &xs, &mask, &member_n, &ops, &status, &berr, &params, &extra,
+                    &acc,
+                ];
+                let entries: Vec<wgpu::BindGroupEntry> = bufs
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| wgpu::BindGroupEntry {
+                        binding: i as u32,
+                        resource: b.as_entire_binding(),
+                    })
+                    .collect();
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("blocktri"),
+                    layout: &bgl,
+                    entries: &entries,
+                })
+            })
+            .collect();
+        Ok(Self {
+            layout,
+            members,
+            device,
+            queue: ctx.queue.clone(),
+            pipelines,
+            bind_groups,
+            xs,
+            mask,
+            member_n,
+            ops,
+            status,
+            berr,
+            staging,
+            _fac_piv: [fac, piv, acc],
+            extra,
+            extra_host: vec![0.0; xn as usize],
+            extra_dirty: vec![false; members],
+            mask_host: vec![0; layout.npn * members],
+            n_host: vec![0; members],
+            topo_dirty: true,
+            ops_host: vec![0; members],
+            last_bytes_down: 0,
+        })
+    }
+
+    /// Member slots.
+    pub fn members(&self) -> usize {
+        self.members
+    }
+
+    /// The layout of the system.
+    pub fn layout(&self) -> BatchLayout {
+        self.layout
+    }
+
+    /// Registers member slot `m` with `masks.len()` nodes (≤ NPN; 0 makes it inactive);
+    /// `masks[j]` has bit `k` set when node-local unknown `k` of node `j` is an unknown.
+    pub fn set_member(&mut self, m: usize, masks: &[u32]) {
+        let npn = self.layout.npn;
+        assert!(
+            masks.len() <= npn,
+            "member of {} nodes in slots of {npn}",
+            masks.len()
+        );
+        self.n_host[m] = masks.len() as u32;
+        let dst = &mut self.mask_host[m * npn..(m + 1) * npn];
+        dst.fill(0);
+        dst[..masks.len()].copy_from_slice(masks);
+        self.topo_dirty = true;
+    }
+
+    /// Sets the values added to member `m`'s stored residual (node-local, one row of 9
+    /// per node) before it becomes the right-hand side; uploaded with the next
+    /// [`Self::encode`] where they changed.
+    pub fn set_extra(&mut self, m: usize, rows: &[[f64; 9]]) {
+        let npn = self.layout.npn;
+        let dst = &mut self.extra_host[9 * m * npn..9 * (m + 1) * npn];
+        let mut changed = false;
+        for (j, row) in rows.iter().enumerate().take(npn) {
+            for (k, &v) in row.iter().enumerate() {
+                changed |= dst[9 * j + k] != v;
+                dst[9 * j + k] = v;
+            }
+        }
+        self.extra_dirty[m] |= changed;
+    }
+
+    /// Records the factor and solve passes into `enc` for the members of `ops`
+    /// (`(slot, OP_FACTOR | OP_SOLVE)`; the others do nothing), uploading what changed.
+    pub fn encode(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
+        if self.topo_dirty {
+            self.queue
+                .write_buffer(&self.mask, 0, bytemuck::cast_slice(&self.mask_host));
+            self.queue
+                .write_buffer(&self.member_n, 0, bytemuck::cast_slice(&self.n_host));
+            self.topo_dirty = false;
+        }
+        let w = 9 * self.layout.npn;
+        for (lo, hi) in super::kernel::take_runs(&mut self.extra_dirty) {
+            self.queue.write_buffer(
+                &self.extra,
+                8 * (w * lo) as u64,
+                bytemuck::cast_slice(&self.extra_host[w * lo..w * hi]),
+            );
+        }
+        let mut new = vec![0u32; self.members];
+        for &(m, o) in ops {
+            new[m] |= o;
+        }
+        if new != self.ops_host {
+            self.queue
+                .write_buffer(&self.ops, 0, bytemuck::cast_slice(&new));
+            self.ops_host = new;
+        }
+        let groups = self.members.div_ceil(64) as u32;
+        let any = |bit: u32| ops.iter().any(|o| o.1 & bit != 0);
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("blocktri"),
+            timestamp_writes: None,
+        });
+        let chunks = self.bind_groups.len();
+        let run =
+            |pass: &mut wgpu::ComputePass, p: usize, order: &mut dyn Iterator<Item = usize>| {
+                pass.set_pipeline(&self.pipelines[p]);
+                for c in order {
+                    pass.set_bind_group(0, &self.bind_groups[c], &[]);
+                    pass.dispatch_workgroups(groups, 1, 1);
+                }
+            };
+        if any(OP_FACTOR) {
+            run(&mut pass, 0, &mut (0..chunks));
+        }
+        if any(OP_SOLVE) {
+            run(&mut pass, 1, &mut (0..chunks));
+            run(&mut pass, 2, &mut (0..chunks).rev());
+            run(&mut pass, 3, &mut (0..chunks));
+        }
+    }
+
+    /// Encodes, submits and waits; reads back every member's status and backward error
+    /// and, with `read_x`, every member's solution.
+    pub fn run(&mut self, ops: &[(usize, u32)], read_x: bool) -> Result<Solved, GpuError> {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.encode(&mut enc, ops);
+        self.queue.submit(Some(enc.finish()));
+        let all: Vec<usize> = if read_x {
+            (0..self.members).collect()
+        } else {
+            Vec::new()
+        };
+        self.read(&all)
+    }
+
+    /// Reads back (after the work encoded with [`Self::encode`] was submitted) every
+    /// member's status and backward error (12 bytes per slot) and the solutions of the
+    /// member slots `x_of` (72 bytes per node slot); `Solved::x` is `None` when `x_of` is
+    /// empty, else holds the whole solution buffer with the other slots left zero.
+    pub fn read(&mut self, x_of: &[usize]) -> Result<Solved, GpuError> {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mb = self.members as u64;
+        let per = 8 * self.layout.x_per_member() as u64;
+        enc.copy_buffer_to_buffer(&self.status, 0, &self.staging, 0, 4 * mb);
+        enc.copy_buffer_to_buffer(&self.berr, 0, &self.staging, 4 * mb, 8 * mb);
+        let mut sorted = x_of.to_vec();
+        sorted.sort_unstable();
+        sorted.dedup();
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        for m in sorted {
+            match runs.last_mut() {
+                Some(last) if last.1 == m => last.1 = m + 1,
+                _ => runs.push((m, m + 1)),
+            }
+        }
+        let mut end = 12 * mb;
+        let mut down = 12 * mb;
+        for &(lo, hi) in &runs {
+            let (at, len) = (per * lo as u64, per * (hi - lo) as u64);
+            enc.copy_buffer_to_buffer(&self.xs, at, &self.staging, 12 * mb + at, len);
+            end = end.max(12 * mb + at + len);
+            down += len;
+        }
+        self.queue.submit(Some(enc.finish()));
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.staging
+            .slice(0..end)
+            .map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Kernel(e.to_string()))?
+            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        let out = {
+            let view = self
+                .staging
+                .get_mapped_range(0..end)
+                .map_err(|e| GpuError::Kernel(e.to_string()))?;
+            let bytes: &[u8] = &view;
+            let status: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[..4 * mb as usize]);
+            let berr: Vec<f64> =
+                bytemuck::pod_collect_to_vec(&bytes[4 * mb as usize..12 * mb as usize]);
+            let x = (!runs.is_empty()).then(|| {
+                let mut x = vec![0.0; self.layout.x_per_member() * self.members];
+                for &(lo, hi) in &runs {
+                    let (a, b) = (12 * mb + per * lo as u64, 12 * mb + per * hi as u64);
+                    let src: Vec<f64> =
+                        bytemuck::pod_collect_to_vec(&bytes[a as usize..b as usize]);
+                    let w = self.layout.x_per_member();
+                    x[w * lo..w * hi].copy_from_slice(&src);
+                }
+                x
+            });
+            Solved { status, berr, x }
+        };
+        self.staging.unmap();
+        self.last_bytes_down = down;
+        Ok(out)
+    }
+}

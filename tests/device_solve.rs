@@ -1,0 +1,325 @@
+//! `--solve device` ≡ the CPU path, member by member.
+//!
+//! A lockstep GPU batch whose Newton systems are factorized and solved on the device
+//! (`shaders/blocktri.wgsl`: only corrections, statuses and backward errors come back)
+//! runs a batch of cantilevers with seeded random kicks, stiffnesses and time steps,
+//! mixed with members that end early, members that fail (a staggered cap too low for
+//! their kick, no fallback; one whose Newton iteration cap is too low), a
+//! generalized-α member (no GPU kernel: CPU kernel inside the batch) and a member with a
+//! tip point mass (a feature the device solver does not cover: host solve inside the same
+//! batch, counted as such), streaming through fewer slots than members. For full and
+//! modified Newton every member ends as on the CPU path — status, failure reason, steps,
+//! Newton iterations (full: equal; modified: as `tests/gpu_lockstep.rs`) — with its
+//! final positions, directors, velocities and energy history within `STATE_RTOL`.
+//!
+//! The paper's frame (EDMC-2, one rod numbered node by node) runs its first 15 steps
+//! with device solves to the same states and iteration counts as on the CPU path.
+//!
+//! From the command line: `run --backend gpu --solve device` records `"solve": "device"`
+//! in `summary.json` and ends as the CPU run; `--solve device` without the GPU path and on
+//! a scene the device solver does not cover (rigid links) is refused with exit code 2
+//! and the reason, writing nothing.
+//!
+//! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
+//! is set, in which case it fails.
+
+mod common;
+use common::gpu;
+use cosserat::batch::{
+    bench_members, run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
+};
+use cosserat::integrator::{NewtonVariant, Scheme};
+use cosserat::observe::record::RunStatus;
+
+/// The bound for whole-run parity (the printed measurement is far below it).
+const STATE_RTOL: f64 = 1e-10;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// 14 members of 10 elements: 0..9 random, 9 ends after 3 steps, 10 fails on its
+/// staggered cap, 11 fails on its Newton cap, 12 is generalized-α, 13 has a point mass.
+fn members() -> Vec<Member> {
+    let mut ms = bench_members(14, 10, 6).unwrap();
+    let mut rng = Rng(0x00de_71ce);
+    for (i, m) in ms.iter_mut().enumerate() {
+        let kick = 0.5 + 1.5 * rng.next();
+        m.model.velocity0.iter_mut().for_each(|v| *v *= kick);
+        let stiff = 0.5 + rng.next();
+        for e in m.model.elements.iter_mut() {
+            e.props.c_gamma *= stiff;
+            e.props.c_omega *= stiff;
+        }
+        let steps = 6.0;
+        m.params.dt *= 0.5 + rng.next();
+        m.params.t_end = steps * m.params.dt;
+        match i {
+            9 => m.params.t_end = 3.0 * m.params.dt,
+            10 => {
+                m.params.max_outer = 3;
+                m.params.fallback = false;
+                m.model.velocity0.iter_mut().for_each(|v| *v *= 4.0);
+            }
+            11 => {
+                m.params.max_iter = 2;
+                m.params.fallback = false;
+            }
+            12 => m.params.scheme = Scheme::GenAlpha { rho_inf: 0.8 },
+            13 => {
+                let tip = m.model.point_mass.len() - 1;
+                m.model.point_mass[tip] = 0.05;
+            }
+            _ => {}
+        }
+    }
+    ms
+}
+
+fn run(
+    ms: &[Member],
+    exec: &Executor,
+    newton: NewtonVariant,
+    solve: SolveMode,
+) -> (Vec<MemberResult>, BatchStats) {
+    let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
+    let stats = run_members(
+        ms,
+        exec,
+        BatchOptions {
+            keep_history: true,
+            keep_state: true,
+            workers: 5,
+            newton: Some(newton),
+            solve,
+            ..Default::default()
+        },
+        |r| {
+            let i = r.index;
+            assert!(out[i].is_none(), "member {i} reported twice");
+            out[i] = Some(r);
+        },
+    )
+    .unwrap();
+    let out = out
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| r.unwrap_or_else(|| panic!("member {i} never reported")))
+        .collect();
+    (out, stats)
+}
+
+fn rel(a: impl Iterator<Item = f64> + Clone, b: impl Iterator<Item = f64>) -> f64 {
+    let scale = a.clone().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    a.zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
+}
+
+#[test]
+fn device_solve_matches_cpu_member_by_member() {
+    let Some(exec) = gpu() else { return };
+    let ms = members();
+    let mut worst = 0.0f64;
+    for newton in [NewtonVariant::Full, NewtonVariant::Modified] {
+        let (cpu, _) = run(&ms, &Executor::Cpu, newton, SolveMode::Host);
+        let (dev, stats) = run(&ms, &exec, newton, SolveMode::Device);
+        // 12 members on the device solver, the point-mass member on the host (the
+        // generalized-α member never reaches the GPU).
+        assert_eq!(stats.device_members, (12, 1), "{}", newton.name());
+        // The mix exercises what it claims to.
+        for i in [10, 11] {
+            assert_eq!(cpu[i].outcome.status, RunStatus::Failed, "member {i}");
+            println!(
+                "member {i} fails after {} steps: {:?}",
+                cpu[i].outcome.steps, cpu[i].outcome.reason
+            );
+        }
+        assert!(cpu[..9]
+            .iter()
+            .all(|r| r.outcome.status != RunStatus::Failed));
+        assert!(dev[..9].iter().all(|r| r.outcome.timers.factorizations > 0));
+        for (c, g) in cpu.iter().zip(&dev) {
+            let i = c.index;
+            let tag = format!("{} Newton, member {i}", newton.name());
+            assert_eq!(c.outcome.status, g.outcome.status, "{tag}");
+            assert_eq!(c.outcome.reason, g.outcome.reason, "{tag}");
+            assert_eq!(c.outcome.steps, g.outcome.steps, "{tag}");
+            let (ic, ig) = (c.outcome.newton_iters_total, g.outcome.newton_iters_total);
+            match newton {
+                NewtonVariant::Full => assert_eq!(ic, ig, "{tag}"),
+                NewtonVariant::Modified => {
+                    assert!(
+                        ic.abs_diff(ig) <= 2 + ic / 50,
+                        "{tag}: {ic} vs {ig} iterations"
+                    )
+                }
+            }
+            assert_eq!(c.history.len(), g.history.len(), "{tag}");
+            let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
+            assert_eq!(sc.t, sg.t, "{tag}");
+            let diffs = [
+                (
+                    "positions",
+                    rel(
+                        sc.r.iter().flat_map(|x| x.iter().copied()),
+                        sg.r.iter().flat_map(|x| x.iter().copied()),
+                    ),
+                ),
+                (
+                    "directors",
+                    rel(
+                        sc.d.iter()
+                            .flat_map(|d| d.iter().flat_map(|m| m.iter().copied())),
+                        sg.d.iter()
+                            .flat_map(|d| d.iter().flat_map(|m| m.iter().copied())),
+                    ),
+                ),
+                (
+                    "velocities",
+                    rel(
+                        sc.v.iter().flat_map(|x| x.iter().copied()),
+                        sg.v.iter().flat_map(|x| x.iter().copied()),
+                    ),
+                ),
+                (
+                    "energy history",
+                    rel(
+                        c.history.iter().map(|h| h.total),
+                        g.history.iter().map(|h| h.total),
+                    ),
+                ),
+            ];
+            for (what, x) in diffs {
+                assert!(x <= STATE_RTOL, "{tag}: {what} differ by {x:.3e}");
+                worst = worst.max(x);
+            }
+        }
+    }
+    println!("largest relative difference device solve vs CPU: {worst:.3e}");
+}
+
+#[test]
+fn device_solve_frame_matches_cpu() {
+    let Some(exec) = gpu() else { return };
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .expect("the built-in frame scene exists")
+        .toml;
+    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
+    let mut params = scene.params;
+    params.t_end = 15.0 * params.dt;
+    let ms = vec![Member {
+        model: scene.model.clone(),
+        params,
+    }];
+    let (cpu, _) = run(&ms, &Executor::Cpu, NewtonVariant::Full, SolveMode::Host);
+    let (dev, stats) = run(&ms, &exec, NewtonVariant::Full, SolveMode::Device);
+    assert_eq!(stats.device_members, (1, 0), "the frame is covered");
+    let (c, g) = (&cpu[0], &dev[0]);
+    assert_eq!(
+        c.outcome.status,
+        RunStatus::Completed,
+        "{:?}",
+        c.outcome.reason
+    );
+    assert_eq!(c.outcome.status, g.outcome.status, "{:?}", g.outcome.reason);
+    assert_eq!(c.outcome.steps, 15);
+    assert_eq!(c.outcome.steps, g.outcome.steps);
+    assert_eq!(c.outcome.newton_iters_total, g.outcome.newton_iters_total);
+    let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
+    let pos = rel(
+        sc.r.iter().flat_map(|x| x.iter().copied()),
+        sg.r.iter().flat_map(|x| x.iter().copied()),
+    );
+    let vel = rel(
+        sc.v.iter().flat_map(|x| x.iter().copied()),
+        sg.v.iter().flat_map(|x| x.iter().copied()),
+    );
+    let energy = rel(
+        c.history.iter().map(|h| h.total),
+        g.history.iter().map(|h| h.total),
+    );
+    println!("frame, device solve vs CPU: positions {pos:.2e}, velocities {vel:.2e}, energy {energy:.2e}");
+    for (what, x) in [("positions", pos), ("velocities", vel), ("energy", energy)] {
+        assert!(x <= STATE_RTOL, "frame: {what} differ by {x:.3e}");
+    }
+}
+
+fn cosserat() -> std::process::Command {
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"));
+    c.env("NODEVICE_SELECT", "1");
+    c
+}
+
+#[test]
+fn device_solve_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    // Refused without the GPU path (no adapter needed to check that).
+    let out = cosserat()
+        .args(["run", "cantilever", "--solve", "device", "--out"])
+        .arg(dir.path().join("cpu"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--backend gpu"));
+    assert!(!dir.path().join("cpu").exists());
+    let Some(_) = gpu() else { return };
+    let out = cosserat()
+        .args([
+            "run",
+            "mechanism",
+            "--backend",
+            "gpu",
+            "--solve",
+            "device",
+            "--out",
+        ])
+        .arg(dir.path().join("mech"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rigid links"));
+    assert!(!dir.path().join("mech").exists());
+    let mut summaries = Vec::new();
+    for (name, extra) in [
+        ("host", &["--backend", "cpu"][..]),
+        ("device", &["--backend", "gpu", "--solve", "device"][..]),
+    ] {
+        let st = cosserat()
+            .args([
+                "run",
+                "cantilever",
+                "--set",
+                "integrator.t_end=0.05",
+                "--set",
+                "rod.beam.elements=20",
+            ])
+            .args(extra)
+            .arg("--out")
+            .arg(dir.path().join(name))
+            .status()
+            .unwrap();
+        assert!(st.success(), "{name}");
+        let text = std::fs::read_to_string(dir.path().join(name).join("summary.json")).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["solve"], name);
+        summaries.push(v);
+    }
+    let (c, d) = (&summaries[0], &summaries[1]);
+    assert_eq!(c["status"], d["status"]);
+    assert_eq!(c["newton_iters_total"], d["newton_iters_total"]);
+    let (ec, ed) = (
+        c["energy_final"].as_f64().unwrap(),
+        d["energy_final"].as_f64().unwrap(),
+    );
+    assert!(
+        (ec - ed).abs() <= STATE_RTOL * ec.abs(),
+        "energy {ec} vs {ed}"
+    );
+}
