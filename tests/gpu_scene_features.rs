@@ -91,6 +91,7 @@ fn run(ms: &[Member], exec: &Executor) -> Result<Vec<MemberResult>, String> {
             newton: None,
             fallback: None,
             cutback: None,
+            solve: Default::default(),
         },
         |r| {
             let i = r.index;
