@@ -1,7 +1,11 @@
 //! Solver fallback (issue 15): a step the paper's staggered loop cannot solve is solved by
 //! the monolithic Newton of the *same* scheme, so the run goes on where the scheme itself
 //! would; every fallback step still holds the dissipation identity and the energy law,
-//! and with the fallback off the staggered failure is reported as before.
+//! and with the fallback off the staggered failure is reported as before. The square
+//! mechanism at Δt = 0.05 needs the fallback once before t = 5.5; at t = 5.5 the monolithic
+//! solution would turn a coupler element's end triads 2.16 rad apart (the director
+//! interpolation's soft branch, on which the coupler used to stretch to 77 times its
+//! length) and is refused, so that run now fails there, saying why.
 use cosserat::integrator::run::{run, RunOutcome};
 use cosserat::integrator::{Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, StepRecord};
@@ -44,15 +48,26 @@ fn identity_and_growth(recs: &[StepRecord]) -> (f64, f64) {
 }
 
 #[test]
-fn mechanism_edmc2_at_large_step_completes_with_the_fallback() {
+fn mechanism_edmc2_at_large_step_uses_the_fallback_and_refuses_the_soft_branch() {
     let scheme = Scheme::edmc2(0.5);
     let (out, recs) = simulate("mechanism", scheme, 0.05, 10.0, true);
-    assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
+    assert_eq!(out.status, RunStatus::Failed);
+    let reason = out.reason.clone().unwrap();
+    assert!(
+        out.t_reached > 5.4 && out.t_reached < 5.6,
+        "t = {}: {reason}",
+        out.t_reached
+    );
+    assert!(
+        reason.contains("monolithic fallback failed too: element 2: its end triads are turned"),
+        "{reason}"
+    );
     let fell_back = recs.iter().filter(|r| r.fallback).count();
     eprintln!(
         "fallback steps {} (records {fell_back}), accepted {:?}",
         out.fallback_steps, out.accepted
     );
+    // Measured: one step before t = 5.5 is solved by the fallback.
     assert!(out.fallback_steps > 0, "no step needed the fallback");
     assert_eq!(fell_back, out.fallback_steps);
     let (miss, growth) = identity_and_growth(&recs);
@@ -107,13 +122,21 @@ fn cosserat_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, St
     (summary, csv)
 }
 
-/// The CLI: the default run completes, counts its fallback steps in summary.json and
-/// marks them in history.csv; `--no-fallback` reproduces the paper's staggered failure.
+/// The CLI: the default run counts its fallback steps in summary.json and marks them in
+/// history.csv, and stops at t = 5.5 on the soft-branch refusal; `--no-fallback`
+/// reproduces the paper's staggered failure at the same time.
 #[test]
-fn cli_run_of_the_mechanism_completes_by_default_and_fails_without_fallback() {
+fn cli_run_of_the_mechanism_counts_fallback_steps_and_fails_without_fallback() {
     let dir = tempfile::tempdir().unwrap();
     let (s, csv) = cosserat_run(&[], &dir.path().join("a"));
-    assert_eq!(s["status"], "completed", "{s}");
+    assert_eq!(s["status"], "failed", "{s}");
+    assert!(
+        s["reason"]
+            .as_str()
+            .unwrap_or("")
+            .contains("end triads are turned"),
+        "{s}"
+    );
     let n = s["fallback_steps"].as_u64().unwrap();
     assert!(n > 0);
     assert_eq!(s["params"]["fallback"], true);
@@ -170,7 +193,8 @@ fn check_names_the_fallback() {
 fn stability_study_maps_the_pure_staggered_strategy_with_no_fallback() {
     let dir = tempfile::tempdir().unwrap();
     for (flag, row) in [
-        (None, "edmc2,0.5,0.05,6,6,completed,"),
+        // Both stop at t = 5.5: the staggered loop there, the fallback on the element turn.
+        (None, "edmc2,0.5,0.05,5.5,6,failed,"),
         (Some("--no-fallback"), "edmc2,0.5,0.05,5.5,6,failed,"),
     ] {
         let out = dir.path().join(if flag.is_some() { "b" } else { "a" });

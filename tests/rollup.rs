@@ -7,7 +7,10 @@
 //! plain fixed-point iteration could not solve at turning points of the director motion
 //! (the run used to fail at step 2 with the identity missed by 1.8e-6; the bracketed
 //! solver of `element::director_factor` holds it to round-off), and the coupled Newton
-//! system still stalls at a few reversals (first at t ≈ 0.3), which `--cutback` resolves.
+//! system still stalls at reversals, which `--cutback` resolves. The rod has 40 elements:
+//! at 20 the sudden moment's whip turns an element's end triads 2 rad apart at t = 0.75,
+//! where the director interpolation goes soft and the run used to "complete" with the rod
+//! stretched to 9.3 times its length (now refused, see the last test).
 use cosserat::integrator::run::run;
 use cosserat::integrator::{Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, StepRecord};
@@ -29,7 +32,7 @@ name = "beam"
 material = "soft"
 section = "round"
 points = [[0, 0, 0], [1, 0, 0]]
-elements = 20
+elements = 40
 d1 = [0, 1, 0]
 [[clamp]]
 at = [0, 0, 0]
@@ -125,24 +128,27 @@ fn rollup_from_rest_completes_for_em_and_each_dissipation_parameter() {
     }
 }
 
-/// EDMC-1's director-velocity dissipation χ_ν: the first steps, which failed on the
-/// director factor's fixed point, now hold the identity; the run completes with
-/// cut-back, every accepted step holding the identity and the energy law.
+/// EDMC-1's director-velocity dissipation χ_ν: with the director factor solved as a root
+/// (plain iteration failed at step 2) the run completes with cut-back (6 levels), every
+/// accepted step holding the identity (measured 2.7e-10) and D ≥ 0; without cut-back it
+/// stalls at a director reversal (t = 0.012 at 40 elements).
 #[test]
 fn rollup_with_director_velocity_dissipation_completes_with_cutback() {
-    // Default settings: no longer refused in the first steps (it was at step 2).
+    // Default settings: refused early, for its reason (measured: t = 0.012, the staggered
+    // loop's identity and the monolithic Newton at a director reversal).
     let (out, _) = roll(edmc1(3));
     eprintln!(
         "without cut-back: {:?} at t = {}",
         out.status, out.t_reached
     );
+    assert_eq!(out.status, RunStatus::Failed);
+    let reason = out.reason.unwrap();
     assert!(
-        out.t_reached >= 0.1,
-        "failed at t = {}: {:?}",
-        out.t_reached,
-        out.reason
+        reason.contains("dissipation identity missed")
+            || reason.contains("Newton did not converge"),
+        "{reason}"
     );
-    let (out, recs) = roll_with(edmc1(3), 4);
+    let (out, recs) = roll_with(edmc1(3), 6);
     assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
     let mut miss = 0.0f64;
     for w in recs.windows(2) {
@@ -193,7 +199,7 @@ fn tiny_energy_states_are_stepped_by_every_scheme() {
         let mut params = s.params;
         params.scheme = scheme;
         if scheme.director_dissipation() && matches!(scheme, Scheme::Edmc1 { .. }) {
-            params.cutback = 4;
+            params.cutback = 6;
         }
         let mut sim = Simulation::new(s.model.clone(), params).unwrap();
         let mut recs = Vec::new();
@@ -211,9 +217,10 @@ fn tiny_energy_states_are_stepped_by_every_scheme() {
         let hmax = recs.iter().map(|r| r.total).fold(0.0, f64::max);
         eprintln!("{name}: H max {hmax:.3e}, {:?}", out.accepted);
         assert!(hmax > 1e-26 && hmax < 1e-22, "{name}: H max {hmax:e}");
-        // Relative growth at round-off (a floor 4ε√(H·U) would allow 1e-2 here).
+        // Relative growth at round-off (measured ≤ 1.8e-14 at 40 elements; a floor
+        // 4ε√(H·U) would allow 1e-2 here).
         assert!(
-            out.accepted.max_rel_energy_growth <= 1e-14,
+            out.accepted.max_rel_energy_growth <= 1e-13,
             "{name}: {:?}",
             out.accepted
         );
@@ -223,6 +230,54 @@ fn tiny_energy_states_are_stepped_by_every_scheme() {
             let href = h0.abs().max(h1.abs()).max(wk.abs());
             miss = miss.max((h0 - h1 + wk - d).abs() / href);
         }
-        assert!(miss <= 1e-9, "{name}: identity missed by {miss:e}");
+        // χ_ν's cut-back sub-steps each hold the identity against their own energy
+        // scale; summed over a step it is met to 3.7e-9 (measured), the others to 1e-10.
+        let bound = if params_cut(scheme) { 1e-8 } else { 1e-9 };
+        assert!(miss <= bound, "{name}: identity missed by {miss:e}");
     }
+}
+
+/// No accepted step may stretch the rod through the director interpolation's soft branch
+/// (end triads of an element turned far apart, interpolated directors shrunk by cos(δ/2)):
+/// the roll-up with EDMC-1 χ_Ω = 1 at Δt = 0.5 (cut-back on) used to be accepted while the
+/// rod grew to 28 times its length in 20 s, every energy law held. Steps that turn an
+/// element's end triads more than 2 rad apart are now refused, so every accepted state keeps
+/// the rod's length (measured ≤ 1.007 at 40 elements; ≤ 1.020 at 20, where the run is
+/// refused at t = 1).
+#[test]
+fn large_steps_never_accept_a_stretched_rod() {
+    let scene = SCENE
+        .replace("dt = 0.002", "dt = 0.5")
+        .replace("t_end = 1.0", "t_end = 20");
+    let s = parse_scene(&scene, "big_steps.toml").unwrap();
+    let mut params = s.params;
+    params.scheme = Scheme::Edmc1 {
+        chi_gamma: 0.0,
+        chi_omega: 1.0,
+        chi_v: 0.0,
+        chi_nu: 0.0,
+    };
+    params.cutback = 6;
+    let mut sim = Simulation::new(s.model.clone(), params).unwrap();
+    let mut longest = 0.0f64;
+    let out = run(&mut sim, 1, |_: &StepRecord, s: &Simulation| {
+        let r = &s.state().r;
+        let len: f64 = r.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        longest = longest.max(len);
+        Ok::<(), ()>(())
+    })
+    .unwrap();
+    eprintln!(
+        "{:?} at t = {}: {:?}; longest {longest}",
+        out.status, out.t_reached, out.reason
+    );
+    assert!(
+        longest <= 1.03,
+        "an accepted state stretched the rod to {longest}"
+    );
+}
+
+/// Whether the tiny-energy test runs `scheme` with cut-back (EDMC-1 χ_ν).
+fn params_cut(scheme: Scheme) -> bool {
+    scheme.director_dissipation() && matches!(scheme, Scheme::Edmc1 { .. })
 }

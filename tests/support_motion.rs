@@ -130,7 +130,7 @@ fn driven_pin_with_point_mass_and_gravity_closes_the_energy_balance() {
     // A pin carried along e2 by a linear table, with gravity, a point mass at the pin and
     // a follower line load: every kind of nodal term at a driven node.
     let extra = "[[pin]]\nat = [0, 0, 0]\ndisplacement = [0, 0.2, 0.05]\ntime = [0, 0.1, 0.3]\nfactor = [0, 1, 0.5]\n\n[[point_mass]]\nat = [0, 0, 0]\nmass = 0.3\n\n[[line_load]]\nrod = \"rod\"\nforce = [0, 0.1, 0.2]\nmoment = [0.01, 0, 0]\nfollower = true";
-    let text = scene(6, extra, "scheme = \"em\"\ndt = 0.005\nt_end = 0.4").replace(
+    let text = scene(12, extra, "scheme = \"em\"\ndt = 0.005\nt_end = 0.4").replace(
         "name = \"drive\"",
         "name = \"drive\"\ngravity = [0, 0, -9.81]",
     );

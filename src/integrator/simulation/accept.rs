@@ -74,6 +74,7 @@ impl Simulation {
         mode: Mode,
     ) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), String> {
         let (next, diss, consistent) = self.advance(q, mode);
+        check_element_turn(&next)?;
         let inv = invariants(&self.model, &self.data, &next);
         let w = self.external_work(q, mode);
         let (h0, h1) = (self.inv.total(), inv.total());
@@ -111,5 +112,72 @@ impl Simulation {
             }
         }
         Ok((next, inv, diss, w, consistent))
+    }
+}
+
+/// Largest angle (rad) between the two end triads of one element that a step may produce.
+///
+/// The element interpolates the directors linearly between its ends, so where the end
+/// triads are turned δ apart the interpolated directors shrink by cos(δ/2), and so does
+/// the element's stiffness against stretching (Γ₃ = d₃ʰ·φ′): at δ → π an element stretches
+/// at almost no energy. Steps can land on that soft branch with every energy law held —
+/// measured: a roll-up with EDMC-1 at Δt = 0.5 grew to 28 times its length in 20 s, and the
+/// square mechanism's unit coupler (4 elements) to 77 at Δt = 0.05 and 28 at Δt = 0.01 —
+/// so a step that turns any element's triads further apart than this is refused (cut-back,
+/// when on, retries it in sub-steps). At 2 rad the interpolated directors have lost 46 %
+/// of their length. A resolved curvature turns an element by h·κ, far less: the full
+/// roll-up with 20 elements turns each by 2π/20 = 0.31 rad; under-resolved passages reach
+/// 1.7 rad (the roll-up's dynamic overshoot) and are still accepted.
+pub const MAX_ELEMENT_TURN: f64 = 2.0;
+
+/// `Err` naming the first element whose end triads are turned more than
+/// [`MAX_ELEMENT_TURN`] apart in `state`.
+fn check_element_turn(state: &State) -> Result<(), String> {
+    for (e, d) in state.d.iter().enumerate() {
+        // cos δ = (tr(D₀ᵀ D₁) − 1)/2 for the relative rotation D₁ D₀ᵀ.
+        let c = (((d[0].transpose() * d[1]).trace() - 1.0) / 2.0).clamp(-1.0, 1.0);
+        let delta = c.acos();
+        if delta > MAX_ELEMENT_TURN {
+            return Err(format!(
+                "element {e}: its end triads are turned {delta:.3} rad apart (limit {MAX_ELEMENT_TURN:.3}): the element's linear director interpolation cannot represent that (use more elements or a smaller Δt, or --cutback)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::cay;
+    use crate::model::{Mat3, Vec3};
+
+    fn two_triads(angle: f64) -> State {
+        let r = cay(&Vec3::new(0.3, -0.2, 0.5));
+        // Turn the second end about an oblique axis by `angle` (Cayley: |θ| = 2 tan(angle/2)).
+        let axis = Vec3::new(1.0, 2.0, -1.0).normalize();
+        let turn = cay(&(axis * 2.0 * (angle / 2.0).tan()));
+        State {
+            t: 0.0,
+            r: vec![Vec3::zeros(); 2],
+            v: vec![Vec3::zeros(); 2],
+            d: vec![[r, turn * r], [Mat3::identity(), Mat3::identity()]],
+            vd: vec![[[Vec3::zeros(); 2]; 2]; 2],
+            eps: vec![nalgebra::Vector6::zeros(); 2],
+            lambda: vec![],
+        }
+    }
+
+    #[test]
+    fn element_turn_limit_names_the_element() {
+        assert!(check_element_turn(&two_triads(0.31)).is_ok());
+        assert!(check_element_turn(&two_triads(MAX_ELEMENT_TURN - 1e-6)).is_ok());
+        let err = check_element_turn(&two_triads(MAX_ELEMENT_TURN + 1e-3)).unwrap_err();
+        assert!(
+            err.starts_with("element 0: its end triads are turned 2.001 rad apart (limit 2.000)"),
+            "{err}"
+        );
+        let err = check_element_turn(&two_triads(3.0)).unwrap_err();
+        assert!(err.contains("turned 3.000 rad"), "{err}");
     }
 }
