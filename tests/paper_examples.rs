@@ -158,7 +158,9 @@ fn arch_em_completes_with_exact_energy_as_observed() {
 fn mechanisms_as_observed() {
     const NEWTON: &str = "Newton did not converge";
     const TURN: &str = "end triads are turned";
-    let cases: [(&str, bool, f64, f64, Option<(f64, f64, &str)>); 11] = [
+    /// Failure window (t_lo, t_hi) and a word of the reason; `None`: the run completes.
+    type Failure = Option<(f64, f64, &'static str)>;
+    let cases: [(&str, bool, f64, f64, Failure); 11] = [
         // (scene, em?, alpha, dt, None = completes | Some(failure window, reason)); EDMC-2
         // staggered with the default fallback, except the first row (the paper's pure
         // staggered loop).
