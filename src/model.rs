@@ -435,15 +435,10 @@ impl Model {
     }
 
     /// The first scene feature the GPU batch path does not implement, by name (`None`:
-    /// the model runs there). The GPU kernels evaluate the elements from increments of
-    /// the Newton unknowns only; a prescribed support motion moves nodes that are not
-    /// unknowns.
+    /// the model runs there). Every feature of the scene format runs there today: the
+    /// kernels evaluate the elements from per-node increments, which carry the
+    /// prescribed motion of driven supports as well as the Newton unknowns.
     pub fn gpu_unsupported(&self) -> Option<&'static str> {
-        if !self.drives.is_empty() {
-            return Some(
-                "prescribed support motion (a [[clamp]] or [[pin]] with `displacement`/`rotation`)",
-            );
-        }
         None
     }
 

@@ -261,26 +261,6 @@ fn bad_support_motions_are_named() {
 }
 
 #[test]
-fn gpu_path_refuses_support_motion_by_name() {
-    let extra = "[[clamp]]\nat = [0, 0, 0]\nrotation = [0.2, 0, 0]\ntime = [0, 1]\nfactor = [0, 1]";
-    let s = parse_scene(
-        &scene(4, extra, "scheme = \"em\"\ndt = 0.01\nt_end = 1"),
-        "t.toml",
-    )
-    .unwrap();
-    let why = s.model.gpu_unsupported().expect("refused");
-    assert!(why.contains("prescribed support motion"), "{why}");
-    let err = cosserat::gpu::GpuError::Unsupported {
-        feature: why.into(),
-    }
-    .to_string();
-    assert!(
-        err.contains("does not support prescribed support motion"),
-        "{err}"
-    );
-}
-
-#[test]
 fn sliding_clamp_guides_a_beam_to_the_fixed_guided_deflection() {
     // Clamped at x = 0; at x = 1 a clamp sliding along e3 (rotation held, free along e3)
     // loaded by P along e3. Damped to rest, the tip deflects by the fixed-guided

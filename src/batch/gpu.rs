@@ -86,6 +86,10 @@ pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     if model.elements.iter().any(|e| e.props.drag != 0.0) {
         return Some("drag");
     }
+    // The device gathers the increments from its solution (zero for removed unknowns).
+    if !model.drives.is_empty() {
+        return Some("prescribed support motion");
+    }
     None
 }
 

@@ -224,11 +224,22 @@ impl Simulation {
         EvalRequest {
             states,
             scalars: self.frozen.clone(),
+            // Removed unknowns are zero, except those of a driven support: they move by the
+            // prescribed increment (as in [`Simulation::gather`]).
             increments: self
                 .dofs
                 .nodes
                 .iter()
-                .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { q[i] }))
+                .zip(&self.prescribed)
+                .map(|(nd, [pu, pt])| {
+                    let idx = node_local(nd);
+                    std::array::from_fn(|k| match (idx[k], k / 3) {
+                        (NONE, 0) => pu[k % 3],
+                        (NONE, 1) => pt[k % 3],
+                        (NONE, _) => 0.0,
+                        (i, _) => q[i],
+                    })
+                })
                 .collect(),
             tangent,
             device_extra: None,
