@@ -1,9 +1,9 @@
 //! Driven supports (`[[clamp]]` / `[[pin]]` with `displacement`/`rotation` and a time
 //! table): the motion is imposed exactly; an end clamp twisted slowly by a smooth ramp
 //! gives the analytic (quasi-static) torsion of a straight rod; the support's work is
-//! reported and EM closes `ΔH = W_loads + W_support` to round-off every step; the GPU
-//! path refuses the feature by name. A sliding clamp holds rotation and the transverse
-//! position exactly and gives the fixed-guided beam deflection.
+//! reported and EM closes `ΔH = W_loads + W_support` to round-off every step (the GPU
+//! path runs it too: `tests/gpu_scene_features.rs`). A sliding clamp holds rotation and
+//! the transverse position exactly and gives the fixed-guided beam deflection.
 
 use cosserat::integrator::Simulation;
 use cosserat::math::cay_inv;
