@@ -310,21 +310,30 @@ pub struct Model {
     pub line_loads: Vec<LineLoad>,
     /// Prescribed motion of supported nodes (driven clamps and pins).
     pub drives: Vec<SupportDrive>,
-    /// Sliding clamps: clamped nodes that are free to translate along a coordinate axis
-    /// (and optionally to turn about it).
+    /// Sliding clamps: clamped nodes that are free to translate along an axis (and
+    /// optionally to turn about it).
     pub slides: Vec<Slide>,
 }
 
 /// A sliding clamp: the node's rotation and its translation across `axis` are held; the
 /// translation along `axis` (and, with `spin`, the rotation about it) stays an unknown.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Slide {
     /// The node (marked clamped in [`Model::supports`]).
     pub node: usize,
-    /// The coordinate axis (0, 1, 2) it slides along.
-    pub axis: usize,
+    /// The unit axis it slides along.
+    pub axis: Vec3,
     /// Whether the rotation about `axis` is free.
     pub spin: bool,
+}
+
+impl Slide {
+    /// The coordinate axis (0, 1, 2) `axis` lies along, if it does (the other two
+    /// components exactly zero): such a slide removes unknowns; any other axis constrains
+    /// rows of the assembled system instead.
+    pub fn coordinate_axis(&self) -> Option<usize> {
+        (0..3).find(|&k| (0..3).all(|c| c == k || self.axis[c] == 0.0))
+    }
 }
 
 /// How the initial configuration and the stress-free shape depart from the reference

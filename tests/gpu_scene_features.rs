@@ -109,6 +109,9 @@ fn gpu_runs_reference_shapes_damping_and_line_loads_like_the_cpu() {
     // The same with the free end guided by a clamp sliding along e3 (a different set of
     // unknowns: the GPU's row masks come from the same numbering).
     ms.extend(members("[[clamp]]\nat = [1, 0, 0]\nslide = [0, 0, 1]"));
+    // And along an oblique axis (all components unknown; the host constrains the rows of
+    // the assembled system the GPU returns).
+    ms.extend(members("[[clamp]]\nat = [1, 0, 0]\nslide = [0, 1, 2]"));
     let cpu = run(&ms, &Executor::Cpu).unwrap();
     let gpu = run(&ms, &exec).unwrap();
     let mut worst = 0.0f64;

@@ -222,8 +222,8 @@ fn bad_support_motions_are_named() {
     ];
     let slides = [
         (
-            "[[clamp]]\nat = [1, 0, 0]\nslide = [1, 1, 0]",
-            "clamp[0].slide: (1, 1, 0) is not along a coordinate axis",
+            "[[clamp]]\nat = [1, 0, 0]\nslide = [0, 0, 0]",
+            "clamp[0].slide: (0, 0, 0) is not an axis: give a nonzero vector",
         ),
         (
             "[[pin]]\nat = [1, 0, 0]\nslide = [1, 0, 0]",
@@ -333,4 +333,110 @@ fn spinning_sliding_clamp_lets_the_end_twist_and_slide() {
         e_tw.abs() < 1e-8 && e_st.abs() < 3e-6,
         "twist {e_tw:e}, stretch {e_st:e}"
     );
+}
+
+/// `v` turned by `q`, as a TOML vector at full precision.
+fn turned(q: &nalgebra::Rotation3<f64>, v: [f64; 3]) -> String {
+    let w = q * nalgebra::Vector3::from(v);
+    format!("[{:e}, {:e}, {:e}]", w.x, w.y, w.z)
+}
+
+#[test]
+fn oblique_sliding_clamp_is_the_coordinate_one_turned() {
+    // A rod along e1, clamped at x = 0, its end at x = 1 sliding along e3 (and spinning
+    // about it), set vibrating; and the same scene turned as a whole by a rotation Q, so
+    // that the end slides along the oblique axis Q e3. The turned run must be the first
+    // turned by Q at every step (the coordinate slide removes unknowns, the oblique one
+    // constrains rows: the same discrete equations), hold the end on its axis exactly,
+    // and keep EM's energy to round-off (the support's reaction does no work).
+    let n = 8;
+    let q = nalgebra::Rotation3::from_axis_angle(
+        &nalgebra::Unit::new_normalize(nalgebra::Vector3::new(1.0, 2.0, 3.0)),
+        0.7,
+    );
+    let id = nalgebra::Rotation3::identity();
+    let make = |r: &nalgebra::Rotation3<f64>| {
+        let extra = format!(
+            "[[clamp]]\nat = [0, 0, 0]\n\n[[clamp]]\nat = {end}\nslide = {axis}\nspin = true\n\n\
+             [[initial_velocity]]\nat = {mid}\nv = {v}\nomega = {w}",
+            end = turned(r, [1.0, 0.0, 0.0]),
+            axis = turned(r, [0.0, 0.0, 1.0]),
+            mid = turned(r, [0.5, 0.0, 0.0]),
+            v = turned(r, [0.0, 0.05, 0.1]),
+            w = turned(r, [0.3, 0.0, 0.0]),
+        );
+        let text = scene(n, &extra, "scheme = \"em\"\ndt = 0.002\nt_end = 0.4")
+            .replace("[1, 0, 0]]", &format!("{}]", turned(r, [1.0, 0.0, 0.0])))
+            .replace(
+                "d1 = [0, 0, 1]",
+                &format!("d1 = {}", turned(r, [0.0, 0.0, 1.0])),
+            );
+        let s = parse_scene(&text, "t.toml").unwrap();
+        assert_eq!(
+            s.model.slides[0].coordinate_axis().is_none(),
+            r != &id,
+            "the turned scene slides along an oblique axis"
+        );
+        let steps = s.params.n_steps();
+        (Simulation::new(s.model, s.params).unwrap(), steps)
+    };
+    let (mut a, steps) = make(&id);
+    let (mut b, _) = make(&q);
+    let h0 = b.invariants().total();
+    let ha0 = a.invariants().total();
+    let mut worst_ha = 0.0f64;
+    let axis = q * nalgebra::Vector3::new(0.0, 0.0, 1.0);
+    let end0 = b.state().r[n];
+    let (mut worst, mut worst_h, mut worst_off, mut travel) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for _ in 0..steps {
+        a.step().unwrap();
+        b.step().unwrap();
+        for (ra, rb) in a.state().r.iter().zip(&b.state().r) {
+            worst = worst.max((q * ra - rb).norm());
+        }
+        worst_h = worst_h.max((b.invariants().total() - h0).abs() / h0);
+        worst_ha = worst_ha.max((a.invariants().total() - ha0).abs() / ha0);
+        let d = b.state().r[n] - end0;
+        worst_off = worst_off.max((d - axis * d.dot(&axis)).norm());
+        travel = travel.max(d.norm());
+    }
+    println!(
+        "oblique vs turned coordinate slide: {worst:e} m; |ΔH|/H {worst_h:e} (coordinate slide {worst_ha:e}); off axis {worst_off:e} m; travel {travel:e} m"
+    );
+    assert!(travel > 1e-4, "the end slides ({travel:e} m)");
+    // Measured: 2.7e-15 m apart; 9.4e-16 m off the axis (the round-off of positions of
+    // size 1); |ΔH|/H 4.2e-12 over 200 steps, as the coordinate slide's own 3.9e-12 (EM
+    // at the default Newton tolerance on this spinning rod).
+    assert!(worst < 3e-14, "turned runs differ by {worst:e} m");
+    assert!(
+        worst_off < 1e-14,
+        "the end leaves its axis by {worst_off:e} m"
+    );
+    assert!(worst_h < 2e-11, "EM energy drifts by {worst_h:e}");
+    assert!(
+        worst_h < 1.5 * worst_ha,
+        "the oblique slide adds drift: {worst_h:e} vs {worst_ha:e}"
+    );
+}
+
+#[test]
+fn planar_scene_refuses_a_slide_out_of_its_plane() {
+    let text = scene(
+        4,
+        "[[clamp]]\nat = [0, 0, 0]\n\n[[clamp]]\nat = [1, 0, 0]\nslide = [0, 1, 1]",
+        "scheme = \"em\"\ndt = 0.01\nt_end = 1",
+    )
+    .replace("name = \"drive\"", "name = \"drive\"\nplanar = \"e1e3\"");
+    let err = parse_scene(&text, "p.toml").unwrap_err().to_string();
+    assert!(
+        err.contains(
+            "clamp[1].slide: scene is planar = \"e1e3\" but the clamp slides out of the plane"
+        ),
+        "{err}"
+    );
+    // In the plane it runs (the planar numbering keeps the two in-plane components).
+    let ok = text.replace("slide = [0, 1, 1]", "slide = [1, 0, 1]");
+    let s = parse_scene(&ok, "p.toml").unwrap();
+    let mut sim = Simulation::new(s.model, s.params).unwrap();
+    sim.step().unwrap();
 }

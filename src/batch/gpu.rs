@@ -86,6 +86,9 @@ pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     if model.elements.iter().any(|e| e.props.drag != 0.0) {
         return Some("drag");
     }
+    if model.slides.iter().any(|s| s.coordinate_axis().is_none()) {
+        return Some("a sliding clamp along an oblique axis");
+    }
     // The device gathers the increments from its solution (zero for removed unknowns).
     if !model.drives.is_empty() {
         return Some("prescribed support motion");

@@ -1,5 +1,6 @@
 //! Numbering of the Newton unknowns: per node `u` (3, unless the translation is
-//! supported; a sliding clamp keeps the component along its axis), `θ` (3, unless
+//! supported; a sliding clamp keeps the component along a coordinate axis, or all three
+//! along an oblique one), `θ` (3, unless
 //! clamped; a spinning sliding clamp keeps the one about its axis), `g` (3, only with translational dissipation and a
 //! free translation). A planar model also drops the out-of-plane translation (and its
 //! `g`) and the two rotations about in-plane axes. Removed unknowns are zero.
@@ -65,8 +66,18 @@ impl DofMap {
         let mut slide_u = vec![[false; 3]; model.supports.len()];
         let mut slide_th = vec![[false; 3]; model.supports.len()];
         for sl in &model.slides {
-            slide_u[sl.node][sl.axis] = true;
-            slide_th[sl.node][sl.axis] = sl.spin;
+            match sl.coordinate_axis() {
+                Some(k) => {
+                    slide_u[sl.node][k] = true;
+                    slide_th[sl.node][k] = sl.spin;
+                }
+                // An oblique axis keeps every component; the assembled rows carry the
+                // constraint (`simulation::slide`).
+                None => {
+                    slide_u[sl.node] = [true; 3];
+                    slide_th[sl.node] = [sl.spin; 3];
+                }
+            }
         }
         let nodes: Vec<NodeDofs> = model
             .supports

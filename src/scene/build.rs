@@ -519,15 +519,17 @@ fn slide(
     }
     let v = cx.vec3(&sp, v)?;
     let n = v.norm();
-    let axis = (0..3).find(|&k| n > 0.0 && (v[k].abs() - n).abs() <= 1e-12 * n);
-    let Some(axis) = axis else {
+    if !(n > 0.0 && n.is_finite()) {
         return Err(cx.err(
             &sp,
-            format!(
-                "{} is not along a coordinate axis: sliding clamps slide along e1, e2 or e3",
-                fmt_v(&v)
-            ),
+            format!("{} is not an axis: give a nonzero vector", fmt_v(&v)),
         ));
+    }
+    // Snap a vector within 1e-12 of a coordinate axis onto it (that slide removes
+    // unknowns instead of constraining rows).
+    let axis = match (0..3).find(|&k| (v[k].abs() - n).abs() <= 1e-12 * n) {
+        Some(k) => Vec3::from_fn(|c, _| if c == k { v[k].signum() } else { 0.0 }),
+        None => v / n,
     };
     if c.displacement.is_some() || c.rotation.is_some() {
         return Err(cx.err(&sp, "a sliding clamp cannot also be driven"));
@@ -1713,6 +1715,30 @@ fn check_planar_drives(cx: &Ctx, p: Plane, raw: &RawScene, drives: &[SupportDriv
     Ok(())
 }
 
+/// A planar scene's sliding clamps slide in the plane and spin (if at all) about its
+/// normal, which only a slide along the normal would do: so no `spin`.
+fn check_planar_slides(cx: &Ctx, p: Plane, raw: &RawScene, slides: &[Slide]) -> Result<()> {
+    let why = |what: &str| format!("scene is planar = \"{}\" but {what}", p.name());
+    let paths = raw
+        .clamp
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.slide.is_some())
+        .map(|(i, _)| KeyPath::root().key("clamp").idx(i));
+    for (sl, path) in slides.iter().zip(paths) {
+        if sl.axis[p.normal].abs() > MERGE_TOL {
+            return Err(cx.err(&path.key("slide"), why("the clamp slides out of the plane")));
+        }
+        if sl.spin {
+            return Err(cx.err(
+                &path.key("spin"),
+                why("a clamp sliding in the plane would spin about an in-plane axis"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// A supported node cannot start moving in the directions its support fixes.
 fn check_supported(
     cx: &Ctx,
@@ -1954,6 +1980,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             check_planar_shape(&cx, p, &plans, &elements, &rods, &shape)?;
             check_planar_line_loads(&cx, p, &elements, &line_loads)?;
             check_planar_drives(&cx, p, &raw, &drives)?;
+            check_planar_slides(&cx, p, &raw, &slides)?;
             Some(p)
         }
     };

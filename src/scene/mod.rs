@@ -337,9 +337,11 @@ impl Scene {
                 .iter()
                 .find(|sl| sl.node == *a)
                 .map_or_else(String::new, |sl| {
+                    let axis = sl
+                        .coordinate_axis()
+                        .map_or_else(|| fmt_vec(&sl.axis), |k| format!("e{}", k + 1));
                     format!(
-                        ", sliding along e{}{}",
-                        sl.axis + 1,
+                        ", sliding along {axis}{}",
                         if sl.spin { " and turning about it" } else { "" }
                     )
                 });

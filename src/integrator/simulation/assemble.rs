@@ -136,6 +136,7 @@ impl Simulation {
         if !device {
             self.nodal_terms(q, tangent, r, &mut scale);
         }
+        self.constrain_slides(q, tangent && !device, r);
         let mut worst: f64 = 0.0;
         for (i, &ri) in r.iter().enumerate() {
             let s = scale[self.row_kinds[i]].max(1e-300);

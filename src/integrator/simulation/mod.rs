@@ -26,6 +26,7 @@ mod follower;
 mod newton;
 mod planar;
 mod probe;
+mod slide;
 mod step;
 mod strategy;
 
@@ -94,6 +95,8 @@ pub struct Simulation {
     off_block_slots: Vec<[[usize; 81]; 2]>,
     /// Residual of the last converged Newton solve (for the residual work in `check`).
     last_residual: Vec<f64>,
+    /// The constrained blocks of oblique sliding clamps ([`slide`]).
+    slide_blocks: Vec<slide::SlideBlock>,
     /// Per rigid link: slots of its node's (u, u) block.
     link_slots: Vec<[[usize; 3]; 3]>,
     /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
@@ -212,6 +215,7 @@ impl Simulation {
             })
             .collect();
         let planar = planar::PlanarKernel::new(&model, &data, &dofs, &slots);
+        let slide_blocks = slide::SlideBlock::build(&model, &dofs, &solver);
         let state = State::initial(&model, &data);
         let inv = invariants(&model, &data, &state);
         let nn = model.n_nodes();
@@ -245,6 +249,7 @@ impl Simulation {
             node_block_slots,
             off_block_slots,
             link_slots,
+            slide_blocks,
             state,
             inv,
             trans_diss,
