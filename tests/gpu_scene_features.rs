@@ -102,6 +102,21 @@ fn run(ms: &[Member], exec: &Executor) -> Result<Vec<MemberResult>, String> {
     Ok(out.into_iter().map(|r| r.unwrap()).collect())
 }
 
+/// Asserts that a member ran its 10 steps alike on both paths; returns the largest
+/// difference of the final positions relative to their size.
+fn same_run(c: &MemberResult, g: &MemberResult) -> f64 {
+    assert_eq!(c.outcome.status, g.outcome.status, "{:?}", g.outcome.reason);
+    assert_eq!(c.outcome.steps, 10, "{:?}", c.outcome.reason);
+    assert_eq!(c.outcome.steps, g.outcome.steps);
+    let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
+    let scale = sc.r.iter().fold(0.0f64, |m, x| m.max(x.amax()));
+    let d =
+        sc.r.iter()
+            .zip(&sg.r)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).amax()));
+    d / scale
+}
+
 #[test]
 fn gpu_runs_reference_shapes_damping_and_line_loads_like_the_cpu() {
     let Some(exec) = gpu() else { return };
@@ -116,16 +131,7 @@ fn gpu_runs_reference_shapes_damping_and_line_loads_like_the_cpu() {
     let gpu = run(&ms, &exec).unwrap();
     let mut worst = 0.0f64;
     for (c, g) in cpu.iter().zip(&gpu) {
-        assert_eq!(c.outcome.status, g.outcome.status, "{:?}", g.outcome.reason);
-        assert_eq!(c.outcome.steps, 10, "{:?}", c.outcome.reason);
-        assert_eq!(c.outcome.steps, g.outcome.steps);
-        let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
-        let scale = sc.r.iter().fold(0.0f64, |m, x| m.max(x.amax()));
-        let d =
-            sc.r.iter()
-                .zip(&sg.r)
-                .fold(0.0f64, |m, (a, b)| m.max((a - b).amax()));
-        worst = worst.max(d / scale);
+        worst = worst.max(same_run(c, g));
         let (hc, hg) = (c.history.last().unwrap(), g.history.last().unwrap());
         assert!(hc.dissipation_total > 0.0, "damping dissipates");
         assert!(
@@ -152,15 +158,7 @@ fn gpu_runs_driven_supports_like_the_cpu() {
     let gpu = run(&ms, &exec).unwrap();
     let mut worst = 0.0f64;
     for (c, g) in cpu.iter().zip(&gpu) {
-        assert_eq!(c.outcome.status, g.outcome.status, "{:?}", g.outcome.reason);
-        assert_eq!(c.outcome.steps, 10, "{:?}", c.outcome.reason);
-        let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
-        let scale = sc.r.iter().fold(0.0f64, |m, x| m.max(x.amax()));
-        let d =
-            sc.r.iter()
-                .zip(&sg.r)
-                .fold(0.0f64, |m, (a, b)| m.max((a - b).amax()));
-        worst = worst.max(d / scale);
+        worst = worst.max(same_run(c, g));
         let (hc, hg) = (c.history.last().unwrap(), g.history.last().unwrap());
         // The support did work, and the same on both paths.
         let w: f64 = c.history.iter().map(|h| h.support_work).sum();
