@@ -256,8 +256,12 @@ fn planar_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if at(I_TANGENT) == 0.0 { return; }
 
     // ---- tangent ----
-    var b1 = gradient(c1, h);
-    if at(I_MIDPOINT) != 0.0 { b1 = bm; }
+    // Trial side: the strains at n+1 (mean of the strains); with the mid-point strain the
+    // elastic part varies with Φ_½ and only the dissipative ½ β C Δε with the end strains.
+    let midpoint = at(I_MIDPOINT) != 0.0;
+    let bend = gradient(c1, h);
+    var b1 = bend;
+    if midpoint { b1 = bm; }
     var amat: array<mat2x2<Real>, 2>;
     for (var l = 0u; l < 2u; l++) {
         let den = 0.5 * (1.0 + rot[l].x);
@@ -272,28 +276,43 @@ fn planar_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     var btm: array<Real, 18>;  // 3 × 6
     var bt1: array<Real, 18>;
+    var bte: array<Real, 18>;
     for (var k = 0u; k < 3u; k++) {
         for (var l = 0u; l < 2u; l++) {
             for (var c = 0u; c < 2u; c++) {
                 btm[6u * k + pu(l) + c] = bm[6u * k + l][c];
                 bt1[6u * k + pu(l) + c] = b1[6u * k + l][c];
+                bte[6u * k + pu(l) + c] = bend[6u * k + l][c];
             }
         }
         for (var p = 2u; p < 6u; p++) {
             let col = pth(field_end(p));
             btm[6u * k + col] += dot(bm[6u * k + p], tvec[p]);
             bt1[6u * k + col] += dot(b1[6u * k + p], jvec[p]);
+            bte[6u * k + col] += dot(bend[6u * k + p], jvec[p]);
         }
     }
-    let dmat = vec3<Real>(
-        0.5 * (1.0 + beta_g) * cc.x,
-        0.5 * (1.0 + beta_g) * cc.y,
-        0.5 * (1.0 + beta_o) * cc.z);
+    // Material part: ½(1+β) C B̃_1 (mean of the strains); ½ C B̃_½J + ½ β C B̃_1
+    // (mid-point strain).
+    var fg = 1.0 + beta_g;
+    var fo = 1.0 + beta_o;
+    var eg = Real(0.0);
+    var eo = Real(0.0);
+    if midpoint {
+        fg = 1.0;
+        fo = 1.0;
+        eg = beta_g;
+        eo = beta_o;
+    }
+    let dmat = vec3<Real>(0.5 * fg * cc.x, 0.5 * fg * cc.y, 0.5 * fo * cc.z);
+    let demat = vec3<Real>(0.5 * eg * cc.x, 0.5 * eg * cc.y, 0.5 * eo * cc.z);
     for (var i = 0u; i < 100u; i++) { kt[i] = 0.0; }
     for (var i = 0u; i < 6u; i++) {
         for (var j = 0u; j < 6u; j++) {
             var s = Real(0.0);
-            for (var k = 0u; k < 3u; k++) { s += btm[6u * k + i] * dmat[k] * bt1[6u * k + j]; }
+            for (var k = 0u; k < 3u; k++) {
+                s += btm[6u * k + i] * (dmat[k] * bt1[6u * k + j] + demat[k] * bte[6u * k + j]);
+            }
             kt[10u * i + j] = h * s;
         }
     }

@@ -400,28 +400,6 @@ impl Model {
             .unwrap_or_else(Vec3::zeros)
     }
 
-    /// The first feature of this model the planar element kernel does not cover (a planar
-    /// model with it runs the 3D kernel with the out-of-plane unknowns removed), or `None`.
-    pub fn planar_kernel_unsupported(&self) -> Option<&'static str> {
-        if (0..self.elements.len()).any(|e| self.intrinsic_curvature(e) != Vec3::zeros()) {
-            return Some("intrinsic curvature");
-        }
-        if self
-            .elements
-            .iter()
-            .any(|e| e.props.damping != 0.0 || e.props.drag != 0.0)
-        {
-            return Some("material damping or drag");
-        }
-        if !self.line_loads.is_empty() {
-            return Some("line loads");
-        }
-        if !self.drives.is_empty() || !self.slides.is_empty() {
-            return Some("moving or sliding supports");
-        }
-        None
-    }
-
     /// True when nothing holds or pushes the model: no supports, no loads, no gravity.
     /// Momenta are then conserved by every scheme.
     pub fn is_free_flight(&self) -> bool {

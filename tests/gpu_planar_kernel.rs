@@ -76,6 +76,7 @@ fn case(rng: &mut Rng, idx: usize) -> (PlanarInput, StepConsts, bool) {
             10.0 * (1.0 + rng.next()),
         ),
         eps0: Vector3::zeros(),
+        damping: 0.0,
         rot_free,
         kappa,
         map: PlanarMap {

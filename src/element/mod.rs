@@ -68,7 +68,9 @@ pub struct ElementData {
     pub props: ElementProps,
     /// Raw strains `(Γ°, Ω°)` of the reference configuration.
     pub eps0: Vector6<f64>,
-    /// Whether the rotation of each end node is free (not clamped).
+    /// Whether the directors of each end node move: its rotation is free (not clamped)
+    /// or driven by a time table. Such an end takes its share of the director
+    /// dissipation ([`ElementData::kappa`]).
     pub rot_free: [bool; 2],
 }
 
@@ -76,6 +78,13 @@ impl ElementData {
     /// The constant data of every element of `model`, in element order: section
     /// constants, reference strains of the reference configuration, end rotations free.
     pub fn for_model(model: &crate::model::Model) -> Vec<ElementData> {
+        // A clamp turned by a time table: its directors move (prescribed), and their
+        // velocities take the director dissipation like a free end's.
+        let mut turned = vec![false; model.n_nodes()];
+        for d in &model.drives {
+            turned[d.node] |= d.rotation != crate::model::Vec3::zeros();
+        }
+        let moves = |a: usize| !model.supports[a].rotation || turned[a];
         model
             .elements
             .iter()
@@ -94,10 +103,7 @@ impl ElementData {
                 ElementData {
                     props: e.props.clone(),
                     eps0,
-                    rot_free: [
-                        !model.supports[e.nodes[0]].rotation,
-                        !model.supports[e.nodes[1]].rotation,
-                    ],
+                    rot_free: [moves(e.nodes[0]), moves(e.nodes[1])],
                 }
             })
             .collect()
@@ -694,19 +700,46 @@ fn tangent(
             }
         }
     }
-    // Material part: h B̃_½ᵀ (∂S*/∂ε) B̃_trial, ∂S*/∂ε = ½(1+β) C (diagonal on Γ, a 3×3
-    // block on Ω: applied by rows instead of as a 6×6 product).
-    let mut db = bt_1;
-    let cg = 0.5 * h * (1.0 + s.beta_gamma);
-    for i in 0..3 {
-        let f = cg * p.c_gamma[i];
-        for c in 0..12 {
-            db[(i, c)] *= f;
+    // Material part: h B̃_½ᵀ (∂S*/∂q). With the mean of the strains ∂S*/∂q = ½(1+β) C B̃_1;
+    // with the strain of the mid-point configuration the dissipative part ½ β C Δε still
+    // varies with the strains at n+1: ∂S*/∂q = ½ C B̃_½J + ½ β C B̃_1 (β from Kelvin–Voigt
+    // damping). C is diagonal on Γ, a 3×3 block on Ω: applied by rows.
+    let scaled = |bt: &SMatrix<f64, 6, 12>, fg: f64, fo: f64| {
+        let mut db = *bt;
+        for i in 0..3 {
+            let f = fg * p.c_gamma[i];
+            for c in 0..12 {
+                db[(i, c)] *= f;
+            }
         }
+        let om = (fo * p.c_omega) * bt.fixed_rows::<3>(3);
+        db.fixed_rows_mut::<3>(3).copy_from(&om);
+        db
+    };
+    let (bg, bo) = (s.beta_gamma, s.beta_omega);
+    let mean = k.scheme.stress_rule() == StressRule::MeanOfStrains;
+    let mut db = if mean {
+        scaled(&bt_1, 0.5 * h * (1.0 + bg), 0.5 * h * (1.0 + bo))
+    } else {
+        scaled(&bt_1, 0.5 * h, 0.5 * h)
+    };
+    if !mean && (bg != 0.0 || bo != 0.0) {
+        let b_end = strain_gradient(&kin.cfg1, h);
+        let mut bt_end = SMatrix::<f64, 6, 12>::zeros();
+        for kk in 0..6 {
+            for q in GRADIENT_FIELDS[kk] {
+                let (c0, dir) = field_block(q);
+                let b = match dir {
+                    None => b_end[kk][q],
+                    Some((l, i)) => dcol[l][i].cross(&(at[l] * b_end[kk][q])),
+                };
+                for c in 0..3 {
+                    bt_end[(kk, c0 + c)] += b[c];
+                }
+            }
+        }
+        db += scaled(&bt_end, 0.5 * h * bg, 0.5 * h * bo);
     }
-    let co = (0.5 * h * (1.0 + s.beta_omega)) * p.c_omega;
-    let om = co * bt_1.fixed_rows::<3>(3);
-    db.fixed_rows_mut::<3>(3).copy_from(&om);
     // Written in place (no 12×12 temporary, no transposed copy).
     kt.fixed_view_mut::<12, 12>(0, 0)
         .gemm_tr(1.0, &bt_mid, &db, 0.0);

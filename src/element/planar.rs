@@ -132,8 +132,11 @@ pub struct PlanarData {
     pub i_amax: f64,
     /// Stiffnesses of `(Γ_s, Γ_t, κ)`: `G A_s, E A, E I_n`.
     pub c: Vector3<f64>,
-    /// Reference strains `(Γ_s°, Γ_t°, κ°)`.
+    /// Reference strains `(Γ_s°, Γ_t°, κ°)` (with the intrinsic curvature about the
+    /// normal in `κ°`).
     pub eps0: Vector3<f64>,
+    /// Kelvin–Voigt retardation time `η` ([`crate::model::ElementProps::damping`]).
+    pub damping: f64,
     /// Whether the rotation of each end node is free.
     pub rot_free: [bool; 2],
     /// Director-dissipation mass factors (as [`ElementData::kappa`]).
@@ -205,8 +208,15 @@ impl PIncrement {
 }
 
 /// Builds the planar data of an element of a planar model (the scene has checked that the
-/// plane's normal is a principal axis of the section, or that the section is isotropic).
-pub fn planar_data(data: &ElementData, reference: &Config, plane: Plane) -> PlanarData {
+/// plane's normal is a principal axis of the section, or that the section is isotropic,
+/// and that the intrinsic curvature `curvature` — material components, as
+/// [`crate::model::ShapeSetup::curvature`] — bends about the normal).
+pub fn planar_data(
+    data: &ElementData,
+    reference: &Config,
+    plane: Plane,
+    curvature: &Vec3,
+) -> PlanarData {
     let ref_triad = &reference.d[0];
     let k = plane.normal;
     let map0 = PlanarMap {
@@ -245,11 +255,17 @@ pub fn planar_data(data: &ElementData, reference: &Config, plane: Plane) -> Plan
         i_amax: p.i_rho.amax(),
         c: Vector3::new(p.c_gamma[m], p.c_gamma[2], ei),
         eps0: Vector3::zeros(),
+        damping: p.damping,
         rot_free: data.rot_free,
         kappa: data.kappa(),
         map,
     };
-    pd.eps0 = strains3(&pd.config(reference), pd.h);
+    let cfg = pd.config(reference);
+    pd.eps0 = strains3(&cfg, pd.h);
+    // κ is the turn about n·(s × t) (`strains3`); the intrinsic curvature's spatial
+    // vector `Λ°K` lies along the normal.
+    let orient = cross2(&cfg.d[0][0], &cfg.d[0][1]).signum();
+    pd.eps0[2] += orient * (ref_triad * curvature)[k];
     pd
 }
 
@@ -475,7 +491,11 @@ pub fn consistent_scalars(
         c_nu = super::director_factor::solve_fixed_point(law, c_min);
     }
     let kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
-    let loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
+    let mut loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
+    // Kelvin–Voigt material damping (as the 3D kernel): β += 2η/Δt.
+    let kv = 2.0 * pd.damping / k.dt;
+    loc.beta_gamma += kv;
+    loc.beta_omega += kv;
     let frozen = FrozenScalars {
         beta_gamma: loc.beta_gamma,
         beta_omega: loc.beta_omega,
@@ -675,12 +695,37 @@ fn tangent(
             bt_1[(kk, col)] += b1[kk][p].dot(&jvec[p]);
         }
     }
-    let dmat = Vector3::new(
-        0.5 * (1.0 + s.beta_gamma) * pd.c[0],
-        0.5 * (1.0 + s.beta_gamma) * pd.c[1],
-        0.5 * (1.0 + s.beta_omega) * pd.c[2],
-    );
-    let km = h * bt_mid.transpose() * SMatrix::<f64, 3, 3>::from_diagonal(&dmat) * bt_1;
+    // Material part (as the 3D kernel): ½(1+β) C B̃_1 with the mean of the strains;
+    // ½ C B̃_½J + ½ β C B̃_1 with the strain of the mid-point configuration.
+    let mean = k.scheme.stress_rule() == StressRule::MeanOfStrains;
+    let (bg, bo) = (s.beta_gamma, s.beta_omega);
+    let own = |beta_g: f64, beta_o: f64| {
+        SMatrix::<f64, 3, 3>::from_diagonal(&Vector3::new(
+            0.5 * beta_g * pd.c[0],
+            0.5 * beta_g * pd.c[1],
+            0.5 * beta_o * pd.c[2],
+        ))
+    };
+    let mut km = if mean {
+        h * bt_mid.transpose() * own(1.0 + bg, 1.0 + bo) * bt_1
+    } else {
+        h * bt_mid.transpose() * own(1.0, 1.0) * bt_1
+    };
+    if !mean && (bg != 0.0 || bo != 0.0) {
+        let b_end = gradient(&kin.cfg1, h);
+        let mut bt_end = SMatrix::<f64, 3, 6>::zeros();
+        for kk in 0..3 {
+            for l in 0..2 {
+                for c in 0..2 {
+                    bt_end[(kk, pu_idx(l) + c)] = b_end[kk][l][c];
+                }
+            }
+            for p in 2..NF {
+                bt_end[(kk, pth_idx(field_end(p)))] += b_end[kk][p].dot(&jvec[p]);
+            }
+        }
+        km += h * bt_mid.transpose() * own(bg, bo) * bt_end;
+    }
     kt.fixed_view_mut::<6, 6>(0, 0).copy_from(&km);
 
     let mut gs = hessian(sstar, h) * (0.5 * h);

@@ -79,6 +79,14 @@ impl DofMap {
                 }
             }
         }
+        // A driven support's translation is prescribed, but its velocity is not: with
+        // translational dissipation the velocity update `u/Δt = ½(v_n + v_n+1) + g`
+        // needs its `g` (removing it would impose the conserving update at that node and
+        // break the dissipation identity).
+        let mut driven = vec![false; model.supports.len()];
+        for d in &model.drives {
+            driven[d.node] = true;
+        }
         let nodes: Vec<NodeDofs> = model
             .supports
             .iter()
@@ -90,7 +98,9 @@ impl DofMap {
                     th: std::array::from_fn(|c| {
                         take((!s.rotation || slide_th[a][c]) && about_normal(c))
                     }),
-                    g: std::array::from_fn(|c| take(with_g && free_u(c))),
+                    g: std::array::from_fn(|c| {
+                        take(with_g && (free_u(c) || (driven[a] && in_plane(c))))
+                    }),
                 }
             })
             .collect();

@@ -298,13 +298,9 @@ impl Scene {
             6 * m.n_nodes(),
         );
         if let Some(p) = m.planar {
-            let kernel = match m.planar_kernel_unsupported() {
-                None => "planar element kernel, 3 unknowns per free node".to_string(),
-                Some(why) => format!("3D element kernel ({why} is not in the planar kernel)"),
-            };
             let _ = writeln!(
                 s,
-                "planar: {} (normal e{}; CPU path: {kernel})",
+                "planar: {} (normal e{}; CPU path: planar element kernel, 3 unknowns per free node)",
                 p.name(),
                 p.normal + 1
             );

@@ -11,8 +11,8 @@ impl Simulation {
     /// The state an increment produces (with the frozen scalars of `mode`), the
     /// predicted dissipation at it, and the consistent scalars.
     pub(super) fn advance(&self, q: &[f64], mode: Mode) -> (State, f64, Vec<FrozenScalars>) {
-        if let Some(planar) = self.advance_planar(q, mode) {
-            return planar;
+        if let Some((next, diss, consistent)) = self.advance_planar(q, mode) {
+            return (next, diss + self.drag_dissipation(q), consistent);
         }
         let k = self.consts();
         let dt = k.dt;

@@ -41,20 +41,17 @@ impl PlanarKernel {
         slots: &[Vec<usize>],
     ) -> Option<Self> {
         let plane = model.planar?;
-        if model.planar_kernel_unsupported().is_some() {
-            // The 3D kernel (with the out-of-plane unknowns removed) runs such a model.
-            return None;
-        }
         let pdata: Vec<PlanarData> = model
             .elements
             .iter()
             .zip(data)
-            .map(|(e, d)| {
+            .enumerate()
+            .map(|(i, (e, d))| {
                 let cfg = Config {
                     r: [model.nodes[e.nodes[0]], model.nodes[e.nodes[1]]],
                     d: e.ref_triad,
                 };
-                planar_data(d, &cfg, plane)
+                planar_data(d, &cfg, plane, &model.intrinsic_curvature(i))
             })
             .collect();
         let mut pdofs = Vec::with_capacity(pdata.len());
@@ -134,7 +131,7 @@ impl Simulation {
         let mut consistent = Vec::with_capacity(pk.data.len());
         let mut node_done = vec![false; self.model.n_nodes()];
         for (e, pd) in pk.data.iter().enumerate() {
-            let inc = PIncrement::from_local(&gather_planar(&pk.dofs[e], q));
+            let inc = PIncrement::from_local(&self.gather_planar(pk, e, q));
             let (st, eps_n) = &pk.states[e];
             let (sc, loc, kin_c): (FrozenScalars, LocalScalars, _) =
                 planar::consistent_scalars(pd, st, eps_n, &inc, &k);
@@ -206,10 +203,20 @@ impl Simulation {
         let Some(pk) = self.planar.as_ref() else {
             return;
         };
+        // Driven supports: the increments with the prescribed motion, gathered before the
+        // matrix values are borrowed (no allocation without drives).
+        let driven: Option<Vec<planar::PElemVec>> = (!self.model.drives.is_empty()).then(|| {
+            (0..pk.data.len())
+                .map(|e| self.gather_planar(pk, e, q))
+                .collect()
+        });
         let vals = self.solver.values_mut();
         for (e, pd) in pk.data.iter().enumerate() {
             let map = &pk.dofs[e];
-            let inc = PIncrement::from_local(&gather_planar(map, q));
+            let inc = PIncrement::from_local(&match &driven {
+                Some(x) => x[e],
+                None => gather_free(map, q),
+            });
             let (st, eps_n) = &pk.states[e];
             let (s, kin) = match mode {
                 Mode::Frozen => {
@@ -257,8 +264,23 @@ impl Simulation {
     }
 }
 
-/// The planar element-local increment vector (zero for removed unknowns).
+impl Simulation {
+    /// The planar element-local increment vector of element `e` at `q`: the unknowns where
+    /// they exist, the prescribed increment of a driven support where they were removed
+    /// (as [`Simulation::gather`]), zero elsewhere.
+    #[inline]
+    fn gather_planar(&self, pk: &PlanarKernel, e: usize, q: &[f64]) -> planar::PElemVec {
+        if !self.model.drives.is_empty() {
+            let full = full_index(&pk.data[e].map);
+            let x = self.gather(e, q).to_local();
+            return planar::PElemVec::from_fn(|i, _| x[full[i]]);
+        }
+        gather_free(&pk.dofs[e], q)
+    }
+}
+
+/// The planar element-local increment vector without drives (zero for removed unknowns).
 #[inline]
-fn gather_planar(map: &[usize; NDOF_P], q: &[f64]) -> planar::PElemVec {
+fn gather_free(map: &[usize; NDOF_P], q: &[f64]) -> planar::PElemVec {
     planar::PElemVec::from_fn(|i, _| if map[i] == NONE { 0.0 } else { q[map[i]] })
 }

@@ -32,9 +32,12 @@ pub(super) struct SlideBlock {
     cols: Vec<usize>,
     slots: Vec<Vec<usize>>,
     /// Scale of the constraint rows: the largest diagonal entry of the block's own rows
-    /// in the last assembled tangent (an element stiffness before the first), so they
+    /// in the first assembled tangent (an element stiffness before it), so they
     /// weigh like their neighbours in the residual norm and the LU.
     stiffness: f64,
+    /// Whether `stiffness` was taken from an assembled tangent (it then stays: the
+    /// constraint rows are one fixed linear function of the increments for the run).
+    measured: bool,
 }
 
 impl SlideBlock {
@@ -90,6 +93,7 @@ impl SlideBlock {
                     cols,
                     slots,
                     stiffness,
+                    measured: false,
                 });
             }
         }
@@ -141,8 +145,9 @@ impl Simulation {
                         vals[b.slots[c][jj]].abs()
                     })
                     .fold(0.0f64, f64::max);
-                if diag > 0.0 && diag.is_finite() {
+                if !b.measured && diag > 0.0 && diag.is_finite() {
                     b.stiffness = diag;
+                    b.measured = true;
                 }
                 for (jj, &j) in b.cols.iter().enumerate() {
                     let old: Vec<f64> = (0..m).map(|c| vals[b.slots[c][jj]]).collect();
