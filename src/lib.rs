@@ -38,6 +38,7 @@ pub mod linsolve;
 pub mod math;
 pub mod model;
 pub mod observe;
+pub mod obstacle;
 pub mod output;
 pub mod paths;
 pub mod reproduce;

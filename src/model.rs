@@ -313,6 +313,8 @@ pub struct Model {
     /// Sliding clamps: clamped nodes that are free to translate along an axis (and
     /// optionally to turn about it).
     pub slides: Vec<Slide>,
+    /// Rigid obstacles the rods' nodes can touch (`[[obstacle]]`).
+    pub obstacles: Vec<crate::obstacle::Obstacle>,
 }
 
 /// A sliding clamp: the node's rotation and its translation across `axis` are held; the
@@ -407,6 +409,7 @@ impl Model {
             && self.links.is_empty()
             && self.loads.is_empty()
             && self.line_loads.is_empty()
+            && self.obstacles.is_empty()
             && self.gravity == Vec3::zeros()
             && !self.has_drag()
     }
@@ -422,11 +425,19 @@ impl Model {
     }
 
     /// The first scene feature the GPU batch path does not implement, by name (`None`:
-    /// the model runs there). Every feature of the scene format runs there today: the
-    /// kernels evaluate the elements from per-node increments, which carry the
-    /// prescribed motion of driven supports as well as the Newton unknowns.
+    /// the model runs there). The kernels evaluate the elements from per-node
+    /// increments, which carry the prescribed motion of driven supports as well as the
+    /// Newton unknowns; contact with obstacles has no GPU kernel yet.
     pub fn gpu_unsupported(&self) -> Option<&'static str> {
+        if !self.obstacles.is_empty() {
+            return Some("contact with obstacles ([[obstacle]])");
+        }
         None
+    }
+
+    /// True when some obstacle has friction (its work is part of the dissipation D).
+    pub fn has_friction(&self) -> bool {
+        self.obstacles.iter().any(|o| o.friction > 0.0)
     }
 
     /// True when some line load follows the directors (its nodal values depend on the

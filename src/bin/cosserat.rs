@@ -613,7 +613,7 @@ fn print_summary(s: &RunSummary, out: &Path) {
     };
     let (e, i) = (&s.energy_balance, &s.impulse_balance);
     let momenta = if i.reactions {
-        "L, J balance includes support/link reactions".to_string()
+        "L, J balance includes support/link/contact reactions".to_string()
     } else {
         format!(
             "L, J minus applied impulse: {:.1e}, {:.1e} (relative)",

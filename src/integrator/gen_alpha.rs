@@ -947,6 +947,7 @@ mod tests {
             line_loads: vec![],
             drives: vec![],
             slides: vec![],
+            obstacles: vec![],
         };
         let colour = colour_nodes(&model);
         let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);

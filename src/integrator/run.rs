@@ -68,6 +68,7 @@ pub fn record_of(
         dissipation: rep.dissipation,
         external_work: rep.external_work,
         support_work: rep.support_work,
+        friction: rep.friction,
         work_total: 0.0,
         dissipation_total: 0.0,
         acc_trans: rep.acc_trans,

@@ -48,8 +48,9 @@ impl BalanceObserver {
     /// Starts at the initial level: its state, momenta `l0`, `j0` and energy `h0`.
     pub fn new(model: &Model, state: &State, dt: f64, l0: Vec3, j0: Vec3, h0: f64) -> Self {
         let n = model.n_nodes();
-        let reactions =
-            model.supports.iter().any(|s| s.translation || s.rotation) || !model.links.is_empty();
+        let reactions = model.supports.iter().any(|s| s.translation || s.rotation)
+            || !model.links.is_empty()
+            || !model.obstacles.is_empty();
         Self {
             dt,
             t0: state.t,

@@ -18,7 +18,8 @@ use crate::model::{Model, Vec3};
 pub struct Invariants {
     /// Kinetic energy.
     pub kinetic: f64,
-    /// Stored energy (strain energy of the rods and the `λg + ½κg²` of rigid links).
+    /// Stored energy (strain energy of the rods, the `λg + ½κg²` of rigid links and the
+    /// penalty energy of contact with obstacles).
     pub potential: f64,
     /// Linear momentum.
     pub l: Vec3,
@@ -66,6 +67,9 @@ pub fn invariants(model: &Model, data: &[ElementData], state: &State) -> Invaria
     }
     for (link, &lambda) in model.links.iter().zip(&state.lambda) {
         out.potential += link.energy(lambda, &state.r[link.node]);
+    }
+    for o in &model.obstacles {
+        out.potential += o.energy(&state.r);
     }
     for (a, &m) in model.point_mass.iter().enumerate() {
         if m != 0.0 {

@@ -29,6 +29,8 @@ pub struct StepRecord {
     pub external_work: f64,
     /// The part of `external_work` done by driven supports (prescribed motion).
     pub support_work: f64,
+    /// The part of `dissipation` taken by friction against obstacles (≥ 0).
+    pub friction: f64,
     /// Work of the external loads from row 0 to here (sum of `external_work` over every
     /// accepted step, thinned or not).
     pub work_total: f64,
@@ -163,8 +165,8 @@ pub struct EnergyBalance {
 pub struct ImpulseBalance {
     /// The discrete impulse rule used.
     pub rule: String,
-    /// True when supports or rigid links act on the model: their reactions' impulse is
-    /// then part of the residual (which is then not an error).
+    /// True when supports, rigid links or obstacles act on the model: their reactions'
+    /// impulse is then part of the residual (which is then not an error).
     pub reactions: bool,
     /// Accepted steps summed.
     pub steps: usize,

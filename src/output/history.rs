@@ -38,6 +38,7 @@ pub const HISTORY_COLUMNS: &[&str] = &[
     "fallback",
     "substeps",
     "support_work",
+    "friction",
 ];
 
 /// Streams `history.csv`: the header is written on [`create`](Self::create), one row per
@@ -131,6 +132,8 @@ fn format_row(r: &StepRecord, out: &mut String) {
     }
     let _ = write!(out, ",{},{},", u8::from(r.fallback), r.substeps);
     fmt_f64(r.support_work, out);
+    out.push(',');
+    fmt_f64(r.friction, out);
     out.push('\n');
 }
 
@@ -228,6 +231,7 @@ fn parse_row(line: &str) -> Result<StepRecord, String> {
         },
         substeps: int(22)?,
         support_work: flt(23)?,
+        friction: flt(24)?,
     })
 }
 
@@ -247,6 +251,7 @@ mod tests {
             dissipation: 5e-324,
             external_work: -1.0e-5 * seed,
             support_work: 2.5e-7 * seed,
+            friction: 4.5e-9 * seed,
             work_total: -3.0e-5 * seed * seed,
             dissipation_total: 0.1 * step as f64 + 1e-17,
             acc_trans: 0.1 + 0.2,

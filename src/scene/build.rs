@@ -8,8 +8,8 @@ use std::fmt::Display;
 use nalgebra::Matrix2;
 
 use super::raw::{
-    RawInitialVelocity, RawIntegrator, RawLineLoad, RawLink, RawLoad, RawMaterial, RawProbe,
-    RawRod, RawScene, RawSection, RawSupport,
+    RawInitialVelocity, RawIntegrator, RawLineLoad, RawLink, RawLoad, RawMaterial, RawObstacle,
+    RawProbe, RawRod, RawScene, RawSection, RawSupport,
 };
 use super::span::{Doc, KeyPath};
 use super::{fmt_num, key_name, Probe, Scene, SceneError};
@@ -1715,6 +1715,232 @@ fn check_planar_drives(cx: &Ctx, p: Plane, raw: &RawScene, drives: &[SupportDriv
     Ok(())
 }
 
+/// A unit vector from `v` (error naming the key when it is zero).
+fn unit(cx: &Ctx, path: &KeyPath, v: &[f64]) -> Result<Vec3> {
+    let v = cx.vec3(path, v)?;
+    let n = v.norm();
+    if !(n > 0.0 && n.is_finite()) {
+        return Err(cx.err(
+            path,
+            format!("{} is not a direction: give a nonzero vector", fmt_v(&v)),
+        ));
+    }
+    Ok(v / n)
+}
+
+/// An `[[obstacle]]`: its shape, penalty and friction, and the contact nodes of its rods
+/// (every node of the named rods, or of all rods) with their contact radius and
+/// tributary length.
+#[allow(clippy::too_many_arguments)]
+fn obstacle(
+    cx: &Ctx,
+    path: &KeyPath,
+    o: &RawObstacle,
+    plans: &[RodPlan],
+    rods: &[RodInfo],
+    elements: &[Element],
+    materials: &BTreeMap<String, Material>,
+    sections: &BTreeMap<String, Section>,
+) -> Result<crate::obstacle::Obstacle> {
+    use crate::obstacle::{ContactNode, Obstacle, Shape};
+    let kind = cx.required(&path.key("kind"), o.kind.as_deref())?;
+    // Keys each kind takes (the others are an error naming the key).
+    let allowed: &[&str] = match kind {
+        "plane" => &["point", "normal"],
+        "sphere" => &["center", "radius"],
+        "cylinder" => &["point", "axis", "radius"],
+        other => {
+            return Err(cx.err(
+                &path.key("kind"),
+                format!(
+                "unknown obstacle kind `{other}` (expected \"plane\", \"sphere\" or \"cylinder\")"
+            ),
+            ))
+        }
+    };
+    for (key, given) in [
+        ("point", o.point.is_some()),
+        ("normal", o.normal.is_some()),
+        ("center", o.center.is_some()),
+        ("axis", o.axis.is_some()),
+        ("radius", o.radius.is_some()),
+    ] {
+        if given && !allowed.contains(&key) {
+            return Err(cx.err(
+                &path.key(key),
+                format!("a {kind} has no `{key}` (it takes {})", allowed.join(", ")),
+            ));
+        }
+    }
+    let req_vec = |key: &str, v: &Option<Vec<f64>>| -> Result<Vec3> {
+        let p = path.key(key);
+        cx.vec3(&p, cx.required(&p, v.as_deref())?)
+    };
+    let req_unit = |key: &str, v: &Option<Vec<f64>>| -> Result<Vec3> {
+        let p = path.key(key);
+        unit(cx, &p, cx.required(&p, v.as_deref())?)
+    };
+    let shape = match kind {
+        "plane" => Shape::Plane {
+            point: req_vec("point", &o.point)?,
+            normal: req_unit("normal", &o.normal)?,
+        },
+        "sphere" => Shape::Sphere {
+            center: req_vec("center", &o.center)?,
+            radius: cx.req_positive(&path.key("radius"), o.radius)?,
+        },
+        _ => Shape::Cylinder {
+            point: req_vec("point", &o.point)?,
+            axis: req_unit("axis", &o.axis)?,
+            radius: cx.req_positive(&path.key("radius"), o.radius)?,
+        },
+    };
+    // The rods it acts on.
+    let which: Vec<usize> = match &o.rods {
+        None => (0..plans.len()).collect(),
+        Some(names) => {
+            if names.is_empty() {
+                return Err(cx.err(
+                    &path.key("rods"),
+                    "empty list: name at least one rod (or leave `rods` out for all)",
+                ));
+            }
+            names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| {
+                    plans.iter().position(|p| &p.name == n).ok_or_else(|| {
+                        cx.err(
+                            &path.key("rods").idx(i),
+                            format!(
+                                "no rod named `{n}` (rods: {})",
+                                plans
+                                    .iter()
+                                    .map(|p| p.name.as_str())
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                        )
+                    })
+                })
+                .collect::<Result<_>>()?
+        }
+    };
+    let radius_override = o
+        .contact_radius
+        .map(|r| cx.positive(&path.key("contact_radius"), r))
+        .transpose()?;
+    let mut per_node: BTreeMap<usize, (f64, f64)> = BTreeMap::new();
+    let mut e_max: f64 = 0.0;
+    for &ri in &which {
+        let plan = &plans[ri];
+        let sec = &sections[&plan.props_key.1];
+        e_max = e_max.max(materials[&plan.props_key.0].e);
+        let rho = radius_override.unwrap_or_else(|| (sec.a / std::f64::consts::PI).sqrt());
+        for el in &elements[rods[ri].elements.clone()] {
+            for &a in &el.nodes {
+                let entry = per_node.entry(a).or_insert((0.0, 0.0));
+                entry.0 = entry.0.max(rho);
+                entry.1 += 0.5 * el.props.h;
+            }
+        }
+    }
+    let stiffness = match o.stiffness {
+        None => e_max,
+        Some(k) => cx.positive(&path.key("stiffness"), k)?,
+    };
+    let friction = cx.opt_non_negative(&path.key("friction"), o.friction)?;
+    let slip = match o.slip {
+        None => 1e-3,
+        Some(s) => cx.positive(&path.key("slip"), s)?,
+    };
+    if o.slip.is_some() && friction == 0.0 {
+        return Err(cx.err(&path.key("slip"), "only with `friction` > 0"));
+    }
+    Ok(Obstacle {
+        shape,
+        stiffness,
+        friction,
+        slip,
+        nodes: per_node
+            .into_iter()
+            .map(|(node, (radius, length))| ContactNode {
+                node,
+                radius,
+                length,
+            })
+            .collect(),
+    })
+}
+
+/// No node may start inside an obstacle (the penalty would throw it out at the first
+/// step); resting on the surface is fine.
+fn check_obstacle_start(
+    cx: &Ctx,
+    path: &KeyPath,
+    o: &crate::obstacle::Obstacle,
+    start: &[Vec3],
+) -> Result<()> {
+    for n in &o.nodes {
+        let g = o.gap(n, &start[n.node]);
+        if g < -1e-6 * n.radius {
+            return Err(cx.err(
+                &path.key("kind"),
+                format!(
+                    "node {} at {} starts inside the {} (penetration {:.3e} m, contact radius {}): start the rod at or outside its surface",
+                    n.node,
+                    fmt_v(&start[n.node]),
+                    o.shape.name(),
+                    -g,
+                    fmt_num(n.radius)
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A planar scene's obstacles push in the plane: a plane's normal lies in it, a
+/// cylinder's axis is its normal, a sphere's centre lies in it.
+fn check_planar_obstacles(
+    cx: &Ctx,
+    p: Plane,
+    obstacles: &[crate::obstacle::Obstacle],
+    start: &[Vec3],
+) -> Result<()> {
+    use crate::obstacle::Shape;
+    let k = p.normal;
+    let why = |what: &str| format!("scene is planar = \"{}\" but {what}", p.name());
+    let level = start.first().map_or(0.0, |x| x[k]);
+    for (i, o) in obstacles.iter().enumerate() {
+        let path = KeyPath::root().key("obstacle").idx(i);
+        match &o.shape {
+            Shape::Plane { normal, .. } if normal[k].abs() > MERGE_TOL => {
+                return Err(cx.err(
+                    &path.key("normal"),
+                    why("the plane's normal leaves the plane"),
+                ));
+            }
+            Shape::Cylinder { axis, .. } if (axis[k].abs() - 1.0).abs() > MERGE_TOL => {
+                return Err(cx.err(
+                    &path.key("axis"),
+                    why("the cylinder's axis is not the plane's normal"),
+                ));
+            }
+            Shape::Sphere { center, .. }
+                if (center[k] - level).abs() > MERGE_TOL * center.norm().max(1.0) =>
+            {
+                return Err(cx.err(
+                    &path.key("center"),
+                    why("the sphere's centre is not in the plane"),
+                ));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// A planar scene's sliding clamps slide in the plane and spin (if at all) about its
 /// normal, which only a slide along the normal would do: so no `spin`.
 fn check_planar_slides(cx: &Ctx, p: Plane, raw: &RawScene, slides: &[Slide]) -> Result<()> {
@@ -1970,6 +2196,30 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             "gen-alpha does not support rigid links ([[link]]); use em, edmc1, edmc2 or midpoint",
         ));
     }
+    let start: &[Vec3] = if shape.positions.is_empty() {
+        &nodes.nodes
+    } else {
+        &shape.positions
+    };
+    let obstacles = raw
+        .obstacle
+        .iter()
+        .enumerate()
+        .map(|(i, o)| {
+            let path = root.key("obstacle").idx(i);
+            let ob = obstacle(
+                &cx, &path, o, &plans, &rods, &elements, &materials, &sections,
+            )?;
+            check_obstacle_start(&cx, &path, &ob, start)?;
+            Ok(ob)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    if !obstacles.is_empty() && matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        return Err(cx.err(
+            &ip.key("scheme"),
+            "gen-alpha does not support contact with obstacles ([[obstacle]]); use em, edmc1, edmc2 or midpoint",
+        ));
+    }
     let planar = match &raw.planar {
         None => None,
         Some(name) => {
@@ -1981,6 +2231,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             check_planar_line_loads(&cx, p, &elements, &line_loads)?;
             check_planar_drives(&cx, p, &raw, &drives)?;
             check_planar_slides(&cx, p, &raw, &slides)?;
+            check_planar_obstacles(&cx, p, &obstacles, start)?;
             Some(p)
         }
     };
@@ -2014,6 +2265,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         line_loads,
         drives,
         slides,
+        obstacles,
     };
     Ok(Scene {
         name,

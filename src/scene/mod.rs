@@ -100,6 +100,11 @@ static BUILTINS: &[BuiltinScene] = &[
         description: "plane four-bar, half-hexagon reading that bends the coupler (paper §5.3)",
         toml: include_str!("../../scenes/mechanism_hexagon.toml"),
     },
+    BuiltinScene {
+        name: "bounce",
+        description: "tilted elastic rod dropped onto a rigid frictionless floor (contact)",
+        toml: include_str!("../../scenes/bounce.toml"),
+    },
 ];
 
 /// Everything that can go wrong loading a scene.
@@ -430,6 +435,48 @@ impl Scene {
                     } else {
                         ", scaled by a time table"
                     },
+                )
+            });
+        }
+        if !m.obstacles.is_empty() {
+            let _ = writeln!(s, "obstacles: {}", m.obstacles.len());
+            list(&mut s, m.obstacles.iter(), |o| {
+                use crate::obstacle::Shape;
+                let geometry = match &o.shape {
+                    Shape::Plane { point, normal } => {
+                        format!(
+                            "plane through {} normal {}",
+                            fmt_vec(point),
+                            fmt_vec(normal)
+                        )
+                    }
+                    Shape::Sphere { center, radius } => {
+                        format!("sphere at {} radius {}", fmt_vec(center), fmt_num(*radius))
+                    }
+                    Shape::Cylinder {
+                        point,
+                        axis,
+                        radius,
+                    } => format!(
+                        "cylinder through {} axis {} radius {}",
+                        fmt_vec(point),
+                        fmt_vec(axis),
+                        fmt_num(*radius)
+                    ),
+                };
+                let friction = if o.friction > 0.0 {
+                    format!(
+                        "friction μ = {} (slip {} m/s)",
+                        fmt_num(o.friction),
+                        fmt_num(o.slip)
+                    )
+                } else {
+                    "frictionless".to_string()
+                };
+                format!(
+                    "{geometry}: {} contact nodes, stiffness {} N/m², {friction}",
+                    o.nodes.len(),
+                    fmt_num(o.stiffness)
                 )
             });
         }

@@ -36,7 +36,26 @@ pub(crate) struct RawScene {
     pub initial_velocity: Vec<RawInitialVelocity>,
     #[serde(default)]
     pub probe: Vec<RawProbe>,
+    #[serde(default)]
+    pub obstacle: Vec<RawObstacle>,
     pub integrator: Option<RawIntegrator>,
+}
+
+/// `[[obstacle]]`: a rigid plane, sphere or cylinder the rods' nodes can touch.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawObstacle {
+    pub kind: Option<String>,
+    pub point: Option<Vec<f64>>,
+    pub normal: Option<Vec<f64>>,
+    pub center: Option<Vec<f64>>,
+    pub axis: Option<Vec<f64>>,
+    pub radius: Option<f64>,
+    pub stiffness: Option<f64>,
+    pub friction: Option<f64>,
+    pub slip: Option<f64>,
+    pub rods: Option<Vec<String>>,
+    pub contact_radius: Option<f64>,
 }
 
 /// `[[probe]]`: a node whose state goes to `probes.csv` every step.

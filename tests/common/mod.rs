@@ -82,6 +82,7 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         line_loads: vec![],
         drives: vec![],
         slides: vec![],
+        obstacles: vec![],
     }
 }
 

@@ -12,7 +12,8 @@ impl Simulation {
     /// predicted dissipation at it, and the consistent scalars.
     pub(super) fn advance(&self, q: &[f64], mode: Mode) -> (State, f64, Vec<FrozenScalars>) {
         if let Some((next, diss, consistent)) = self.advance_planar(q, mode) {
-            return (next, diss + self.drag_dissipation(q), consistent);
+            let extra = self.drag_dissipation(q) + self.contact_friction_work(q);
+            return (next, diss + extra, consistent);
         }
         let k = self.consts();
         let dt = k.dt;
@@ -49,7 +50,7 @@ impl Simulation {
                 }
             }
         }
-        diss += self.drag_dissipation(q);
+        diss += self.drag_dissipation(q) + self.contact_friction_work(q);
         (next, diss, consistent)
     }
 
@@ -100,7 +101,9 @@ impl Simulation {
             ));
         }
         let damped = self.params.scheme.controls_energy()
-            && (self.model.has_material_damping() || self.model.has_drag());
+            && (self.model.has_material_damping()
+                || self.model.has_drag()
+                || self.model.has_friction());
         if self.params.scheme.is_dissipative() || damped {
             let miss = (h0 - h1 + w - diss).abs();
             if miss > self.params.outer_tol * href + residual_work {

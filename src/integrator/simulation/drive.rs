@@ -56,6 +56,7 @@ impl Simulation {
         }
         let (fl, ml) = self.follower_node_loads(q);
         let drag = self.drag_node_forces(q);
+        let contact = self.contact_node_forces(q);
         let mut work = 0.0;
         for (i, d) in self.model.drives.iter().enumerate() {
             let a = d.node;
@@ -64,7 +65,8 @@ impl Simulation {
             let mut ru = reaction[i][0] + m * (2.0 * u / dt - 2.0 * self.state.v[a]) / dt
                 - self.force[a]
                 - fl[a]
-                - drag[a];
+                - drag[a]
+                - contact[a];
             let rt = reaction[i][1] - self.moment[a] - ml[a];
             for (j, link) in self.model.links.iter().enumerate() {
                 if link.node == a {

@@ -20,6 +20,7 @@
 
 mod accept;
 mod assemble;
+mod contact;
 mod drag;
 mod drive;
 mod follower;
@@ -99,6 +100,9 @@ pub struct Simulation {
     slide_blocks: Vec<slide::SlideBlock>,
     /// Per rigid link: slots of its node's (u, u) block.
     link_slots: Vec<[[usize; 3]; 3]>,
+    /// Per obstacle and contact node: slots of the node's (u, u) block (filled at the
+    /// first assembly).
+    contact_slots: Vec<Vec<[[usize; 3]; 3]>>,
     /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
     row_kinds: Vec<usize>,
     state: State,
@@ -249,6 +253,7 @@ impl Simulation {
             node_block_slots,
             off_block_slots,
             link_slots,
+            contact_slots: Vec::new(),
             slide_blocks,
             state,
             inv,

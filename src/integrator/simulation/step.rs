@@ -59,6 +59,7 @@ impl Simulation {
                         agg.dissipation += r.dissipation;
                         agg.external_work += r.external_work;
                         agg.support_work += r.support_work;
+                        agg.friction += r.friction;
                         agg.acc_trans = agg.acc_trans.max(r.acc_trans);
                         agg.acc_rot = agg.acc_rot.max(r.acc_rot);
                         agg.max_link_g = agg.max_link_g.max(r.max_link_g);
@@ -111,6 +112,12 @@ impl Simulation {
             if self.model.has_material_damping() || self.model.has_drag() {
                 return Err(StepFailure {
                     reason: "gen-alpha does not support material damping or drag; use em, edmc1, edmc2 or midpoint".into(),
+                    residuals: vec![],
+                });
+            }
+            if !self.model.obstacles.is_empty() {
+                return Err(StepFailure {
+                    reason: "gen-alpha does not support contact with obstacles ([[obstacle]]); use em, edmc1, edmc2 or midpoint".into(),
                     residuals: vec![],
                 });
             }
@@ -170,6 +177,7 @@ impl Simulation {
                     Mode::Frozen
                 };
                 let support_work = self.support_work(&q, mode);
+                let friction = self.contact_friction_work(&q);
                 if multipliers.update(&self.model.links, &g1, &mut self.state.lambda) {
                     let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
                     let report = StepReport {
@@ -179,6 +187,7 @@ impl Simulation {
                         dissipation: diss,
                         external_work: w,
                         support_work,
+                        friction,
                         acc_trans: at,
                         acc_rot: ar,
                         max_link_g,
@@ -246,6 +255,7 @@ impl Simulation {
             dissipation: 0.0,
             external_work: out.external_work,
             support_work: 0.0,
+            friction: 0.0,
             acc_trans: at,
             acc_rot: ar,
             max_link_g: 0.0,

@@ -1,0 +1,131 @@
+//! Contact with rigid obstacles (part of stage 4, [`super::assemble`]; the friction's work
+//! is counted in stage 5, [`super::accept`]): every contact node feels the obstacle's
+//! discrete-gradient penalty force and its friction over the step
+//! ([`crate::obstacle`]), a nodal term like drag. The penalty energy is part of the
+//! stored energy `V`, so without friction EM keeps `H` to round-off through impacts; the
+//! friction's work is part of the dissipation `D` (and of the history's `friction`
+//! column). A scene without obstacles pays nothing.
+
+use super::Simulation;
+use crate::integrator::dofs::NONE;
+use crate::model::Vec3;
+use crate::obstacle::NodeContact;
+
+impl Simulation {
+    /// Slots of the `(u, u)` block of every contact node, per obstacle.
+    pub(super) fn contact_slots(&self) -> Vec<Vec<[[usize; 3]; 3]>> {
+        self.model
+            .obstacles
+            .iter()
+            .map(|o| {
+                o.nodes
+                    .iter()
+                    .map(|n| {
+                        let ix = self.dofs.nodes[n.node].u;
+                        std::array::from_fn(|c| {
+                            std::array::from_fn(|d| {
+                                if ix[c] == NONE || ix[d] == NONE {
+                                    NONE
+                                } else {
+                                    self.solver.slot(ix[c], ix[d])
+                                }
+                            })
+                        })
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The force of every obstacle on every one of its nodes over the step at `q`.
+    fn contact_forces(&self, q: &[f64], jacobian: bool) -> Vec<Vec<NodeContact>> {
+        let dt = self.params.dt;
+        self.model
+            .obstacles
+            .iter()
+            .map(|o| {
+                o.nodes
+                    .iter()
+                    .map(|n| {
+                        let (u, _) = self.node_increment(n.node, q);
+                        let x0 = self.state.r[n.node];
+                        o.node_force(n, &x0, &(x0 + u), dt, jacobian)
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Adds the contact rows (`−F`), row scales and, with `tangent`, the `(u, u)` blocks.
+    pub(super) fn add_contact_terms(
+        &mut self,
+        q: &[f64],
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        if self.model.obstacles.is_empty() {
+            return;
+        }
+        if self.contact_slots.is_empty() {
+            self.contact_slots = self.contact_slots();
+        }
+        let forces = self.contact_forces(q, tangent);
+        let vals = self.solver.values_mut();
+        for ((o, fs), slots) in self
+            .model
+            .obstacles
+            .iter()
+            .zip(&forces)
+            .zip(&self.contact_slots)
+        {
+            for ((n, f), s) in o.nodes.iter().zip(fs).zip(slots) {
+                let ix = self.dofs.nodes[n.node].u;
+                for c in 0..3 {
+                    if ix[c] == NONE {
+                        continue;
+                    }
+                    r[ix[c]] -= f.force[c];
+                    scale[0] = scale[0].max(f.force[c].abs());
+                    if tangent {
+                        for d in 0..3 {
+                            if s[c][d] != NONE {
+                                vals[s[c][d]] -= f.jacobian[(c, d)];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Energy the obstacles' friction takes out over the step at `q` (≥ 0).
+    pub(super) fn contact_friction_work(&self, q: &[f64]) -> f64 {
+        if !self.model.has_friction() {
+            return 0.0;
+        }
+        self.contact_forces(q, false)
+            .iter()
+            .flatten()
+            .map(|f| f.friction_work)
+            .sum()
+    }
+
+    /// Contact force on every node at `q` (zero without obstacles).
+    pub(super) fn contact_node_forces(&self, q: &[f64]) -> Vec<Vec3> {
+        let mut out = vec![Vec3::zeros(); self.model.n_nodes()];
+        if !self.model.obstacles.is_empty() {
+            for (o, fs) in self
+                .model
+                .obstacles
+                .iter()
+                .zip(self.contact_forces(q, false))
+            {
+                for (n, f) in o.nodes.iter().zip(fs) {
+                    out[n.node] += f.force;
+                }
+            }
+        }
+        out
+    }
+}
