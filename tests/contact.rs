@@ -293,3 +293,45 @@ fn bad_obstacles_are_named() {
         "{err}"
     );
 }
+
+/// The capstan: a cable (100 elements, stress-free as laid) over the upper half of a fixed
+/// drum (wrap angle θ = π, μ = 0.3) loaded at its ends by T1 = 1 N and T2 = `ratio` ·
+/// e^{μθ} T1, ramped in over 0.1 s. Returns how far the cable's middle slid along the drum
+/// (m) by t = 0.4.
+fn capstan_slide(ratio: f64) -> f64 {
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "capstan")
+        .unwrap()
+        .toml;
+    let mu: f64 = 0.3;
+    let t2 = ratio * (mu * std::f64::consts::PI).exp();
+    // The built-in scene is set at ratio 0.98: put this ratio's T2 in its place.
+    let t2_builtin = 0.98 * (mu * std::f64::consts::PI).exp();
+    let old = format!("force = [0, 0, {}]", -t2_builtin);
+    assert!(text.contains(&old), "T2 line `{old}` not in the scene");
+    let text = text.replace(&old, &format!("force = [0, 0, {}]", -t2));
+    let s = parse_scene(&text, "capstan.toml").unwrap();
+    let n = s.model.n_nodes();
+    let mid = n / 2;
+    let angle = |r: &cosserat::model::Vec3| r.z.atan2(r.x);
+    let a0 = angle(&s.model.nodes[mid]);
+    let rc = s.model.nodes[mid].norm();
+    let mut sim = Simulation::new(s.model, s.params).unwrap();
+    let out = run(&mut sim, 10, |_: &StepRecord, _: &Simulation| {
+        Ok::<(), ()>(())
+    })
+    .unwrap();
+    assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
+    // Positive: towards the T2 end (the angle decreases from π/2 towards 0).
+    (a0 - angle(&sim.state().r[mid])) * rc
+}
+
+#[test]
+fn capstan_holds_below_e_mu_theta_and_slides_above() {
+    let hold = capstan_slide(0.98);
+    let slide = capstan_slide(1.02);
+    eprintln!("capstan: T2/T1 = 0.98 e^(μθ): slid {hold:.3e} m; 1.02 e^(μθ): slid {slide:.3e} m");
+    assert!(hold.abs() < 2e-3, "slid {hold} m below the capstan limit");
+    assert!(slide > 2e-2, "held ({slide} m) above the capstan limit");
+}

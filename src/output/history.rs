@@ -335,7 +335,7 @@ mod tests {
         drop(HistoryWriter::create(&path).unwrap());
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text, format!("{}\n", HISTORY_COLUMNS.join(",")));
-        assert_eq!(HISTORY_COLUMNS.len(), 24);
+        assert_eq!(HISTORY_COLUMNS.len(), 25);
         assert!(read_history(&path).unwrap().is_empty());
     }
 

@@ -105,6 +105,11 @@ static BUILTINS: &[BuiltinScene] = &[
         description: "tilted elastic rod dropped onto a rigid frictionless floor (contact)",
         toml: include_str!("../../scenes/bounce.toml"),
     },
+    BuiltinScene {
+        name: "capstan",
+        description: "cable over a fixed drum with friction, end tensions near the capstan limit (contact)",
+        toml: include_str!("../../scenes/capstan.toml"),
+    },
 ];
 
 /// Everything that can go wrong loading a scene.
