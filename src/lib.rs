@@ -42,6 +42,7 @@ pub mod obstacle;
 pub mod output;
 pub mod paths;
 pub mod reproduce;
+pub mod rod_contact;
 pub mod scene;
 pub mod scheme;
 pub mod study;

@@ -315,6 +315,8 @@ pub struct Model {
     pub slides: Vec<Slide>,
     /// Rigid obstacles the rods' nodes can touch (`[[obstacle]]`).
     pub obstacles: Vec<crate::obstacle::Obstacle>,
+    /// Contact between rods and of rods with themselves (`[[contact]]`).
+    pub rod_contacts: Vec<crate::rod_contact::RodContact>,
 }
 
 /// A sliding clamp: the node's rotation and its translation across `axis` are held; the
@@ -431,6 +433,9 @@ impl Model {
     pub fn gpu_unsupported(&self) -> Option<&'static str> {
         if !self.obstacles.is_empty() {
             return Some("contact with obstacles ([[obstacle]])");
+        }
+        if !self.rod_contacts.is_empty() {
+            return Some("contact between rods ([[contact]])");
         }
         None
     }

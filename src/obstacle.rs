@@ -123,7 +123,7 @@ fn quotient_linear(c: f64, y0: f64, y1: f64) -> (f64, f64) {
 
 /// `(value, ∂value/∂s₁)` of `[W(s₁) − W(s₀)]/(s₁ − s₀)` for `W(s) = ½ c (√s − R)²` while
 /// `√s < R`.
-fn quotient_quadric(c: f64, r: f64, s0: f64, s1: f64) -> (f64, f64) {
+pub(crate) fn quotient_quadric(c: f64, r: f64, s0: f64, s1: f64) -> (f64, f64) {
     let (a0, a1) = (s0.max(0.0).sqrt(), s1.max(0.0).sqrt());
     let w = |a: f64| {
         if a < r {

@@ -948,6 +948,7 @@ mod tests {
             drives: vec![],
             slides: vec![],
             obstacles: vec![],
+            rod_contacts: vec![],
         };
         let colour = colour_nodes(&model);
         let adj = |a: usize, b: usize| edges.iter().any(|e| *e == [a, b] || *e == [b, a]);

@@ -401,6 +401,31 @@ impl SparseSolver {
         }
     }
 
+    /// The pattern's `(row, col)` entries in value order.
+    pub fn entries(&self) -> Vec<(usize, usize)> {
+        let pattern = self.a.symbolic();
+        let mut out = Vec::with_capacity(self.nnz());
+        for col in 0..self.dim() {
+            let (start, end) = (pattern.col_ptr()[col], pattern.col_ptr()[col + 1]);
+            out.extend(pattern.row_idx()[start..end].iter().map(|&row| (row, col)));
+        }
+        out
+    }
+
+    /// Index into [`values_mut`](Self::values_mut) of entry `(row, col)`, `None` if it is
+    /// not in the pattern.
+    pub fn try_slot(&self, row: usize, col: usize) -> Option<usize> {
+        let pattern = self.a.symbolic();
+        if col >= self.dim() {
+            return None;
+        }
+        let (start, end) = (pattern.col_ptr()[col], pattern.col_ptr()[col + 1]);
+        pattern.row_idx()[start..end]
+            .binary_search(&row)
+            .ok()
+            .map(|k| start + k)
+    }
+
     /// Values in pattern order (compressed sparse column), writable. Writing invalidates
     /// the factorization only once [`factor`](Self::factor) is called again: until then
     /// [`solve`](Self::solve) keeps using the factors (and checks its backward error

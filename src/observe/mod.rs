@@ -19,7 +19,7 @@ pub struct Invariants {
     /// Kinetic energy.
     pub kinetic: f64,
     /// Stored energy (strain energy of the rods, the `λg + ½κg²` of rigid links and the
-    /// penalty energy of contact with obstacles).
+    /// penalty energy of contact with obstacles and between rods).
     pub potential: f64,
     /// Linear momentum.
     pub l: Vec3,
@@ -70,6 +70,9 @@ pub fn invariants(model: &Model, data: &[ElementData], state: &State) -> Invaria
     }
     for o in &model.obstacles {
         out.potential += o.energy(&state.r);
+    }
+    for c in &model.rod_contacts {
+        out.potential += c.energy(&state.r);
     }
     for (a, &m) in model.point_mass.iter().enumerate() {
         if m != 0.0 {

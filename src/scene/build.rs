@@ -8,8 +8,8 @@ use std::fmt::Display;
 use nalgebra::Matrix2;
 
 use super::raw::{
-    RawInitialVelocity, RawIntegrator, RawLineLoad, RawLink, RawLoad, RawMaterial, RawObstacle,
-    RawProbe, RawRod, RawScene, RawSection, RawSupport,
+    RawContact, RawInitialVelocity, RawIntegrator, RawLineLoad, RawLink, RawLoad, RawMaterial,
+    RawObstacle, RawProbe, RawRod, RawScene, RawSection, RawSupport,
 };
 use super::span::{Doc, KeyPath};
 use super::{fmt_num, key_name, Probe, Scene, SceneError};
@@ -1873,6 +1873,129 @@ fn obstacle(
     })
 }
 
+/// A `[[contact]]`: the contact spheres of its rod(s) (nodes and points between them, at
+/// most one contact radius apart), checked not to start overlapping.
+#[allow(clippy::too_many_arguments)]
+fn rod_contact(
+    cx: &Ctx,
+    path: &KeyPath,
+    c: &RawContact,
+    plans: &[RodPlan],
+    rods: &[RodInfo],
+    elements: &[Element],
+    materials: &BTreeMap<String, Material>,
+    sections: &BTreeMap<String, Section>,
+    start: &[Vec3],
+) -> Result<crate::rod_contact::RodContact> {
+    use crate::rod_contact::{RodContact, SamplePoint};
+    let rp = path.key("rods");
+    let names = cx.required(&rp, c.rods.as_ref())?;
+    if names.is_empty() || names.len() > 2 {
+        return Err(cx.err(
+            &rp,
+            format!(
+                "give one rod (contact with itself) or two (contact between them), got {}",
+                names.len()
+            ),
+        ));
+    }
+    if names.len() == 2 && names[0] == names[1] {
+        return Err(cx.err(
+            &rp.idx(1),
+            format!(
+                "`{}` twice: for contact of a rod with itself give it once",
+                names[0]
+            ),
+        ));
+    }
+    if c.friction.is_some() {
+        return Err(cx.err(
+            &path.key("friction"),
+            "friction between rods is not available yet (contact between rods is frictionless)",
+        ));
+    }
+    let which: Vec<usize> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            plans.iter().position(|p| &p.name == n).ok_or_else(|| {
+                cx.err(
+                    &rp.idx(i),
+                    format!(
+                        "no rod named `{n}` (rods: {})",
+                        plans
+                            .iter()
+                            .map(|p| p.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })
+        })
+        .collect::<Result<_>>()?;
+    let radius_override = c
+        .contact_radius
+        .map(|r| cx.positive(&path.key("contact_radius"), r))
+        .transpose()?;
+    let mut points = Vec::new();
+    let mut split = 0;
+    let mut e_max: f64 = 0.0;
+    for (k, &ri) in which.iter().enumerate() {
+        let plan = &plans[ri];
+        e_max = e_max.max(materials[&plan.props_key.0].e);
+        let rho = radius_override
+            .unwrap_or_else(|| (sections[&plan.props_key.1].a / std::f64::consts::PI).sqrt());
+        let els = &elements[rods[ri].elements.clone()];
+        let mut arc = 0.0;
+        for (n, el) in els.iter().enumerate() {
+            let h = el.props.h;
+            let m = (h / rho).ceil().max(1.0) as usize;
+            let last = n + 1 == els.len();
+            for s in 0..m + usize::from(last) {
+                points.push(SamplePoint {
+                    nodes: el.nodes,
+                    xi: s as f64 / m as f64,
+                    radius: rho,
+                    spacing: h / m as f64,
+                    arc: arc + h * s as f64 / m as f64,
+                });
+            }
+            arc += h;
+        }
+        if k == 0 {
+            split = points.len();
+        }
+    }
+    let stiffness = match c.stiffness {
+        None => e_max,
+        Some(k) => cx.positive(&path.key("stiffness"), k)?,
+    };
+    let contact = RodContact {
+        rods: names.clone(),
+        stiffness,
+        split: if which.len() == 1 {
+            points.len()
+        } else {
+            split
+        },
+        points,
+    };
+    if let Some(&(i, j)) = contact.candidates(start, 0.0).first() {
+        let (a, b) = (contact.points[i].at(start), contact.points[j].at(start));
+        return Err(cx.err(
+            &rp,
+            format!(
+                "the rods start overlapping: contact spheres at {} and {} are {:.3e} apart, closer than their contact diameter {}",
+                fmt_v(&a),
+                fmt_v(&b),
+                (a - b).norm(),
+                fmt_num(contact.points[i].radius + contact.points[j].radius)
+            ),
+        ));
+    }
+    Ok(contact)
+}
+
 /// No node may start inside an obstacle (the penalty would throw it out at the first
 /// step); resting on the surface is fine.
 fn check_obstacle_start(
@@ -2214,6 +2337,23 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             Ok(ob)
         })
         .collect::<Result<Vec<_>>>()?;
+    let rod_contacts = raw
+        .contact
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let path = root.key("contact").idx(i);
+            rod_contact(
+                &cx, &path, c, &plans, &rods, &elements, &materials, &sections, start,
+            )
+        })
+        .collect::<Result<Vec<_>>>()?;
+    if !rod_contacts.is_empty() && matches!(params.scheme, Scheme::GenAlpha { .. }) {
+        return Err(cx.err(
+            &ip.key("scheme"),
+            "gen-alpha does not support contact between rods ([[contact]]); use em, edmc1, edmc2 or midpoint",
+        ));
+    }
     if !obstacles.is_empty() && matches!(params.scheme, Scheme::GenAlpha { .. }) {
         return Err(cx.err(
             &ip.key("scheme"),
@@ -2266,6 +2406,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         drives,
         slides,
         obstacles,
+        rod_contacts,
     };
     Ok(Scene {
         name,

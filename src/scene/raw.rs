@@ -38,7 +38,19 @@ pub(crate) struct RawScene {
     pub probe: Vec<RawProbe>,
     #[serde(default)]
     pub obstacle: Vec<RawObstacle>,
+    #[serde(default)]
+    pub contact: Vec<RawContact>,
     pub integrator: Option<RawIntegrator>,
+}
+
+/// `[[contact]]`: contact between two rods, or of one rod with itself.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawContact {
+    pub rods: Option<Vec<String>>,
+    pub stiffness: Option<f64>,
+    pub contact_radius: Option<f64>,
+    pub friction: Option<f64>,
 }
 
 /// `[[obstacle]]`: a rigid plane, sphere or cylinder the rods' nodes can touch.

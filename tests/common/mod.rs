@@ -83,6 +83,7 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         drives: vec![],
         slides: vec![],
         obstacles: vec![],
+        rod_contacts: vec![],
     }
 }
 

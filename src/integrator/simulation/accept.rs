@@ -76,6 +76,7 @@ impl Simulation {
     ) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), String> {
         let (next, diss, consistent) = self.advance(q, mode);
         check_element_turn(&next)?;
+        self.check_rod_pairs(&next.r)?;
         let inv = invariants(&self.model, &self.data, &next);
         let w = self.external_work(q, mode);
         let (h0, h1) = (self.inv.total(), inv.total());

@@ -57,6 +57,7 @@ impl Simulation {
         let (fl, ml) = self.follower_node_loads(q);
         let drag = self.drag_node_forces(q);
         let contact = self.contact_node_forces(q);
+        let rod_contact = self.rod_contact_node_forces(q);
         let mut work = 0.0;
         for (i, d) in self.model.drives.iter().enumerate() {
             let a = d.node;
@@ -66,7 +67,8 @@ impl Simulation {
                 - self.force[a]
                 - fl[a]
                 - drag[a]
-                - contact[a];
+                - contact[a]
+                - rod_contact[a];
             let rt = reaction[i][1] - self.moment[a] - ml[a];
             for (j, link) in self.model.links.iter().enumerate() {
                 if link.node == a {

@@ -27,6 +27,7 @@ mod follower;
 mod newton;
 mod planar;
 mod probe;
+mod rod_contact;
 mod slide;
 mod step;
 mod strategy;
@@ -45,6 +46,22 @@ use crate::integrator::state::State;
 use crate::linsolve::{SolverKind, SparseSolver};
 use crate::model::{Model, Vec3};
 use crate::observe::{invariants, Invariants};
+
+/// The pattern-dependent structures of a simulation's linear system
+/// ([`Simulation::system_parts`]).
+struct SystemParts {
+    solver: SparseSolver,
+    slots: Vec<Vec<usize>>,
+    row_map: Vec<(usize, usize)>,
+    tangent_map: Vec<(usize, usize)>,
+    scatter_off: Vec<(usize, usize)>,
+    node_slots: Vec<[[usize; 3]; 4]>,
+    node_block_slots: Vec<[usize; 81]>,
+    off_block_slots: Vec<[[usize; 81]; 2]>,
+    link_slots: Vec<[[usize; 3]; 3]>,
+    slide_blocks: Vec<slide::SlideBlock>,
+    planar: Option<planar::PlanarKernel>,
+}
 
 /// How the dissipation scalars are treated in one Newton solve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -103,6 +120,12 @@ pub struct Simulation {
     /// Per obstacle and contact node: slots of the node's (u, u) block (filled at the
     /// first assembly).
     contact_slots: Vec<Vec<[[usize; 3]; 3]>>,
+    /// Couplings added to the element pattern for contact between rods (sorted, unique).
+    extra_pattern: Vec<(usize, usize)>,
+    /// Per rod contact: the sample-point pairs the current step considers.
+    rod_pairs: Vec<Vec<(usize, usize)>>,
+    /// The state version `rod_pairs` was searched at.
+    rod_pairs_version: Option<u64>,
     /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
     row_kinds: Vec<usize>,
     state: State,
@@ -155,71 +178,7 @@ impl Simulation {
         let data = ElementData::for_model(&model);
         let trans_diss = params.scheme.translational_dissipation();
         let dofs = DofMap::new(&model, trans_diss);
-        let mut pattern = dofs.pattern();
-        for i in 0..dofs.n {
-            pattern.push((i, i));
-        }
-        let link_dofs: Vec<[usize; 3]> = model.links.iter().map(|l| dofs.nodes[l.node].u).collect();
-        for ix in &link_dofs {
-            for &i in ix.iter().filter(|&&i| i != NONE) {
-                for &j in ix.iter().filter(|&&j| j != NONE) {
-                    pattern.push((i, j));
-                }
-            }
-        }
-        let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
-        let slots: Vec<Vec<usize>> = dofs
-            .elements
-            .iter()
-            .map(|m| {
-                let mut s = vec![NONE; NDOF * NDOF];
-                for i in 0..NDOF {
-                    for j in 0..NDOF {
-                        if m[i] != NONE && m[j] != NONE {
-                            s[i * NDOF + j] = solver.slot(m[i], m[j]);
-                        }
-                    }
-                }
-                s
-            })
-            .collect();
-        let (row_map, tangent_map, scatter_off) = Self::scatter_maps(&dofs, &slots);
-        let node_slots = dofs
-            .nodes
-            .iter()
-            .map(|nd| {
-                let slot = |a: [usize; 3], b: [usize; 3], c: usize| {
-                    if a[c] == NONE || b[c] == NONE {
-                        NONE
-                    } else {
-                        solver.slot(a[c], b[c])
-                    }
-                };
-                [
-                    std::array::from_fn(|c| slot(nd.u, nd.u, c)),
-                    std::array::from_fn(|c| slot(nd.u, nd.g, c)),
-                    std::array::from_fn(|c| slot(nd.g, nd.u, c)),
-                    std::array::from_fn(|c| slot(nd.g, nd.g, c)),
-                ]
-            })
-            .collect();
-        let (node_block_slots, off_block_slots) = Self::block_slots(&model, &dofs, &solver);
-        let link_slots = link_dofs
-            .iter()
-            .map(|ix| {
-                std::array::from_fn(|c| {
-                    std::array::from_fn(|d| {
-                        if ix[c] == NONE || ix[d] == NONE {
-                            NONE
-                        } else {
-                            solver.slot(ix[c], ix[d])
-                        }
-                    })
-                })
-            })
-            .collect();
-        let planar = planar::PlanarKernel::new(&model, &data, &dofs, &slots);
-        let slide_blocks = slide::SlideBlock::build(&model, &dofs, &solver);
+        let parts = Self::system_parts(&model, &data, &dofs, &[])?;
         let state = State::initial(&model, &data);
         let inv = invariants(&model, &data, &state);
         let nn = model.n_nodes();
@@ -244,17 +203,20 @@ impl Simulation {
             params,
             data,
             dofs,
-            solver,
-            slots,
-            row_map,
-            tangent_map,
-            scatter_off,
-            node_slots,
-            node_block_slots,
-            off_block_slots,
-            link_slots,
+            solver: parts.solver,
+            slots: parts.slots,
+            row_map: parts.row_map,
+            tangent_map: parts.tangent_map,
+            scatter_off: parts.scatter_off,
+            node_slots: parts.node_slots,
+            node_block_slots: parts.node_block_slots,
+            off_block_slots: parts.off_block_slots,
+            link_slots: parts.link_slots,
             contact_slots: Vec::new(),
-            slide_blocks,
+            extra_pattern: Vec::new(),
+            rod_pairs: Vec::new(),
+            rod_pairs_version: None,
+            slide_blocks: parts.slide_blocks,
             state,
             inv,
             trans_diss,
@@ -264,10 +226,129 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
-            planar,
+            planar: parts.planar,
             device_solve: false,
             device_x: None,
         })
+    }
+
+    /// The linear system's structures for the element pattern plus `extra` (row, col)
+    /// couplings (contact between rods): the solver (symbolic analysis) and every slot
+    /// table into its values.
+    fn system_parts(
+        model: &Model,
+        data: &[ElementData],
+        dofs: &DofMap,
+        extra: &[(usize, usize)],
+    ) -> Result<SystemParts, crate::linsolve::LinsolveError> {
+        let mut pattern = dofs.pattern();
+        for i in 0..dofs.n {
+            pattern.push((i, i));
+        }
+        let link_dofs: Vec<[usize; 3]> = model.links.iter().map(|l| dofs.nodes[l.node].u).collect();
+        for ix in &link_dofs {
+            for &i in ix.iter().filter(|&&i| i != NONE) {
+                for &j in ix.iter().filter(|&&j| j != NONE) {
+                    pattern.push((i, j));
+                }
+            }
+        }
+        pattern.extend_from_slice(extra);
+        let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
+        let slots: Vec<Vec<usize>> = dofs
+            .elements
+            .iter()
+            .map(|m| {
+                let mut s = vec![NONE; NDOF * NDOF];
+                for i in 0..NDOF {
+                    for j in 0..NDOF {
+                        if m[i] != NONE && m[j] != NONE {
+                            s[i * NDOF + j] = solver.slot(m[i], m[j]);
+                        }
+                    }
+                }
+                s
+            })
+            .collect();
+        let (row_map, tangent_map, scatter_off) = Self::scatter_maps(dofs, &slots);
+        let node_slots = dofs
+            .nodes
+            .iter()
+            .map(|nd| {
+                let slot = |a: [usize; 3], b: [usize; 3], c: usize| {
+                    if a[c] == NONE || b[c] == NONE {
+                        NONE
+                    } else {
+                        solver.slot(a[c], b[c])
+                    }
+                };
+                [
+                    std::array::from_fn(|c| slot(nd.u, nd.u, c)),
+                    std::array::from_fn(|c| slot(nd.u, nd.g, c)),
+                    std::array::from_fn(|c| slot(nd.g, nd.u, c)),
+                    std::array::from_fn(|c| slot(nd.g, nd.g, c)),
+                ]
+            })
+            .collect();
+        let (node_block_slots, off_block_slots) = Self::block_slots(model, dofs, &solver);
+        let link_slots = link_dofs
+            .iter()
+            .map(|ix| {
+                std::array::from_fn(|c| {
+                    std::array::from_fn(|d| {
+                        if ix[c] == NONE || ix[d] == NONE {
+                            NONE
+                        } else {
+                            solver.slot(ix[c], ix[d])
+                        }
+                    })
+                })
+            })
+            .collect();
+        let planar = planar::PlanarKernel::new(model, data, dofs, &slots);
+        let slide_blocks = slide::SlideBlock::build(model, dofs, &solver);
+        Ok(SystemParts {
+            solver,
+            slots,
+            row_map,
+            tangent_map,
+            scatter_off,
+            node_slots,
+            node_block_slots,
+            off_block_slots,
+            link_slots,
+            slide_blocks,
+            planar,
+        })
+    }
+
+    /// Rebuilds the linear system for the element pattern plus `extra` couplings (kept
+    /// sorted and unique; the pattern only grows). The planar kernel keeps its switch;
+    /// the next Newton iteration assembles and factorizes afresh.
+    fn rebuild_pattern(
+        &mut self,
+        extra: Vec<(usize, usize)>,
+    ) -> Result<(), crate::linsolve::LinsolveError> {
+        let parts = Self::system_parts(&self.model, &self.data, &self.dofs, &extra)?;
+        let planar_on = self.planar.as_ref().is_none_or(|p| p.enabled);
+        self.solver = parts.solver;
+        self.slots = parts.slots;
+        self.row_map = parts.row_map;
+        self.tangent_map = parts.tangent_map;
+        self.scatter_off = parts.scatter_off;
+        self.node_slots = parts.node_slots;
+        self.node_block_slots = parts.node_block_slots;
+        self.off_block_slots = parts.off_block_slots;
+        self.link_slots = parts.link_slots;
+        self.slide_blocks = parts.slide_blocks;
+        self.planar = parts.planar;
+        if let Some(p) = self.planar.as_mut() {
+            p.enabled = planar_on;
+        }
+        self.contact_slots.clear();
+        self.extra_pattern = extra;
+        self.factored = None;
+        Ok(())
     }
 
     /// Time spent so far in assembly, factorization and solves.

@@ -3,8 +3,7 @@
 //! hand.
 
 use super::{Mode, Simulation};
-use crate::element::{FrozenScalars, NDOF};
-use crate::integrator::dofs::NONE;
+use crate::element::FrozenScalars;
 use crate::integrator::evaluate::now;
 
 impl Simulation {
@@ -13,6 +12,7 @@ impl Simulation {
     pub fn residual_at(&mut self, q: &[f64], consistent: bool) -> Vec<f64> {
         let mut r = vec![0.0; self.dofs.n];
         self.mid_step_loads();
+        self.refresh_rod_pairs().expect("contact pairs");
         let mode = if consistent {
             Mode::Consistent
         } else {
@@ -27,16 +27,8 @@ impl Simulation {
         let _ = self.residual_at(q, consistent);
         let n = self.dofs.n;
         let mut dense = vec![vec![0.0; n]; n];
-        for e in 0..self.model.elements.len() {
-            let map = &self.dofs.elements[e];
-            for i in 0..NDOF {
-                for j in 0..NDOF {
-                    if map[i] != NONE && map[j] != NONE {
-                        let v = self.solver.values()[self.slots[e][i * NDOF + j]];
-                        dense[map[i]][map[j]] = v;
-                    }
-                }
-            }
+        for ((row, col), v) in self.solver.entries().into_iter().zip(self.solver.values()) {
+            dense[row][col] = *v;
         }
         dense
     }

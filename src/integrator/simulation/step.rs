@@ -115,9 +115,9 @@ impl Simulation {
                     residuals: vec![],
                 });
             }
-            if !self.model.obstacles.is_empty() {
+            if !self.model.obstacles.is_empty() || !self.model.rod_contacts.is_empty() {
                 return Err(StepFailure {
-                    reason: "gen-alpha does not support contact with obstacles ([[obstacle]]); use em, edmc1, edmc2 or midpoint".into(),
+                    reason: "gen-alpha does not support contact ([[obstacle]], [[contact]]); use em, edmc1, edmc2 or midpoint".into(),
                     residuals: vec![],
                 });
             }
@@ -131,6 +131,12 @@ impl Simulation {
         }
         self.fell_back = false;
         self.mid_step_loads();
+        if let Err(reason) = self.refresh_rod_pairs() {
+            return Err(StepFailure {
+                reason,
+                residuals: vec![],
+            });
+        }
 
         let mut predictors = vec![self.prev.clone()];
         if self.prev.iter().any(|&x| x != 0.0) {

@@ -1,0 +1,313 @@
+//! Contact between rods and of a rod with itself: a chain of contact spheres per rod.
+//!
+//! Each rod of a `[[contact]]` carries sample points at fixed places along its elements
+//! (the nodes and, where an element is longer than the contact radius `ρ`, points in
+//! between, at most `ρ` apart), each the centre of a sphere of radius `ρ`. A point's
+//! position is the linear interpolation of its element's end nodes, `x = (1 − ξ) r₀ + ξ r₁`.
+//! Two points `i`, `j` (of different rods, or of one rod and more than `2(ρᵢ + ρⱼ)` apart
+//! along it) store the penalty energy `½ K (|d| − ρᵢ − ρⱼ)²` while `|d| < ρᵢ + ρⱼ`,
+//! `d = xᵢ − xⱼ`, `K = k · min(spacingᵢ, spacingⱼ)` (`k` per unit length, N/m²).
+//!
+//! Over a step the pair exerts the discrete gradient of that energy in `s = |d|²` (a
+//! quadratic function of the node positions):
+//!
+//! ```text
+//! Fᵢ = −[W(s₁) − W(s₀)]/(s₁ − s₀) · 2 d_½,   Fⱼ = −Fᵢ
+//! ```
+//!
+//! so the pair's work equals the drop of its energy exactly (EM keeps `H` to round-off),
+//! the forces are equal and opposite (L is kept exactly) and act along the mid-point
+//! connecting vector at the mid-point positions (J is kept exactly: the nodal forces
+//! `wₐ Fᵢ` at `r_a,½` have the moment `xᵢ,½ × Fᵢ − xⱼ,½ × Fᵢ = d_½ × Fᵢ = 0`).
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::obstacle::quotient_quadric;
+
+type V3 = Vector3<f64>;
+type M3 = Matrix3<f64>;
+
+/// A contact sphere's centre on an element.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SamplePoint {
+    /// The element's end nodes.
+    pub nodes: [usize; 2],
+    /// Position along the element, `x = (1 − ξ) r₀ + ξ r₁`.
+    pub xi: f64,
+    /// Contact radius `ρ`.
+    pub radius: f64,
+    /// Distance to the neighbouring sample points along the rod (reference).
+    pub spacing: f64,
+    /// Arc length along its rod (reference), for the self-contact exclusion.
+    pub arc: f64,
+}
+
+impl SamplePoint {
+    /// Position at node positions `r`.
+    #[inline]
+    pub fn at(&self, r: &[V3]) -> V3 {
+        (1.0 - self.xi) * r[self.nodes[0]] + self.xi * r[self.nodes[1]]
+    }
+
+    /// The nodes and weights of the interpolation.
+    #[inline]
+    pub fn weights(&self) -> [(usize, f64); 2] {
+        [(self.nodes[0], 1.0 - self.xi), (self.nodes[1], self.xi)]
+    }
+}
+
+/// Contact between two rods (`points[..split]` on one, `points[split..]` on the other), or
+/// of one rod with itself (`split == points.len()`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RodContact {
+    /// The rods' names, for messages (one name for self-contact).
+    pub rods: Vec<String>,
+    /// Penalty stiffness `k` per unit length (N/m²).
+    pub stiffness: f64,
+    /// The sample points.
+    pub points: Vec<SamplePoint>,
+    /// Where the second rod's points start (`points.len()` for self-contact).
+    pub split: usize,
+}
+
+/// The force of one contact pair over a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairForce {
+    /// Force on point `i` (point `j` feels its opposite).
+    pub force: V3,
+    /// `∂force/∂d₁` (`d₁ = xᵢ − xⱼ` at the end of the step).
+    pub jacobian: M3,
+}
+
+impl RodContact {
+    /// True for contact of a rod with itself.
+    pub fn is_self(&self) -> bool {
+        self.split == self.points.len()
+    }
+
+    /// Whether points `i < j` may touch: on different rods, or on one rod farther apart
+    /// along it than twice their contact diameters (neighbours along a rod always
+    /// overlap).
+    pub fn allowed(&self, i: usize, j: usize) -> bool {
+        let (a, b) = (&self.points[i], &self.points[j]);
+        if self.is_self() {
+            (a.arc - b.arc).abs() > 2.0 * (a.radius + b.radius)
+        } else {
+            (i < self.split) != (j < self.split)
+        }
+    }
+
+    /// Largest contact radius.
+    pub fn max_radius(&self) -> f64 {
+        self.points.iter().fold(0.0, |m, p| m.max(p.radius))
+    }
+
+    /// Pairs `(i, j)`, `i < j`, allowed to touch and closer than `ρᵢ + ρⱼ + reach` at node
+    /// positions `r` (a uniform grid of cell `2 ρ_max + reach`).
+    pub fn candidates(&self, r: &[V3], reach: f64) -> Vec<(usize, usize)> {
+        let cell = 2.0 * self.max_radius() + reach;
+        let x: Vec<V3> = self.points.iter().map(|p| p.at(r)).collect();
+        let key = |v: &V3| -> [i64; 3] { std::array::from_fn(|c| (v[c] / cell).floor() as i64) };
+        let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> =
+            std::collections::HashMap::new();
+        for (i, v) in x.iter().enumerate() {
+            grid.entry(key(v)).or_default().push(i);
+        }
+        let mut out = Vec::new();
+        for (i, v) in x.iter().enumerate() {
+            let k = key(v);
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let Some(list) = grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
+                            continue;
+                        };
+                        for &j in list {
+                            if j <= i || !self.allowed(i, j) {
+                                continue;
+                            }
+                            let lim = self.points[i].radius + self.points[j].radius + reach;
+                            if (x[i] - x[j]).norm_squared() < lim * lim {
+                                out.push((i, j));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+
+    fn pair_constants(&self, i: usize, j: usize) -> (f64, f64) {
+        let (a, b) = (&self.points[i], &self.points[j]);
+        (
+            self.stiffness * a.spacing.min(b.spacing),
+            a.radius + b.radius,
+        )
+    }
+
+    /// Penalty energy of pair `(i, j)` at node positions `r`.
+    pub fn pair_energy(&self, i: usize, j: usize, r: &[V3]) -> f64 {
+        let (k, reach) = self.pair_constants(i, j);
+        let dist = (self.points[i].at(r) - self.points[j].at(r)).norm();
+        if dist < reach {
+            0.5 * k * (dist - reach) * (dist - reach)
+        } else {
+            0.0
+        }
+    }
+
+    /// Total penalty energy at node positions `r`.
+    pub fn energy(&self, r: &[V3]) -> f64 {
+        self.candidates(r, 0.0)
+            .into_iter()
+            .map(|(i, j)| self.pair_energy(i, j, r))
+            .sum()
+    }
+
+    /// The force of pair `(i, j)` over the step from node positions `r0` to `r1`, with
+    /// its Jacobian when `jacobian` is set.
+    pub fn pair_force(
+        &self,
+        i: usize,
+        j: usize,
+        r0: &[V3],
+        r1: &[V3],
+        jacobian: bool,
+    ) -> PairForce {
+        let (k, reach) = self.pair_constants(i, j);
+        let (pi, pj) = (&self.points[i], &self.points[j]);
+        let d0 = pi.at(r0) - pj.at(r0);
+        let d1 = pi.at(r1) - pj.at(r1);
+        let (q, dq) = quotient_quadric(k, reach, d0.norm_squared(), d1.norm_squared());
+        let dm = 0.5 * (d0 + d1);
+        let force = -2.0 * q * dm;
+        let jac = if jacobian && q != 0.0 {
+            // ∂(−2 q d_½)/∂d₁ = −2 d_½ (∂q/∂s₁ · 2 d₁)ᵀ − q I.
+            -4.0 * dq * dm * d1.transpose() - q * M3::identity()
+        } else {
+            M3::zeros()
+        };
+        PairForce {
+            force,
+            jacobian: jac,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_rods() -> (RodContact, Vec<V3>) {
+        // Rod A: nodes 0-1-2 along e1; rod B: nodes 3-4 crossing above it along e2.
+        let r = vec![
+            V3::new(0.0, 0.0, 0.0),
+            V3::new(0.1, 0.0, 0.0),
+            V3::new(0.2, 0.0, 0.0),
+            V3::new(0.1, -0.1, 0.015),
+            V3::new(0.1, 0.1, 0.015),
+        ];
+        let pt = |nodes: [usize; 2], xi: f64, arc: f64| SamplePoint {
+            nodes,
+            xi,
+            radius: 0.01,
+            spacing: 0.01,
+            arc,
+        };
+        let mut points = Vec::new();
+        for k in 0..10 {
+            points.push(pt([0, 1], k as f64 / 10.0, 0.01 * k as f64));
+            points.push(pt([1, 2], k as f64 / 10.0, 0.1 + 0.01 * k as f64));
+        }
+        let split = points.len();
+        for k in 0..=20 {
+            points.push(pt([3, 4], k as f64 / 20.0, 0.01 * k as f64));
+        }
+        let c = RodContact {
+            rods: vec!["a".into(), "b".into()],
+            stiffness: 1e5,
+            points,
+            split,
+        };
+        (c, r)
+    }
+
+    #[test]
+    fn pair_work_equals_energy_change_and_keeps_momenta() {
+        let (c, r0) = two_rods();
+        let mut r1 = r0.clone();
+        r1[3] += V3::new(0.004, 0.002, -0.006);
+        r1[4] += V3::new(-0.003, 0.001, -0.004);
+        r1[1] += V3::new(0.0, 0.001, 0.003);
+        let pairs = c.candidates(&r0, 0.02);
+        assert!(!pairs.is_empty());
+        let (mut work, mut f_sum, mut moment) = (0.0, V3::zeros(), V3::zeros());
+        for &(i, j) in &pairs {
+            let f = c.pair_force(i, j, &r0, &r1, false).force;
+            for (p, sign) in [(i, 1.0), (j, -1.0)] {
+                for (node, w) in c.points[p].weights() {
+                    let fa = sign * w * f;
+                    work += fa.dot(&(r1[node] - r0[node]));
+                    f_sum += fa;
+                    moment += (0.5 * (r0[node] + r1[node])).cross(&fa);
+                }
+            }
+        }
+        let (e0, e1) = (c.energy(&r0), c.energy(&r1));
+        assert!(e1 > 0.0, "no contact at the end");
+        assert!(
+            (work + e1 - e0).abs() <= 1e-12 * e1,
+            "work {work:e} vs ΔV {:e}",
+            e1 - e0
+        );
+        assert!(f_sum.norm() <= 1e-15 * work.abs().max(1e-300) * 1e6);
+        assert!(moment.norm() <= 1e-12 * (work.abs() / 0.01));
+    }
+
+    #[test]
+    fn pair_jacobian_matches_finite_differences() {
+        let (c, r0) = two_rods();
+        let mut r1 = r0.clone();
+        r1[3] += V3::new(0.001, 0.002, -0.008);
+        for &(i, j) in &c.candidates(&r0, 0.02) {
+            let f = c.pair_force(i, j, &r0, &r1, true);
+            if f.force == V3::zeros() {
+                continue;
+            }
+            // Move node 3 (weight w on point j, which feels −F): ∂F_i/∂r₃ = −w ∂F/∂d₁.
+            let w = c.points[j]
+                .weights()
+                .iter()
+                .find(|(n, _)| *n == 3)
+                .map_or(0.0, |x| x.1);
+            let h = 1e-8;
+            for col in 0..3 {
+                let (mut rp, mut rm) = (r1.clone(), r1.clone());
+                rp[3][col] += h;
+                rm[3][col] -= h;
+                let fd = (c.pair_force(i, j, &r0, &rp, false).force
+                    - c.pair_force(i, j, &r0, &rm, false).force)
+                    / (2.0 * h);
+                let an = -w * f.jacobian.column(col);
+                let scale = f.jacobian.amax().max(1e-300);
+                assert!(
+                    (fd - an).amax() <= 1e-6 * scale,
+                    "pair ({i}, {j}) column {col}: {fd:?} vs {an:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn self_contact_skips_neighbours_along_the_rod() {
+        let (mut c, r) = two_rods();
+        c.points.truncate(c.split);
+        c.split = c.points.len();
+        assert!(c.is_self());
+        // Rod A is straight: no pair of it is both allowed and touching.
+        assert!(c.candidates(&r, 0.0).is_empty());
+        assert!(!c.allowed(0, 2) && c.allowed(0, 10));
+    }
+}
