@@ -336,68 +336,26 @@ fn capstan_holds_below_e_mu_theta_and_slides_above() {
     assert!(slide > 2e-2, "held ({slide} m) above the capstan limit");
 }
 
-/// Two crossing rods thrown at each other in free flight (off-centre, spinning).
-fn collision_text(scheme: &str, dt: f64) -> String {
+/// The built-in `crossing` scene (two crossing rods thrown at each other in free flight,
+/// off-centre and spinning) with `scheme` (EDMC-2 at α = 0.5).
+fn collision_text(scheme: &str) -> String {
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "crossing")
+        .unwrap()
+        .toml;
     let alpha = if scheme == "edmc2" {
         "\nalpha = 0.5"
     } else {
         ""
     };
-    format!(
-        r#"
-[material.soft]
-E = 1e8
-nu = 0.5
-density = 1000
-
-[section.round]
-A = 1.2566370614359173e-3
-I11 = 1.2566370614359173e-7
-I22 = 1.2566370614359173e-7
-J = 2.5132741228718346e-7
-
-[[rod]]
-name = "a"
-material = "soft"
-section = "round"
-points = [[-0.5, 0, 0], [0.5, 0, 0]]
-elements = 20
-d1 = [0, 1, 0]
-
-[[rod]]
-name = "b"
-material = "soft"
-section = "round"
-points = [[0.2, -0.5, 0.1], [0.2, 0.5, 0.1]]
-elements = 20
-d1 = [1, 0, 0]
-
-[[contact]]
-rods = ["a", "b"]
-
-[[initial_velocity]]
-rod = "a"
-v = [0.1, 0, 1]
-omega = [0.5, 0, 0.3]
-
-[[initial_velocity]]
-rod = "b"
-center = [0.2, 0, 0.1]
-v = [0, 0.2, -1]
-omega = [0, 0, -0.4]
-
-[integrator]
-scheme = "{scheme}"{alpha}
-dt = {dt}
-t_end = 0.12
-"#
-    )
+    text.replace("scheme = \"em\"", &format!("scheme = \"{scheme}\"{alpha}"))
 }
 
 #[test]
 fn colliding_rods_keep_l_j_and_em_energy_to_round_off() {
     for scheme in ["em", "edmc2"] {
-        let s = parse_scene(&collision_text(scheme, 1e-3), "collide.toml").unwrap();
+        let s = parse_scene(&collision_text(scheme), "collide.toml").unwrap();
         assert!(s.model.is_free_flight());
         let a_nodes: Vec<usize> = s.model.elements[s.model.rods[0].elements.clone()]
             .iter()
@@ -456,7 +414,7 @@ fn colliding_rods_keep_l_j_and_em_energy_to_round_off() {
 fn rod_contact_tangent_matches_finite_differences() {
     // Step the collision into contact, then compare the assembled tangent with central
     // differences of the residual (pair list fixed at the state).
-    let s = parse_scene(&collision_text("em", 1e-3), "collide.toml").unwrap();
+    let s = parse_scene(&collision_text("em"), "collide.toml").unwrap();
     let mut sim = Simulation::new(s.model, s.params).unwrap();
     for _ in 0..40 {
         sim.step().unwrap();
@@ -488,4 +446,122 @@ fn rod_contact_tangent_matches_finite_differences() {
     );
     // Measured 2.8e-10 (the central differences' truncation).
     assert!(worst <= 3e-9 * kmax, "tangent off by {:e}", worst / kmax);
+}
+
+#[test]
+fn twisted_rod_forms_a_plectoneme_without_interpenetration() {
+    let s = load_scene("plectoneme").unwrap();
+    let c = s.model.rod_contacts[0].clone();
+    let diameter = 2.0 * c.max_radius();
+    let mut sim = Simulation::new(s.model, s.params).unwrap();
+    let (mut min_gap, mut touching_steps, mut max_energy) = (f64::INFINITY, 0usize, 0.0f64);
+    let mut last_t_contact = 0.0;
+    let out = run(&mut sim, 50, |_: &StepRecord, sim: &Simulation| {
+        let r = &sim.state().r;
+        let pairs = c.candidates(r, diameter);
+        for &(i, j) in &pairs {
+            let d = (c.points[i].at(r) - c.points[j].at(r)).norm();
+            min_gap = min_gap.min(d / diameter);
+        }
+        let e = c.energy(r);
+        if e > 0.0 {
+            touching_steps += 1;
+            last_t_contact = sim.state().t;
+        }
+        max_energy = max_energy.max(e);
+        Ok::<(), ()>(())
+    })
+    .unwrap();
+    // The contact at the end: strands wrapped along a stretch of rod (a plectoneme), not
+    // a single touch — the arc lengths of the points in contact.
+    let r = &sim.state().r;
+    let touching: Vec<(f64, f64)> = c
+        .candidates(r, 0.0)
+        .into_iter()
+        .map(|(i, j)| (c.points[i].arc, c.points[j].arc))
+        .collect();
+    let lo = touching
+        .iter()
+        .map(|p| p.0.min(p.1))
+        .fold(f64::INFINITY, f64::min);
+    let hi = touching.iter().map(|p| p.0.max(p.1)).fold(0.0f64, f64::max);
+    let span = touching
+        .iter()
+        .map(|p| p.0.min(p.1))
+        .fold(f64::NEG_INFINITY, f64::max)
+        - lo;
+    eprintln!(
+        "plectoneme: {:?}; closest approach of non-neighbouring points {min_gap:.3} diameters; in self-contact at {touching_steps} of the sampled levels (last t = {last_t_contact}); largest contact energy {max_energy:.3e}; at the end {} pairs touch, arcs {lo:.3}–{hi:.3}, contact along {:.1} diameters of one strand",
+        out.status,
+        touching.len(),
+        span / diameter
+    );
+    assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
+    // Measured: in contact from t ≈ 2.9 to the end (21 of 51 levels); at the end 19 pairs
+    // from arc 0.32 to 0.69 — the two strands of a loop around the middle, wrapped along
+    // 4.5 diameters; closest approach 0.981 diameters.
+    assert!(touching_steps > 10, "never in lasting self-contact");
+    assert!(
+        touching.len() >= 5 && lo < 0.5 && hi > 0.5,
+        "no loop around the middle"
+    );
+    assert!(
+        span >= 2.0 * diameter,
+        "the strands touch along only {span} m"
+    );
+    assert!(min_gap >= 0.9, "interpenetration: {min_gap} diameters");
+}
+
+#[test]
+fn bad_rod_contacts_are_named() {
+    let base = collision_text("em");
+    let i = base.find("[[contact]]").unwrap();
+    let j = base.find("[[initial_velocity]]").unwrap();
+    let base = format!("{}@@{}", &base[..i], &base[j..]);
+    let cases = [
+        ("[[contact]]\nstiffness = 1e5", "contact[0].rods: required key missing"),
+        (
+            "[[contact]]\nrods = [\"a\", \"b\", \"a\"]",
+            "contact[0].rods: give one rod (contact with itself) or two (contact between them), got 3",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"a\"]",
+            "contact[0].rods[1]: `a` twice: for contact of a rod with itself give it once",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"c\"]",
+            "contact[0].rods[1]: no rod named `c` (rods: a, b)",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"b\"]\nfriction = 0.3",
+            "contact[0].friction: friction between rods is not available yet",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"b\"]\ncontact_radius = 0.06",
+            "contact[0].rods: the rods start overlapping: contact spheres at",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"b\"]\nstiffness = 0",
+            "contact[0].stiffness: must be > 0 (got 0)",
+        ),
+    ];
+    for (extra, want) in cases {
+        let err = parse_scene(&base.replace("@@", &format!("{extra}\n\n")), "bad.toml")
+            .expect_err(extra)
+            .to_string();
+        assert!(err.contains(want), "{extra}\n got: {err}\nwant: {want}");
+    }
+    let ga = base
+        .replace("@@", "[[contact]]\nrods = [\"a\", \"b\"]\n\n")
+        .replace("scheme = \"em\"", "scheme = \"gen-alpha\"");
+    let err = parse_scene(&ga, "bad.toml").unwrap_err().to_string();
+    assert!(
+        err.contains("gen-alpha does not support contact between rods"),
+        "{err}"
+    );
+    let s = load_scene("crossing").unwrap();
+    assert_eq!(
+        s.model.gpu_unsupported(),
+        Some("contact between rods ([[contact]])")
+    );
 }

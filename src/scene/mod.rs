@@ -110,6 +110,16 @@ static BUILTINS: &[BuiltinScene] = &[
         description: "cable over a fixed drum with friction, end tensions near the capstan limit (contact)",
         toml: include_str!("../../scenes/capstan.toml"),
     },
+    BuiltinScene {
+        name: "crossing",
+        description: "two crossing rods thrown at each other in free flight, off-centre (contact between rods)",
+        toml: include_str!("../../scenes/crossing.toml"),
+    },
+    BuiltinScene {
+        name: "plectoneme",
+        description: "clamped rod twisted 5 turns while its ends close in: a self-contacting plectoneme (contact)",
+        toml: include_str!("../../scenes/plectoneme.toml"),
+    },
 ];
 
 /// Everything that can go wrong loading a scene.
@@ -482,6 +492,22 @@ impl Scene {
                     "{geometry}: {} contact nodes, stiffness {} N/m², {friction}",
                     o.nodes.len(),
                     fmt_num(o.stiffness)
+                )
+            });
+        }
+        if !m.rod_contacts.is_empty() {
+            let _ = writeln!(s, "contact between rods: {}", m.rod_contacts.len());
+            list(&mut s, m.rod_contacts.iter(), |c| {
+                format!(
+                    "{}: {} contact spheres of radius up to {}, stiffness {} N/m², frictionless",
+                    if c.is_self() {
+                        format!("rod {} with itself", c.rods[0])
+                    } else {
+                        format!("rods {} and {}", c.rods[0], c.rods[1])
+                    },
+                    c.points.len(),
+                    fmt_num(c.max_radius()),
+                    fmt_num(c.stiffness)
                 )
             });
         }
