@@ -440,9 +440,11 @@ impl Model {
         None
     }
 
-    /// True when some obstacle has friction (its work is part of the dissipation D).
+    /// True when some obstacle or rod contact has friction (its work is part of the
+    /// dissipation D).
     pub fn has_friction(&self) -> bool {
         self.obstacles.iter().any(|o| o.friction > 0.0)
+            || self.rod_contacts.iter().any(|c| c.friction > 0.0)
     }
 
     /// True when some line load follows the directors (its nodal values depend on the

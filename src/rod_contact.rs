@@ -64,10 +64,26 @@ pub struct RodContact {
     pub rods: Vec<String>,
     /// Penalty stiffness `k` per unit length (N/m²).
     pub stiffness: f64,
+    /// Coulomb friction coefficient `μ` between the spheres (0: frictionless).
+    pub friction: f64,
+    /// Regularization speed `ε` (m/s) of the friction law.
+    pub slip: f64,
     /// The sample points.
     pub points: Vec<SamplePoint>,
     /// Where the second rod's points start (`points.len()` for self-contact).
     pub split: usize,
+}
+
+/// The friction of one contact pair over a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PairFriction {
+    /// Force on sphere `i` (sphere `j` feels its opposite), at the centres.
+    pub force: V3,
+    /// Moment on each of the two spheres (the same on both): `−½ d_½ × force`, so the
+    /// pair's forces and moments have no resultant moment.
+    pub moment: V3,
+    /// Energy removed over the step (≥ 0).
+    pub work: f64,
 }
 
 /// The force of one contact pair over a step.
@@ -196,6 +212,52 @@ impl RodContact {
     }
 }
 
+impl RodContact {
+    /// Friction of pair `(i, j)` over the step from `r0` to `r1`, the node rotation
+    /// increments (Cayley vectors) `theta` interpolated at the spheres, over `dt`: the slip
+    /// of the contact point `δ = Δxᵢ − Δxⱼ + ½ d_½ × (θᵢ + θⱼ)` (the relative motion of
+    /// the two sphere surfaces at the mid-point between the centres), its part across the
+    /// normal `δ_t`, and `f = −μ N δ_t/√(|δ_t|² + (ε Δt)²)` with `N` the pair's normal
+    /// force. The work `f·δ_t ≤ 0` is what the force at the centres and the two moments
+    /// do together. `None` out of contact or without friction.
+    pub fn pair_friction(
+        &self,
+        i: usize,
+        j: usize,
+        r0: &[V3],
+        r1: &[V3],
+        theta: &dyn Fn(usize) -> V3,
+        dt: f64,
+    ) -> Option<PairFriction> {
+        if self.friction == 0.0 {
+            return None;
+        }
+        let (pi, pj) = (&self.points[i], &self.points[j]);
+        let (k, reach) = self.pair_constants(i, j);
+        let d0 = pi.at(r0) - pj.at(r0);
+        let d1 = pi.at(r1) - pj.at(r1);
+        let (q, _) = quotient_quadric(k, reach, d0.norm_squared(), d1.norm_squared());
+        let dm = 0.5 * (d0 + d1);
+        let len = dm.norm();
+        if q >= 0.0 || len == 0.0 {
+            return None;
+        }
+        let n = dm / len;
+        let normal = -2.0 * q * len;
+        let th = |p: &SamplePoint| p.weights().iter().map(|&(a, w)| w * theta(a)).sum::<V3>();
+        let delta = (d1 - d0) + 0.5 * dm.cross(&(th(pi) + th(pj)));
+        let dt_slip = delta - n * n.dot(&delta);
+        let eps = self.slip * dt;
+        let sn = (dt_slip.norm_squared() + eps * eps).sqrt();
+        let force = -self.friction * normal * dt_slip / sn;
+        Some(PairFriction {
+            force,
+            moment: -0.5 * dm.cross(&force),
+            work: self.friction * normal * dt_slip.norm_squared() / sn,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -228,6 +290,8 @@ mod tests {
         let c = RodContact {
             rods: vec!["a".into(), "b".into()],
             stiffness: 1e5,
+            friction: 0.0,
+            slip: 1e-3,
             points,
             split,
         };
@@ -298,6 +362,43 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn friction_work_is_what_its_forces_and_moments_do_and_never_negative() {
+        let (mut c, r0) = two_rods();
+        c.friction = 0.4;
+        let mut r1 = r0.clone();
+        r1[3] += V3::new(0.004, 0.002, -0.008);
+        r1[4] += V3::new(0.003, -0.001, -0.007);
+        let theta = |a: usize| V3::new(0.01 * a as f64, -0.02, 0.015 * (a as f64 - 2.0));
+        let mut found = 0;
+        for &(i, j) in &c.candidates(&r0, 0.02) {
+            let Some(f) = c.pair_friction(i, j, &r0, &r1, &theta, 1e-3) else {
+                continue;
+            };
+            found += 1;
+            let (pi, pj) = (&c.points[i], &c.points[j]);
+            let th = |p: &SamplePoint| p.weights().iter().map(|&(a, w)| w * theta(a)).sum::<V3>();
+            let dxi = pi.at(&r1) - pi.at(&r0);
+            let dxj = pj.at(&r1) - pj.at(&r0);
+            let work = f.force.dot(&(dxi - dxj)) + f.moment.dot(&(th(pi) + th(pj)));
+            assert!(f.work > 0.0);
+            assert!(
+                (work + f.work).abs() <= 1e-12 * f.work,
+                "{work:e} vs {:e}",
+                f.work
+            );
+            // No resultant moment about the origin at the mid-point centres.
+            let xi = 0.5 * (pi.at(&r0) + pi.at(&r1));
+            let xj = 0.5 * (pj.at(&r0) + pj.at(&r1));
+            let m = xi.cross(&f.force) - xj.cross(&f.force) + 2.0 * f.moment;
+            assert!(
+                m.norm() <= 1e-15 * f.force.norm().max(1e-300) * 10.0,
+                "{m:?}"
+            );
+        }
+        assert!(found > 0, "no pair in contact");
     }
 
     #[test]

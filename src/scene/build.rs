@@ -1908,11 +1908,13 @@ fn rod_contact(
             ),
         ));
     }
-    if c.friction.is_some() {
-        return Err(cx.err(
-            &path.key("friction"),
-            "friction between rods is not available yet (contact between rods is frictionless)",
-        ));
+    let friction = cx.opt_non_negative(&path.key("friction"), c.friction)?;
+    let slip = match c.slip {
+        None => 1e-3,
+        Some(s) => cx.positive(&path.key("slip"), s)?,
+    };
+    if c.slip.is_some() && friction == 0.0 {
+        return Err(cx.err(&path.key("slip"), "only with `friction` > 0"));
     }
     let which: Vec<usize> = names
         .iter()
@@ -1973,6 +1975,8 @@ fn rod_contact(
     let contact = RodContact {
         rods: names.clone(),
         stiffness,
+        friction,
+        slip,
         split: if which.len() == 1 {
             points.len()
         } else {

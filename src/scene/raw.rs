@@ -51,6 +51,7 @@ pub(crate) struct RawContact {
     pub stiffness: Option<f64>,
     pub contact_radius: Option<f64>,
     pub friction: Option<f64>,
+    pub slip: Option<f64>,
 }
 
 /// `[[obstacle]]`: a rigid plane, sphere or cylinder the rods' nodes can touch.

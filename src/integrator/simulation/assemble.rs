@@ -187,6 +187,7 @@ impl Simulation {
         self.add_drag_terms(q, tangent, r, scale);
         self.add_contact_terms(q, tangent, r, scale);
         self.add_rod_contact_terms(q, tangent, r, scale);
+        self.add_rod_friction_terms(q, tangent, r, scale);
         // Rigid links: the mid-point bar force (exactly energy-consistent, see `Link`).
         for (i, link) in self.model.links.iter().enumerate() {
             let a = link.node;

@@ -99,7 +99,8 @@ impl Simulation {
         }
     }
 
-    /// Energy the obstacles' friction takes out over the step at `q` (≥ 0).
+    /// Energy friction (against obstacles and between rods) takes out over the step at
+    /// `q` (≥ 0).
     pub(super) fn contact_friction_work(&self, q: &[f64]) -> f64 {
         if !self.model.has_friction() {
             return 0.0;
@@ -108,7 +109,8 @@ impl Simulation {
             .iter()
             .flatten()
             .map(|f| f.friction_work)
-            .sum()
+            .sum::<f64>()
+            + self.rod_friction_work(q)
     }
 
     /// Contact force on every node at `q` (zero without obstacles).

@@ -57,7 +57,7 @@ impl Simulation {
         let (fl, ml) = self.follower_node_loads(q);
         let drag = self.drag_node_forces(q);
         let contact = self.contact_node_forces(q);
-        let rod_contact = self.rod_contact_node_forces(q);
+        let (rod_contact, rod_moment) = self.rod_contact_node_loads(q);
         let mut work = 0.0;
         for (i, d) in self.model.drives.iter().enumerate() {
             let a = d.node;
@@ -69,7 +69,7 @@ impl Simulation {
                 - drag[a]
                 - contact[a]
                 - rod_contact[a];
-            let rt = reaction[i][1] - self.moment[a] - ml[a];
+            let rt = reaction[i][1] - self.moment[a] - ml[a] - rod_moment[a];
             for (j, link) in self.model.links.iter().enumerate() {
                 if link.node == a {
                     ru += links::bar_terms(link, self.state.lambda[j], &self.state.r[a], &u).force;

@@ -40,7 +40,16 @@ impl Simulation {
                         if wa == 0.0 || wb == 0.0 {
                             continue;
                         }
-                        let (ua, ub) = (self.dofs.nodes[a].u, self.dofs.nodes[b].u);
+                        let (na, nb) = (&self.dofs.nodes[a], &self.dofs.nodes[b]);
+                        // Friction also couples the rotations (its moments and the slip).
+                        let (ua, ub): (Vec<usize>, Vec<usize>) = if c.friction > 0.0 {
+                            (
+                                na.u.iter().chain(&na.th).copied().collect(),
+                                nb.u.iter().chain(&nb.th).copied().collect(),
+                            )
+                        } else {
+                            (na.u.to_vec(), nb.u.to_vec())
+                        };
                         for x in ua.iter().filter(|&&x| x != NONE) {
                             for y in ub.iter().filter(|&&y| y != NONE) {
                                 if self.solver.try_slot(*x, *y).is_none() {
@@ -135,13 +144,158 @@ impl Simulation {
         }
     }
 
-    /// The rod-contact force on every node at `q` (zero without rod contact).
-    pub(super) fn rod_contact_node_forces(&self, q: &[f64]) -> Vec<Vec3> {
-        let mut out = vec![Vec3::zeros(); self.model.n_nodes()];
+    /// Node rotation increments at `q` (prescribed where removed).
+    fn end_rotations(&self, q: &[f64]) -> Vec<Vec3> {
+        (0..self.model.n_nodes())
+            .map(|a| self.node_increment(a, q).1)
+            .collect()
+    }
+
+    /// Nodal (force, moment) of the friction of pair `(i, j)` of contact `c` over the step
+    /// to `r1`, `th`, added into `out` (local nodes by index), and its work.
+    fn friction_loads(
+        &self,
+        c: usize,
+        (i, j): (usize, usize),
+        r1: &[Vec3],
+        th: &[Vec3],
+        out: &mut dyn FnMut(usize, Vec3, Vec3),
+    ) -> f64 {
+        let rc = &self.model.rod_contacts[c];
+        let dt = self.params.dt;
+        let Some(f) = rc.pair_friction(i, j, &self.state.r, r1, &|a| th[a], dt) else {
+            return 0.0;
+        };
+        for (p, sp) in [(i, 1.0), (j, -1.0)] {
+            for (a, wa) in rc.points[p].weights() {
+                if wa != 0.0 {
+                    out(a, sp * wa * f.force, wa * f.moment);
+                }
+            }
+        }
+        f.work
+    }
+
+    /// Adds the friction of the rod contacts: rows (`−F`, `−M`), scales and, with
+    /// `tangent`, its Jacobian by central differences over the unknowns of the pair's
+    /// (at most four) nodes.
+    pub(super) fn add_rod_friction_terms(
+        &mut self,
+        q: &[f64],
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        if !self.model.rod_contacts.iter().any(|c| c.friction > 0.0) {
+            return;
+        }
+        let mut r1 = self.end_positions(q);
+        let mut th = self.end_rotations(q);
+        for c in 0..self.model.rod_contacts.len() {
+            if self.model.rod_contacts[c].friction == 0.0 {
+                continue;
+            }
+            for pi in 0..self.rod_pairs[c].len() {
+                let pair = self.rod_pairs[c][pi];
+                let mut loads: Vec<(usize, Vec3, Vec3)> = Vec::new();
+                self.friction_loads(c, pair, &r1, &th, &mut |a, f, m| loads.push((a, f, m)));
+                if loads.is_empty() {
+                    continue;
+                }
+                for &(a, f, m) in &loads {
+                    let nd = &self.dofs.nodes[a];
+                    for k in 0..3 {
+                        if nd.u[k] != NONE {
+                            r[nd.u[k]] -= f[k];
+                            scale[0] = scale[0].max(f[k].abs());
+                        }
+                        if nd.th[k] != NONE {
+                            r[nd.th[k]] -= m[k];
+                            scale[1] = scale[1].max(m[k].abs());
+                        }
+                    }
+                }
+                if !tangent {
+                    continue;
+                }
+                // The pair's nodes and their unknowns (u, then θ).
+                let mut nodes: Vec<usize> = loads.iter().map(|l| l.0).collect();
+                nodes.sort_unstable();
+                nodes.dedup();
+                // Central differences resolve the friction law's regularization (slip
+                // increments of ε Δt) with a step well inside it.
+                let rc = &self.model.rod_contacts[c];
+                let h = (0.01 * rc.slip * self.params.dt).min(1e-7);
+                for &b in &nodes {
+                    let nb = self.dofs.nodes[b];
+                    for (col, kind, comp) in (0..3)
+                        .map(|k| (nb.u[k], 0, k))
+                        .chain((0..3).map(|k| (nb.th[k], 1, k)))
+                    {
+                        if col == NONE {
+                            continue;
+                        }
+                        let mut diff: Vec<(usize, Vec3, Vec3)> = Vec::new();
+                        for sign in [1.0, -1.0] {
+                            if kind == 0 {
+                                r1[b][comp] += sign * h;
+                            } else {
+                                th[b][comp] += sign * h;
+                            }
+                            self.friction_loads(c, pair, &r1, &th, &mut |a, f, m| {
+                                diff.push((a, sign * f / (2.0 * h), sign * m / (2.0 * h)))
+                            });
+                            if kind == 0 {
+                                r1[b][comp] -= sign * h;
+                            } else {
+                                th[b][comp] -= sign * h;
+                            }
+                        }
+                        for (a, df, dm) in diff {
+                            let na = self.dofs.nodes[a];
+                            for k in 0..3 {
+                                for (row, v) in [(na.u[k], df[k]), (na.th[k], dm[k])] {
+                                    if row == NONE {
+                                        continue;
+                                    }
+                                    let slot = self
+                                        .solver
+                                        .try_slot(row, col)
+                                        .expect("friction coupling in the pattern");
+                                    self.solver.values_mut()[slot] -= v;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Energy the friction between rods takes out over the step at `q` (≥ 0).
+    pub(super) fn rod_friction_work(&self, q: &[f64]) -> f64 {
+        if !self.model.rod_contacts.iter().any(|c| c.friction > 0.0) {
+            return 0.0;
+        }
+        let (r1, th) = (self.end_positions(q), self.end_rotations(q));
+        let mut work = 0.0;
+        for (c, pairs) in self.rod_pairs.iter().enumerate() {
+            for &pair in pairs {
+                work += self.friction_loads(c, pair, &r1, &th, &mut |_, _, _| {});
+            }
+        }
+        work
+    }
+
+    /// The rod-contact force and moment on every node at `q` (zero without rod contact).
+    pub(super) fn rod_contact_node_loads(&self, q: &[f64]) -> (Vec<Vec3>, Vec<Vec3>) {
+        let n = self.model.n_nodes();
+        let (mut out, mut mom) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
         if self.model.rod_contacts.is_empty() {
-            return out;
+            return (out, mom);
         }
         let r1 = self.end_positions(q);
+        let th = self.end_rotations(q);
         for (c, pairs) in self.model.rod_contacts.iter().zip(&self.rod_pairs) {
             for &(i, j) in pairs {
                 let f = c.pair_force(i, j, &self.state.r, &r1, false).force;
@@ -152,7 +306,15 @@ impl Simulation {
                 }
             }
         }
-        out
+        for c in 0..self.rod_pairs.len() {
+            for &pair in &self.rod_pairs[c] {
+                self.friction_loads(c, pair, &r1, &th, &mut |a, f, m| {
+                    out[a] += f;
+                    mom[a] += m;
+                });
+            }
+        }
+        (out, mom)
     }
 
     /// `Err` when the state `next` puts a pair in contact that the step did not consider
