@@ -265,8 +265,14 @@ fn cases(n: usize, seed: u64) -> Vec<Case> {
 fn gpu_matches_cpu_element_kernel_f64() {
     let Some(ctx) = context() else { return };
     if !ctx.is_f64() {
+        // CI requires the GPU tests: an adapter without f64 must not pass silently.
+        assert!(
+            !gpu_required(),
+            "COSSERAT_REQUIRE_GPU is set but adapter {} has no SHADER_F64",
+            ctx.describe()
+        );
         println!(
-            "adapter {} has no SHADER_F64: f64 parity not applicable",
+            "skipped: adapter {} has no SHADER_F64 (f64 parity not applicable)",
             ctx.describe()
         );
         return;

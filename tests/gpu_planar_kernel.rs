@@ -168,6 +168,11 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
 fn gpu_planar_kernel_matches_cpu() {
     let Some(ctx) = context() else { return };
     if ctx.precision != Precision::F64 {
+        // CI requires the GPU tests: an adapter without f64 must not pass silently.
+        assert!(
+            !gpu_required(),
+            "COSSERAT_REQUIRE_GPU is set but the adapter has no SHADER_F64"
+        );
         println!("skipped: adapter without SHADER_F64");
         return;
     }

@@ -152,7 +152,10 @@ impl GpuContext {
             });
         };
         let info = adapter.get_info();
-        let f64 = adapter.features().contains(wgpu::Features::SHADER_F64);
+        // `COSSERAT_GPU_NO_F64` (any value) treats the adapter as one without f64: the f32
+        // path and the refusals that depend on it can be exercised on any adapter.
+        let f64 = adapter.features().contains(wgpu::Features::SHADER_F64)
+            && std::env::var_os("COSSERAT_GPU_NO_F64").is_none();
         let cache_path = cache_dir
             .filter(|_| adapter.features().contains(wgpu::Features::PIPELINE_CACHE))
             .and_then(|dir| {
