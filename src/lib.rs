@@ -47,3 +47,4 @@ pub mod scene;
 pub mod scheme;
 pub mod study;
 pub mod sweep;
+pub mod table;

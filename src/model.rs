@@ -9,6 +9,8 @@
 
 use nalgebra::{Matrix2, Matrix3, Vector3};
 
+pub use crate::table::{Ramp, TimeTable};
+
 /// 3-vector of `f64`.
 pub type Vec3 = Vector3<f64>;
 /// 3×3 matrix of `f64`.
@@ -58,58 +60,6 @@ pub struct Support {
     pub rotation: bool,
 }
 
-/// A piecewise-linear scalar table `f(t)`; constant before the first and after the last
-/// entry. Equal consecutive times express a jump (the later value holds from that time on).
-#[derive(Clone, Debug, PartialEq)]
-pub struct TimeTable {
-    /// Strictly non-decreasing times.
-    pub times: Vec<f64>,
-    /// Values at `times`.
-    pub values: Vec<f64>,
-}
-
-impl TimeTable {
-    /// A table that is `1` for all time.
-    pub fn constant_one() -> Self {
-        Self {
-            times: vec![0.0],
-            values: vec![1.0],
-        }
-    }
-
-    /// Evaluates the table at `t` (right-continuous at jumps).
-    pub fn eval(&self, t: f64) -> f64 {
-        let n = self.times.len();
-        if n == 0 {
-            return 0.0;
-        }
-        if t < self.times[0] {
-            return self.values[0];
-        }
-        // Last index k with times[k] <= t.
-        let k = self.times.partition_point(|&x| x <= t) - 1;
-        if k + 1 >= n {
-            return self.values[n - 1];
-        }
-        let (t0, t1) = (self.times[k], self.times[k + 1]);
-        let (f0, f1) = (self.values[k], self.values[k + 1]);
-        if t1 <= t0 {
-            return f1;
-        }
-        f0 + (f1 - f0) * (t - t0) / (t1 - t0)
-    }
-}
-
-/// How a support's motion factor is interpolated between the entries of its table.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Ramp {
-    /// Piecewise linear.
-    Linear,
-    /// Smoothstep `3τ² − 2τ³` between consecutive entries: the factor's rate is zero at
-    /// every entry (no velocity jump at the start or end of a ramp).
-    Smooth,
-}
-
 /// Prescribed motion of a supported node (a driven clamp or pin): relative to where the
 /// node starts, its position follows `r(t) = r_0 + (s(t) − s(0)) displacement` and its
 /// rotation `Λ(t) = exp((s(t) − s(0)) φ̂) Λ_0`, imposed exactly at every time level.
@@ -131,27 +81,7 @@ pub struct SupportDrive {
 impl SupportDrive {
     /// The motion factor at `t`.
     pub fn factor(&self, t: f64) -> f64 {
-        match self.ramp {
-            Ramp::Linear => self.table.eval(t),
-            Ramp::Smooth => {
-                let tt = &self.table;
-                let n = tt.times.len();
-                if n == 0 || t < tt.times[0] {
-                    return tt.values.first().copied().unwrap_or(0.0);
-                }
-                let k = tt.times.partition_point(|&x| x <= t) - 1;
-                if k + 1 >= n {
-                    return tt.values[n - 1];
-                }
-                let (t0, t1) = (tt.times[k], tt.times[k + 1]);
-                let (f0, f1) = (tt.values[k], tt.values[k + 1]);
-                if t1 <= t0 {
-                    return f1;
-                }
-                let x = (t - t0) / (t1 - t0);
-                f0 + (f1 - f0) * x * x * (3.0 - 2.0 * x)
-            }
-        }
+        self.table.eval_ramped(self.ramp, t)
     }
 
     /// The node's increment `(u, θ)` from `t0` to `t1`: `u = Δs displacement` and the

@@ -24,6 +24,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::table::{Ramp, TimeTable};
+
 type V3 = Vector3<f64>;
 type M3 = Matrix3<f64>;
 
@@ -78,7 +80,19 @@ pub struct ContactNode {
     pub length: f64,
 }
 
-/// A rigid, fixed obstacle and the nodes that can touch it.
+/// A prescribed translation of an obstacle: `p(t) = (s(t) − s(0)) · displacement`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObstacleMotion {
+    /// Displacement at factor 1.
+    pub displacement: V3,
+    /// Factor table `s(t)`.
+    pub table: TimeTable,
+    /// Interpolation of the table.
+    pub ramp: Ramp,
+}
+
+/// A rigid obstacle (fixed, or translated by a time table) and the nodes that can touch
+/// it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Obstacle {
     /// Geometry.
@@ -92,6 +106,8 @@ pub struct Obstacle {
     pub slip: f64,
     /// Nodes that can touch it.
     pub nodes: Vec<ContactNode>,
+    /// Its prescribed translation (`None`: fixed).
+    pub motion: Option<ObstacleMotion>,
 }
 
 /// The force of one obstacle on one node over a step and its derivative.
@@ -159,7 +175,17 @@ pub(crate) fn quotient_quadric(c: f64, r: f64, s0: f64, s1: f64) -> (f64, f64) {
 }
 
 impl Obstacle {
-    /// Penalty energy of node `n` at position `x`.
+    /// How far the obstacle has moved at time `t` (zero when fixed). The shape's
+    /// coordinates are those at `s(0)`; a moving obstacle's geometry is the shape shifted
+    /// by this offset, so a node at `x` sees the fixed shape at `x − p(t)`.
+    pub fn offset(&self, t: f64) -> V3 {
+        self.motion.as_ref().map_or_else(V3::zeros, |m| {
+            m.displacement * (m.table.eval_ramped(m.ramp, t) - m.table.eval_ramped(m.ramp, 0.0))
+        })
+    }
+
+    /// Penalty energy of node `n` at position `x` (relative to the obstacle's current
+    /// place).
     pub fn energy_at(&self, n: &ContactNode, x: &V3) -> f64 {
         let c = self.stiffness * n.length;
         let g = self.gap(n, x);
@@ -186,11 +212,12 @@ impl Obstacle {
         }
     }
 
-    /// Total penalty energy of the obstacle's nodes at positions `r`.
-    pub fn energy(&self, r: &[V3]) -> f64 {
+    /// Total penalty energy of the obstacle's nodes at positions `r` and time `t`.
+    pub fn energy(&self, r: &[V3], t: f64) -> f64 {
+        let p = self.offset(t);
         self.nodes
             .iter()
-            .map(|n| self.energy_at(n, &r[n.node]))
+            .map(|n| self.energy_at(n, &(r[n.node] - p)))
             .sum()
     }
 
@@ -301,6 +328,7 @@ mod tests {
             friction,
             slip: 0.05,
             nodes: nodes.clone(),
+            motion: None,
         };
         let mut out = Vec::new();
         for mu in [0.0, 0.4] {

@@ -27,7 +27,8 @@ pub struct StepReport {
     pub external_work: f64,
     /// The part of `external_work` done by driven supports (prescribed motion).
     pub support_work: f64,
-    /// The part of `dissipation` taken by friction against obstacles (≥ 0).
+    /// The part of `dissipation` taken by friction against obstacles and between rods
+    /// (≥ 0).
     pub friction: f64,
     /// Acceleration norms over the step.
     pub acc_trans: f64,

@@ -69,7 +69,7 @@ pub fn invariants(model: &Model, data: &[ElementData], state: &State) -> Invaria
         out.potential += link.energy(lambda, &state.r[link.node]);
     }
     for o in &model.obstacles {
-        out.potential += o.energy(&state.r);
+        out.potential += o.energy(&state.r, state.t);
     }
     for c in &model.rod_contacts {
         out.potential += c.energy(&state.r);

@@ -29,7 +29,8 @@ pub struct StepRecord {
     pub external_work: f64,
     /// The part of `external_work` done by driven supports (prescribed motion).
     pub support_work: f64,
-    /// The part of `dissipation` taken by friction against obstacles (≥ 0).
+    /// The part of `dissipation` taken by friction against obstacles and between rods
+    /// (≥ 0).
     pub friction: f64,
     /// Work of the external loads from row 0 to here (sum of `external_work` over every
     /// accepted step, thinned or not).

@@ -1857,7 +1857,48 @@ fn obstacle(
     if o.slip.is_some() && friction == 0.0 {
         return Err(cx.err(&path.key("slip"), "only with `friction` > 0"));
     }
+    let motion = match cx.opt_vec3(&path.key("displacement"), &o.displacement)? {
+        None => {
+            for (key, present) in [
+                ("time", o.time.is_some()),
+                ("factor", o.factor.is_some()),
+                ("ramp", o.ramp.is_some()),
+            ] {
+                if present {
+                    return Err(cx.err(
+                        &path.key(key),
+                        "only for a moving obstacle (give `displacement`)",
+                    ));
+                }
+            }
+            None
+        }
+        Some(displacement) => {
+            if o.time.is_none() && o.factor.is_none() {
+                return Err(cx.err(
+                    &path.key("time"),
+                    "required key missing: a moving obstacle needs its `time` and `factor` table",
+                ));
+            }
+            let ramp = match o.ramp.as_deref() {
+                None | Some("linear") => Ramp::Linear,
+                Some("smooth") => Ramp::Smooth,
+                Some(other) => {
+                    return Err(cx.err(
+                        &path.key("ramp"),
+                        format!("unknown ramp `{other}` (expected \"linear\" or \"smooth\")"),
+                    ))
+                }
+            };
+            Some(crate::obstacle::ObstacleMotion {
+                displacement,
+                table: time_table(cx, path, &o.time, &o.factor)?,
+                ramp,
+            })
+        }
+    };
     Ok(Obstacle {
+        motion,
         shape,
         stiffness,
         friction,
@@ -2063,6 +2104,14 @@ fn check_planar_obstacles(
                 ));
             }
             _ => {}
+        }
+        if let Some(m) = &o.motion {
+            if m.displacement[k].abs() > MERGE_TOL * m.displacement.norm().max(1.0) {
+                return Err(cx.err(
+                    &path.key("displacement"),
+                    why("the obstacle moves out of the plane"),
+                ));
+            }
         }
     }
     Ok(())

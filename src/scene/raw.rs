@@ -69,6 +69,10 @@ pub(crate) struct RawObstacle {
     pub slip: Option<f64>,
     pub rods: Option<Vec<String>>,
     pub contact_radius: Option<f64>,
+    pub displacement: Option<Vec<f64>>,
+    pub time: Option<Vec<f64>>,
+    pub factor: Option<Vec<f64>>,
+    pub ramp: Option<String>,
 }
 
 /// `[[probe]]`: a node whose state goes to `probes.csv` every step.

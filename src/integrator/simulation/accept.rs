@@ -54,8 +54,9 @@ impl Simulation {
         (next, diss, consistent)
     }
 
-    /// Work over the step at `q` of the loads (nodal, line, gravity) and of the driven
-    /// supports ([`Self::support_work`]).
+    /// Work over the step at `q` of the loads (nodal, line, gravity), of the driven
+    /// supports ([`Self::support_work`]) and of the moving obstacles
+    /// ([`Self::obstacle_work`]).
     pub(super) fn external_work(&self, q: &[f64], mode: Mode) -> f64 {
         let mut w = 0.0;
         for a in 0..self.dofs.nodes.len() {
@@ -64,7 +65,7 @@ impl Simulation {
             w += self.force[a].dot(&u);
             w += self.moment[a].dot(&th);
         }
-        w + self.follower_work(q) + self.support_work(q, mode)
+        w + self.follower_work(q) + self.support_work(q, mode) + self.obstacle_work(q)
     }
 
     /// Checks energy and the dissipation identity of a converged increment; on success

@@ -37,23 +37,46 @@ impl Simulation {
             .collect()
     }
 
-    /// The force of every obstacle on every one of its nodes over the step at `q`.
+    /// The force of every obstacle on every one of its nodes over the step at `q` (a
+    /// moving obstacle: the node's motion relative to it, `x − p(t)` at both ends).
     fn contact_forces(&self, q: &[f64], jacobian: bool) -> Vec<Vec<NodeContact>> {
         let dt = self.params.dt;
+        let t = self.state.t;
         self.model
             .obstacles
             .iter()
             .map(|o| {
+                let (p0, p1) = (o.offset(t), o.offset(t + dt));
                 o.nodes
                     .iter()
                     .map(|n| {
                         let (u, _) = self.node_increment(n.node, q);
                         let x0 = self.state.r[n.node];
-                        o.node_force(n, &x0, &(x0 + u), dt, jacobian)
+                        o.node_force(n, &(x0 - p0), &(x0 + u - p1), dt, jacobian)
                     })
                     .collect()
             })
             .collect()
+    }
+
+    /// Work the moving obstacles do over the step at `q`: `Σ F·Δp` over their nodes (the
+    /// penalty energy changes by `−F_n·(Δx − Δp)`, the friction takes `−f·(Δx − Δp)`, so
+    /// `ΔH = W − D` holds with this work in `W`). Zero for fixed obstacles.
+    pub(super) fn obstacle_work(&self, q: &[f64]) -> f64 {
+        if self.model.obstacles.iter().all(|o| o.motion.is_none()) {
+            return 0.0;
+        }
+        let (t, dt) = (self.state.t, self.params.dt);
+        self.model
+            .obstacles
+            .iter()
+            .zip(self.contact_forces(q, false))
+            .filter(|(o, _)| o.motion.is_some())
+            .map(|(o, fs)| {
+                let dp = o.offset(t + dt) - o.offset(t);
+                fs.iter().map(|f| f.force.dot(&dp)).sum::<f64>()
+            })
+            .sum()
     }
 
     /// Adds the contact rows (`−F`), row scales and, with `tangent`, the `(u, u)` blocks.

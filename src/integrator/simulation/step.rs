@@ -182,7 +182,7 @@ impl Simulation {
                 } else {
                     Mode::Frozen
                 };
-                let support_work = self.support_work(&q, mode);
+                let support_work = self.support_work(&q, mode) + self.obstacle_work(&q);
                 let friction = self.contact_friction_work(&q);
                 if multipliers.update(&self.model.links, &g1, &mut self.state.lambda) {
                     let (at, ar) = acceleration_norms(&self.model, &self.data, &self.state, &next);
