@@ -1715,6 +1715,10 @@ fn check_planar_drives(cx: &Ctx, p: Plane, raw: &RawScene, drives: &[SupportDriv
     Ok(())
 }
 
+/// The `cutback` of a scene with friction that does not set one (docs/scenes.md,
+/// "Friction").
+pub const FRICTION_CUTBACK: usize = 6;
+
 /// A unit vector from `v` (error naming the key when it is zero).
 fn unit(cx: &Ctx, path: &KeyPath, v: &[f64]) -> Result<Vec3> {
     let v = cx.vec3(path, v)?;
@@ -2209,7 +2213,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             "required table [integrator] missing (scheme, dt, t_end)",
         )
     })?;
-    let (params, output_every) = integrator(&cx, &ip, raw_int)?;
+    let (mut params, output_every) = integrator(&cx, &ip, raw_int)?;
 
     if raw.rod.is_empty() {
         return Err(cx.err(&root.key("rod"), "no rods: give at least one [[rod]]"));
@@ -2401,6 +2405,13 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             )
         })
         .collect::<Result<Vec<_>>>()?;
+    // Friction's stick–slip transitions are hard on Newton's method: a scene with friction
+    // cuts a failed step back (up to 64 sub-steps) unless it says otherwise.
+    let friction =
+        obstacles.iter().any(|o| o.friction > 0.0) || rod_contacts.iter().any(|c| c.friction > 0.0);
+    if friction && raw_int.cutback.is_none() {
+        params.cutback = FRICTION_CUTBACK;
+    }
     if !rod_contacts.is_empty() && matches!(params.scheme, Scheme::GenAlpha { .. }) {
         return Err(cx.err(
             &ip.key("scheme"),
