@@ -185,4 +185,68 @@ mod tests {
         let err = check_element_turn(&two_triads(3.0)).unwrap_err();
         assert!(err.contains("turned 3.000 rad"), "{err}");
     }
+
+    /// The cantilever (its tip kicked) with `scheme`, and an increment `q` that moves every
+    /// free node by `s · v_n Δt` (no Newton solution: the acceptance stage must judge it).
+    fn crafted(scheme: crate::integrator::Scheme, s: f64) -> (super::Simulation, Vec<f64>) {
+        let sc = crate::scene::load_scene("cantilever").unwrap();
+        let mut params = sc.params;
+        params.scheme = scheme;
+        let sim = super::Simulation::new(sc.model, params).unwrap();
+        let mut q = vec![0.0; sim.n_dofs()];
+        let dt = sim.params.dt;
+        for (a, nd) in sim.dofs.nodes.iter().enumerate() {
+            for c in 0..3 {
+                if nd.u[c] != crate::integrator::dofs::NONE {
+                    q[nd.u[c]] = s * sim.state.v[a][c] * dt;
+                }
+            }
+        }
+        (sim, q)
+    }
+
+    #[test]
+    fn a_step_whose_energy_grows_is_refused_with_its_growth() {
+        // Moving the kicked nodes 3 Δt v_n in one step gives them v = 5 v_n: K grows 25×.
+        let (sim, q) = crafted(crate::integrator::Scheme::Em, 3.0);
+        let h0 = sim.inv.total();
+        let err = sim.check(&q, super::Mode::Frozen).unwrap_err();
+        assert!(err.starts_with("energy grew by "), "{err}");
+        let growth: f64 = err["energy grew by ".len()..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(growth > 20.0 * h0, "growth {growth:e} of H0 {h0:e}");
+        // Newton's answer for the same step is accepted.
+        let (mut sim, _) = crafted(crate::integrator::Scheme::Em, 1.0);
+        assert!(sim.step().is_ok());
+    }
+
+    #[test]
+    fn a_step_that_misses_the_dissipation_identity_is_refused_naming_it() {
+        // EDMC-2 (α = 0.5): no displacement, and the translational corrections g = −½ v_n
+        // stop the kicked tip (v_n+1 = 2u/Δt − v_n − 2g = 0). H drops by all of K while
+        // the strain energy is unchanged — not the D the scheme predicts.
+        let (sim, mut q) = crafted(crate::integrator::Scheme::edmc2(0.5), 0.0);
+        for (a, nd) in sim.dofs.nodes.iter().enumerate() {
+            for c in 0..3 {
+                if nd.g[c] != crate::integrator::dofs::NONE {
+                    q[nd.g[c]] = -0.5 * sim.state.v[a][c];
+                }
+            }
+        }
+        let next = sim.advance(&q, super::Mode::Frozen).0;
+        let h1 = crate::observe::invariants(&sim.model, &sim.data, &next).total();
+        assert!(
+            h1 < 1e-3 * sim.inv.total(),
+            "the crafted step keeps H = {h1:e}"
+        );
+        let err = sim.check(&q, super::Mode::Frozen).unwrap_err();
+        assert!(
+            err.starts_with("dissipation identity missed: H_n − H_n+1 + W − D = "),
+            "{err}"
+        );
+    }
 }
