@@ -22,24 +22,33 @@ impl TimeTable {
 
     /// Evaluates the table at `t` (right-continuous at jumps).
     pub fn eval(&self, t: f64) -> f64 {
+        match self.segment(t) {
+            Err(held) => held,
+            Ok((t0, t1, f0, f1)) => f0 + (f1 - f0) * (t - t0) / (t1 - t0),
+        }
+    }
+
+    /// The entries `(t0, t1, f0, f1)` around `t`, or the value held there (before the
+    /// first entry, after the last, at a jump; 0 for an empty table).
+    fn segment(&self, t: f64) -> Result<(f64, f64, f64, f64), f64> {
         let n = self.times.len();
         if n == 0 {
-            return 0.0;
+            return Err(0.0);
         }
         if t < self.times[0] {
-            return self.values[0];
+            return Err(self.values[0]);
         }
         // Last index k with times[k] <= t.
         let k = self.times.partition_point(|&x| x <= t) - 1;
         if k + 1 >= n {
-            return self.values[n - 1];
+            return Err(self.values[n - 1]);
         }
         let (t0, t1) = (self.times[k], self.times[k + 1]);
         let (f0, f1) = (self.values[k], self.values[k + 1]);
         if t1 <= t0 {
-            return f1;
+            return Err(f1);
         }
-        f0 + (f1 - f0) * (t - t0) / (t1 - t0)
+        Ok((t0, t1, f0, f1))
     }
 }
 
@@ -59,23 +68,13 @@ impl TimeTable {
     pub fn eval_ramped(&self, ramp: Ramp, t: f64) -> f64 {
         match ramp {
             Ramp::Linear => self.eval(t),
-            Ramp::Smooth => {
-                let n = self.times.len();
-                if n == 0 || t < self.times[0] {
-                    return self.values.first().copied().unwrap_or(0.0);
+            Ramp::Smooth => match self.segment(t) {
+                Err(held) => held,
+                Ok((t0, t1, f0, f1)) => {
+                    let x = (t - t0) / (t1 - t0);
+                    f0 + (f1 - f0) * x * x * (3.0 - 2.0 * x)
                 }
-                let k = self.times.partition_point(|&x| x <= t) - 1;
-                if k + 1 >= n {
-                    return self.values[n - 1];
-                }
-                let (t0, t1) = (self.times[k], self.times[k + 1]);
-                let (f0, f1) = (self.values[k], self.values[k + 1]);
-                if t1 <= t0 {
-                    return f1;
-                }
-                let x = (t - t0) / (t1 - t0);
-                f0 + (f1 - f0) * x * x * (3.0 - 2.0 * x)
-            }
+            },
         }
     }
 }

@@ -438,20 +438,9 @@ fn colliding_rods_keep_l_j_and_em_energy_to_round_off() {
     }
 }
 
-#[test]
-fn rod_contact_tangent_matches_finite_differences() {
-    // Step the collision into contact, then compare the assembled tangent with central
-    // differences of the residual (pair list fixed at the state).
-    let s = parse_scene(&collision_text("em"), "collide.toml").unwrap();
-    let mut sim = Simulation::new(s.model, s.params).unwrap();
-    for _ in 0..40 {
-        sim.step().unwrap();
-    }
-    let c = sim.model().rod_contacts[0].clone();
-    assert!(
-        c.energy(&sim.state().r) > 0.0,
-        "not in contact after 40 steps"
-    );
+/// Largest difference between the assembled tangent at a fixed increment and central
+/// differences of the residual (step 1e-7), and the tangent's largest entry.
+fn tangent_vs_central_differences(sim: &mut Simulation) -> (f64, f64) {
     let n = sim.n_dofs();
     let q: Vec<f64> = (0..n).map(|i| 1e-4 * ((i as f64 * 0.37).sin())).collect();
     let k = sim.dense_tangent_at(&q, false);
@@ -468,6 +457,24 @@ fn rod_contact_tangent_matches_finite_differences() {
             worst = worst.max((k[i][j] - (rp[i] - rm[i]) / (2.0 * h)).abs());
         }
     }
+    (worst, kmax)
+}
+
+#[test]
+fn rod_contact_tangent_matches_finite_differences() {
+    // Step the collision into contact, then compare the assembled tangent with central
+    // differences of the residual (pair list fixed at the state).
+    let s = parse_scene(&collision_text("em"), "collide.toml").unwrap();
+    let mut sim = Simulation::new(s.model, s.params).unwrap();
+    for _ in 0..40 {
+        sim.step().unwrap();
+    }
+    let c = sim.model().rod_contacts[0].clone();
+    assert!(
+        c.energy(&sim.state().r) > 0.0,
+        "not in contact after 40 steps"
+    );
+    let (worst, kmax) = tangent_vs_central_differences(&mut sim);
     eprintln!(
         "rod contact tangent vs central differences: {:.1e}",
         worst / kmax
@@ -671,22 +678,7 @@ fn rod_friction_tangent_matches_finite_differences() {
         sim.step().unwrap();
     }
     assert!(sim.model().rod_contacts[0].energy(&sim.state().r) > 0.0);
-    let n = sim.n_dofs();
-    let q: Vec<f64> = (0..n).map(|i| 1e-4 * ((i as f64 * 0.37).sin())).collect();
-    let k = sim.dense_tangent_at(&q, false);
-    let kmax = k.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-    let mut worst: f64 = 0.0;
-    let h = 1e-7;
-    for j in 0..n {
-        let mut qp = q.clone();
-        qp[j] += h;
-        let rp = sim.residual_at(&qp, false);
-        qp[j] -= 2.0 * h;
-        let rm = sim.residual_at(&qp, false);
-        for i in 0..n {
-            worst = worst.max((k[i][j] - (rp[i] - rm[i]) / (2.0 * h)).abs());
-        }
-    }
+    let (worst, kmax) = tangent_vs_central_differences(&mut sim);
     eprintln!(
         "rod friction tangent vs central differences: {:.1e}",
         worst / kmax

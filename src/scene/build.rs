@@ -588,16 +588,7 @@ fn support_drive(
         ));
     }
     let table = time_table(cx, path, &c.time, &c.factor)?;
-    let ramp = match c.ramp.as_deref() {
-        None | Some("linear") => Ramp::Linear,
-        Some("smooth") => Ramp::Smooth,
-        Some(other) => {
-            return Err(cx.err(
-                &path.key("ramp"),
-                format!("unknown ramp `{other}` (expected \"linear\" or \"smooth\")"),
-            ))
-        }
-    };
+    let ramp = ramp(cx, path, &c.ramp)?;
     Ok(Some(SupportDrive {
         node,
         displacement: displacement.unwrap_or_else(Vec3::zeros),
@@ -605,6 +596,18 @@ fn support_drive(
         table,
         ramp,
     }))
+}
+
+/// The `ramp` key under `path` (default linear).
+fn ramp(cx: &Ctx, path: &KeyPath, r: &Option<String>) -> Result<Ramp> {
+    match r.as_deref() {
+        None | Some("linear") => Ok(Ramp::Linear),
+        Some("smooth") => Ok(Ramp::Smooth),
+        Some(other) => Err(cx.err(
+            &path.key("ramp"),
+            format!("unknown ramp `{other}` (expected \"linear\" or \"smooth\")"),
+        )),
+    }
 }
 
 /// A `time`/`factor` pair of keys under `path`: both or neither (constant factor 1).
@@ -1884,20 +1887,10 @@ fn obstacle(
                     "required key missing: a moving obstacle needs its `time` and `factor` table",
                 ));
             }
-            let ramp = match o.ramp.as_deref() {
-                None | Some("linear") => Ramp::Linear,
-                Some("smooth") => Ramp::Smooth,
-                Some(other) => {
-                    return Err(cx.err(
-                        &path.key("ramp"),
-                        format!("unknown ramp `{other}` (expected \"linear\" or \"smooth\")"),
-                    ))
-                }
-            };
             Some(crate::obstacle::ObstacleMotion {
                 displacement,
                 table: time_table(cx, path, &o.time, &o.factor)?,
-                ramp,
+                ramp: ramp(cx, path, &o.ramp)?,
             })
         }
     };
