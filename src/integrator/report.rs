@@ -66,6 +66,12 @@ pub struct SolveTimers {
     pub factorizations: u64,
     /// Solves done (more than factorizations under modified Newton).
     pub solves: u64,
+    /// Full-Newton iterations that assembled the residual without the tangent because the
+    /// residual history predicted acceptance …
+    pub tangents_skipped: u64,
+    /// … and of those, the ones whose residual was not accepted after all (the tangent
+    /// was then assembled at the same iterate).
+    pub tangent_skip_misses: u64,
 }
 
 impl SolveTimers {
@@ -77,6 +83,8 @@ impl SolveTimers {
         self.solve_s += o.solve_s;
         self.factorizations += o.factorizations;
         self.solves += o.solves;
+        self.tangents_skipped += o.tangents_skipped;
+        self.tangent_skip_misses += o.tangent_skip_misses;
     }
 }
 
