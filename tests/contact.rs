@@ -683,7 +683,7 @@ fn rod_friction_tangent_matches_finite_differences() {
         "rod friction tangent vs central differences: {:.1e}",
         worst / kmax
     );
-    assert!(worst <= 3e-8 * kmax, "tangent off by {:e}", worst / kmax);
+    assert!(worst <= 2e-9 * kmax, "tangent off by {:e}", worst / kmax);
 }
 
 /// A horizontal rod resting on a floor under gravity, the floor moving by `motion` (TOML

@@ -249,4 +249,118 @@ mod tests {
             "{err}"
         );
     }
+
+    /// Newton's increment for the first step of `scheme` on the kicked cantilever, the
+    /// crafted direction `δ = v_n Δt` (free nodes), and a simulation at the start.
+    fn near_solution(scheme: crate::integrator::Scheme) -> (super::Simulation, Vec<f64>, Vec<f64>) {
+        let (mut solved, _) = crafted(scheme, 1.0);
+        solved.step().unwrap();
+        let (sim, delta) = crafted(scheme, 1.0);
+        (sim, solved.prev.clone(), delta)
+    }
+
+    /// The ε for which `f(q + ε δ) = target` (secant; `f` is smooth and nearly linear in
+    /// ε this close to the solution).
+    fn solve_eps(f: impl Fn(f64) -> f64, target: f64) -> f64 {
+        let (mut a, mut b) = (0.0, 1e-6);
+        let (mut fa, mut fb) = (f(a) - target, f(b) - target);
+        for _ in 0..50 {
+            if fb == fa {
+                break;
+            }
+            let c = b - fb * (b - a) / (fb - fa);
+            (a, fa) = (b, fb);
+            (b, fb) = (c, f(c) - target);
+            if fb.abs() <= 1e-4 * target.abs() {
+                break;
+            }
+        }
+        b
+    }
+
+    fn shifted(q: &[f64], delta: &[f64], eps: f64) -> Vec<f64> {
+        q.iter().zip(delta).map(|(a, d)| a + eps * d).collect()
+    }
+
+    /// The relative number a refusal message reports in its parentheses.
+    fn reported_relative(err: &str) -> f64 {
+        let i = err.rfind('(').unwrap();
+        err[i + 1..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    }
+
+    /// README's promise at its own level: with the default `energy_tol` (1e-9 of H_ref) an
+    /// EM step whose energy grows by 2e-9 of H_ref beyond the external work is refused,
+    /// one that grows by 0.5e-9 is accepted.
+    #[test]
+    fn energy_growth_is_refused_just_above_energy_tol_and_accepted_just_below() {
+        let (sim, q0, delta) = near_solution(crate::integrator::Scheme::Em);
+        assert_eq!(sim.params.energy_tol, 1e-9, "documented default");
+        let rel_growth = |eps: f64| {
+            let q = shifted(&q0, &delta, eps);
+            let next = sim.advance(&q, super::Mode::Frozen).0;
+            let h1 = crate::observe::invariants(&sim.model, &sim.data, &next).total();
+            let h0 = sim.inv.total();
+            let w = sim.external_work(&q, super::Mode::Frozen);
+            (h1 - h0 - w) / h0.abs().max(h1.abs()).max(w.abs())
+        };
+        // Newton's own answer grows by round-off only.
+        assert!(rel_growth(0.0).abs() < 1e-13, "{:e}", rel_growth(0.0));
+        for (target, refused) in [(2e-9, true), (0.5e-9, false)] {
+            let eps = solve_eps(rel_growth, target);
+            let q = shifted(&q0, &delta, eps);
+            match sim.check(&q, super::Mode::Frozen) {
+                Err(e) => {
+                    assert!(refused, "growth {target:e} refused: {e}");
+                    assert!(e.starts_with("energy grew by "), "{e}");
+                    let r = reported_relative(&e);
+                    assert!(
+                        (r / target - 1.0).abs() < 1e-2,
+                        "reported {r:e} for {target:e}"
+                    );
+                }
+                Ok(_) => assert!(!refused, "growth {target:e} accepted"),
+            }
+        }
+    }
+
+    /// The dissipation identity at its own level: with the default `outer_tol` (1e-10 of
+    /// H_ref) an EDMC-2 step that misses `H_n − H_n+1 + W = D` by 2e-10 of H_ref is refused,
+    /// one that misses it by 0.5e-10 is accepted.
+    #[test]
+    fn identity_miss_is_refused_just_above_outer_tol_and_accepted_just_below() {
+        let scheme = crate::integrator::Scheme::edmc2(0.5);
+        let (sim, q0, delta) = near_solution(scheme);
+        assert_eq!(sim.params.outer_tol, 1e-10, "documented default");
+        let mode = super::Mode::Consistent;
+        let rel_miss = |eps: f64| {
+            let q = shifted(&q0, &delta, eps);
+            let (next, diss, _) = sim.advance(&q, mode);
+            let h1 = crate::observe::invariants(&sim.model, &sim.data, &next).total();
+            let h0 = sim.inv.total();
+            let w = sim.external_work(&q, mode);
+            (h0 - h1 + w - diss) / h0.abs().max(h1.abs()).max(w.abs())
+        };
+        assert!(rel_miss(0.0).abs() < 1e-10, "{:e}", rel_miss(0.0));
+        for (target, refused) in [(2e-10, true), (-2e-10, true), (0.5e-10, false)] {
+            let eps = solve_eps(rel_miss, target);
+            let q = shifted(&q0, &delta, eps);
+            match sim.check(&q, mode) {
+                Err(e) => {
+                    assert!(refused, "miss {target:e} refused: {e}");
+                    assert!(e.starts_with("dissipation identity missed: "), "{e}");
+                    let r = reported_relative(&e);
+                    assert!(
+                        (r / target.abs() - 1.0).abs() < 1e-2,
+                        "reported {r:e} for {target:e}"
+                    );
+                }
+                Ok(_) => assert!(!refused, "miss {target:e} accepted"),
+            }
+        }
+    }
 }
