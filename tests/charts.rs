@@ -17,6 +17,9 @@ const BLUE: &str = "#1F77B4";
 const ORANGE: &str = "#FF7F0E";
 const GREEN: &str = "#2CA02C";
 
+/// What a series charts of a record.
+type Value<'a> = &'a dyn Fn(&StepRecord) -> f64;
+
 /// 201 records over t ∈ [0, 10]: K = 2 + sin t, V = 5 − sin t, H = 7 (constant), L and J
 /// with distinct ranges per component.
 fn records() -> Vec<StepRecord> {
@@ -128,7 +131,7 @@ fn energy_chart_draws_each_series_where_its_data_are() {
     let lines = polylines(&svg);
     let (w, h) = (1000.0, 700.0);
 
-    let series: [(&str, &dyn Fn(&StepRecord) -> f64); 3] = [
+    let series: [(&str, Value); 3] = [
         (BLACK_ISH, &|r| r.total),
         (RED, &|r| r.kinetic),
         (BLUE, &|r| r.potential),
@@ -213,11 +216,7 @@ fn momenta_chart_has_two_panels_of_three_components() {
     let svg = std::fs::read_to_string(&path).unwrap();
     let lines = polylines(&svg);
     // Per colour: the L line (upper panel) and the J line (lower panel).
-    let comps: [(
-        &str,
-        &dyn Fn(&StepRecord) -> f64,
-        &dyn Fn(&StepRecord) -> f64,
-    ); 3] = [
+    let comps: [(&str, Value, Value); 3] = [
         (BLUE, &|r| r.l.x, &|r| r.j.x),
         (ORANGE, &|r| r.l.y, &|r| r.j.y),
         (GREEN, &|r| r.l.z, &|r| r.j.z),
