@@ -16,5 +16,5 @@ files=(${MUTANTS_FILES:-src/element/mod.rs src/element/strain.rs src/element/dis
 args=()
 for f in "${files[@]}"; do args+=(-f "$f"); done
 exec cargo mutants "${args[@]}" --shard "$shard/$n" --sharding round-robin \
-    --profile mutants --baseline skip --timeout 300 --build-timeout 600 -j 1 \
+    --profile mutants --baseline skip --timeout 300 --build-timeout 600 -j 1 -o "${MUTANTS_OUT:-.}" \
     -- --lib --test tangent --test conservation --test planar_kernel --test gpu_kernel

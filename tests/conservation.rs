@@ -1,18 +1,25 @@
 //! Conservation invariants of DESIGN §5 on the free-flying frame (staircase, 15
-//! elements): L and J to ≤ 1e-10 relative per step for EM, EDMC-1 and EDMC-2 under both
-//! dissipation strategies; H exact (≤ 1e-10 per step) for EM; for EDMC, H never grows and
-//! its drop equals the predicted dissipation D to ≤ 1e-9 relative.
+//! elements), asserted at ≤ 10× their measured level (issue 20): L and J to ≤ 5e-14
+//! relative per step for EM, EDMC-1 and EDMC-2 under both dissipation strategies (measured
+//! ≤ 8.0e-15); H exact for EM (≤ 4e-12 per step, measured 4.4e-13); for EDMC, H never grows
+//! and its drop equals the predicted dissipation D to ≤ 1e-9 of H0 with the staggered
+//! loop, which closes the identity to `outer_tol` = 1e-10 (measured 9.9e-11), and to
+//! ≤ 1e-11 with the monolithic Newton (measured 9.8e-13).
 mod common;
 
 use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
 use cosserat::model::Vec3;
 
-/// Per-step relative tolerance on L and J (DESIGN §5).
-const MOMENTUM_RTOL: f64 = 1e-10;
-/// Per-step relative tolerance on H for EM (DESIGN §5).
-const EM_ENERGY_RTOL: f64 = 1e-10;
-/// Relative tolerance of the identity H_n − H_{n+1} = D (DESIGN §5).
+/// Per-step relative change of L and J: round-off (measured ≤ 8.0e-15).
+const MOMENTUM_RTOL: f64 = 5e-14;
+/// Per-step relative change of H for EM: round-off (measured ≤ 4.4e-13).
+const EM_ENERGY_RTOL: f64 = 4e-12;
+/// Miss of the identity H_n − H_{n+1} = D relative to H0, staggered loop: closed to
+/// `outer_tol` = 1e-10 per step (measured ≤ 9.9e-11).
 const DISSIPATION_RTOL: f64 = 1e-9;
+/// The same with the monolithic Newton, which solves the identity with the step
+/// (measured ≤ 9.8e-13).
+const DISSIPATION_RTOL_MONOLITHIC: f64 = 1e-11;
 
 struct Level {
     h: f64,
@@ -65,6 +72,27 @@ fn spinning_frame() -> cosserat::model::Model {
 
 fn check_invariants(levels: &[Level], dissipative: bool, label: &str) {
     let h0 = levels[0].h;
+    // Largest measured values, printed for docs/testing.md (`--nocapture`).
+    let (mut ml, mut mj, mut mh) = (0.0f64, 0.0f64, 0.0f64);
+    for w in levels.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        ml = ml.max((b.l - a.l).norm() / a.l.norm());
+        mj = mj.max((b.j - a.j).norm() / a.j.norm());
+        mh = mh.max(if dissipative {
+            (a.h - b.h - b.d).abs() / h0
+        } else {
+            (b.h - a.h).abs() / a.h
+        });
+    }
+    eprintln!(
+        "{label}: max dL {ml:.1e}, dJ {mj:.1e}, {} {mh:.1e}",
+        if dissipative { "identity miss" } else { "dH" }
+    );
+    let identity_rtol = if label.to_lowercase().contains("monolithic") {
+        DISSIPATION_RTOL_MONOLITHIC
+    } else {
+        DISSIPATION_RTOL
+    };
     for (n, w) in levels.windows(2).enumerate() {
         let (a, b) = (&w[0], &w[1]);
         let dl = (b.l - a.l).norm() / a.l.norm();
@@ -75,7 +103,7 @@ fn check_invariants(levels: &[Level], dissipative: bool, label: &str) {
             assert!(b.h <= a.h, "{label} step {n}: energy grew {:e}", b.h - a.h);
             let miss = (a.h - b.h - b.d).abs() / h0;
             assert!(
-                miss <= DISSIPATION_RTOL,
+                miss <= identity_rtol,
                 "{label} step {n}: identity miss {miss:e}"
             );
         } else {
@@ -195,8 +223,14 @@ fn relative_equilibrium_dissipates_nothing() {
     let lv = run(m, s, Strategy::Monolithic, 0.05, 40);
     let h0 = lv[0].h;
     assert!(h0 > 0.0);
+    let (md, mh) = lv.iter().fold((0.0f64, 0.0f64), |(a, b), l| {
+        (a.max(l.d.abs() / h0), b.max((l.h - h0).abs() / h0))
+    });
+    eprintln!("relative equilibrium: max D {md:.1e}, max |H − H0| {mh:.1e} of H0");
+    // D vanishes by structure (measured 4.1e-46 of H0: round-off of zero); H is constant
+    // to round-off (measured 3.9e-15).
     for l in &lv {
-        assert!(l.d.abs() <= 1e-12 * h0, "dissipation {:e}", l.d);
-        assert!((l.h - h0).abs() <= 1e-12 * h0);
+        assert!(l.d.abs() <= 1e-40 * h0, "dissipation {:e}", l.d);
+        assert!((l.h - h0).abs() <= 4e-14 * h0);
     }
 }

@@ -60,27 +60,46 @@ fn max_growth_after(recs: &[StepRecord], t_load_end: f64) -> f64 {
 #[test]
 fn frame_conserves_momenta_and_energy_as_the_paper_says() {
     for alpha in [0.0, 0.5] {
-        let (out, recs, _) = simulate("frame", Scheme::edmc2(alpha), 0.2, 10.0, false);
+        let scheme = if alpha == 0.0 {
+            Scheme::Em
+        } else {
+            Scheme::edmc2(alpha)
+        };
+        let (out, recs, _) = simulate("frame", scheme, 0.2, 10.0, false);
         assert_eq!(out.status, RunStatus::Completed);
         assert_eq!(out.steps, 50);
         let (l0, j0) = (recs[0].l, recs[0].j);
+        let h0 = recs[0].total;
+        eprintln!(
+            "frame α={alpha}: max L drift {:.1e}, J drift {:.1e}, max |ΔH| per step {:.1e} of H0",
+            recs.iter()
+                .map(|r| (r.l - l0).norm() / l0.norm())
+                .fold(0.0, f64::max),
+            recs.iter()
+                .map(|r| (r.j - j0).norm() / j0.norm())
+                .fold(0.0, f64::max),
+            recs.windows(2)
+                .map(|w| (w[1].total - w[0].total).abs() / h0)
+                .fold(0.0, f64::max)
+        );
         for r in &recs {
+            // Round-off: measured ≤ 1.9e-15 (L), 3.0e-15 (J) over the 50 steps.
             assert!(
-                (r.l - l0).norm() <= 1e-10 * l0.norm(),
+                (r.l - l0).norm() <= 2e-14 * l0.norm(),
                 "α={alpha} L drift at t={}",
                 r.t
             );
             assert!(
-                (r.j - j0).norm() <= 1e-10 * j0.norm(),
+                (r.j - j0).norm() <= 2e-14 * j0.norm(),
                 "α={alpha} J drift at t={}",
                 r.t
             );
         }
-        let h0 = recs[0].total;
         for w in recs.windows(2) {
             if alpha == 0.0 {
+                // Round-off: measured ≤ 5.8e-13 per step.
                 assert!(
-                    (w[1].total - w[0].total).abs() <= 1e-10 * h0,
+                    (w[1].total - w[0].total).abs() <= 5e-12 * h0,
                     "EM: H not exact at t={}",
                     w[1].t
                 );
@@ -122,13 +141,25 @@ fn arch_edmc2_runs_to_2000_and_snaps_through() {
 /// on geometry its text does not give.
 #[test]
 fn arch_em_completes_with_exact_energy_as_observed() {
-    let (out, recs, _) = simulate("arch", Scheme::edmc2(0.0), 1.0, 2000.0, true);
+    let (out, recs, _) = simulate("arch", Scheme::Em, 1.0, 2000.0, true);
     assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
     let after: Vec<&StepRecord> = recs.iter().filter(|r| r.t >= 1001.0).collect();
     let h = after[0].total;
+    eprintln!(
+        "arch EM: max |H − H(1001)| {:.1e} of H, max per step {:.1e}",
+        after
+            .iter()
+            .map(|r| (r.total - h).abs() / h)
+            .fold(0.0, f64::max),
+        after
+            .windows(2)
+            .map(|w| (w[1].total - w[0].total).abs() / h)
+            .fold(0.0, f64::max)
+    );
+    // Round-off over 1000 steps: measured ≤ 2.1e-12.
     for r in &after {
         assert!(
-            (r.total - h).abs() <= 1e-10 * h,
+            (r.total - h).abs() <= 2e-11 * h,
             "EM energy moved at t={}",
             r.t
         );
@@ -237,6 +268,10 @@ fn mechanisms_as_observed() {
             assert!(link.strain(&sim.state().r[link.node]).abs() <= link.tol);
         }
         let growth = max_growth_after(&recs, 0.5);
+        eprintln!(
+            "{tag}: max growth after the load {growth:.1e}, max link g {:.1e}",
+            recs.iter().map(|r| r.max_link_g).fold(0.0, f64::max)
+        );
         assert!(
             growth <= 1e-9,
             "{tag}: energy grew by {growth:e} (relative) after the load"
@@ -244,6 +279,17 @@ fn mechanisms_as_observed() {
         if em {
             let after: Vec<&StepRecord> = recs.iter().filter(|r| r.t >= 0.5 - 1e-12).collect();
             let h = after[0].total;
+            eprintln!(
+                "{tag}: EM max |H − H(0.5)| {:.1e} of H, per step {:.1e}",
+                after
+                    .iter()
+                    .map(|r| (r.total - h).abs() / h)
+                    .fold(0.0, f64::max),
+                after
+                    .windows(2)
+                    .map(|w| (w[1].total - w[0].total).abs() / h)
+                    .fold(0.0, f64::max)
+            );
             for r in &after {
                 assert!(
                     (r.total - h).abs() <= 1e-8 * h,
@@ -316,6 +362,10 @@ fn square_mechanism_with_a_resolved_coupler_runs_as_the_paper_says() {
         );
         assert!(turn < 0.3, "{tag}: element turn {turn}");
         let growth = max_growth_after(&recs, 0.5);
+        eprintln!(
+            "{tag}: max growth after the load {growth:.1e}, max link g {:.1e}",
+            recs.iter().map(|r| r.max_link_g).fold(0.0, f64::max)
+        );
         assert!(
             growth <= 1e-9,
             "{tag}: energy grew by {growth:e} after the load"
@@ -343,8 +393,9 @@ fn planar_equals_full_3d_to_round_off() {
         );
         let size = s2.state().r.iter().fold(0.0f64, |m, x| m.max(x.norm()));
         for (a, b) in s2.state().r.iter().zip(&s3.state().r) {
+            // Measured ≤ 7.4e-14 relative (the arch through its snap-through).
             assert!(
-                (a - b).norm() <= 1e-9 * size,
+                (a - b).norm() <= 5e-13 * size,
                 "{scene}: positions differ by {}",
                 (a - b).norm()
             );
@@ -358,9 +409,17 @@ fn planar_equals_full_3d_to_round_off() {
             .fold(0.0f64, |m, (a, b)| m.max((a - b).norm()));
         eprintln!("{scene}: planar vs 3D max position difference {:.2e} (relative {:.2e}), unknowns {} vs {}", dx, dx / size, s2.n_dofs(), s3.n_dofs());
         let href = r2.iter().fold(0.0f64, |m, r| m.max(r.total.abs()));
+        eprintln!(
+            "{scene}: planar vs 3D max H difference {:.1e} of max H",
+            r2.iter()
+                .zip(&r3)
+                .map(|(a, b)| (a.total - b.total).abs() / href)
+                .fold(0.0, f64::max)
+        );
+        // Measured ≤ 6.9e-12 of max H (the arch).
         for (a, b) in r2.iter().zip(&r3) {
             assert!(
-                (a.total - b.total).abs() <= 1e-9 * href,
+                (a.total - b.total).abs() <= 5e-11 * href,
                 "{scene} t={}: H {} vs {}",
                 a.t,
                 a.total,
