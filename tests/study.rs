@@ -202,12 +202,12 @@ fn stability_grid_has_failed_and_completed_cells() {
     );
 }
 
-/// Largest per-step change of L or J that still counts as round-off (the EM/EDMC
-/// conservation tests use 1e-10; measured ≤ 4e-16 for every scheme below).
-const MOMENTUM_ROUNDOFF: f64 = 1e-12;
+/// Largest per-step change of L or J that still counts as round-off (measured ≤ 4.1e-16
+/// for every scheme below).
+const MOMENTUM_ROUNDOFF: f64 = 4e-15;
 
 /// Free-flying frame, Δt = 0.05, t = 10 (200 steps). Measured drifts:
-/// EM: H change −4e-12 relative, L/J per step ≤ 4e-16;
+/// EM: H change −4.4e-12 relative, L/J per step ≤ 4e-16;
 /// mid-point: L/J per step ≤ 4e-16, H +1.6e-3 relative (energy created);
 /// gen-α ρ∞=0.8: L per step 3e-16, J per step 5.1e-5 relative, H −5.7e-2 (numerical
 /// damping); gen-α ρ∞=1: J per step 6.0e-5, H +9e-4 (no damping, not conserving either).
@@ -220,7 +220,14 @@ fn frame_drifts_of_h_l_j_per_scheme() {
 
     let em = run(SchemeKind::Em, 0.0);
     assert_eq!(em.status, RunStatus::Completed);
-    assert!(rel_dh(&em).abs() < 1e-9, "EM H drift {}", rel_dh(&em));
+    eprintln!(
+        "frame Δt=0.05: EM dH {:.1e}, dL {:.1e}, dJ {:.1e}",
+        rel_dh(&em),
+        em.max_rel_dl,
+        em.max_rel_dj
+    );
+    // Measured: −4.4e-12 over the 200 steps.
+    assert!(rel_dh(&em).abs() < 3e-11, "EM H drift {}", rel_dh(&em));
     assert!(em.max_rel_dl < MOMENTUM_ROUNDOFF && em.max_rel_dj < MOMENTUM_ROUNDOFF);
 
     // Mid-point: momenta exact (the stress forces are B_{n+½}ᵀ S with S any symmetric
@@ -236,8 +243,9 @@ fn frame_drifts_of_h_l_j_per_scheme() {
     let ga = run(SchemeKind::GenAlpha, 0.8);
     assert_eq!(ga.status, RunStatus::Completed);
     assert!(ga.max_rel_dl < MOMENTUM_ROUNDOFF, "{}", ga.max_rel_dl);
+    // A drift, not round-off: measured 5.1e-5 (ρ∞ = 0.8) and 6.0e-5 (ρ∞ = 1) per step.
     assert!(
-        ga.max_rel_dj > 1e-6 && ga.max_rel_dj < 1e-3,
+        ga.max_rel_dj > 1e-5 && ga.max_rel_dj < 5e-4,
         "gen-α J drift {}",
         ga.max_rel_dj
     );
@@ -246,7 +254,7 @@ fn frame_drifts_of_h_l_j_per_scheme() {
     let ga1 = run(SchemeKind::GenAlpha, 1.0);
     assert_eq!(ga1.status, RunStatus::Completed);
     assert!(
-        ga1.max_rel_dj > 1e-6 && ga1.max_rel_dj < 1e-3,
+        ga1.max_rel_dj > 1e-5 && ga1.max_rel_dj < 5e-4,
         "{}",
         ga1.max_rel_dj
     );
@@ -280,6 +288,8 @@ fn damping_study_separates_what_each_parameter_damps() {
     };
     for mode in [ModeKind::Axial, ModeKind::Bending] {
         let em = zeta(mode, "em", 0.0);
+        // Measured 4.7e-16 (axial), 1.9e-13 (bending).
+        eprintln!("EM ζ of the {} mode: {em:.1e}", mode.name());
         assert!(
             em.abs() < 1e-12,
             "EM damps the {} mode: ζ = {em:e}",
