@@ -31,8 +31,10 @@ use cosserat::batch::{
 use cosserat::integrator::{NewtonVariant, Scheme};
 use cosserat::observe::record::RunStatus;
 
-/// The issue's bound for whole-run parity (the printed measurement is far below it).
-const STATE_RTOL: f64 = 1e-10;
+/// Whole-run parity, device solve against the CPU path (the issue asks 1e-10; measured
+/// ≤ 7.6e-12 over full and modified Newton, modified Newton stopping anywhere inside its
+/// tolerance).
+const STATE_RTOL: f64 = 6e-11;
 
 struct Rng(u64);
 impl Rng {
@@ -246,8 +248,14 @@ fn device_solve_frame_matches_cpu() {
         g.history.iter().map(|h| h.total),
     );
     println!("frame, device solve vs CPU: positions {pos:.2e}, velocities {vel:.2e}, energy {energy:.2e}");
-    for (what, x) in [("positions", pos), ("velocities", vel), ("energy", energy)] {
-        assert!(x <= STATE_RTOL, "frame: {what} differ by {x:.3e}");
+    // Full Newton on both sides, same iterations: round-off apart (measured 7.0e-16,
+    // 2.4e-13, 6.4e-15).
+    for (what, x, bound) in [
+        ("positions", pos, 7e-15),
+        ("velocities", vel, 2e-12),
+        ("energy", energy, 6e-14),
+    ] {
+        assert!(x <= bound, "frame: {what} differ by {x:.3e}");
     }
 }
 

@@ -2,7 +2,8 @@
 //!
 //! * A 64-member EDMC-2 batch of the free-flying frame (α_Γv and the initial-velocity
 //!   scale varied per member, α_Ων on for half of them) run on the GPU path gives every
-//!   member's energy history of the CPU path to `HISTORY_RTOL` (same steps, same status).
+//!   member's history (H, K, V, L, J) of the CPU path to `PARITY_RTOL` (same steps, same
+//!   status).
 //! * Modified Newton (tangent reuse) gives the full-Newton histories to `HISTORY_RTOL` on
 //!   the CPU path (no adapter needed) and on the GPU path.
 //! * On the GPU path, in free flight: L and J are constant step to step
@@ -19,11 +20,42 @@ use cosserat::integrator::{NewtonVariant, Scheme};
 use cosserat::observe::record::RunStatus;
 use cosserat::scene::load_scene;
 
-/// GPU and CPU histories: both Newton solves converge to 1e-11 of the force scale from
-/// round-off-different element blocks.
-const HISTORY_RTOL: f64 = 1e-9;
-const MOMENTUM_RTOL: f64 = 1e-10;
-const EM_ENERGY_RTOL: f64 = 1e-10;
+/// GPU and CPU histories (every column: H, K, V, L, J): both Newton solves converge from
+/// round-off-different element blocks, to the same iterates up to round-off (measured
+/// ≤ 2.5e-14, lavapipe).
+const PARITY_RTOL: f64 = 2e-13;
+/// Modified against full Newton: the same solution to the Newton tolerance (measured
+/// ≤ 8.2e-12).
+const HISTORY_RTOL: f64 = 5e-11;
+/// L and J per step on the GPU path: round-off (measured ≤ 9.0e-16).
+const MOMENTUM_RTOL: f64 = 8e-15;
+/// EM energy on the GPU path (measured ≤ 5.1e-13 of H0 over the run).
+const EM_ENERGY_RTOL: f64 = 4e-12;
+
+/// Largest difference between two histories over H, K, V (relative to max |H|) and L, J
+/// (relative to their norms).
+fn history_difference(
+    a: &[cosserat::observe::record::StepRecord],
+    b: &[cosserat::observe::record::StepRecord],
+) -> f64 {
+    let h = a.iter().map(|r| r.total.abs()).fold(1e-300, f64::max);
+    let l = a.iter().map(|r| r.l.norm()).fold(1e-300, f64::max);
+    let j = a.iter().map(|r| r.j.norm()).fold(1e-300, f64::max);
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| {
+            [
+                (x.total - y.total).abs() / h,
+                (x.kinetic - y.kinetic).abs() / h,
+                (x.potential - y.potential).abs() / h,
+                (x.l - y.l).norm() / l,
+                (x.j - y.j).norm() / j,
+            ]
+            .into_iter()
+            .fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
+}
 
 fn members(n: usize, scheme_of: impl Fn(usize) -> Scheme, t_end: f64) -> Vec<Member> {
     let scene = load_scene("frame").unwrap();
@@ -92,13 +124,10 @@ fn gpu_batch_energy_histories_match_cpu() {
             g.index, g.outcome.reason
         );
         assert_eq!(g.history.len(), c.history.len());
-        for (a, b) in c.history.iter().zip(&g.history) {
-            let rel = (a.total - b.total).abs() / a.total.abs().max(1e-300);
-            worst = worst.max(rel);
-        }
+        worst = worst.max(history_difference(&c.history, &g.history));
     }
-    println!("64 EDMC-2 members ({completed} completed): worst relative energy difference GPU vs CPU {worst:.2e}");
-    assert!(worst <= HISTORY_RTOL, "{worst:.3e}");
+    println!("64 EDMC-2 members ({completed} completed): worst relative history difference GPU vs CPU {worst:.2e}");
+    assert!(worst <= PARITY_RTOL, "{worst:.3e}");
 }
 
 #[test]
@@ -106,9 +135,19 @@ fn gpu_path_conserves_momenta_and_dissipates() {
     let Some(exec) = gpu() else { return };
     let em = members(4, |_| Scheme::Em, 2.0);
     let ed = members(4, edmc2, 2.0);
+    let (mut ml, mut mh) = (0.0f64, 0.0f64);
     for (ms, dissipative) in [(em, false), (ed, true)] {
         for r in run_all(&ms, &exec) {
             let o = &r.outcome;
+            ml = ml.max(o.max_rel_dl).max(o.max_rel_dj);
+            if !dissipative {
+                let h0 = r.history[0].total;
+                mh = r
+                    .history
+                    .iter()
+                    .map(|x| (x.total - h0).abs() / h0)
+                    .fold(mh, f64::max);
+            }
             assert_eq!(o.status, RunStatus::Completed, "{:?}", o.reason);
             assert!(
                 o.max_rel_dl <= MOMENTUM_RTOL,
@@ -137,6 +176,7 @@ fn gpu_path_conserves_momenta_and_dissipates() {
             }
         }
     }
+    println!("GPU path: max L/J change per step {ml:.1e}, EM energy drift {mh:.1e}");
 }
 
 #[test]
@@ -176,7 +216,8 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
         totals.push(s["energy_final"].as_f64().unwrap());
     }
     let rel = (totals[0] - totals[1]).abs() / totals[0].abs();
-    assert!(rel <= HISTORY_RTOL, "cpu {} gpu {}", totals[0], totals[1]);
+    println!("run --backend gpu vs cpu: final energy differs by {rel:.1e}");
+    assert!(rel <= PARITY_RTOL, "cpu {} gpu {}", totals[0], totals[1]);
 }
 
 #[test]
@@ -190,6 +231,7 @@ fn modified_newton_matches_full_newton() {
     if let Some(exec) = gpu() {
         paths.push(("gpu", run_opts(&ms, &exec, NewtonVariant::Modified)));
     }
+    let mut worst = 0.0f64;
     for (name, got) in paths {
         for (a, b) in full.iter().zip(&got) {
             assert_eq!(
@@ -197,10 +239,10 @@ fn modified_newton_matches_full_newton() {
                 "{name} member {}: {:?}",
                 a.index, b.outcome.reason
             );
-            for (x, y) in a.history.iter().zip(&b.history) {
-                let rel = (x.total - y.total).abs() / x.total.abs();
-                assert!(rel <= HISTORY_RTOL, "{name} member {}: {rel:.3e}", a.index);
-            }
+            let rel = history_difference(&a.history, &b.history);
+            worst = worst.max(rel);
+            assert!(rel <= HISTORY_RTOL, "{name} member {}: {rel:.3e}", a.index);
         }
     }
+    println!("modified vs full Newton: worst relative history difference {worst:.1e}");
 }
