@@ -4,8 +4,18 @@
 use cosserat::integrator::{Scheme, Simulation};
 use cosserat::scene::{builtin_scenes, parse_scene};
 
-/// Per-step tolerance of the balance, relative to max(|H|, |W|).
-const BALANCE_RTOL: f64 = 1e-9;
+/// Per-step tolerance of the balance, relative to max(|H|, |W|), at ≤ 10× the measured
+/// worst step.
+fn bound(scheme: &str) -> f64 {
+    match scheme {
+        "em" => BALANCE_RTOL_EM,
+        _ => BALANCE_RTOL_EDMC,
+    }
+}
+/// EM: exact up to round-off (measured 1.3e-13).
+const BALANCE_RTOL_EM: f64 = 1e-12;
+/// EDMC-2: the staggered loop closes the identity to `outer_tol` = 1e-10 (measured 9.7e-11).
+const BALANCE_RTOL_EDMC: f64 = 1e-9;
 
 fn loaded_cantilever(scheme: &str) -> cosserat::scene::Scene {
     let base = builtin_scenes()
@@ -42,7 +52,22 @@ factor = [0, 1, 0]
     // gravity must be a top-level key: move it before the first table.
     let text = text.replace("gravity = [0, 0, -9.81]\n\n", "");
     let text = format!("gravity = [0, 0, -9.81]\n{text}");
-    parse_scene(&text, "loaded_cantilever.toml").unwrap()
+    let scene = parse_scene(&text, "loaded_cantilever.toml").unwrap();
+    // Every edit by string replacement took effect (a changed built-in scene must not
+    // silently drop a case).
+    assert_eq!(scene.params.scheme.name(), scheme, "scheme edit");
+    assert_eq!(scene.params.t_end, 0.6, "t_end edit");
+    assert_eq!(
+        scene.model.point_mass.iter().filter(|&&m| m > 0.0).count(),
+        1,
+        "point mass"
+    );
+    assert_eq!(scene.model.loads.len(), 1, "load");
+    assert_eq!(
+        scene.model.gravity,
+        cosserat::model::Vec3::new(0.0, 0.0, -9.81)
+    );
+    scene
 }
 
 fn check(scheme: &str) {
@@ -51,12 +76,14 @@ fn check(scheme: &str) {
     let mut h0 = sim.invariants().total();
     let mut total_w = 0.0;
     let mut total_d = 0.0;
+    let mut worst = 0.0f64;
     for _ in 0..scene.params.n_steps() {
         let rep = sim.step().unwrap_or_else(|f| panic!("{scheme}: {f:?}"));
         let h1 = sim.invariants().total();
         let scale = h1.abs().max(h0.abs()).max(rep.external_work.abs());
         let miss = (h1 - h0 - rep.external_work + rep.dissipation).abs() / scale;
-        assert!(miss <= BALANCE_RTOL, "{scheme}: balance miss {miss:e}");
+        worst = worst.max(miss);
+        assert!(miss <= bound(scheme), "{scheme}: balance miss {miss:e}");
         assert!(
             rep.dissipation >= -1e-15 * scale,
             "{scheme}: negative D {}",
@@ -66,6 +93,7 @@ fn check(scheme: &str) {
         total_d += rep.dissipation;
         h0 = h1;
     }
+    eprintln!("{scheme}: worst balance miss per step {worst:.1e}");
     assert!(total_w.abs() > 1e-4, "the loads must do work ({total_w:e})");
     if matches!(scene.params.scheme, Scheme::Edmc2 { .. }) {
         assert!(total_d > 0.0, "EDMC-2 must dissipate under a load ramp");

@@ -286,16 +286,29 @@ fn planar_free_flight_conserves_momenta_and_energy() {
             assert!(s.planar_kernel());
             let mut prev = s.invariants();
             let (l0, j0, h0) = (prev.l.norm(), prev.j.norm(), prev.total());
+            let mut worst = [0.0f64; 4];
             for n in 0..20 {
                 let rep = s.step().unwrap();
                 let inv = s.invariants();
                 let label = format!("{name} {strategy:?} step {n}");
-                assert!((inv.l - prev.l).norm() <= 1e-10 * l0, "{label}: dL");
-                assert!((inv.j - prev.j).norm() <= 1e-10 * j0, "{label}: dJ");
-                assert!(inv.l.z.abs() <= 1e-14 * l0 && inv.j.x.abs() + inv.j.y.abs() <= 1e-14 * j0);
+                worst[0] = worst[0].max((inv.l - prev.l).norm() / l0);
+                worst[1] = worst[1].max((inv.j - prev.j).norm() / j0);
+                worst[2] =
+                    worst[2].max((inv.l.z.abs() / l0).max((inv.j.x.abs() + inv.j.y.abs()) / j0));
+                worst[3] = worst[3].max(match scheme {
+                    Scheme::Em => (inv.total() - prev.total()).abs() / h0,
+                    Scheme::Midpoint => 0.0,
+                    _ => (prev.total() - inv.total() - rep.dissipation).abs() / h0,
+                });
+                // Round-off, at ≤ 10× the measured maxima (dL 7.8e-16, dJ 1.9e-14, out of
+                // plane 6.2e-18, EM dH 4.4e-13, identity 8.7e-11 staggered — its
+                // `outer_tol` is 1e-10 — and 7.3e-13 monolithic).
+                assert!((inv.l - prev.l).norm() <= 1.5e-13 * l0, "{label}: dL");
+                assert!((inv.j - prev.j).norm() <= 1.5e-13 * j0, "{label}: dJ");
+                assert!(inv.l.z.abs() <= 5e-17 * l0 && inv.j.x.abs() + inv.j.y.abs() <= 5e-17 * j0);
                 match scheme {
                     Scheme::Em => assert!(
-                        (inv.total() - prev.total()).abs() <= 1e-10 * h0,
+                        (inv.total() - prev.total()).abs() <= 4e-12 * h0,
                         "{label}: dH {:e}",
                         (inv.total() - prev.total()) / h0
                     ),
@@ -303,11 +316,20 @@ fn planar_free_flight_conserves_momenta_and_energy() {
                     _ => {
                         assert!(inv.total() <= prev.total(), "{label}: energy grew");
                         let miss = (prev.total() - inv.total() - rep.dissipation).abs() / h0;
-                        assert!(miss <= 1e-9, "{label}: identity missed by {miss:e}");
+                        let bound = if strategy == Strategy::Monolithic {
+                            7e-12
+                        } else {
+                            8e-10
+                        };
+                        assert!(miss <= bound, "{label}: identity missed by {miss:e}");
                     }
                 }
                 prev = inv;
             }
+            eprintln!(
+                "{name} {strategy:?}: dL {:.1e}, dJ {:.1e}, out of plane {:.1e}, dH or identity {:.1e}",
+                worst[0], worst[1], worst[2], worst[3]
+            );
             if scheme.is_dissipative() {
                 assert!(
                     prev.total() < h0 * (1.0 - 1e-6),
@@ -382,15 +404,16 @@ fn paper_arch_and_mechanism_planar_equal_3d() {
                 dh / href
             );
             assert_eq!(rp.len(), ro.len());
+            // Measured ≤ 1.5e-12 (the arch's snap-through, EDMC-2).
             assert!(
-                dx <= 1e-10 * size,
+                dx <= 1e-11 * size,
                 "{scene} vs {other}: positions {:e}",
                 dx / size
             );
             // Energies of the stiff arch (E A = 2e8) amplify position differences
-            // (δV ≈ N·δx): measured ≤ 1.3e-10 of H through the snap-through.
+            // (δV ≈ N·δx): measured ≤ 8.8e-11 of H through the snap-through.
             assert!(
-                dh <= 1e-9 * href,
+                dh <= 8e-10 * href,
                 "{scene} vs {other}: energy {:e}",
                 dh / href
             );
