@@ -234,3 +234,30 @@ fn study_commands_write_csv_and_png() {
     assert_eq!(st.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&st.stderr).contains("unknown scheme"));
 }
+
+/// README's first command: `cosserat` with no arguments is
+/// `run frame --scheme edmc2 --alpha 0.5 --out out/frame --snapshots 10` in the current
+/// folder — the frame's 50 steps of Δt = 0.2, completed, with the charts and snapshots.
+#[test]
+fn bare_command_runs_the_default_frame_into_out_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = cosserat().current_dir(dir.path()).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = dir.path().join("out").join("frame");
+    let s = summary(&out);
+    assert_eq!(s["status"], "completed");
+    assert_eq!(s["steps"], 50);
+    assert_eq!(s["scene"], "builtin:frame");
+    assert_eq!(s["params"]["scheme"]["name"], "edmc2");
+    assert_eq!(s["params"]["scheme"]["alpha_gv"], 0.5);
+    assert_eq!(s["params"]["dt"], 0.2);
+    for f in ["history.csv", "energy.png", "momenta.png", "snapshots.png"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    // Nothing else is written beside the output folder.
+    let top: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(top, ["out"]);
+}

@@ -797,8 +797,9 @@ fn a_moving_floor_does_the_work_the_energy_balance_counts() {
         x.x - 0.5
     );
     assert!(friction > 0.0 && recs.iter().all(|r| r.friction >= 0.0));
+    // Measured 5.6e-11.
     assert!(
-        miss <= 1e-9,
+        miss <= 5e-10,
         "balance with a dragging floor missed by {miss:e}"
     );
 }
