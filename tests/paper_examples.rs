@@ -124,11 +124,13 @@ fn arch_edmc2_runs_to_2000_and_snaps_through() {
     assert!(max_growth_after(&recs, 1000.0) <= 1e-9);
     let at = |t: f64| recs.iter().find(|r| (r.t - t).abs() < 1e-9).unwrap().total;
     let (h_unload, h_end) = (at(1001.0), at(2000.0));
-    assert!(h_end <= h_unload && (h_unload - h_end) < 1e-5 * h_unload);
+    assert!(h_end <= h_unload && (h_unload - h_end) < 8e-7 * h_unload);
     // The apex (node 15, rise 3.15) went through the chord: the arch snapped.
     let (_, _, sim_1100) = simulate("arch", Scheme::edmc2(1.0), 1.0, 1087.0, true);
+    eprintln!("arch apex at t = 1087: {}", sim_1100.state().r[15].z);
+    // Measured −3.11 (the apex far through, as docs/benchmarks.md says: below −3).
     assert!(
-        sim_1100.state().r[15].z < -1.0,
+        sim_1100.state().r[15].z < -3.0,
         "apex at {}",
         sim_1100.state().r[15].z
     );
