@@ -431,7 +431,7 @@ fn colliding_rods_keep_l_j_and_em_energy_to_round_off() {
         assert!(dl <= 6e-14, "{scheme}: L changed by {dl:e}");
         assert!(dj <= 9e-12, "{scheme}: J changed by {dj:e}");
         if scheme == "em" {
-            assert!(dh <= 6e-12, "EM: H changed by {dh:e} in a step");
+            assert!(dh <= 5.5e-12, "EM: H changed by {dh:e} in a step");
         } else {
             assert!(balance(&recs) <= 1e-9, "EDMC identity missed");
         }
@@ -480,7 +480,7 @@ fn rod_contact_tangent_matches_finite_differences() {
         worst / kmax
     );
     // Measured 2.8e-10 (the central differences' truncation).
-    assert!(worst <= 3e-9 * kmax, "tangent off by {:e}", worst / kmax);
+    assert!(worst <= 2.5e-9 * kmax, "tangent off by {:e}", worst / kmax);
 }
 
 #[test]
@@ -658,9 +658,9 @@ fn friction_between_rods_keeps_l_and_j_and_only_dissipates() {
     assert!(recs.iter().all(|r| r.friction >= 0.0));
     assert!(friction > 1e-3 * href, "no friction work");
     assert!(vx1 > vx0 + 0.1, "rod a was not dragged along");
-    assert!(dl <= 1.5e-14, "L changed by {dl:e}");
+    assert!(dl <= 1.3e-14, "L changed by {dl:e}");
     assert!(dj <= 6e-12, "J changed by {dj:e}");
-    assert!(growth <= 1e-13 * href, "H − W grew by {:e}", growth / href);
+    assert!(growth <= 9e-14 * href, "H − W grew by {:e}", growth / href);
     assert!(miss <= 5e-13, "balance missed by {miss:e}");
 }
 
