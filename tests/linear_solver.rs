@@ -7,7 +7,7 @@ use cosserat::scene::load_scene;
 
 /// Both Newton variants converge to 1e-11 of the force scale; the levels they reach
 /// differ by round-off amplified over the run.
-const HISTORY_RTOL: f64 = 1e-9;
+const HISTORY_RTOL: f64 = 1e-11;
 
 fn sim(name: &str, scheme: Scheme, steps: usize) -> Simulation {
     sim_with(name, scheme, steps, NewtonVariant::Full)
@@ -44,15 +44,19 @@ fn modified_newton_reuses_the_factorization_and_follows_full_newton() {
     for (name, steps) in [("frame", 40), ("cantilever", 30)] {
         let mut full = sim(name, Scheme::edmc2(0.5), steps);
         let mut modified = sim_with(name, Scheme::edmc2(0.5), steps, NewtonVariant::Modified);
+        let mut worst = 0.0f64;
         for step in 0..steps {
             full.step().unwrap();
             modified.step().unwrap();
             let (a, b) = (full.invariants().total(), modified.invariants().total());
+            worst = worst.max((a - b).abs() / a.abs());
             assert!(
                 (a - b).abs() <= HISTORY_RTOL * a.abs(),
                 "{name} step {step}: H {a} vs {b}"
             );
         }
+        // Measured 1.3e-12 (frame), 4.0e-14 (cantilever); bound HISTORY_RTOL = 1e-11.
+        eprintln!("{name}: modified vs full Newton energy history {worst:.1e}");
         let (tf, tm) = (full.solve_timers(), modified.solve_timers());
         assert_eq!(tf.factorizations, tf.solves, "{name}: full Newton");
         assert!(

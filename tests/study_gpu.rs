@@ -31,6 +31,16 @@ fn stability_grid_on_the_gpu_matches_the_cpu() {
     let gpu = stability_on(&scene, &cfg, &exec).unwrap();
     let cpu = stability(&scene, &cfg).unwrap();
     assert_eq!(gpu.cells.len(), cpu.cells.len());
+    let worst = gpu
+        .cells
+        .iter()
+        .zip(&cpu.cells)
+        .map(|(g, c)| {
+            (g.max_energy_growth - c.max_energy_growth).abs() / c.max_energy_growth.abs().max(1.0)
+        })
+        .fold(0.0f64, f64::max);
+    // Measured 2.7e-15 (bound 2e-14 below).
+    println!("stability grid GPU vs CPU: max energy growth differs by {worst:.1e}");
     for (g, c) in gpu.cells.iter().zip(&cpu.cells) {
         let tag = format!("{} {} Δt={}", g.kind.name(), g.param, g.dt);
         assert_eq!((g.kind, g.param, g.dt), (c.kind, c.param, c.dt));
@@ -38,7 +48,7 @@ fn stability_grid_on_the_gpu_matches_the_cpu() {
         assert!((g.t_reached - c.t_reached).abs() < 1e-12, "{tag}");
         assert!(
             (g.max_energy_growth - c.max_energy_growth).abs()
-                <= 1e-9 * c.max_energy_growth.abs().max(1.0),
+                <= 2e-14 * c.max_energy_growth.abs().max(1.0),
             "{tag}: growth {} vs {}",
             g.max_energy_growth,
             c.max_energy_growth

@@ -559,12 +559,16 @@ fn a_shard_runs_on_the_backend_it_is_given() {
     // GPU members agree with the CPU ones (to round-off, not bit for bit).
     let want = sorted(rows(&reference.join("members.csv")));
     let got = rows(&out.join("members.csv"));
+    let mut worst = 0.0f64;
     for (a, b) in want.iter().zip(&got) {
         let (fa, fb): (Vec<&str>, Vec<&str>) = (a.split(',').collect(), b.split(',').collect());
         assert_eq!(fa[..3], fb[..3], "member, status, t_reached");
         if fa[1] == "completed" {
             let (x, y): (f64, f64) = (fa[3].parse().unwrap(), fb[3].parse().unwrap());
-            assert!((x - y).abs() <= 1e-9 * x.abs(), "final_total {x} vs {y}");
+            worst = worst.max((x - y).abs() / x.abs());
+            // Measured ≤ 1.1e-14.
+            assert!((x - y).abs() <= 1e-13 * x.abs(), "final_total {x} vs {y}");
         }
     }
+    println!("GPU shard vs CPU: final energy {worst:.1e}");
 }
