@@ -218,3 +218,28 @@ fn stability_study_maps_the_pure_staggered_strategy_with_no_fallback() {
         );
     }
 }
+
+/// The staggered loop's cap is a failure path of its own: with `max_outer = 2` and no
+/// fallback, the frame's first EDMC-2 step (5–6 outer rounds at the start) fails naming
+/// the cap and the last round's reason; with the fallback on, the monolithic Newton
+/// solves that step instead.
+#[test]
+fn staggered_cap_is_reported_naming_the_cap() {
+    let scene = load_scene("frame").unwrap();
+    let mut p = scene.params;
+    p.scheme = Scheme::edmc2(0.5);
+    p.max_outer = 2;
+    p.fallback = false;
+    let mut sim = Simulation::new(scene.model.clone(), p).unwrap();
+    let err = sim.step().unwrap_err();
+    assert!(
+        err.reason
+            .starts_with("staggered loop hit its cap of 2 outer rounds: "),
+        "{}",
+        err.reason
+    );
+    p.fallback = true;
+    let mut sim = Simulation::new(scene.model, p).unwrap();
+    let rep = sim.step().unwrap();
+    assert!(rep.fallback, "the monolithic fallback solved the step");
+}

@@ -163,3 +163,44 @@ fn cli_sweep_exit_codes_and_auto_backend() {
         assert!(e.contains(want), "{backend}: {e}");
     }
 }
+
+/// A member that fails at run time is a result: the sweep goes on, the member's row says
+/// `failed` with the time reached and the reason (Newton's, here: EM on the frame at
+/// Δt = 0.5 fails in its fifth step, from t = 2 to 2.5; tests/cutback.rs), its history
+/// ends at the last accepted step, and the members before and after it complete.
+#[test]
+fn a_member_failing_at_run_time_is_recorded_with_its_reason_and_the_sweep_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "base = \"frame\"\nmode = \"list\"\n\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [0.2, 0.5, 0.1]\n\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [0.0, 0.0, 0.0]\n\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [4.0, 4.0, 4.0]\n";
+    let p = write(dir.path(), "f.toml", text);
+    let spec = load_sweep(&p).unwrap();
+    let out = dir.path().join("out");
+    let opts = SweepOptions {
+        histories: true,
+        ..Default::default()
+    };
+    let s = run_sweep(&spec, &Executor::Cpu, &out, &opts, |_| {}).unwrap();
+    assert_eq!((s.completed, s.failed), (2, 1));
+    let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
+    let mut lines = csv.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(rows.len(), 3);
+    let by_member = |m: &str| rows.iter().find(|r| r[0] == m).unwrap();
+    for m in ["0", "2"] {
+        assert_eq!(by_member(m)[col("status")], "completed", "member {m}");
+    }
+    let failed = by_member("1");
+    assert_eq!(failed[col("status")], "failed");
+    let t: f64 = failed[col("t_reached")].parse().unwrap();
+    assert!((t - 2.0).abs() < 1e-12, "t_reached {t}");
+    let reason = &failed[col("reason")];
+    assert!(reason.contains("Newton did not converge"), "{reason}");
+    // The failed member's history ends at its last accepted step.
+    let hist = std::fs::read_to_string(out.join("member_1/history.csv")).unwrap();
+    let last = hist.lines().last().unwrap();
+    assert!(last.starts_with("4,2,"), "{last}");
+}
