@@ -169,6 +169,18 @@ fn bad_damping_is_named() {
         err.contains("material.m.damping: gen-alpha does not support material damping"),
         "{err}"
     );
+    // Through the library (no scene validation), the step refuses it with the reason.
+    let s = parse_scene(&cantilever(4, 0.1, 0.01, 1.0, 1e-3), "ok.toml").unwrap();
+    let mut p = s.params;
+    p.scheme = cosserat::integrator::Scheme::GenAlpha { rho_inf: 0.8 };
+    let reason = match Simulation::new(s.model, p) {
+        Err(e) => e.to_string(),
+        Ok(mut sim) => sim.step().unwrap_err().reason,
+    };
+    assert!(
+        reason.contains("gen-alpha does not support material damping or drag"),
+        "{reason}"
+    );
 }
 
 #[test]

@@ -201,3 +201,41 @@ fn expect_accept(history: &[f64], tol: f64) -> bool {
     let (r2, r1) = (history[h - 2], history[h - 1]);
     r1 < r2 && quadratic(r2, r1) <= tol
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{at_floor, expect_accept};
+
+    const TOL: f64 = 1e-11;
+
+    /// The cantilever's history (measured): 1.5 → 0.11 → 1e-8 → 3e-11 is on the floor,
+    /// and the iterate after 1e-8 is predicted to be accepted (its tangent is skipped).
+    #[test]
+    fn the_cantilever_floor_is_recognized_one_correction_early() {
+        assert!(expect_accept(&[1.5, 0.11, 1e-8], TOL));
+        assert!(at_floor(&[1.5, 0.11, 1e-8], 3e-11, TOL, true));
+        // Modified Newton contracts linearly: the quadratic sign does not apply.
+        assert!(!at_floor(&[1.5, 0.11, 1e-8], 3e-11, TOL, false));
+        // Not after a single correction, and not from a predictor alone.
+        assert!(!at_floor(&[1.5], 3e-11, TOL, true));
+        assert!(!expect_accept(&[1.5], TOL));
+        assert!(!expect_accept(&[1.5, 0.11], TOL));
+    }
+
+    /// The quadratic sign accepts only within 10·tol, and only far above the prediction:
+    /// a slowly converging sequence is not mistaken for the floor.
+    #[test]
+    fn the_floor_is_bounded_near_tol_and_far_above_the_prediction() {
+        // Within 10·tol, far above the prediction 1e-6·(1e-5)² = 1e-16: floor.
+        assert!(at_floor(&[1e-1, 1e-6], 9e-11, TOL, true));
+        // Above 10·tol: not the floor, however far above the prediction.
+        assert!(!at_floor(&[1e-1, 1e-6], 2e-10, TOL, true));
+        // Within 10·tol but less than 1000× the prediction 1e-5·(1e-3)² = 1e-11: a slowly
+        // converging sequence, not the floor.
+        assert!(!at_floor(&[1e-2, 1e-5], 5e-11, TOL, true));
+        // The stall sign: a residual that no longer halves within 1e5·tol.
+        assert!(at_floor(&[1e-3, 4e-7], 3e-7, TOL, false));
+        assert!(!at_floor(&[1e-3, 4e-7], 1e-7, TOL, false));
+        assert!(!at_floor(&[1e-3, 4e-6], 3e-6, TOL, false));
+    }
+}
