@@ -7,6 +7,8 @@
 //! plot area). The PNG drawn from the same records must then carry each series' colour
 //! at the pixels the SVG puts its samples at.
 
+mod common;
+
 use cosserat::model::Vec3;
 use cosserat::observe::record::StepRecord;
 use cosserat::output::{plot_energy, plot_momenta};
@@ -303,19 +305,6 @@ impl Image {
 }
 
 fn decode(path: &std::path::Path) -> Image {
-    let file = std::fs::File::open(path).unwrap();
-    let decoder = png::Decoder::new(std::io::BufReader::new(file));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    let ch = info.color_type.samples();
-    let rgb = buf[..info.buffer_size()]
-        .chunks(ch)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect();
-    Image {
-        w: info.width as usize,
-        h: info.height as usize,
-        rgb,
-    }
+    let (w, h, rgb) = common::image_rgb(path);
+    Image { w, h, rgb }
 }

@@ -48,6 +48,21 @@ fn simulate_with(
     (out, recs, sim)
 }
 
+/// Largest change of H from the first record, and largest change per step, both relative
+/// to the first record's H (printed beside the EM energy assertions).
+fn energy_drift(recs: &[&StepRecord]) -> (f64, f64) {
+    let h = recs[0].total;
+    let drift = recs
+        .iter()
+        .map(|r| (r.total - h).abs() / h)
+        .fold(0.0, f64::max);
+    let per_step = recs
+        .windows(2)
+        .map(|w| (w[1].total - w[0].total).abs() / h)
+        .fold(0.0, f64::max);
+    (drift, per_step)
+}
+
 /// Largest per-step increase of H relative to max |H|, over steps after `t_load_end`.
 fn max_growth_after(recs: &[StepRecord], t_load_end: f64) -> f64 {
     let href = recs.iter().fold(0.0f64, |m, r| m.max(r.total.abs()));
@@ -147,17 +162,8 @@ fn arch_em_completes_with_exact_energy_as_observed() {
     assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
     let after: Vec<&StepRecord> = recs.iter().filter(|r| r.t >= 1001.0).collect();
     let h = after[0].total;
-    eprintln!(
-        "arch EM: max |H − H(1001)| {:.1e} of H, max per step {:.1e}",
-        after
-            .iter()
-            .map(|r| (r.total - h).abs() / h)
-            .fold(0.0, f64::max),
-        after
-            .windows(2)
-            .map(|w| (w[1].total - w[0].total).abs() / h)
-            .fold(0.0, f64::max)
-    );
+    let (drift, per_step) = energy_drift(&after);
+    eprintln!("arch EM: max |H − H(1001)| {drift:.1e} of H, max per step {per_step:.1e}");
     // Round-off over 1000 steps: measured ≤ 2.1e-12.
     for r in &after {
         assert!(
@@ -281,17 +287,8 @@ fn mechanisms_as_observed() {
         if em {
             let after: Vec<&StepRecord> = recs.iter().filter(|r| r.t >= 0.5 - 1e-12).collect();
             let h = after[0].total;
-            eprintln!(
-                "{tag}: EM max |H − H(0.5)| {:.1e} of H, per step {:.1e}",
-                after
-                    .iter()
-                    .map(|r| (r.total - h).abs() / h)
-                    .fold(0.0, f64::max),
-                after
-                    .windows(2)
-                    .map(|w| (w[1].total - w[0].total).abs() / h)
-                    .fold(0.0, f64::max)
-            );
+            let (drift, per_step) = energy_drift(&after);
+            eprintln!("{tag}: EM max |H − H(0.5)| {drift:.1e} of H, per step {per_step:.1e}");
             for r in &after {
                 assert!(
                     (r.total - h).abs() <= 1e-8 * h,

@@ -11,6 +11,8 @@
 //! * the damping study (the dissipation guide): EM does not damp; χ_Γ damps the axial and
 //!   χ_Ω the bending mode, each leaving the other nearly untouched; EDMC-1's ζ is linear in
 //!   χ, EDMC-2's quadratic in α (at this amplitude); the chart has both panels drawn.
+mod common;
+
 use cosserat::observe::record::RunStatus;
 use cosserat::scene::{load_scene, parse_scene, Scene};
 use cosserat::study::{
@@ -326,7 +328,7 @@ fn damping_study_separates_what_each_parameter_damps() {
     let png = dir.path().join("damping.png");
     plot_damping(&png, &d).unwrap();
     // Both panels carry drawn lines: count non-white, non-grey (coloured) pixels per half.
-    let img = image_rgb(&png);
+    let img = common::image_rgb(&png);
     let (w, h) = (img.0, img.1);
     for half in 0..2 {
         let coloured = (0..h)
@@ -339,21 +341,6 @@ fn damping_study_separates_what_each_parameter_damps() {
             .count();
         assert!(coloured > 500, "panel {half}: {coloured} coloured pixels");
     }
-}
-
-/// Decodes a PNG into (width, height, RGB bytes).
-fn image_rgb(path: &std::path::Path) -> (usize, usize, Vec<u8>) {
-    let file = std::fs::File::open(path).unwrap();
-    let decoder = png::Decoder::new(std::io::BufReader::new(file));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    let ch = info.color_type.samples();
-    let rgb: Vec<u8> = buf[..info.buffer_size()]
-        .chunks(ch)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect();
-    (info.width as usize, info.height as usize, rgb)
 }
 
 /// `study damping` refuses a scene that is not one clamped straight rod, by name, with

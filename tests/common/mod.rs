@@ -125,3 +125,18 @@ pub fn gpu() -> Option<cosserat::batch::Executor> {
         Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no usable adapter: {e}"),
     }
 }
+
+/// Decodes a PNG into (width, height, RGB bytes) (chart tests).
+pub fn image_rgb(path: &std::path::Path) -> (usize, usize, Vec<u8>) {
+    let file = std::fs::File::open(path).unwrap();
+    let decoder = png::Decoder::new(std::io::BufReader::new(file));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let ch = info.color_type.samples();
+    let rgb: Vec<u8> = buf[..info.buffer_size()]
+        .chunks(ch)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    (info.width as usize, info.height as usize, rgb)
+}
