@@ -381,3 +381,106 @@ fn berr_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if j.n == 0u || status[j.m] != OK { return; }
     status[j.m] = backward_error(j.m, j.n, j.lo, j.hi);
 }
+
+// ---------------------------------------------------------------------------------------
+// DEVICE-RESIDENT NEWTON (ops bits 2 and 3; `src/gpu/blocktri.rs`, host side in
+// `src/integrator/simulation/newton.rs`). The member's Newton increment lives in the
+// assembly's node increments `node_x` (field-major: component k of node slot s at
+// k·(n_member·NPN) + s, the buffer the gather pass reads), so an iteration needs nothing
+// from the host but its operation word, and returns 16 bytes: `report`.
+//
+// UPDATE (bit 2), after the solve: over the member's unknowns, with r = stored residual +
+// extra (the residual of the iterate just evaluated, before negation) and the row scale
+// s_k = max(assembled scale of kind k, host scale of kind k, 1e-300) (kinds u, θ, g: rows
+// 0–2, 3–5, 6–8 of a node):
+//   report[2m]     = max |r| / s_k        (the host's relative residual; −1 if not finite)
+//   report[2m + 1] = backward error of the solve when it succeeded, −status otherwise
+//   rwork[m]       = Σ |r · q|             (the residual work of the energy check)
+// then, if the solve succeeded, q_prev2 ← q_prev, q_prev ← q and q ← q + x. RESTORE (bit 3),
+// before the gather pass: q ← q_prev2 (modified Newton's undo of the correction made with
+// a kept tangent that led to the iterate evaluated last, whose own correction the device
+// already applied).
+
+// Per node slot, field-major (as the gather pass reads them): the Newton increments.
+@group(0) @binding(12) var<storage, read_write> node_x: array<Real>;
+// Per member 9·NPN (node-local order): the iterate before the last update.
+@group(0) @binding(13) var<storage, read_write> q_prev: array<Real>;
+// Per member 3: the host's row scales (u, θ, g) of its nodal terms.
+@group(0) @binding(14) var<storage, read> host_scale: array<Real>;
+// Per member 2: relative residual and solve outcome (see above).
+@group(0) @binding(15) var<storage, read_write> report: array<Real>;
+// Per member: Σ |r · q| of the iterate evaluated last.
+@group(0) @binding(16) var<storage, read_write> rwork: array<Real>;
+// Per member 9·NPN: the iterate before `q_prev`.
+@group(0) @binding(17) var<storage, read_write> q_prev2: array<Real>;
+
+// Index of node-local unknown r of node i of member m in `node_x`.
+fn qidx(m: u32, i: u32, r: u32) -> u32 {
+    return r * (prm.n_member * prm.npn) + m * prm.npn + i;
+}
+
+@compute @workgroup_size(64)
+fn restore_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let m = gid.x;
+    if m >= prm.n_member { return; }
+    let n = member_n[m];
+    if n == 0u || (ops[m] & 8u) == 0u { return; }
+    for (var i = 0u; i < n; i++) {
+        let mi = mask[m * prm.npn + i];
+        for (var r = 0u; r < 9u; r++) {
+            if ((mi >> r) & 1u) != 0u {
+                node_x[qidx(m, i, r)] = q_prev2[9u * (m * prm.npn + i) + r];
+            }
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let m = gid.x;
+    if m >= prm.n_member { return; }
+    let n = member_n[m];
+    if n == 0u || (ops[m] & 4u) == 0u { return; }
+    let sc = m * prm.rpm + 9u * prm.npn;
+    var s: array<Real, 3>;
+    for (var k = 0u; k < 3u; k++) {
+        s[k] = max(max(sys[sc + k], host_scale[3u * m + k]), 1e-300);
+    }
+    var worst: Real = 0.0;
+    var finite = true;
+    var work: Real = 0.0;
+    for (var i = 0u; i < n; i++) {
+        let mi = mask[m * prm.npn + i];
+        for (var r = 0u; r < 9u; r++) {
+            if ((mi >> r) & 1u) == 0u { continue; }
+            let v = sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
+            let rel = abs(v) / s[r / 3u];
+            finite = finite && is_finite(rel);
+            worst = max(worst, rel);
+            work += abs(v * node_x[qidx(m, i, r)]);
+        }
+    }
+    if !finite { worst = -1.0; }
+    report[2u * m] = worst;
+    rwork[m] = work;
+    let st = status[m];
+    if st != OK {
+        report[2u * m + 1u] = -Real(st);
+        return;
+    }
+    report[2u * m + 1u] = berr[m];
+    if (ops[m] & 2u) == 0u { return; }
+    let x = m * 9u * prm.npn;
+    for (var i = 0u; i < n; i++) {
+        let mi = mask[m * prm.npn + i];
+        for (var r = 0u; r < 9u; r++) {
+            if ((mi >> r) & 1u) == 0u { continue; }
+            let at = qidx(m, i, r);
+            let q = node_x[at];
+            let p = 9u * (m * prm.npn + i) + r;
+            q_prev2[p] = q_prev[p];
+            q_prev[p] = q;
+            node_x[at] = q + xs[x + 9u * i + r];
+        }
+    }
+}

@@ -58,6 +58,7 @@ fn run(ms: &[Member], exec: &Executor, newton: NewtonVariant, slots: usize) -> V
             fallback: None,
             cutback: None,
             solve: Default::default(),
+            host_update: false,
         },
         |r| {
             let i = r.index;

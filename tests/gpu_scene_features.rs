@@ -92,6 +92,7 @@ fn run(ms: &[Member], exec: &Executor) -> Result<Vec<MemberResult>, String> {
             fallback: None,
             cutback: None,
             solve: Default::default(),
+            host_update: false,
         },
         |r| {
             let i = r.index;

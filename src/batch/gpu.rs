@@ -10,12 +10,12 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::element::StepConsts;
-use crate::gpu::blocktri::{OP_FACTOR, OP_SOLVE};
+use crate::gpu::blocktri::{Readback, Report, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_UPDATE};
 use crate::gpu::kernel::KernelTimers;
 use crate::gpu::layout::AsmLayout;
 use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
 use crate::integrator::evaluate::{
-    AssembledSystem, DeviceSolution, ElementBackend, EvalPort, EvalRequest,
+    AssembledSystem, DeviceSolution, ElementBackend, EvalPort, EvalRequest, ResidentAnswer,
 };
 use crate::integrator::Simulation;
 use crate::linsolve::batched::{BatchLayout, NONFINITE, OK};
@@ -34,6 +34,16 @@ pub struct ServeTimers {
     pub element_evals: u64,
     /// Of which with the tangent.
     pub element_tangent_evals: u64,
+    /// Device-resident Newton iterations served (requests that kept the iterate on the
+    /// device) and the bytes their reports brought back.
+    pub resident_iterations: u64,
+    /// Bytes read back for [`Self::resident_iterations`] (16 per iteration).
+    pub resident_bytes_down: u64,
+    /// Accepted iterates fetched (one per converged device-resident Newton solve) and the
+    /// bytes they brought back.
+    pub fetches: u64,
+    /// Bytes read back for [`Self::fetches`].
+    pub fetch_bytes_down: u64,
 }
 
 /// `slots` members of at most `per_slot` elements and `nodes_per_slot` nodes each on one
@@ -54,6 +64,9 @@ pub struct GpuEvaluator {
     solver: Option<BlockTriSolver>,
     /// Per slot: its member's systems are solved on the device.
     device: Vec<bool>,
+    /// Device solves keep the Newton iterate on the device (device-resident Newton, the
+    /// default; `false`: the correction comes back every iteration and the host adds it).
+    resident: bool,
     /// Members attached with a device solve, and with a host solve although device
     /// solves were asked for (a feature the device solver does not cover).
     pub device_members: (u64, u64),
@@ -119,6 +132,14 @@ fn device_outcome(status: u32, berr: f64, x: &[f64], n_nodes: usize) -> DeviceSo
         .collect())
 }
 
+/// [`device_outcome`] of a device-resident iteration's [`Report`].
+fn resident_outcome(r: &Report) -> ResidentAnswer {
+    ResidentAnswer::Iterated {
+        residual: r.residual,
+        solve: device_outcome(r.status, r.berr, &[], 0).map(|_| ()),
+    }
+}
+
 impl GpuEvaluator {
     /// Kernel and assembly buffers for `slots` members of at most `per_slot` elements and
     /// `nodes_per_slot` nodes.
@@ -140,6 +161,7 @@ impl GpuEvaluator {
             serve_timers: ServeTimers::default(),
             solver: None,
             device: vec![false; slots],
+            resident: true,
             device_members: (0, 0),
         })
     }
@@ -161,8 +183,17 @@ impl GpuEvaluator {
             l.members,
             layout,
             self.assembler.buffer(),
+            Some(self.assembler.increments_buffer()),
         )?);
         Ok(())
+    }
+
+    /// Whether device solves keep the Newton iterate on the device (default `true`; set
+    /// before attaching members). `false` reads the correction and the residual rows back
+    /// every iteration and leaves the update to the host, the earlier shape of
+    /// `--solve device`, kept for comparison (`tests/device_solve.rs`).
+    pub fn set_resident(&mut self, on: bool) {
+        self.resident = on;
     }
 
     /// Largest number of slots of `per_slot` elements and `nodes_per_slot` nodes that fits
@@ -256,12 +287,19 @@ impl GpuEvaluator {
         };
         self.device[slot] = on;
         sim.set_device_solve(on);
+        sim.set_device_resident(on && self.resident);
+        self.assembler.set_device_owned(slot, on && self.resident);
         on
     }
 
     /// Frees `slot` (its member finished).
     pub fn detach(&mut self, slot: usize) {
         self.ports[slot] = None;
+        if self.device[slot] {
+            // The device changed the slot's increments: the next member uploads all.
+            self.assembler.invalidate_increments(slot);
+            self.assembler.set_device_owned(slot, false);
+        }
         self.device[slot] = false;
     }
 
@@ -279,7 +317,10 @@ impl GpuEvaluator {
     fn pack(&mut self, slot: usize, req: &EvalRequest) -> Result<(), String> {
         let (n_elems, n_nodes) = self.sizes[slot];
         let states_ok = req.states.as_ref().is_none_or(|s| s.len() == n_elems);
-        if !states_ok || req.scalars.len() != n_elems || req.increments.len() != n_nodes {
+        let resident = req.resident.filter(|_| self.device[slot]);
+        let upload = resident.is_none_or(|r| r.upload);
+        if !states_ok || req.scalars.len() != n_elems || (upload && req.increments.len() != n_nodes)
+        {
             return Err(format!(
                 "GPU slot {slot} holds (elements, nodes) ({n_elems}, {n_nodes}), ({}, {}) submitted",
                 req.scalars.len(),
@@ -295,12 +336,18 @@ impl GpuEvaluator {
         for (e, s) in req.scalars.iter().enumerate() {
             self.kernel.set_scalars(base + e, s);
         }
-        self.assembler.set_increments(slot, &req.increments);
+        match resident {
+            // The device's copy may differ from the host's mirror.
+            Some(r) if r.upload => self.assembler.set_increments_forced(slot, &req.increments),
+            Some(_) => {}
+            None => self.assembler.set_increments(slot, &req.increments),
+        }
         Ok(())
     }
 
     /// Evaluates the given (slot, request) pairs in one dispatch; one answer per pair, in
-    /// order.
+    /// order. Device-resident fetches ([`crate::integrator::evaluate::Resident::fetch`])
+    /// evaluate nothing: their iterates are read back with the dispatch's results.
     fn evaluate(
         &mut self,
         reqs: Vec<(usize, EvalRequest)>,
@@ -309,18 +356,34 @@ impl GpuEvaluator {
         let mut answers = Vec::with_capacity(reqs.len());
         let mut pending = Vec::with_capacity(reqs.len());
         let mut ops: Vec<(usize, u32)> = Vec::new();
+        // Device-resident slots of this dispatch: iterating, fetching.
+        let mut iterating: Vec<usize> = Vec::new();
+        let mut fetching: Vec<usize> = Vec::new();
         for (slot, req) in reqs {
+            let resident = req.resident.filter(|_| self.device[slot]);
+            if resident.is_some_and(|r| r.fetch) {
+                fetching.push(slot);
+                continue;
+            }
             match self.pack(slot, &req) {
                 Ok(()) => {
                     if let (Some(extra), Some(solver), true) =
                         (&req.device_extra, &mut self.solver, self.device[slot])
                     {
                         solver.set_extra(slot, extra);
-                        let op = if req.tangent {
+                        let mut op = if req.tangent {
                             OP_FACTOR | OP_SOLVE
                         } else {
                             OP_SOLVE
                         };
+                        if let Some(r) = resident {
+                            solver.set_host_scale(slot, r.scale);
+                            op |= OP_UPDATE;
+                            if r.restore {
+                                op |= OP_RESTORE;
+                            }
+                            iterating.push(slot);
+                        }
                         ops.push((slot, op));
                     }
                     let n = self.sizes[slot].0 as u64;
@@ -337,39 +400,82 @@ impl GpuEvaluator {
             }
         }
         self.serve_timers.pack_s += t0.elapsed().as_secs_f64();
-        if pending.is_empty() {
+        if pending.is_empty() && fetching.is_empty() {
             return answers;
         }
         let device = &self.device;
-        let mut res = match &mut self.solver {
-            Some(solver) if !ops.is_empty() => {
-                self.assembler
-                    .run_with(&mut self.kernel, &pending, &|m| !device[m], &mut |enc| {
-                        solver.encode(enc, &ops)
-                    })
+        let is_resident = |m: usize| iterating.contains(&m);
+        let mut res = if pending.is_empty() {
+            Ok(())
+        } else {
+            match &mut self.solver {
+                Some(solver) if !ops.is_empty() => {
+                    // Restores go ahead of the gather pass that reads the increments, the
+                    // solves (and resident updates) after the assembly.
+                    let solver = std::cell::RefCell::new(solver);
+                    self.assembler.run_with(
+                        &mut self.kernel,
+                        &pending,
+                        &|m| !device[m],
+                        &|m| !is_resident(m),
+                        &mut |enc| solver.borrow_mut().encode_restore(enc, &ops),
+                        &mut |enc| solver.borrow_mut().encode(enc, &ops),
+                    )
+                }
+                _ => self.assembler.run(&mut self.kernel, &pending),
             }
-            _ => self.assembler.run(&mut self.kernel, &pending),
         };
-        // Device solves: every slot's status and backward error, the solved members'
-        // corrections.
+        // Device solves: statuses and corrections of the per-iteration members, reports of
+        // the resident ones, iterates of the fetching ones.
         let mut solved = None;
-        if let (Ok(()), Some(solver), false) = (&res, &mut self.solver, ops.is_empty()) {
+        if let (Ok(()), Some(solver)) = (&res, &mut self.solver) {
+            let per_iteration: Vec<usize> = ops
+                .iter()
+                .map(|o| o.0)
+                .filter(|&m| !is_resident(m))
+                .collect();
+            let what = Readback {
+                status: !per_iteration.is_empty(),
+                x: per_iteration,
+                report: iterating.clone(),
+                fetch: fetching.clone(),
+            };
             let t0 = Instant::now();
-            let slots: Vec<usize> = ops.iter().map(|o| o.0).collect();
-            match solver.read(&slots) {
+            let npn = self.assembler.layout().nodes_per_slot as u64;
+            let st = &mut self.serve_timers;
+            st.resident_iterations += what.report.len() as u64;
+            st.resident_bytes_down += 16 * what.report.len() as u64;
+            st.fetches += what.fetch.len() as u64;
+            st.fetch_bytes_down += (72 * npn + 8) * what.fetch.len() as u64;
+            match solver.read_back(&what) {
                 Ok(s) => solved = Some(s),
                 Err(e) => res = Err(e),
             }
             self.kernel.timers.bytes_down += solver.last_bytes_down;
+            self.kernel.timers.bytes_up += std::mem::take(&mut solver.bytes_up);
             self.kernel.timers.readback_s += t0.elapsed().as_secs_f64();
         }
         let t0 = Instant::now();
         // Unpacking is per member and independent: in parallel.
         let (asm, sizes, device) = (&self.assembler, &self.sizes, &self.device);
         let npn = self.assembler.layout().nodes_per_slot;
+        let solved = &solved;
+        let iterating = &iterating;
         answers.par_extend(pending.par_iter().map(|&(slot, tangent)| {
             let (n_elems, n_nodes) = sizes[slot];
             let out = match &res {
+                Ok(()) if iterating.contains(&slot) => {
+                    let report = solved
+                        .as_ref()
+                        .and_then(|s| s.reports.iter().find(|r| r.0 == slot));
+                    match report {
+                        Some((_, r)) => Ok(AssembledSystem {
+                            resident: Some(resident_outcome(r)),
+                            ..AssembledSystem::default()
+                        }),
+                        None => Err("the device did not report a resident iteration".into()),
+                    }
+                }
                 Ok(()) if device[slot] => {
                     let mut sys = asm.system(slot, n_nodes, n_elems, false);
                     sys.solution = solved.as_ref().map(|s| {
@@ -388,6 +494,24 @@ impl GpuEvaluator {
             };
             (slot, out)
         }));
+        for slot in fetching {
+            let n_nodes = self.sizes[slot].1;
+            let out = match (&res, solved.as_ref()) {
+                (Ok(()), Some(s)) => match s.fetched.iter().find(|f| f.0 == slot) {
+                    Some((_, f)) => Ok(AssembledSystem {
+                        resident: Some(ResidentAnswer::Fetched {
+                            q: f.q[..n_nodes].to_vec(),
+                            residual_work: f.residual_work,
+                        }),
+                        ..AssembledSystem::default()
+                    }),
+                    None => Err("the device did not return a resident iterate".into()),
+                },
+                (Err(e), _) => Err(e.to_string()),
+                (Ok(()), None) => Err("no device solver for a resident fetch".into()),
+            };
+            answers.push((slot, out));
+        }
         for &(slot, _) in &pending {
             let base = slot * self.per_slot;
             for e in 0..self.sizes[slot].0 {

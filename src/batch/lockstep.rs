@@ -81,6 +81,7 @@ pub(super) fn run(
     let mut gpu = GpuEvaluator::new(ctx, slots, per_slot, nodes_per_slot)?;
     if opts.solve == super::SolveMode::Device {
         gpu.enable_device_solve(ctx)?;
+        gpu.set_resident(!opts.host_update);
     }
     stats.setup_s = t0.elapsed().as_secs_f64();
     stats.slots = slots;

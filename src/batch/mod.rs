@@ -151,6 +151,10 @@ pub struct BatchOptions {
     pub cutback: Option<usize>,
     /// GPU path: where the Newton systems are solved (`--solve`).
     pub solve: SolveMode,
+    /// `--solve device`: the host adds each Newton correction (read back with the residual
+    /// rows every iteration) instead of the device keeping the iterate — the earlier
+    /// shape of the device solve, kept for side-by-side comparison (`bench --host-update`).
+    pub host_update: bool,
 }
 
 /// Where a GPU batch solves its members' Newton systems (`--solve host|device`,

@@ -80,6 +80,8 @@ pub struct Assembler {
     node_x: wgpu::Buffer,
     node_x_host: Vec<f64>,
     node_x_dirty: Vec<bool>,
+    /// Per node slot: the device owns the increments (device-resident Newton).
+    node_x_owned: Vec<bool>,
     asm: wgpu::Buffer,
     staging: wgpu::Buffer,
     params: wgpu::Buffer,
@@ -252,6 +254,7 @@ impl Assembler {
             node_x,
             node_x_host: vec![0.0; A_NODE * n_nodes],
             node_x_dirty: vec![false; n_nodes],
+            node_x_owned: vec![false; n_nodes],
             asm,
             staging,
             params,
@@ -357,17 +360,58 @@ impl Assembler {
         kernel: &mut ElementKernel,
         pending: &[(usize, bool)],
     ) -> Result<(), GpuError> {
-        self.run_with(kernel, pending, &|_| true, &mut |_| {})
+        self.run_with(
+            kernel,
+            pending,
+            &|_| true,
+            &|_| true,
+            &mut |_| {},
+            &mut |_| {},
+        )
     }
 
-    /// [`Self::run`] with `more` encoded after the assembly pass (and before the
-    /// readback: the device block solver of [`crate::gpu::blocktri`]); the tangent blocks
-    /// of member slot `m` are read back only when `blocks_back(m)`.
+    /// The node increments on the device (9 per node slot, field-major: component `k` of
+    /// node slot `s` at `k · members · nodes_per_slot + s`), as the gather pass reads them.
+    pub fn increments_buffer(&self) -> &wgpu::Buffer {
+        &self.node_x
+    }
+
+    /// [`Self::set_increments`] uploading every node slot of member `m` whatever the host
+    /// copy holds (the device may have changed them: device-resident Newton).
+    pub fn set_increments_forced(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
+        self.set_increments(m, nodes);
+        let npn = self.layout.nodes_per_slot;
+        self.node_x_dirty[m * npn..m * npn + nodes.len()].fill(true);
+    }
+
+    /// Forgets the host copy of member slot `m`'s increments (the device changed them), so
+    /// that the next [`Self::set_increments`] uploads every value.
+    pub fn invalidate_increments(&mut self, m: usize) {
+        let (nn, npn) = (self.n_nodes, self.layout.nodes_per_slot);
+        for k in 0..A_NODE {
+            self.node_x_host[k * nn + m * npn..k * nn + (m + 1) * npn].fill(f64::NAN);
+        }
+    }
+
+    /// Marks member slot `m`'s increments as owned by the device (device-resident Newton
+    /// updates them there): uploads of neighbouring slots never re-send them from the host
+    /// copy, which is then stale.
+    pub fn set_device_owned(&mut self, m: usize, owned: bool) {
+        let npn = self.layout.nodes_per_slot;
+        self.node_x_owned[m * npn..(m + 1) * npn].fill(owned);
+    }
+
+    /// [`Self::run`] with `before` encoded ahead of the gather pass and `more` after the
+    /// assembly pass (and before the readback: the device block solver of
+    /// [`crate::gpu::blocktri`]); the tangent blocks of member slot `m` are read back only
+    /// when `blocks_back(m)`, its residual region only when `residual_back(m)`.
     pub fn run_with(
         &mut self,
         kernel: &mut ElementKernel,
         pending: &[(usize, bool)],
         blocks_back: &dyn Fn(usize) -> bool,
+        residual_back: &dyn Fn(usize) -> bool,
+        before: &mut dyn FnMut(&mut wgpu::CommandEncoder),
         more: &mut dyn FnMut(&mut wgpu::CommandEncoder),
     ) -> Result<(), GpuError> {
         let want_tangent = pending.iter().any(|p| p.1);
@@ -377,7 +421,30 @@ impl Assembler {
         let l = self.layout;
         let t0 = std::time::Instant::now();
         let nn = self.n_nodes;
-        for (lo, hi) in take_runs(&mut self.node_x_dirty) {
+        // Clean slots between two dirty ones may go up from the host copy to save copies,
+        // except those the device owns (their host copy is stale).
+        let dirty = self.node_x_dirty.clone();
+        let owned = &self.node_x_owned;
+        let runs = take_runs(&mut self.node_x_dirty)
+            .into_iter()
+            .flat_map(|(lo, hi)| {
+                let mut parts = Vec::new();
+                let mut start = None;
+                for s in lo..=hi {
+                    let send = s < hi && (dirty[s] || !owned[s]);
+                    match (send, start) {
+                        (true, None) => start = Some(s),
+                        (false, Some(a)) => {
+                            parts.push((a, s));
+                            start = None;
+                        }
+                        _ => {}
+                    }
+                }
+                parts
+            })
+            .collect::<Vec<_>>();
+        for (lo, hi) in runs {
             for k in 0..A_NODE {
                 kernel.timers.bytes_up += write_scalars(
                     &self.queue,
@@ -415,6 +482,7 @@ impl Assembler {
             kernel.timers.bytes_up += 4 * (hi - lo) as u64;
         }
         kernel.timers.upload_s += t0.elapsed().as_secs_f64();
+        before(&mut enc);
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("gather"),
@@ -457,7 +525,7 @@ impl Assembler {
         // asked for it: one range per run of adjacent such members.
         let w = ElementKernel::width(self.precision) as u64;
         let (r, k) = (l.residual_per_member(), l.tangent_per_member());
-        let residual = member_runs(pending.iter().map(|p| p.0))
+        let residual = member_runs(pending.iter().map(|p| p.0).filter(|&m| residual_back(m)))
             .into_iter()
             .map(|(lo, hi)| ((lo * r) as u64 * w, ((hi - lo) * r) as u64 * w));
         let tangent = member_runs(
@@ -516,6 +584,7 @@ impl Assembler {
             off_k,
             scale,
             solution: None,
+            resident: None,
         }
     }
 }

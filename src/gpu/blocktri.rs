@@ -22,6 +22,50 @@ pub const CHUNK_NODES: usize = 16;
 pub const OP_FACTOR: u32 = 1;
 /// Per-member operation bit: solve with the factors.
 pub const OP_SOLVE: u32 = 2;
+/// Per-member operation bit (device-resident Newton): after the solve, report the
+/// relative residual and the solve's outcome and add the correction to the increments
+/// the gather pass reads (`update_main` in `shaders/blocktri.wgsl`).
+pub const OP_UPDATE: u32 = 4;
+/// Per-member operation bit (device-resident Newton): before the gather pass, restore the
+/// increments from before the correction that led to the iterate evaluated last
+/// (`restore_main`: the device already applied that iterate's own correction).
+pub const OP_RESTORE: u32 = 8;
+
+/// What an [`OP_UPDATE`] member reports (16 bytes per member and iteration).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Report {
+    /// `max |R_i| / scale(kind of i)` of the iterate evaluated (`+∞` if not finite).
+    pub residual: f64,
+    /// [`crate::linsolve::batched::OK`] or the failure status of the solve.
+    pub status: u32,
+    /// Backward error of the solve (when it succeeded).
+    pub berr: f64,
+}
+
+impl Report {
+    fn decode(res: f64, code: f64) -> Self {
+        let (status, berr) = if code >= 0.0 {
+            (crate::linsolve::batched::OK, code)
+        } else {
+            (-code as u32, f64::NAN)
+        };
+        Self {
+            residual: if res < 0.0 { f64::INFINITY } else { res },
+            status,
+            berr,
+        }
+    }
+}
+
+/// A device-resident member's accepted iterate, fetched at convergence.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fetched {
+    /// Per node slot of the member (`NPN`), node-local order: the iterate before the last
+    /// update.
+    pub q: Vec<[f64; 9]>,
+    /// `Σ |R_i q_i|` of that iterate.
+    pub residual_work: f64,
+}
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -46,6 +90,23 @@ pub struct Solved {
     pub berr: Vec<f64>,
     /// The solutions (`9 · NPN` per member slot), when asked for.
     pub x: Option<Vec<f64>>,
+    /// Per member slot asked for ([`Readback::report`]): its [`Report`].
+    pub reports: Vec<(usize, Report)>,
+    /// Per member slot asked for ([`Readback::fetch`]): its accepted iterate.
+    pub fetched: Vec<(usize, Fetched)>,
+}
+
+/// What [`BlockTriSolver::read`] copies back, by member slot.
+#[derive(Clone, Debug, Default)]
+pub struct Readback {
+    /// Status and backward error of every member slot (12 bytes per slot).
+    pub status: bool,
+    /// Solutions of these slots.
+    pub x: Vec<usize>,
+    /// [`Report`]s of these slots (16 bytes each).
+    pub report: Vec<usize>,
+    /// Accepted iterates of these slots ([`Fetched`]).
+    pub fetch: Vec<usize>,
 }
 
 /// A batch of `members` block-tridiagonal systems on the device.
@@ -54,8 +115,9 @@ pub struct BlockTriSolver {
     members: usize,
     device: wgpu::Device,
     queue: wgpu::Queue,
-    /// `factor_main`, `forward_main`, `backward_main`, `berr_main`.
-    pipelines: [wgpu::ComputePipeline; 4],
+    /// `factor_main`, `forward_main`, `backward_main`, `berr_main`, `restore_main`,
+    /// `update_main`.
+    pipelines: [wgpu::ComputePipeline; 6],
     /// One bind group per node chunk (each with its own `lo`, `hi`).
     bind_groups: Vec<wgpu::BindGroup>,
     /// `[xs, mask, member_n, ops, status, berr]` (factors and pivots are never read back).
@@ -69,15 +131,22 @@ pub struct BlockTriSolver {
     extra: wgpu::Buffer,
     extra_host: Vec<f64>,
     extra_dirty: Vec<bool>,
+    /// Device-resident Newton: `[q_prev, host_scale, report, rwork, q_prev2]`.
+    resident: [wgpu::Buffer; 5],
+    scale_host: Vec<f64>,
+    scale_dirty: Vec<bool>,
     /// Factors, pivots and backward-error terms: only ever touched by the shader (kept
     /// alive with the solver).
-    _fac_piv: [wgpu::Buffer; 3],
+    _fac_piv: [wgpu::Buffer; 4],
     mask_host: Vec<u32>,
     n_host: Vec<u32>,
     topo_dirty: bool,
     ops_host: Vec<u32>,
     /// Bytes read back by the last [`Self::run`].
     pub last_bytes_down: u64,
+    /// Bytes uploaded since this was last reset (topology, extras, host scales,
+    /// operation words).
+    pub bytes_up: u64,
 }
 
 fn storage(
@@ -109,11 +178,18 @@ impl BlockTriSolver {
 
     /// Builds the passes over `members` member slots of the system in `sys`, laid out by
     /// `layout`. Needs `SHADER_F64`. Every member slot starts inactive (no nodes).
+    ///
+    /// `node_x` holds the Newton increments the device-resident operations ([`OP_UPDATE`],
+    /// [`OP_RESTORE`]) update (9 per node slot, field-major over `members · NPN` slots, as
+    /// the assembly's gather pass reads them; `None`: a buffer of its own), and the
+    /// residual region of each member must then end in its three row scales
+    /// (`rpm ≥ 9 NPN + 3`, as [`crate::gpu::layout::AsmLayout`]).
     pub fn new(
         ctx: &GpuContext,
         members: usize,
         layout: BatchLayout,
         sys: &wgpu::Buffer,
+        node_x: Option<&wgpu::Buffer>,
     ) -> Result<Self, GpuError> {
         if ctx.precision != Precision::F64 {
             return Err(GpuError::Kernel(
@@ -164,6 +240,12 @@ impl BlockTriSolver {
                 entry(9, wgpu::BufferBindingType::Uniform),
                 entry(10, ro),
                 entry(11, rw),
+                entry(12, rw),
+                entry(13, rw),
+                entry(14, ro),
+                entry(15, rw),
+                entry(16, rw),
+                entry(17, rw),
             ],
         });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -186,6 +268,8 @@ impl BlockTriSolver {
             pipe("forward_main"),
             pipe("backward_main"),
             pipe("berr_main"),
+            pipe("restore_main"),
+            pipe("update_main"),
         ];
         ctx.save_pipeline_cache();
         let none = wgpu::BufferUsages::empty();
@@ -203,9 +287,18 @@ impl BlockTriSolver {
         let extra = storage(&device, "rhs extras", 8 * xn, dst);
         ctx.queue
             .write_buffer(&extra, 0, bytemuck::cast_slice(&vec![0.0f64; xn as usize]));
+        let own_x = storage(&device, "node increments", 8 * xn, dst);
+        let node_x = node_x.unwrap_or(&own_x);
+        let resident = [
+            storage(&device, "previous iterates", 8 * xn, src),
+            storage(&device, "host scales", 24 * members as u64, dst),
+            storage(&device, "reports", 16 * members as u64, src),
+            storage(&device, "residual work", 8 * members as u64, src),
+            storage(&device, "iterates before the previous", 8 * xn, none),
+        ];
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("blocktri staging"),
-            size: 8 * xn + 12 * members as u64,
+            size: 16 * xn + 36 * members as u64,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -232,8 +325,24 @@ impl BlockTriSolver {
                 };
                 ctx.queue.write_buffer(&params, 0, bytemuck::bytes_of(&p));
                 let bufs = [
-                    sys, &fac, &piv, &xs, &mask, &member_n, &ops, &status, &berr, &params, &extra,
+                    sys,
+                    &fac,
+                    &piv,
+                    &xs,
+                    &mask,
+                    &member_n,
+                    &ops,
+                    &status,
+                    &berr,
+                    &params,
+                    &extra,
                     &acc,
+                    node_x,
+                    &resident[0],
+                    &resident[1],
+                    &resident[2],
+                    &resident[3],
+                    &resident[4],
                 ];
                 let entries: Vec<wgpu::BindGroupEntry> = bufs
                     .iter()
@@ -264,15 +373,19 @@ impl BlockTriSolver {
             status,
             berr,
             staging,
-            _fac_piv: [fac, piv, acc],
+            _fac_piv: [fac, piv, acc, own_x],
             extra,
             extra_host: vec![0.0; xn as usize],
             extra_dirty: vec![false; members],
+            resident,
+            scale_host: vec![0.0; 3 * members],
+            scale_dirty: vec![false; members],
             mask_host: vec![0; layout.npn * members],
             n_host: vec![0; members],
             topo_dirty: true,
             ops_host: vec![0; members],
             last_bytes_down: 0,
+            bytes_up: 0,
         })
     }
 
@@ -319,32 +432,10 @@ impl BlockTriSolver {
     }
 
     /// Records the factor and solve passes into `enc` for the members of `ops`
-    /// (`(slot, OP_FACTOR | OP_SOLVE)`; the others do nothing), uploading what changed.
+    /// (`(slot, OP_FACTOR | OP_SOLVE | OP_UPDATE)`; the others do nothing), then the
+    /// device-resident update pass when some member asked for it, uploading what changed.
     pub fn encode(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
-        if self.topo_dirty {
-            self.queue
-                .write_buffer(&self.mask, 0, bytemuck::cast_slice(&self.mask_host));
-            self.queue
-                .write_buffer(&self.member_n, 0, bytemuck::cast_slice(&self.n_host));
-            self.topo_dirty = false;
-        }
-        let w = 9 * self.layout.npn;
-        for (lo, hi) in super::kernel::take_runs(&mut self.extra_dirty) {
-            self.queue.write_buffer(
-                &self.extra,
-                8 * (w * lo) as u64,
-                bytemuck::cast_slice(&self.extra_host[w * lo..w * hi]),
-            );
-        }
-        let mut new = vec![0u32; self.members];
-        for &(m, o) in ops {
-            new[m] |= o;
-        }
-        if new != self.ops_host {
-            self.queue
-                .write_buffer(&self.ops, 0, bytemuck::cast_slice(&new));
-            self.ops_host = new;
-        }
+        self.prepare(ops);
         let groups = self.members.div_ceil(64) as u32;
         let any = |bit: u32| ops.iter().any(|o| o.1 & bit != 0);
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -367,6 +458,80 @@ impl BlockTriSolver {
             run(&mut pass, 1, &mut (0..chunks));
             run(&mut pass, 2, &mut (0..chunks).rev());
             run(&mut pass, 3, &mut (0..chunks));
+        }
+        if any(OP_UPDATE) {
+            run(&mut pass, 5, &mut (0..1));
+        }
+    }
+
+    /// Encodes the [`OP_RESTORE`] pass of `ops` (to run before the gather pass that reads
+    /// the increments); nothing when no member restores.
+    pub fn encode_restore(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
+        if !ops.iter().any(|o| o.1 & OP_RESTORE != 0) {
+            return;
+        }
+        self.prepare(ops);
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("blocktri restore"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipelines[4]);
+        pass.set_bind_group(0, &self.bind_groups[0], &[]);
+        pass.dispatch_workgroups(self.members.div_ceil(64) as u32, 1, 1);
+    }
+
+    /// Sets member `m`'s host row scales (u, θ, g) of its nodal terms, for
+    /// [`OP_UPDATE`]'s relative residual; uploaded with the next operations when changed.
+    pub fn set_host_scale(&mut self, m: usize, scale: [f64; 3]) {
+        let dst = &mut self.scale_host[3 * m..3 * m + 3];
+        if dst != scale {
+            dst.copy_from_slice(&scale);
+            self.scale_dirty[m] = true;
+        }
+    }
+
+    /// Uploads what changed: topology, extras, host scales, the operation words.
+    fn prepare(&mut self, ops: &[(usize, u32)]) {
+        if self.topo_dirty {
+            self.queue
+                .write_buffer(&self.mask, 0, bytemuck::cast_slice(&self.mask_host));
+            self.queue
+                .write_buffer(&self.member_n, 0, bytemuck::cast_slice(&self.n_host));
+            self.bytes_up += 4 * (self.mask_host.len() + self.n_host.len()) as u64;
+            self.topo_dirty = false;
+        }
+        let w = 9 * self.layout.npn;
+        for (lo, hi) in super::kernel::take_runs(&mut self.extra_dirty) {
+            self.queue.write_buffer(
+                &self.extra,
+                8 * (w * lo) as u64,
+                bytemuck::cast_slice(&self.extra_host[w * lo..w * hi]),
+            );
+            self.bytes_up += 8 * (w * (hi - lo)) as u64;
+        }
+        let mut new = vec![0u32; self.members];
+        for &(m, o) in ops {
+            new[m] |= o;
+        }
+        for (lo, hi) in super::kernel::take_runs(&mut self.scale_dirty) {
+            self.queue.write_buffer(
+                &self.resident[1],
+                24 * lo as u64,
+                bytemuck::cast_slice(&self.scale_host[3 * lo..3 * hi]),
+            );
+            self.bytes_up += 24 * (hi - lo) as u64;
+        }
+        if new != self.ops_host {
+            // Only the words that changed.
+            for (lo, hi) in changed_runs(&self.ops_host, &new) {
+                self.queue.write_buffer(
+                    &self.ops,
+                    4 * lo as u64,
+                    bytemuck::cast_slice(&new[lo..hi]),
+                );
+                self.bytes_up += 4 * (hi - lo) as u64;
+            }
+            self.ops_host = new;
         }
     }
 
@@ -391,35 +556,56 @@ impl BlockTriSolver {
     /// member slots `x_of` (72 bytes per node slot); `Solved::x` is `None` when `x_of` is
     /// empty, else holds the whole solution buffer with the other slots left zero.
     pub fn read(&mut self, x_of: &[usize]) -> Result<Solved, GpuError> {
+        self.read_back(&Readback {
+            status: true,
+            x: x_of.to_vec(),
+            ..Readback::default()
+        })
+    }
+
+    /// Reads back what `what` asks for, in one copy and map: statuses and backward errors
+    /// of every slot, solutions, device-resident [`Report`]s (16 bytes per slot) and
+    /// accepted iterates ([`Fetched`]: 72 bytes per node slot and 8 for the residual work).
+    pub fn read_back(&mut self, what: &Readback) -> Result<Solved, GpuError> {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let mb = self.members as u64;
         let per = 8 * self.layout.x_per_member() as u64;
-        enc.copy_buffer_to_buffer(&self.status, 0, &self.staging, 0, 4 * mb);
-        enc.copy_buffer_to_buffer(&self.berr, 0, &self.staging, 4 * mb, 8 * mb);
-        let mut sorted = x_of.to_vec();
-        sorted.sort_unstable();
-        sorted.dedup();
-        let mut runs: Vec<(usize, usize)> = Vec::new();
-        for m in sorted {
-            match runs.last_mut() {
-                Some(last) if last.1 == m => last.1 = m + 1,
-                _ => runs.push((m, m + 1)),
-            }
+        // (source, source offset, length) in staging order.
+        let mut copies: Vec<(&wgpu::Buffer, u64, u64)> = Vec::new();
+        if what.status {
+            copies.push((&self.status, 0, 4 * mb));
+            copies.push((&self.berr, 0, 8 * mb));
         }
-        let mut end = 12 * mb;
-        let mut down = 12 * mb;
-        for &(lo, hi) in &runs {
-            let (at, len) = (per * lo as u64, per * (hi - lo) as u64);
-            enc.copy_buffer_to_buffer(&self.xs, at, &self.staging, 12 * mb + at, len);
-            end = end.max(12 * mb + at + len);
-            down += len;
+        let x_runs = slot_runs(&what.x);
+        for &(lo, hi) in &x_runs {
+            copies.push((&self.xs, per * lo as u64, per * (hi - lo) as u64));
+        }
+        let r_runs = slot_runs(&what.report);
+        for &(lo, hi) in &r_runs {
+            copies.push((&self.resident[2], 16 * lo as u64, 16 * (hi - lo) as u64));
+        }
+        let f_runs = slot_runs(&what.fetch);
+        for &(lo, hi) in &f_runs {
+            copies.push((&self.resident[0], per * lo as u64, per * (hi - lo) as u64));
+            copies.push((&self.resident[3], 8 * lo as u64, 8 * (hi - lo) as u64));
+        }
+        let mut out = Solved::default();
+        let down: u64 = copies.iter().map(|c| c.2).sum();
+        self.last_bytes_down = down;
+        if down == 0 {
+            return Ok(out);
+        }
+        let mut at = 0u64;
+        for &(src, off, len) in &copies {
+            enc.copy_buffer_to_buffer(src, off, &self.staging, at, len);
+            at += len;
         }
         self.queue.submit(Some(enc.finish()));
         let (tx, rx) = std::sync::mpsc::channel();
         self.staging
-            .slice(0..end)
+            .slice(0..down)
             .map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
             });
@@ -429,30 +615,84 @@ impl BlockTriSolver {
         rx.recv()
             .map_err(|e| GpuError::Kernel(e.to_string()))?
             .map_err(|e| GpuError::Kernel(e.to_string()))?;
-        let out = {
+        {
             let view = self
                 .staging
-                .get_mapped_range(0..end)
+                .get_mapped_range(0..down)
                 .map_err(|e| GpuError::Kernel(e.to_string()))?;
             let bytes: &[u8] = &view;
-            let status: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[..4 * mb as usize]);
-            let berr: Vec<f64> =
-                bytemuck::pod_collect_to_vec(&bytes[4 * mb as usize..12 * mb as usize]);
-            let x = (!runs.is_empty()).then(|| {
-                let mut x = vec![0.0; self.layout.x_per_member() * self.members];
-                for &(lo, hi) in &runs {
-                    let (a, b) = (12 * mb + per * lo as u64, 12 * mb + per * hi as u64);
-                    let src: Vec<f64> =
-                        bytemuck::pod_collect_to_vec(&bytes[a as usize..b as usize]);
-                    let w = self.layout.x_per_member();
+            let mut pos = 0usize;
+            let mut take = |len: usize| {
+                let b = &bytes[pos..pos + len];
+                pos += len;
+                b
+            };
+            if what.status {
+                out.status = bytemuck::pod_collect_to_vec(take(4 * mb as usize));
+                out.berr = bytemuck::pod_collect_to_vec(take(8 * mb as usize));
+            }
+            let w = self.layout.x_per_member();
+            if !x_runs.is_empty() {
+                let mut x = vec![0.0; w * self.members];
+                for &(lo, hi) in &x_runs {
+                    let src: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * w * (hi - lo)));
                     x[w * lo..w * hi].copy_from_slice(&src);
                 }
-                x
-            });
-            Solved { status, berr, x }
-        };
+                out.x = Some(x);
+            }
+            for &(lo, hi) in &r_runs {
+                let v: Vec<f64> = bytemuck::pod_collect_to_vec(take(16 * (hi - lo)));
+                out.reports.extend(
+                    (lo..hi).map(|m| (m, Report::decode(v[2 * (m - lo)], v[2 * (m - lo) + 1]))),
+                );
+            }
+            for &(lo, hi) in &f_runs {
+                let q: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * w * (hi - lo)));
+                let rw: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * (hi - lo)));
+                out.fetched.extend((lo..hi).map(|m| {
+                    let base = w * (m - lo);
+                    (
+                        m,
+                        Fetched {
+                            q: (0..w / 9)
+                                .map(|j| std::array::from_fn(|k| q[base + 9 * j + k]))
+                                .collect(),
+                            residual_work: rw[m - lo],
+                        },
+                    )
+                }));
+            }
+        }
         self.staging.unmap();
-        self.last_bytes_down = down;
         Ok(out)
     }
+}
+
+/// Runs `(lo, hi)` of adjacent slots among `slots` (sorted, without duplicates).
+fn slot_runs(slots: &[usize]) -> Vec<(usize, usize)> {
+    let mut sorted = slots.to_vec();
+    sorted.sort_unstable();
+    sorted.dedup();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for m in sorted {
+        match runs.last_mut() {
+            Some(last) if last.1 == m => last.1 = m + 1,
+            _ => runs.push((m, m + 1)),
+        }
+    }
+    runs
+}
+
+/// Runs `(lo, hi)` of indices where `old` and `new` differ.
+fn changed_runs(old: &[u32], new: &[u32]) -> Vec<(usize, usize)> {
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for (i, (a, b)) in old.iter().zip(new).enumerate() {
+        if a != b {
+            match runs.last_mut() {
+                Some(last) if last.1 == i => last.1 = i + 1,
+                _ => runs.push((i, i + 1)),
+            }
+        }
+    }
+    runs
 }

@@ -53,6 +53,48 @@ pub struct EvalRequest {
     /// Per node: `extra`, the host's nodal residual terms (loads, moments) in node-local
     /// order. `None`: the host solves.
     pub device_extra: Option<Vec<[f64; 9]>>,
+    /// Device-resident Newton (with `device_extra`): the device keeps the increment, adds
+    /// its own correction after the solve and answers the relative residual only
+    /// ([`ResidentAnswer`]). `None`: the host keeps the increment.
+    pub resident: Option<Resident>,
+}
+
+/// A device-resident Newton request ([`EvalRequest::resident`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Resident {
+    /// The request's increments are the host's (the start of a Newton solve): the device
+    /// starts from them. Otherwise it iterates from its own and `increments` is empty.
+    pub upload: bool,
+    /// Before evaluating, go back to the iterate before the device's last correction
+    /// (modified Newton undoing a correction made with a kept tangent).
+    pub restore: bool,
+    /// The host's row scales (u, θ, g) of its nodal terms (they join the element scales
+    /// in the relative residual).
+    pub scale: [f64; 3],
+    /// No evaluation: answer the iterate evaluated last before the device's last correction
+    /// (the one the host accepted) and its residual work ([`ResidentAnswer::Fetched`]).
+    pub fetch: bool,
+}
+
+/// The answer to a device-resident request.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ResidentAnswer {
+    /// An iteration: the relative residual `max_i |R_i| / scale(kind of i)` of the iterate
+    /// evaluated, and the outcome of the solve (on success the device added the
+    /// correction to its iterate; the error is the host solver's message).
+    Iterated {
+        /// Relative residual of the evaluated iterate.
+        residual: f64,
+        /// The device solve's outcome.
+        solve: Result<(), String>,
+    },
+    /// A fetch: the accepted iterate per node (node-local order) and `Σ |R_i q_i|` there.
+    Fetched {
+        /// Per node: the increment.
+        q: Vec<[f64; 9]>,
+        /// The residual work of the energy check.
+        residual_work: f64,
+    },
 }
 
 /// The answer of a device solve: the Newton correction per node (node-local order,
@@ -77,6 +119,9 @@ pub struct AssembledSystem {
     /// The solution of a device solve ([`EvalRequest::device_extra`]); then the blocks
     /// are left empty.
     pub solution: Option<DeviceSolution>,
+    /// The answer to a device-resident request ([`EvalRequest::resident`]); then the
+    /// residual rows and blocks are left empty.
+    pub resident: Option<ResidentAnswer>,
 }
 
 /// Evaluates all elements of one simulation at once (frozen scalars), synchronously.

@@ -567,6 +567,11 @@ pub struct BenchArgs {
     /// device-solve GPU batches side by side (JSON: `gpu_*` and the `device` object).
     #[arg(long, value_enum, default_value_t = BenchSolveArg::Host)]
     pub solve: BenchSolveArg,
+    /// Device solve with the host adding each Newton correction (correction and residual
+    /// rows read back every iteration): the earlier shape of `--solve device`, for
+    /// side-by-side comparison with the device-resident default (docs/gpu.md).
+    #[arg(long)]
+    pub host_update: bool,
 }
 
 /// `bench --solve`.
@@ -596,6 +601,7 @@ fn timed(
     newton: NewtonVariant,
     slots: usize,
     solve: SolveMode,
+    host_update: bool,
 ) -> Result<Timed> {
     let (mut iters, mut failed) = (0usize, 0usize);
     let mut stages = SolveTimers::default();
@@ -603,6 +609,7 @@ fn timed(
         newton: Some(newton),
         workers: slots,
         solve,
+        host_update,
         ..Default::default()
     };
     let stats = run_members(members, exec, opts, |r| {
@@ -740,6 +747,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             newton,
             a.slots,
             SolveMode::Host,
+            false,
         )?)
     };
     let cpu_rate = cpu.as_ref().map(|c| work / c.stats.wall_s);
@@ -756,14 +764,24 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let (adapter, f64_ok, gpu, dev) = match &gpu_exec {
         Ok((exec @ Executor::Gpu(ctx), _)) => {
             let r = if host_solve {
-                Some(timed(&members, exec, newton, a.slots, SolveMode::Host).context("GPU batch")?)
+                Some(
+                    timed(&members, exec, newton, a.slots, SolveMode::Host, false)
+                        .context("GPU batch")?,
+                )
             } else {
                 None
             };
             let d = if device_solve {
                 Some(
-                    timed(&members, exec, newton, a.slots, SolveMode::Device)
-                        .context("GPU batch, device solve")?,
+                    timed(
+                        &members,
+                        exec,
+                        newton,
+                        a.slots,
+                        SolveMode::Device,
+                        a.host_update,
+                    )
+                    .context("GPU batch, device solve")?,
                 )
             } else {
                 None
@@ -817,6 +835,13 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
                 "ratio": dev_ratio,
                 "members_device_solved": d.stats.device_members.0,
                 "members_host_solved": d.stats.device_members.1,
+                "host_update": a.host_update,
+                "resident_iterations": d.stats.serve.resident_iterations,
+                "resident_bytes_down_per_iteration": d.stats.serve.resident_bytes_down as f64
+                    / d.stats.serve.resident_iterations.max(1) as f64,
+                "fetches": d.stats.serve.fetches,
+                "fetch_bytes_down_each": d.stats.serve.fetch_bytes_down as f64
+                    / d.stats.serve.fetches.max(1) as f64,
             });
             gpu_model_json(&mut o, d, &a);
             obj["device"] = o;
@@ -892,6 +917,15 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
                 k.kernel_s,
                 k.readback_s
             );
+            if sv.resident_iterations > 0 {
+                println!(
+                    "device-resident Newton: {} iterations at {:.0} B down each, {} accepted iterates fetched at {:.0} B each",
+                    sv.resident_iterations,
+                    sv.resident_bytes_down as f64 / sv.resident_iterations as f64,
+                    sv.fetches,
+                    sv.fetch_bytes_down as f64 / sv.fetches.max(1) as f64
+                );
+            }
             println!("device solve stages: {}", stages_line(&g.stages));
         }
         _ if device_solve => println!("gpu, device solve: not run ({adapter})"),

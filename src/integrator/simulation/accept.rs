@@ -86,12 +86,14 @@ impl Simulation {
         // increment q with residual R misses it by R·q. Allow that much on top of the
         // relative tolerances: it matters only when H is tiny against the forces (a stiff
         // structure at the start of a slow load ramp, residual at its f64 floor).
-        let residual_work: f64 = self
-            .last_residual
-            .iter()
-            .zip(q)
-            .map(|(r, x)| (r * x).abs())
-            .sum::<f64>();
+        // (Device-resident Newton: summed on the device, where the residual stayed.)
+        let residual_work: f64 = self.residual_work.unwrap_or_else(|| {
+            self.last_residual
+                .iter()
+                .zip(q)
+                .map(|(r, x)| (r * x).abs())
+                .sum::<f64>()
+        });
         let growth = h1 - h0 - w;
         crate::integrator::scaling::check_resolved(residual_work, href)?;
         if self.params.scheme.controls_energy()

@@ -12,7 +12,7 @@ use crate::element::{
     ElementEval, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
-use crate::integrator::evaluate::{AssembledSystem, EvalRequest};
+use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
 use crate::integrator::links;
 
 impl Simulation {
@@ -53,8 +53,18 @@ impl Simulation {
         if device {
             self.nodal_terms(q, false, r, &mut scale);
         }
+        let resident = device && self.device_resident;
         if external {
-            let mut req = self.eval_request(q, tangent);
+            let upload = !resident || self.resident_upload;
+            let mut req = self.eval_request(upload.then_some(q), tangent);
+            if resident {
+                req.resident = Some(Resident {
+                    upload,
+                    restore: self.resident_restore,
+                    scale,
+                    fetch: false,
+                });
+            }
             if device {
                 req.device_extra = Some(
                     self.dofs
@@ -72,6 +82,17 @@ impl Simulation {
             };
             self.timers.evaluate_wait_s += t0.elapsed().as_secs_f64();
             match answer {
+                Ok(AssembledSystem {
+                    resident: Some(ResidentAnswer::Iterated { residual, solve }),
+                    ..
+                }) if resident => {
+                    // The device evaluated the iterate it holds (the host's `q` is stale
+                    // until fetched) and added the correction if the solve succeeded.
+                    self.resident_upload = false;
+                    self.resident_restore = false;
+                    self.device_x = Some(solve.map(|()| Vec::new()));
+                    return (residual, scale);
+                }
                 Ok(mut sys) => {
                     if device {
                         self.device_x = Some(sys.solution.take().unwrap_or_else(|| {
@@ -216,9 +237,52 @@ impl Simulation {
         }
     }
 
+    /// Device-resident Newton: fetches the iterate the host accepted (the device's iterate
+    /// before its last correction) into `q`, with its residual work.
+    pub(super) async fn fetch_resident(&mut self, q: &mut [f64]) -> Result<(), String> {
+        let req = EvalRequest {
+            resident: Some(Resident {
+                fetch: true,
+                ..Resident::default()
+            }),
+            ..EvalRequest::default()
+        };
+        let t0 = Instant::now();
+        let answer = match &self.backend {
+            Backend::Direct(b, slot) => b.evaluate_assembled(*slot, req),
+            Backend::Lockstep(port) => port.evaluate(req).await,
+            Backend::Cpu => Err("device-resident Newton without an evaluator".into()),
+        };
+        self.timers.evaluate_wait_s += t0.elapsed().as_secs_f64();
+        match answer? {
+            AssembledSystem {
+                resident:
+                    Some(ResidentAnswer::Fetched {
+                        q: nodes,
+                        residual_work,
+                    }),
+                ..
+            } => {
+                for (nd, x) in self.dofs.nodes.iter().zip(&nodes) {
+                    for (&i, &v) in node_local(nd).iter().zip(x) {
+                        if i != NONE {
+                            q[i] = v;
+                        }
+                    }
+                }
+                self.residual_work = Some(residual_work);
+                // The next solve starts from the host's iterate.
+                self.resident_upload = true;
+                Ok(())
+            }
+            _ => Err("the evaluator did not return the device's iterate".into()),
+        }
+    }
+
     /// What an evaluator needs for this iteration: the element states only when they
-    /// changed since the last request, the frozen scalars, the increments per node.
-    pub(super) fn eval_request(&mut self, q: &[f64], tangent: bool) -> EvalRequest {
+    /// changed since the last request, the frozen scalars, the increments per node
+    /// (none without `q`: a device-resident iteration continues from the device's).
+    pub(super) fn eval_request(&mut self, q: Option<&[f64]>, tangent: bool) -> EvalRequest {
         let states = (self.sent_version != Some(self.state_version)).then(|| {
             (0..self.model.elements.len())
                 .map(|e| (self.state.element(&self.model, e), self.state.eps[e]))
@@ -230,23 +294,25 @@ impl Simulation {
             scalars: self.frozen.clone(),
             // Removed unknowns are zero, except those of a driven support: they move by the
             // prescribed increment (as in [`Simulation::gather`]).
-            increments: self
-                .dofs
-                .nodes
-                .iter()
-                .zip(&self.prescribed)
-                .map(|(nd, [pu, pt])| {
-                    let idx = node_local(nd);
-                    std::array::from_fn(|k| match (idx[k], k / 3) {
-                        (NONE, 0) => pu[k % 3],
-                        (NONE, 1) => pt[k % 3],
-                        (NONE, _) => 0.0,
-                        (i, _) => q[i],
+            increments: q.map_or_else(Vec::new, |q| {
+                self.dofs
+                    .nodes
+                    .iter()
+                    .zip(&self.prescribed)
+                    .map(|(nd, [pu, pt])| {
+                        let idx = node_local(nd);
+                        std::array::from_fn(|k| match (idx[k], k / 3) {
+                            (NONE, 0) => pu[k % 3],
+                            (NONE, 1) => pt[k % 3],
+                            (NONE, _) => 0.0,
+                            (i, _) => q[i],
+                        })
                     })
-                })
-                .collect(),
+                    .collect()
+            }),
             tangent,
             device_extra: None,
+            resident: None,
         }
     }
 

@@ -164,8 +164,21 @@ pub struct Simulation {
     /// `--solve device`: the attached lockstep evaluator also solves each frozen-scalar
     /// Newton system on the device ([`Self::set_device_solve`]).
     device_solve: bool,
-    /// The device's solution of the last evaluation, when it solved one.
+    /// The device's solution of the last evaluation, when it solved one (empty on success
+    /// when the device kept it: device-resident Newton).
     device_x: Option<crate::integrator::evaluate::DeviceSolution>,
+    /// Device-resident Newton: the device keeps the Newton iterate and adds its own
+    /// corrections; only the relative residual comes back per iteration
+    /// ([`Self::set_device_resident`]).
+    device_resident: bool,
+    /// Device-resident Newton: the next evaluation uploads the host's iterate (start of a
+    /// Newton solve) …
+    resident_upload: bool,
+    /// … or first restores the device's iterate before its last correction (undo).
+    resident_restore: bool,
+    /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
+    /// Newton); `None`: from `last_residual`.
+    residual_work: Option<f64>,
 }
 
 impl Simulation {
@@ -229,6 +242,10 @@ impl Simulation {
             planar: parts.planar,
             device_solve: false,
             device_x: None,
+            device_resident: false,
+            resident_upload: false,
+            resident_restore: false,
+            residual_work: None,
         })
     }
 
@@ -399,6 +416,20 @@ impl Simulation {
     /// Whether the device solves this simulation's Newton systems.
     pub fn device_solve(&self) -> bool {
         self.device_solve
+    }
+
+    /// Device-resident Newton (with a device solve, [`Self::set_device_solve`]): the
+    /// device keeps each Newton iterate, adds its own corrections and answers only the
+    /// relative residual and the solve's outcome per iteration; the host fetches the
+    /// iterate it accepts. Only for members whose nodal terms do not depend on the
+    /// iterate (every member the device solver covers).
+    pub fn set_device_resident(&mut self, on: bool) {
+        self.device_resident = on;
+    }
+
+    /// Whether the device keeps this simulation's Newton iterates.
+    pub fn device_resident(&self) -> bool {
+        self.device_resident && self.device_solve
     }
 
     fn attach(&mut self, backend: Backend) -> bool {

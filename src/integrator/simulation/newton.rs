@@ -33,6 +33,14 @@ impl Simulation {
         // (not freshly evaluated) tangent, and the iterate before it.
         let mut last_kept = false;
         let mut q_prev = vec![0.0; n];
+        // Device-resident Newton: the device holds the iterate from the first evaluation
+        // on (uploaded then), adds its own corrections, and the host fetches the iterate
+        // it accepts; `q` is stale in between.
+        let resident =
+            self.device_resident() && mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+        self.resident_upload = true;
+        self.resident_restore = false;
+        self.residual_work = None;
         for it in 0..=self.params.max_iter {
             // Modified Newton keeps the factorized tangent of this mode (from an earlier
             // iteration, outer round or step) and evaluates the residual only.
@@ -59,7 +67,11 @@ impl Simulation {
                 // The kept tangent no longer contracts fast enough (or sent the iterate
                 // astray): undo its correction and take a fresh tangent there (that
                 // iterate's residual is already in the history).
-                q.copy_from_slice(&q_prev);
+                if resident {
+                    self.resident_restore = true;
+                } else {
+                    q.copy_from_slice(&q_prev);
+                }
                 self.timed_assemble(q, mode, true, &mut r).await;
                 fresh = true;
             } else {
@@ -71,7 +83,16 @@ impl Simulation {
                     });
                 }
                 if accepted(res, &history[..history.len() - 1]) {
-                    self.last_residual.clone_from(&r);
+                    if resident {
+                        if let Err(e) = self.fetch_resident(q).await {
+                            return Err(StepFailure {
+                                reason: format!("device-resident Newton: {e}"),
+                                residuals: history,
+                            });
+                        }
+                    } else {
+                        self.last_residual.clone_from(&r);
+                    }
                     return Ok((it, history));
                 }
             }
@@ -93,6 +114,8 @@ impl Simulation {
                     if fresh {
                         self.factored = Some(mode);
                     }
+                    // (Device-resident: the device added the correction itself; `x` is
+                    // empty.)
                     for (nd, xn) in self.dofs.nodes.iter().zip(&x) {
                         for (&i, &v) in super::node_local(nd).iter().zip(xn) {
                             if i != NONE {
@@ -127,9 +150,11 @@ impl Simulation {
                     residuals: history,
                 });
             }
-            q_prev.copy_from_slice(q);
-            for (qi, di) in q.iter_mut().zip(&r) {
-                *qi += di;
+            if !resident {
+                q_prev.copy_from_slice(q);
+                for (qi, di) in q.iter_mut().zip(&r) {
+                    *qi += di;
+                }
             }
             last_kept = !fresh;
         }
