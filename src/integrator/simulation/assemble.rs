@@ -53,7 +53,7 @@ impl Simulation {
         if device {
             self.nodal_terms(q, false, r, &mut scale);
         }
-        let resident = device && self.device_resident;
+        let resident = device && self.resident_now;
         if external {
             let upload = !resident || self.resident_upload;
             let mut req = self.eval_request(upload.then_some(q), tangent);

@@ -171,6 +171,8 @@ pub struct Simulation {
     /// corrections; only the relative residual comes back per iteration
     /// ([`Self::set_device_resident`]).
     device_resident: bool,
+    /// Device-resident Newton is in progress (set by `newton` for the duration of a solve).
+    resident_now: bool,
     /// Device-resident Newton: the next evaluation uploads the host's iterate (start of a
     /// Newton solve) …
     resident_upload: bool,
@@ -243,6 +245,7 @@ impl Simulation {
             device_solve: false,
             device_x: None,
             device_resident: false,
+            resident_now: false,
             resident_upload: false,
             resident_restore: false,
             residual_work: None,

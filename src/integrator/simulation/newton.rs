@@ -24,6 +24,20 @@ impl Simulation {
         q: &mut [f64],
         mode: Mode,
     ) -> Result<(usize, Vec<f64>), StepFailure> {
+        // Device-resident evaluations exist only inside a Newton solve (the test entry
+        // points of `probe.rs` assemble on the host's `q` and read the residual back).
+        self.resident_now =
+            self.device_resident() && mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+        let out = self.newton_iterations(q, mode).await;
+        self.resident_now = false;
+        out
+    }
+
+    async fn newton_iterations(
+        &mut self,
+        q: &mut [f64],
+        mode: Mode,
+    ) -> Result<(usize, Vec<f64>), StepFailure> {
         let n = self.dofs.n;
         let mut r = vec![0.0; n];
         let mut history = Vec::new();
@@ -36,8 +50,7 @@ impl Simulation {
         // Device-resident Newton: the device holds the iterate from the first evaluation
         // on (uploaded then), adds its own corrections, and the host fetches the iterate
         // it accepts; `q` is stale in between.
-        let resident =
-            self.device_resident() && mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+        let resident = self.resident_now;
         self.resident_upload = true;
         self.resident_restore = false;
         self.residual_work = None;
