@@ -396,7 +396,9 @@ fn berr_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 //   report[2m]     = max |r| / s_k        (the host's relative residual; −1 if not finite)
 //   report[2m + 1] = backward error of the solve when it succeeded, −status otherwise
 //   rwork[m]       = Σ |r · q|             (the residual work of the energy check)
-// then, if the solve succeeded, q_prev2 ← q_prev, q_prev ← q and q ← q + x. RESTORE (bit 3),
+// then q_prev2 ← q_prev, q_prev ← q (the evaluated iterate, which a fetch reads) and, if a
+// solve ran and succeeded, q ← q + x (without a solve in the operation word — an iterate
+// the host expects to accept — the iterate stays). RESTORE (bit 3),
 // before the gather pass: q ← q_prev2 (modified Newton's undo of the correction made with
 // a kept tangent that led to the iterate evaluated last, whose own correction the device
 // already applied).
@@ -463,13 +465,19 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if !finite { worst = -1.0; }
     report[2u * m] = worst;
     rwork[m] = work;
+    // Without a solve in the operation word (an iterate the host expects to accept) the
+    // iterate stays; a failed solve leaves it too.
+    let solved = (ops[m] & 2u) != 0u;
     let st = status[m];
-    if st != OK {
+    var apply = false;
+    if !solved {
+        report[2u * m + 1u] = 0.0;
+    } else if st != OK {
         report[2u * m + 1u] = -Real(st);
-        return;
+    } else {
+        report[2u * m + 1u] = berr[m];
+        apply = true;
     }
-    report[2u * m + 1u] = berr[m];
-    if (ops[m] & 2u) == 0u { return; }
     let x = m * 9u * prm.npn;
     for (var i = 0u; i < n; i++) {
         let mi = mask[m * prm.npn + i];
@@ -480,7 +488,7 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let p = 9u * (m * prm.npn + i) + r;
             q_prev2[p] = q_prev[p];
             q_prev[p] = q;
-            node_x[at] = q + xs[x + 9u * i + r];
+            if apply { node_x[at] = q + xs[x + 9u * i + r]; }
         }
     }
 }

@@ -165,7 +165,17 @@ fn device_solve_matches_cpu_member_by_member() {
             assert_eq!(c.outcome.steps, g.outcome.steps, "{tag}");
             let (ic, ig) = (c.outcome.newton_iters_total, g.outcome.newton_iters_total);
             match newton {
-                NewtonVariant::Full => assert_eq!(ic, ig, "{tag}"),
+                NewtonVariant::Full => {
+                    assert_eq!(ic, ig, "{tag}");
+                    // The same tangents skipped (device-resident: no factorization of an
+                    // iterate predicted to be accepted), so the same factorizations.
+                    if g.outcome.timers.tangents_skipped > 0 {
+                        assert_eq!(
+                            c.outcome.timers.factorizations, g.outcome.timers.factorizations,
+                            "{tag}"
+                        );
+                    }
+                }
                 NewtonVariant::Modified => {
                     assert!(
                         ic.abs_diff(ig) <= 2 + ic / 50,
@@ -247,16 +257,31 @@ fn device_resident_newton_matches_host_update_with_16_bytes_per_iteration() {
             "{tag}"
         );
         let npn = 11; // nodes per slot: 10 elements
-        assert_eq!(sv.fetch_bytes_down, (72 * npn + 8) * sv.fetches, "{tag}");
+        assert_eq!(
+            sv.fetch_bytes_down,
+            (72 * npn + 8) * (sv.fetches + sv.iterates_sent),
+            "{tag}"
+        );
         let iters: usize = res.iter().map(|r| r.outcome.newton_iters_total).sum();
         println!(
-            "{tag}: {} resident iterations, {} fetches; bytes down per member-iteration {:.0} (host update {:.0}), up {:.0} (host update {:.0}); {iters} Newton iterations",
+            "{tag}: {} resident iterations, {} fetches, {} iterates sent with the report; {} batch iterations (host update {}); bytes down per member-iteration {:.0} (host update {:.0}), up {:.0} (host update {:.0}); {iters} Newton iterations",
             sv.resident_iterations,
             sv.fetches,
+            sv.iterates_sent,
+            rs.iterations,
+            hs.iterations,
             k.bytes_down as f64 / sv.requests as f64,
             hs.gpu.bytes_down as f64 / hs.serve.requests as f64,
             k.bytes_up as f64 / sv.requests as f64,
             hs.gpu.bytes_up as f64 / hs.serve.requests as f64,
+        );
+        // The accepted iterate mostly rides with its report (measured: 167 of 180 full,
+        // 176 of 210 modified), so the fetches add few batch iterations (measured 2.7 %).
+        assert!(
+            rs.iterations * 100 <= hs.iterations * 105,
+            "{tag}: {} batch iterations against {}",
+            rs.iterations,
+            hs.iterations
         );
         assert!(
             k.bytes_down * 3 < hs.gpu.bytes_down,
@@ -273,10 +298,19 @@ fn device_resident_newton_matches_host_update_with_16_bytes_per_iteration() {
                 h.outcome.newton_iters_total, r.outcome.newton_iters_total,
                 "{tag}"
             );
-            assert_eq!(
-                h.outcome.timers.factorizations, r.outcome.timers.factorizations,
-                "{tag}"
+            // Full Newton: the iterate predicted to be accepted is neither factorized nor
+            // solved on the device-resident path (as on the CPU path), so fewer
+            // factorizations; modified Newton never predicts.
+            let (fh, fr) = (
+                h.outcome.timers.factorizations,
+                r.outcome.timers.factorizations,
             );
+            match newton {
+                NewtonVariant::Full => {
+                    assert!(fr <= fh, "{tag}: {fr} vs {fh}")
+                }
+                NewtonVariant::Modified => assert_eq!(fh, fr, "{tag}"),
+            }
             let (sh, sr) = (h.state.as_ref().unwrap(), r.state.as_ref().unwrap());
             let x = rel(
                 sh.r.iter()

@@ -42,7 +42,10 @@ pub struct ServeTimers {
     /// Accepted iterates fetched (one per converged device-resident Newton solve) and the
     /// bytes they brought back.
     pub fetches: u64,
-    /// Bytes read back for [`Self::fetches`].
+    /// Iterates sent back with their report (the host expected or might accept them).
+    pub iterates_sent: u64,
+    /// Bytes read back for [`Self::fetches`] and [`Self::iterates_sent`] (72 per node slot
+    /// and 8 each).
     pub fetch_bytes_down: u64,
 }
 
@@ -133,10 +136,11 @@ fn device_outcome(status: u32, berr: f64, x: &[f64], n_nodes: usize) -> DeviceSo
 }
 
 /// [`device_outcome`] of a device-resident iteration's [`Report`].
-fn resident_outcome(r: &Report) -> ResidentAnswer {
+fn resident_outcome(r: &Report, iterate: Option<(Vec<[f64; 9]>, f64)>) -> ResidentAnswer {
     ResidentAnswer::Iterated {
         residual: r.residual,
         solve: device_outcome(r.status, r.berr, &[], 0).map(|_| ()),
+        iterate,
     }
 }
 
@@ -356,9 +360,11 @@ impl GpuEvaluator {
         let mut answers = Vec::with_capacity(reqs.len());
         let mut pending = Vec::with_capacity(reqs.len());
         let mut ops: Vec<(usize, u32)> = Vec::new();
-        // Device-resident slots of this dispatch: iterating, fetching.
+        // Device-resident slots of this dispatch: iterating, fetching, and iterating with
+        // the iterate sent back (predicted acceptance).
         let mut iterating: Vec<usize> = Vec::new();
         let mut fetching: Vec<usize> = Vec::new();
+        let mut with_iterate: Vec<usize> = Vec::new();
         for (slot, req) in reqs {
             let resident = req.resident.filter(|_| self.device[slot]);
             if resident.is_some_and(|r| r.fetch) {
@@ -381,6 +387,12 @@ impl GpuEvaluator {
                             op |= OP_UPDATE;
                             if r.restore {
                                 op |= OP_RESTORE;
+                            }
+                            if r.predict_accept && !req.tangent {
+                                op &= !OP_SOLVE;
+                                with_iterate.push(slot);
+                            } else if r.send_iterate {
+                                with_iterate.push(slot);
                             }
                             iterating.push(slot);
                         }
@@ -438,14 +450,15 @@ impl GpuEvaluator {
                 status: !per_iteration.is_empty(),
                 x: per_iteration,
                 report: iterating.clone(),
-                fetch: fetching.clone(),
+                fetch: fetching.iter().chain(&with_iterate).copied().collect(),
             };
             let t0 = Instant::now();
             let npn = self.assembler.layout().nodes_per_slot as u64;
             let st = &mut self.serve_timers;
             st.resident_iterations += what.report.len() as u64;
             st.resident_bytes_down += 16 * what.report.len() as u64;
-            st.fetches += what.fetch.len() as u64;
+            st.fetches += fetching.len() as u64;
+            st.iterates_sent += with_iterate.len() as u64;
             st.fetch_bytes_down += (72 * npn + 8) * what.fetch.len() as u64;
             match solver.read_back(&what) {
                 Ok(s) => solved = Some(s),
@@ -453,7 +466,14 @@ impl GpuEvaluator {
             }
             self.kernel.timers.bytes_down += solver.last_bytes_down;
             self.kernel.timers.bytes_up += std::mem::take(&mut solver.bytes_up);
-            self.kernel.timers.readback_s += t0.elapsed().as_secs_f64();
+            // When every evaluated member is device-resident the assembly read nothing
+            // back, so this read is where the wait for the passes happens: kernel time.
+            let waited = t0.elapsed().as_secs_f64();
+            if !pending.is_empty() && iterating.len() == pending.len() {
+                self.kernel.timers.kernel_s += waited;
+            } else {
+                self.kernel.timers.readback_s += waited;
+            }
         }
         let t0 = Instant::now();
         // Unpacking is per member and independent: in parallel.
@@ -461,6 +481,7 @@ impl GpuEvaluator {
         let npn = self.assembler.layout().nodes_per_slot;
         let solved = &solved;
         let iterating = &iterating;
+        let with_iterate = &with_iterate;
         answers.par_extend(pending.par_iter().map(|&(slot, tangent)| {
             let (n_elems, n_nodes) = sizes[slot];
             let out = match &res {
@@ -468,9 +489,18 @@ impl GpuEvaluator {
                     let report = solved
                         .as_ref()
                         .and_then(|s| s.reports.iter().find(|r| r.0 == slot));
+                    let iterate = with_iterate
+                        .contains(&slot)
+                        .then(|| {
+                            solved
+                                .as_ref()
+                                .and_then(|s| s.fetched.iter().find(|f| f.0 == slot))
+                                .map(|(_, f)| (f.q[..n_nodes].to_vec(), f.residual_work))
+                        })
+                        .flatten();
                     match report {
                         Some((_, r)) => Ok(AssembledSystem {
-                            resident: Some(resident_outcome(r)),
+                            resident: Some(resident_outcome(r, iterate)),
                             ..AssembledSystem::default()
                         }),
                         None => Err("the device did not report a resident iteration".into()),

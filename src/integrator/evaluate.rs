@@ -74,6 +74,15 @@ pub struct Resident {
     /// No evaluation: answer the iterate evaluated last before the device's last correction
     /// (the one the host accepted) and its residual work ([`ResidentAnswer::Fetched`]).
     pub fetch: bool,
+    /// The host expects to accept this iterate (full Newton's quadratic prediction, as the
+    /// CPU path's tangent skip): evaluate the residual only, neither factorize nor solve
+    /// nor update, and send the iterate back with the report
+    /// ([`ResidentAnswer::Iterated::iterate`]), which saves the fetch's round trip.
+    pub predict_accept: bool,
+    /// Send the evaluated iterate back with the report even though it is solved and
+    /// updated as usual (the host may accept it: a speculative fetch, 72 bytes per node,
+    /// that saves a round trip when it does).
+    pub send_iterate: bool,
 }
 
 /// The answer to a device-resident request.
@@ -87,6 +96,9 @@ pub enum ResidentAnswer {
         residual: f64,
         /// The device solve's outcome.
         solve: Result<(), String>,
+        /// With [`Resident::predict_accept`] or [`Resident::send_iterate`]: the evaluated
+        /// iterate per node and its residual work.
+        iterate: Option<(Vec<[f64; 9]>, f64)>,
     },
     /// A fetch: the accepted iterate per node (node-local order) and `Σ |R_i q_i|` there.
     Fetched {

@@ -840,8 +840,9 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
                 "resident_bytes_down_per_iteration": d.stats.serve.resident_bytes_down as f64
                     / d.stats.serve.resident_iterations.max(1) as f64,
                 "fetches": d.stats.serve.fetches,
+                "iterates_sent": d.stats.serve.iterates_sent,
                 "fetch_bytes_down_each": d.stats.serve.fetch_bytes_down as f64
-                    / d.stats.serve.fetches.max(1) as f64,
+                    / (d.stats.serve.fetches + d.stats.serve.iterates_sent).max(1) as f64,
             });
             gpu_model_json(&mut o, d, &a);
             obj["device"] = o;
@@ -919,11 +920,12 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             );
             if sv.resident_iterations > 0 {
                 println!(
-                    "device-resident Newton: {} iterations at {:.0} B down each, {} accepted iterates fetched at {:.0} B each",
+                    "device-resident Newton: {} iterations at {:.0} B down each; iterates back: {} with their report, {} fetched alone, {:.0} B each",
                     sv.resident_iterations,
                     sv.resident_bytes_down as f64 / sv.resident_iterations as f64,
+                    sv.iterates_sent,
                     sv.fetches,
-                    sv.fetch_bytes_down as f64 / sv.fetches.max(1) as f64
+                    sv.fetch_bytes_down as f64 / (sv.fetches + sv.iterates_sent).max(1) as f64
                 );
             }
             println!("device solve stages: {}", stages_line(&g.stages));

@@ -63,6 +63,8 @@ impl Simulation {
                     restore: self.resident_restore,
                     scale,
                     fetch: false,
+                    predict_accept: self.resident_predict && !tangent,
+                    send_iterate: self.resident_send,
                 });
             }
             if device {
@@ -83,13 +85,20 @@ impl Simulation {
             self.timers.evaluate_wait_s += t0.elapsed().as_secs_f64();
             match answer {
                 Ok(AssembledSystem {
-                    resident: Some(ResidentAnswer::Iterated { residual, solve }),
+                    resident:
+                        Some(ResidentAnswer::Iterated {
+                            residual,
+                            solve,
+                            iterate,
+                        }),
                     ..
                 }) if resident => {
                     // The device evaluated the iterate it holds (the host's `q` is stale
-                    // until fetched) and added the correction if the solve succeeded.
+                    // until fetched) and added the correction if the solve succeeded (or,
+                    // predicted to be accepted, sent the iterate back instead).
                     self.resident_upload = false;
                     self.resident_restore = false;
+                    self.resident_iterate = iterate;
                     self.device_x = Some(solve.map(|()| Vec::new()));
                     return (residual, scale);
                 }
@@ -263,20 +272,30 @@ impl Simulation {
                     }),
                 ..
             } => {
-                for (nd, x) in self.dofs.nodes.iter().zip(&nodes) {
-                    for (&i, &v) in node_local(nd).iter().zip(x) {
-                        if i != NONE {
-                            q[i] = v;
-                        }
-                    }
-                }
-                self.residual_work = Some(residual_work);
-                // The next solve starts from the host's iterate.
-                self.resident_upload = true;
+                self.take_resident_iterate(q, &nodes, residual_work);
                 Ok(())
             }
             _ => Err("the evaluator did not return the device's iterate".into()),
         }
+    }
+
+    /// Takes the device's iterate (per node, node-local order) into `q`, with its residual
+    /// work; the next Newton solve starts from the host's iterate again.
+    pub(super) fn take_resident_iterate(
+        &mut self,
+        q: &mut [f64],
+        nodes: &[[f64; 9]],
+        residual_work: f64,
+    ) {
+        for (nd, x) in self.dofs.nodes.iter().zip(nodes) {
+            for (&i, &v) in node_local(nd).iter().zip(x) {
+                if i != NONE {
+                    q[i] = v;
+                }
+            }
+        }
+        self.residual_work = Some(residual_work);
+        self.resident_upload = true;
     }
 
     /// What an evaluator needs for this iteration: the element states only when they

@@ -178,6 +178,13 @@ pub struct Simulation {
     resident_upload: bool,
     /// … or first restores the device's iterate before its last correction (undo).
     resident_restore: bool,
+    /// … or expects to accept the iterate (no solve; the iterate comes back with the
+    /// report, into `resident_iterate`) …
+    resident_predict: bool,
+    /// … or may accept it (the iterate comes back with the report all the same).
+    resident_send: bool,
+    /// The iterate (per node) and its residual work sent back with the last report.
+    resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
     /// Newton); `None`: from `last_residual`.
     residual_work: Option<f64>,
@@ -248,6 +255,9 @@ impl Simulation {
             resident_now: false,
             resident_upload: false,
             resident_restore: false,
+            resident_predict: false,
+            resident_send: false,
+            resident_iterate: None,
             residual_work: None,
         })
     }

@@ -59,11 +59,21 @@ impl Simulation {
             // iteration, outer round or step) and evaluates the residual only.
             let reuse = modified && self.factored == Some(mode);
             // Full Newton on the CPU kernel skips the tangent of an iterate whose residual
-            // the history predicts to be accepted (and assembles it after all if not).
-            let skip =
-                !modified && matches!(self.backend, Backend::Cpu) && expect_accept(&history, tol);
+            // the history predicts to be accepted (and assembles it after all if not);
+            // device-resident Newton skips the factorization and solve there, and the
+            // iterate comes back with the report.
+            let skip = !modified
+                && (resident || matches!(self.backend, Backend::Cpu))
+                && expect_accept(&history, tol);
             self.timers.tangents_skipped += u64::from(skip);
+            self.resident_predict = skip;
+            // Device-resident: an iterate that may well be accepted comes back with its
+            // report, which saves the fetch's round trip.
+            self.resident_send =
+                resident && scaling::may_accept(it) && may_be_accepted(&history, tol, modified);
             let mut res = self.timed_assemble(q, mode, !reuse && !skip, &mut r).await;
+            self.resident_predict = false;
+            self.resident_send = false;
             let accepted = |res: f64, history: &[f64]| {
                 (res <= tol && scaling::may_accept(it)) || at_floor(history, res, tol, !modified)
             };
@@ -96,7 +106,9 @@ impl Simulation {
                     });
                 }
                 if accepted(res, &history[..history.len() - 1]) {
-                    if resident {
+                    if let (true, Some((nodes, rw))) = (resident, self.resident_iterate.take()) {
+                        self.take_resident_iterate(q, &nodes, rw);
+                    } else if resident {
                         if let Err(e) = self.fetch_resident(q).await {
                             return Err(StepFailure {
                                 reason: format!("device-resident Newton: {e}"),
@@ -229,6 +241,18 @@ fn quadratic(r2: f64, r1: f64) -> f64 {
     r1 * (r1 / r2) * (r1 / r2)
 }
 
+/// Whether the next residual after `history` may well be accepted (device-resident Newton
+/// then has the iterate sent back with its report): full Newton, the last residual within
+/// `√tol` (quadratic convergence with a unit constant reaches tol); modified Newton, the
+/// last contraction rate carried once more reaches tol.
+fn may_be_accepted(history: &[f64], tol: f64, modified: bool) -> bool {
+    match (history, modified) {
+        ([.., r1], false) => r1 * r1 <= tol,
+        ([.., r2, r1], true) => r1 < r2 && r1 * (r1 / r2) <= tol,
+        _ => false,
+    }
+}
+
 /// Whether the next residual after `history` is expected to be accepted: quadratic
 /// convergence takes it below `tol` (or onto the floor [`at_floor`] recognizes).
 fn expect_accept(history: &[f64], tol: f64) -> bool {
@@ -242,7 +266,7 @@ fn expect_accept(history: &[f64], tol: f64) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::{at_floor, expect_accept};
+    use super::{at_floor, expect_accept, may_be_accepted};
 
     const TOL: f64 = 1e-11;
 
@@ -258,6 +282,19 @@ mod tests {
         assert!(!at_floor(&[1.5], 3e-11, TOL, true));
         assert!(!expect_accept(&[1.5], TOL));
         assert!(!expect_accept(&[1.5, 0.11], TOL));
+    }
+
+    /// Device-resident Newton has the iterate sent back when the next residual may be
+    /// accepted: full Newton within √tol, modified Newton by its last contraction rate.
+    #[test]
+    fn an_iterate_is_sent_back_when_it_may_be_accepted() {
+        assert!(!may_be_accepted(&[], TOL, false));
+        assert!(may_be_accepted(&[3e-6], TOL, false));
+        assert!(!may_be_accepted(&[4e-6], TOL, false));
+        // Modified: 1e-9 at a rate of 1e-3 gives 1e-12.
+        assert!(may_be_accepted(&[1e-6, 1e-9], TOL, true));
+        assert!(!may_be_accepted(&[1e-7, 1e-9], TOL, true));
+        assert!(!may_be_accepted(&[1e-9], TOL, true));
     }
 
     /// The quadratic sign accepts only within 10·tol, and only far above the prediction:
