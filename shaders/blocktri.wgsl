@@ -364,7 +364,11 @@ fn factor_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(64)
 fn forward_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let j = job(gid.x, 2u);
-    if j.n == 0u || status[j.m] != OK { return; }
+    if j.n == 0u { return; }
+    // A solve with kept factors starts from their status: a non-finite earlier solve
+    // (NONFINITE comes from solves only) does not carry over, as in the CPU twin.
+    if j.lo == 0u && (ops[j.m] & 1u) == 0u && status[j.m] == NONFINITE { status[j.m] = OK; }
+    if status[j.m] != OK { return; }
     forward(j.m, j.lo, j.hi);
 }
 

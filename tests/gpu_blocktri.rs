@@ -470,4 +470,20 @@ fn device_solver_matches_twin() {
     let flags = s.run(&solve_only, false).unwrap();
     assert_eq!(s.last_bytes_down, 12 * b.nodes.len() as u64);
     assert!(flags.x.is_none());
+    // A non-finite right-hand side fails that solve only: the next solve with the same
+    // factors and a finite right-hand side succeeds again (as the twin, which keeps no
+    // status between solves).
+    let (m, _) = solve_only[0];
+    let n = b2.nodes[m];
+    let mut nan = vec![[0.0; 9]; n];
+    nan[0][0] = f64::NAN;
+    s.set_extra(m, &nan);
+    let bad = s.run(&solve_only, false).unwrap();
+    assert_eq!(bad.status[m], batched::NONFINITE, "member {m}");
+    s.set_extra(m, &vec![[0.0; 9]; n]);
+    let good = s.run(&solve_only, false).unwrap();
+    assert_eq!(
+        good.status[m], OK,
+        "member {m}: a non-finite solve stuck to its factors"
+    );
 }

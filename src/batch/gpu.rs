@@ -344,6 +344,11 @@ impl GpuEvaluator {
             // The device's copy may differ from the host's mirror.
             Some(r) if r.upload => self.assembler.set_increments_forced(slot, &req.increments),
             Some(_) => {}
+            // A host-side request on a slot the device owns (the test entry points of a
+            // resident member): the host copy is stale, upload everything.
+            None if self.device[slot] && self.resident => {
+                self.assembler.set_increments_forced(slot, &req.increments)
+            }
             None => self.assembler.set_increments(slot, &req.increments),
         }
         Ok(())
@@ -508,7 +513,8 @@ impl GpuEvaluator {
                 }
                 Ok(()) if device[slot] => {
                     let mut sys = asm.system(slot, n_nodes, n_elems, false);
-                    sys.solution = solved.as_ref().map(|s| {
+                    // (No status read back: this request did not ask the device to solve.)
+                    sys.solution = solved.as_ref().filter(|s| !s.status.is_empty()).map(|s| {
                         let x = s.x.as_deref().unwrap_or(&[]);
                         device_outcome(
                             s.status[slot],

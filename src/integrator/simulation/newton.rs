@@ -95,7 +95,17 @@ impl Simulation {
                 } else {
                     q.copy_from_slice(&q_prev);
                 }
-                self.timed_assemble(q, mode, true, &mut r).await;
+                // That iterate's residual was finite: a non-finite one now is the
+                // evaluator failing.
+                if !self.timed_assemble(q, mode, true, &mut r).await.is_finite() {
+                    self.resident_restore = false;
+                    return Err(StepFailure {
+                        reason: "the evaluation failed while undoing a correction made with a \
+                                 kept tangent"
+                            .into(),
+                        residuals: history,
+                    });
+                }
                 fresh = true;
             } else {
                 history.push(res);
