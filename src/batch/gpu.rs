@@ -67,6 +67,9 @@ pub struct GpuEvaluator {
     solver: Option<BlockTriSolver>,
     /// Per slot: its member's systems are solved on the device.
     device: Vec<bool>,
+    /// Per slot: its elements are active in the kernel (they stay active from one
+    /// evaluation to the next, so that an iterating member uploads nothing for them).
+    active: Vec<bool>,
     /// Device solves keep the Newton iterate on the device (device-resident Newton, the
     /// default; `false`: the correction comes back every iteration and the host adds it).
     resident: bool,
@@ -165,6 +168,7 @@ impl GpuEvaluator {
             serve_timers: ServeTimers::default(),
             solver: None,
             device: vec![false; slots],
+            active: vec![false; slots],
             resident: true,
             device_members: (0, 0),
         })
@@ -233,6 +237,8 @@ impl GpuEvaluator {
             scheme: sim.params().scheme,
         };
         let trans = sim.params().scheme.translational_dissipation();
+        // The slot's previous member may have had more elements: none stays active.
+        self.deactivate(slot);
         let ends: Vec<[usize; 2]> = sim.model().elements.iter().map(|e| e.nodes).collect();
         let masks = sim.dof_map().element_row_masks();
         let n_nodes = sim.model().n_nodes();
@@ -296,9 +302,19 @@ impl GpuEvaluator {
         on
     }
 
+    /// Marks every element slot of member slot `slot` inactive (the kernel skips them).
+    fn deactivate(&mut self, slot: usize) {
+        let base = slot * self.per_slot;
+        for e in 0..self.per_slot {
+            self.kernel.set_inactive(base + e);
+        }
+        self.active[slot] = false;
+    }
+
     /// Frees `slot` (its member finished).
     pub fn detach(&mut self, slot: usize) {
         self.ports[slot] = None;
+        self.deactivate(slot);
         if self.device[slot] {
             // The device changed the slot's increments: the next member uploads all.
             self.assembler.invalidate_increments(slot);
@@ -362,6 +378,21 @@ impl GpuEvaluator {
         reqs: Vec<(usize, EvalRequest)>,
     ) -> Vec<(usize, Result<AssembledSystem, String>)> {
         let t0 = Instant::now();
+        // Slots active from an earlier evaluation that evaluate nothing now go inactive
+        // (the evaluating ones are activated by packing).
+        let evaluating: Vec<bool> = {
+            let mut v = vec![false; self.sizes.len()];
+            for (slot, req) in &reqs {
+                let fetch = req.resident.is_some_and(|r| r.fetch) && self.device[*slot];
+                v[*slot] |= !fetch;
+            }
+            v
+        };
+        for slot in 0..self.sizes.len() {
+            if self.active[slot] && !evaluating[slot] {
+                self.deactivate(slot);
+            }
+        }
         let mut answers = Vec::with_capacity(reqs.len());
         let mut pending = Vec::with_capacity(reqs.len());
         let mut ops: Vec<(usize, u32)> = Vec::new();
@@ -549,10 +580,7 @@ impl GpuEvaluator {
             answers.push((slot, out));
         }
         for &(slot, _) in &pending {
-            let base = slot * self.per_slot;
-            for e in 0..self.sizes[slot].0 {
-                self.kernel.set_inactive(base + e);
-            }
+            self.active[slot] = true;
         }
         self.kernel.timers.unpack_s += t0.elapsed().as_secs_f64();
         answers

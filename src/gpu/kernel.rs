@@ -403,19 +403,26 @@ impl ElementKernel {
             self.put(2, I_X + c, i, x[c]);
         }
         self.set_scalars(i, s);
+        self.dirty[2][i] = true;
     }
 
     /// Writes the frozen scalars of slot `i` and marks it active (its increment is written
-    /// on the device, see [`Self::gather_increments_on_device`]).
+    /// on the device, see [`Self::gather_increments_on_device`]); the slot goes up with the
+    /// next dispatch only if that changed something (the scalars change once per staggered
+    /// round, not per Newton iteration).
     pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {
-        for (c, v) in [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu]
+        let vals = [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu, 1.0];
+        let cap = self.cap;
+        let changed = vals
             .iter()
             .enumerate()
-        {
-            self.put(2, I_S + c, i, *v);
+            .any(|(c, v)| self.host[2][(I_S + c) * cap + i].to_bits() != v.to_bits());
+        if changed {
+            for (c, v) in vals.iter().enumerate() {
+                self.put(2, I_S + c, i, *v);
+            }
+            self.dirty[2][i] = true;
         }
-        self.put(2, I_ACTIVE, i, 1.0);
-        self.dirty[2][i] = true;
     }
 
     /// From now on the increments ([`I_X`] fields) are written by a pass on the device
