@@ -10,7 +10,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::element::StepConsts;
-use crate::gpu::blocktri::{Readback, Report, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_UPDATE};
+use crate::gpu::blocktri::{Fetched, Readback, Report, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_UPDATE};
 use crate::gpu::kernel::KernelTimers;
 use crate::gpu::layout::AsmLayout;
 use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
@@ -452,7 +452,11 @@ impl GpuEvaluator {
             return answers;
         }
         let device = &self.device;
-        let is_resident = |m: usize| iterating.contains(&m);
+        let mut resident_slot = vec![false; self.sizes.len()];
+        for &m in &iterating {
+            resident_slot[m] = true;
+        }
+        let is_resident = |m: usize| resident_slot[m];
         let mut res = if pending.is_empty() {
             Ok(())
         } else {
@@ -515,27 +519,27 @@ impl GpuEvaluator {
         // Unpacking is per member and independent: in parallel.
         let (asm, sizes, device) = (&self.assembler, &self.sizes, &self.device);
         let npn = self.assembler.layout().nodes_per_slot;
-        let solved = &solved;
-        let iterating = &iterating;
-        let with_iterate = &with_iterate;
+        // Reports and iterates by slot (a slot posts one request per dispatch, so an
+        // iterate read back belongs to its fetch or rides with its report).
+        let mut report_of: Vec<Option<&Report>> = vec![None; sizes.len()];
+        let mut iterate_of: Vec<Option<&Fetched>> = vec![None; sizes.len()];
+        if let Some(s) = &solved {
+            for (m, r) in &s.reports {
+                report_of[*m] = Some(r);
+            }
+            for (m, f) in &s.fetched {
+                iterate_of[*m] = Some(f);
+            }
+        }
+        let (solved, report_of, iterate_of) = (&solved, &report_of, &iterate_of);
         answers.par_extend(pending.par_iter().map(|&(slot, tangent)| {
             let (n_elems, n_nodes) = sizes[slot];
             let out = match &res {
-                Ok(()) if iterating.contains(&slot) => {
-                    let report = solved
-                        .as_ref()
-                        .and_then(|s| s.reports.iter().find(|r| r.0 == slot));
-                    let iterate = with_iterate
-                        .contains(&slot)
-                        .then(|| {
-                            solved
-                                .as_ref()
-                                .and_then(|s| s.fetched.iter().find(|f| f.0 == slot))
-                                .map(|(_, f)| (f.q[..n_nodes].to_vec(), f.residual_work))
-                        })
-                        .flatten();
-                    match report {
-                        Some((_, r)) => Ok(AssembledSystem {
+                Ok(()) if is_resident(slot) => {
+                    let iterate =
+                        iterate_of[slot].map(|f| (f.q[..n_nodes].to_vec(), f.residual_work));
+                    match report_of[slot] {
+                        Some(r) => Ok(AssembledSystem {
                             resident: Some(resident_outcome(r, iterate)),
                             ..AssembledSystem::default()
                         }),
@@ -564,8 +568,8 @@ impl GpuEvaluator {
         for slot in fetching {
             let n_nodes = self.sizes[slot].1;
             let out = match (&res, solved.as_ref()) {
-                (Ok(()), Some(s)) => match s.fetched.iter().find(|f| f.0 == slot) {
-                    Some((_, f)) => Ok(AssembledSystem {
+                (Ok(()), Some(_)) => match iterate_of[slot] {
+                    Some(f) => Ok(AssembledSystem {
                         resident: Some(ResidentAnswer::Fetched {
                             q: f.q[..n_nodes].to_vec(),
                             residual_work: f.residual_work,

@@ -10,8 +10,8 @@
 
 use super::context::{GpuContext, Precision};
 use super::kernel::{
-    shader_precision, take_runs, write_scalars, ElementKernel, KernelMode, KernelTimers, Readback,
-    TangentSlots,
+    index_runs, shader_precision, take_runs, write_scalars, ElementKernel, KernelMode,
+    KernelTimers, Readback, TangentSlots,
 };
 use super::layout::{AsmLayout, A_NODE};
 use super::GpuError;
@@ -525,10 +525,10 @@ impl Assembler {
         // asked for it: one range per run of adjacent such members.
         let w = ElementKernel::width(self.precision) as u64;
         let (r, k) = (l.residual_per_member(), l.tangent_per_member());
-        let residual = member_runs(pending.iter().map(|p| p.0).filter(|&m| residual_back(m)))
+        let residual = index_runs(pending.iter().map(|p| p.0).filter(|&m| residual_back(m)))
             .into_iter()
             .map(|(lo, hi)| ((lo * r) as u64 * w, ((hi - lo) * r) as u64 * w));
-        let tangent = member_runs(
+        let tangent = index_runs(
             pending
                 .iter()
                 .filter(|p| p.1 && blocks_back(p.0))
@@ -587,20 +587,6 @@ impl Assembler {
             resident: None,
         }
     }
-}
-
-/// Runs `(lo, hi)` of adjacent member slots among `members`.
-fn member_runs(members: impl Iterator<Item = usize>) -> Vec<(usize, usize)> {
-    let mut sorted: Vec<usize> = members.collect();
-    sorted.sort_unstable();
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    for m in sorted {
-        match runs.last_mut() {
-            Some(last) if last.1 == m => last.1 = m + 1,
-            _ => runs.push((m, m + 1)),
-        }
-    }
-    runs
 }
 
 fn compute_pipeline(ctx: &GpuContext, label: &str, src: &str) -> wgpu::ComputePipeline {

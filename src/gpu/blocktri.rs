@@ -7,6 +7,7 @@
 //! (12 bytes), the solution when wanted.
 
 use super::context::{GpuContext, Precision};
+use super::kernel::index_runs;
 use super::GpuError;
 use crate::linsolve::batched::BatchLayout;
 
@@ -523,7 +524,8 @@ impl BlockTriSolver {
         }
         if new != self.ops_host {
             // Only the words that changed.
-            for (lo, hi) in changed_runs(&self.ops_host, &new) {
+            let changed = (0..new.len()).filter(|&i| new[i] != self.ops_host[i]);
+            for (lo, hi) in super::kernel::index_runs(changed) {
                 self.queue.write_buffer(
                     &self.ops,
                     4 * lo as u64,
@@ -578,15 +580,15 @@ impl BlockTriSolver {
             copies.push((&self.status, 0, 4 * mb));
             copies.push((&self.berr, 0, 8 * mb));
         }
-        let x_runs = slot_runs(&what.x);
+        let x_runs = index_runs(what.x.iter().copied());
         for &(lo, hi) in &x_runs {
             copies.push((&self.xs, per * lo as u64, per * (hi - lo) as u64));
         }
-        let r_runs = slot_runs(&what.report);
+        let r_runs = index_runs(what.report.iter().copied());
         for &(lo, hi) in &r_runs {
             copies.push((&self.resident[2], 16 * lo as u64, 16 * (hi - lo) as u64));
         }
-        let f_runs = slot_runs(&what.fetch);
+        let f_runs = index_runs(what.fetch.iter().copied());
         for &(lo, hi) in &f_runs {
             copies.push((&self.resident[0], per * lo as u64, per * (hi - lo) as u64));
             copies.push((&self.resident[3], 8 * lo as u64, 8 * (hi - lo) as u64));
@@ -666,33 +668,4 @@ impl BlockTriSolver {
         self.staging.unmap();
         Ok(out)
     }
-}
-
-/// Runs `(lo, hi)` of adjacent slots among `slots` (sorted, without duplicates).
-fn slot_runs(slots: &[usize]) -> Vec<(usize, usize)> {
-    let mut sorted = slots.to_vec();
-    sorted.sort_unstable();
-    sorted.dedup();
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    for m in sorted {
-        match runs.last_mut() {
-            Some(last) if last.1 == m => last.1 = m + 1,
-            _ => runs.push((m, m + 1)),
-        }
-    }
-    runs
-}
-
-/// Runs `(lo, hi)` of indices where `old` and `new` differ.
-fn changed_runs(old: &[u32], new: &[u32]) -> Vec<(usize, usize)> {
-    let mut runs: Vec<(usize, usize)> = Vec::new();
-    for (i, (a, b)) in old.iter().zip(new).enumerate() {
-        if a != b {
-            match runs.last_mut() {
-                Some(last) if last.1 == i => last.1 = i + 1,
-                _ => runs.push((i, i + 1)),
-            }
-        }
-    }
-    runs
 }

@@ -631,6 +631,22 @@ pub(crate) fn write_scalars(
 /// the host mirrors of clean slots are current, so re-sending them is harmless.
 const MERGE_GAP: usize = 32;
 
+/// The runs `(lo, hi)` of adjacent indices among `indices` (in any order, repeats
+/// allowed): one copy per run of member slots.
+pub(crate) fn index_runs(indices: impl IntoIterator<Item = usize>) -> Vec<(usize, usize)> {
+    let mut sorted: Vec<usize> = indices.into_iter().collect();
+    sorted.sort_unstable();
+    sorted.dedup();
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    for m in sorted {
+        match runs.last_mut() {
+            Some(last) if last.1 == m => last.1 = m + 1,
+            _ => runs.push((m, m + 1)),
+        }
+    }
+    runs
+}
+
 /// The runs `(lo, hi)` of set flags, clearing them; runs closer than [`MERGE_GAP`] are
 /// merged.
 pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {

@@ -55,16 +55,13 @@ impl Simulation {
         }
         let resident = device && self.resident_now;
         if external {
-            let upload = !resident || self.resident_upload;
+            let upload = !resident || self.resident_next.upload;
             let mut req = self.eval_request(upload.then_some(q), tangent);
             if resident {
                 req.resident = Some(Resident {
-                    upload,
-                    restore: self.resident_restore,
                     scale,
-                    fetch: false,
-                    predict_accept: self.resident_predict && !tangent,
-                    send_iterate: self.resident_send,
+                    predict_accept: self.resident_next.predict_accept && !tangent,
+                    ..self.resident_next
                 });
             }
             if device {
@@ -96,8 +93,8 @@ impl Simulation {
                     // The device evaluated the iterate it holds (the host's `q` is stale
                     // until fetched) and added the correction if the solve succeeded (or,
                     // predicted to be accepted, sent the iterate back instead).
-                    self.resident_upload = false;
-                    self.resident_restore = false;
+                    self.resident_next.upload = false;
+                    self.resident_next.restore = false;
                     self.resident_iterate = iterate;
                     self.device_x = Some(solve.map(|()| Vec::new()));
                     return (residual, scale);
@@ -295,7 +292,7 @@ impl Simulation {
             }
         }
         self.residual_work = Some(residual_work);
-        self.resident_upload = true;
+        self.resident_next.upload = true;
     }
 
     /// What an evaluator needs for this iteration: the element states only when they

@@ -173,16 +173,10 @@ pub struct Simulation {
     device_resident: bool,
     /// Device-resident Newton is in progress (set by `newton` for the duration of a solve).
     resident_now: bool,
-    /// Device-resident Newton: the next evaluation uploads the host's iterate (start of a
-    /// Newton solve) …
-    resident_upload: bool,
-    /// … or first restores the device's iterate before its last correction (undo).
-    resident_restore: bool,
-    /// … or expects to accept the iterate (no solve; the iterate comes back with the
-    /// report, into `resident_iterate`) …
-    resident_predict: bool,
-    /// … or may accept it (the iterate comes back with the report all the same).
-    resident_send: bool,
+    /// Device-resident Newton: what the next evaluation asks of the device (upload the
+    /// host's iterate, restore, predicted acceptance, send the iterate back; its `scale`
+    /// is filled in when it is posted).
+    resident_next: crate::integrator::evaluate::Resident,
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
@@ -253,10 +247,7 @@ impl Simulation {
             device_x: None,
             device_resident: false,
             resident_now: false,
-            resident_upload: false,
-            resident_restore: false,
-            resident_predict: false,
-            resident_send: false,
+            resident_next: Default::default(),
             resident_iterate: None,
             residual_work: None,
         })

@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use super::{Backend, Mode, Simulation};
 use crate::integrator::dofs::NONE;
+use crate::integrator::evaluate::Resident;
 use crate::integrator::params::NewtonVariant;
 use crate::integrator::report::{StepFailure, ROUNDOFF_RESIDUAL};
 use crate::integrator::scaling;
@@ -51,8 +52,10 @@ impl Simulation {
         // on (uploaded then), adds its own corrections, and the host fetches the iterate
         // it accepts; `q` is stale in between.
         let resident = self.resident_now;
-        self.resident_upload = true;
-        self.resident_restore = false;
+        self.resident_next = Resident {
+            upload: true,
+            ..Resident::default()
+        };
         self.residual_work = None;
         for it in 0..=self.params.max_iter {
             // Modified Newton keeps the factorized tangent of this mode (from an earlier
@@ -66,14 +69,14 @@ impl Simulation {
                 && (resident || matches!(self.backend, Backend::Cpu))
                 && expect_accept(&history, tol);
             self.timers.tangents_skipped += u64::from(skip);
-            self.resident_predict = skip;
+            self.resident_next.predict_accept = skip;
             // Device-resident: an iterate that may well be accepted comes back with its
             // report, which saves the fetch's round trip.
-            self.resident_send =
+            self.resident_next.send_iterate =
                 resident && scaling::may_accept(it) && may_be_accepted(&history, tol, modified);
             let mut res = self.timed_assemble(q, mode, !reuse && !skip, &mut r).await;
-            self.resident_predict = false;
-            self.resident_send = false;
+            self.resident_next.predict_accept = false;
+            self.resident_next.send_iterate = false;
             let accepted = |res: f64, history: &[f64]| {
                 (res <= tol && scaling::may_accept(it)) || at_floor(history, res, tol, !modified)
             };
@@ -91,14 +94,14 @@ impl Simulation {
                 // astray): undo its correction and take a fresh tangent there (that
                 // iterate's residual is already in the history).
                 if resident {
-                    self.resident_restore = true;
+                    self.resident_next.restore = true;
                 } else {
                     q.copy_from_slice(&q_prev);
                 }
                 // That iterate's residual was finite: a non-finite one now is the
                 // evaluator failing.
                 if !self.timed_assemble(q, mode, true, &mut r).await.is_finite() {
-                    self.resident_restore = false;
+                    self.resident_next.restore = false;
                     return Err(StepFailure {
                         reason: "the evaluation failed while undoing a correction made with a \
                                  kept tangent"
