@@ -69,16 +69,32 @@ impl Simulation {
     }
 
     /// Checks energy and the dissipation identity of a converged increment; on success
-    /// returns the new state, its invariants, D and W.
+    /// returns the new state, its invariants, D, W and the consistent scalars. A refusal
+    /// carries the consistent scalars too: the staggered loop's next frozen scalars.
     pub(super) fn check(
         &self,
         q: &[f64],
         mode: Mode,
-    ) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), String> {
+    ) -> Result<(State, Invariants, f64, f64, Vec<FrozenScalars>), Refusal> {
         let (next, diss, consistent) = self.advance(q, mode);
-        check_element_turn(&next)?;
+        match self.check_advanced(q, mode, &next, diss) {
+            Ok((inv, w)) => Ok((next, inv, diss, w, consistent)),
+            Err(reason) => Err(Refusal { reason, consistent }),
+        }
+    }
+
+    /// The checks of [`Self::check`] on the state `next` that `q` produces, with its
+    /// predicted dissipation `diss`: its invariants and W, or why it is refused.
+    fn check_advanced(
+        &self,
+        q: &[f64],
+        mode: Mode,
+        next: &State,
+        diss: f64,
+    ) -> Result<(Invariants, f64), String> {
+        check_element_turn(next)?;
         self.check_rod_pairs(&next.r)?;
-        let inv = invariants(&self.model, &self.data, &next);
+        let inv = invariants(&self.model, &self.data, next);
         let w = self.external_work(q, mode);
         let (h0, h1) = (self.inv.total(), inv.total());
         let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
@@ -118,8 +134,16 @@ impl Simulation {
                 ));
             }
         }
-        Ok((next, inv, diss, w, consistent))
+        Ok((inv, w))
     }
+}
+
+/// A converged increment the step's checks refuse: why, and the scalars consistent with it.
+pub(super) struct Refusal {
+    /// Which check failed, with its numbers.
+    pub reason: String,
+    /// The dissipation scalars consistent with the refused increment, per element.
+    pub consistent: Vec<FrozenScalars>,
 }
 
 /// Largest angle (rad) between the two end triads of one element that a step may produce.
@@ -212,7 +236,7 @@ mod tests {
         // Moving the kicked nodes 3 Δt v_n in one step gives them v = 5 v_n: K grows 25×.
         let (sim, q) = crafted(crate::integrator::Scheme::Em, 3.0);
         let h0 = sim.inv.total();
-        let err = sim.check(&q, super::Mode::Frozen).unwrap_err();
+        let err = sim.check(&q, super::Mode::Frozen).err().unwrap().reason;
         assert!(err.starts_with("energy grew by "), "{err}");
         let growth: f64 = err["energy grew by ".len()..]
             .split_whitespace()
@@ -245,7 +269,7 @@ mod tests {
             h1 < 1e-3 * sim.inv.total(),
             "the crafted step keeps H = {h1:e}"
         );
-        let err = sim.check(&q, super::Mode::Frozen).unwrap_err();
+        let err = sim.check(&q, super::Mode::Frozen).err().unwrap().reason;
         assert!(
             err.starts_with("dissipation identity missed: H_n − H_n+1 + W − D = "),
             "{err}"
@@ -316,7 +340,7 @@ mod tests {
             let eps = solve_eps(rel_growth, target);
             let q = shifted(&q0, &delta, eps);
             match sim.check(&q, super::Mode::Frozen) {
-                Err(e) => {
+                Err(super::Refusal { reason: e, .. }) => {
                     assert!(refused, "growth {target:e} refused: {e}");
                     assert!(e.starts_with("energy grew by "), "{e}");
                     let r = reported_relative(&e);
@@ -352,7 +376,7 @@ mod tests {
             let eps = solve_eps(rel_miss, target);
             let q = shifted(&q0, &delta, eps);
             match sim.check(&q, mode) {
-                Err(e) => {
+                Err(super::Refusal { reason: e, .. }) => {
                     assert!(refused, "miss {target:e} refused: {e}");
                     assert!(e.starts_with("dissipation identity missed: "), "{e}");
                     let r = reported_relative(&e);

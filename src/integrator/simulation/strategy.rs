@@ -80,8 +80,8 @@ impl Simulation {
         let res = *hist.last().unwrap_or(&0.0);
         match self.check(q, mode) {
             Ok((s, inv, d, w, c)) => Ok((s, inv, d, w, 1, res, c)),
-            Err(reason) => Err(StepFailure {
-                reason,
+            Err(refused) => Err(StepFailure {
+                reason: refused.reason,
                 residuals: hist,
             }),
         }
@@ -105,10 +105,11 @@ impl Simulation {
             hist_all.extend(hist);
             match self.check(q, Mode::Frozen) {
                 Ok((s, inv, d, w, c)) => return Ok((s, inv, d, w, outer, res, c)),
-                Err(reason) => {
-                    last_reason = reason;
-                    let (_, _, c) = self.advance(q, Mode::Frozen);
-                    self.frozen = c;
+                Err(refused) => {
+                    // The next round freezes the scalars consistent with this increment
+                    // (the check computed them).
+                    last_reason = refused.reason;
+                    self.frozen = refused.consistent;
                 }
             }
         }
