@@ -10,8 +10,8 @@
 
 use super::context::{GpuContext, Precision};
 use super::kernel::{
-    index_runs, shader_precision, take_runs, write_scalars, ElementKernel, KernelMode,
-    KernelTimers, Readback, TangentSlots,
+    index_runs, shader_precision, take_runs, take_runs_gap, ElementKernel, KernelMode,
+    KernelTimers, Readback, TangentSlots, SCATTER_GAP,
 };
 use super::layout::{AsmLayout, A_NODE};
 use super::GpuError;
@@ -45,6 +45,8 @@ struct Params {
 
 /// Topology buffers (u32) of the assembly pass, in binding order.
 const NODE_INC: usize = 0;
+/// The node increments' target in the kernel's upload scatter ([`crate::gpu::upload`]).
+const NODE_X_TARGET: usize = 3;
 const INC: usize = 1;
 const ROW_MASK: usize = 2;
 const MEMBER_N: usize = 3;
@@ -237,6 +239,7 @@ impl Assembler {
             ],
         );
         kernel.gather_increments_on_device();
+        kernel.scatter_mut().set_target(NODE_X_TARGET, &node_x);
         Ok(Self {
             layout,
             n_nodes,
@@ -421,11 +424,11 @@ impl Assembler {
         let l = self.layout;
         let t0 = std::time::Instant::now();
         let nn = self.n_nodes;
-        // Clean slots between two dirty ones may go up from the host copy to save copies,
+        // Clean slots between two dirty ones may go up from the host copy to save runs,
         // except those the device owns (their host copy is stale).
         let dirty = self.node_x_dirty.clone();
         let owned = &self.node_x_owned;
-        let runs = take_runs(&mut self.node_x_dirty)
+        let runs = take_runs_gap(&mut self.node_x_dirty, SCATTER_GAP)
             .into_iter()
             .flat_map(|(lo, hi)| {
                 let mut parts = Vec::new();
@@ -444,17 +447,16 @@ impl Assembler {
                 parts
             })
             .collect::<Vec<_>>();
-        for (lo, hi) in runs {
-            for k in 0..A_NODE {
-                kernel.timers.bytes_up += write_scalars(
-                    &self.queue,
-                    &self.node_x,
-                    k * nn + lo,
-                    &self.node_x_host[k * nn + lo..k * nn + hi],
-                    self.precision,
-                );
+        for k in 0..A_NODE {
+            for &(lo, hi) in &runs {
+                let (lo, hi) = (k * nn + lo, k * nn + hi);
+                kernel
+                    .scatter_mut()
+                    .push(NODE_X_TARGET, lo, &self.node_x_host[lo..hi]);
             }
         }
+        // The uploads go first: the gather pass reads the node increments.
+        kernel.flush_uploads(&mut enc);
         // Per-member tangent flags (uploaded where they changed) and the tangent pass's
         // element list.
         let mut flags = vec![0u32; l.members];

@@ -11,6 +11,7 @@ use nalgebra::Vector6;
 
 use super::context::{GpuContext, Precision};
 use super::layout::*;
+use super::upload::Scatter;
 use super::GpuError;
 use crate::element::{
     ElemMat, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars, Increment, StepConsts,
@@ -69,6 +70,9 @@ pub struct KernelTimers {
     pub bytes_up: u64,
     /// Bytes read back.
     pub bytes_down: u64,
+    /// Host → device copies of the uploads (two per dispatch that uploads anything: see
+    /// [`crate::gpu::upload`]).
+    pub copies: u64,
     /// Element slots dispatched to the tangent pass (four invocations each), summed over
     /// dispatches: the tangent work done (every slot runs the residual pass).
     pub tangent_elements: u64,
@@ -123,6 +127,8 @@ pub struct ElementKernel {
     /// ([`crate::gpu::Assembler`] gathers them from per-node increments).
     iter_from: usize,
     out: Vec<f64>,
+    /// The uploads of the next dispatch.
+    scatter: Scatter,
     /// Stage timers.
     pub timers: KernelTimers,
 }
@@ -235,6 +241,22 @@ impl ElementKernel {
             ),
         ];
         let tmid = mk("intermediate", NT, wgpu::BufferUsages::STORAGE);
+        // The node increments' place until an assembler takes it.
+        let placeholder = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("scatter placeholder"),
+            size: 64,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let scatter = Scatter::new(
+            ctx,
+            [
+                bufs[0].clone(),
+                bufs[1].clone(),
+                bufs[2].clone(),
+                placeholder,
+            ],
+        );
         let tan_list = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("tangent slots"),
             size: 4 * cap as u64,
@@ -283,6 +305,7 @@ impl ElementKernel {
             dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
             iter_from: I_X,
             out: Vec::new(),
+            scatter,
             timers: KernelTimers::default(),
         })
     }
@@ -444,28 +467,34 @@ impl ElementKernel {
         }
     }
 
-    /// Uploads the changed slots of every input buffer: per run of adjacent changed
-    /// slots, one copy per field (a slot's fields are `capacity` apart); one copy of the
-    /// whole buffer when every slot changed.
+    /// Queues the changed slots of every input buffer for the dispatch's scatter pass: per
+    /// run of changed slots, one run per field (a slot's fields are `capacity` apart).
     fn upload(&mut self) {
         let fields = [0..NE, 0..NS, self.iter_from..NI];
         for (b, fields) in fields.into_iter().enumerate() {
-            let runs = take_runs(&mut self.dirty[b]);
-            let (host, buf) = (&self.host[b], &self.bufs[b]);
-            let mut put = |lo: usize, hi: usize| {
-                self.timers.bytes_up +=
-                    write_scalars(&self.queue, buf, lo, &host[lo..hi], self.precision);
-            };
-            if runs == [(0, self.cap)] {
-                put(fields.start * self.cap, fields.end * self.cap);
-                continue;
-            }
-            for &(lo, hi) in &runs {
-                for f in fields.clone() {
-                    put(f * self.cap + lo, f * self.cap + hi);
+            let runs = take_runs_gap(&mut self.dirty[b], SCATTER_GAP);
+            for f in fields {
+                for &(lo, hi) in &runs {
+                    let (lo, hi) = (f * self.cap + lo, f * self.cap + hi);
+                    self.scatter.push(b, lo, &self.host[b][lo..hi]);
                 }
             }
         }
+    }
+
+    /// Records the uploads queued so far (the kernel's changed slots and whatever
+    /// [`Self::scatter_mut`] queued) as the next pass of `enc`, ahead of the passes that
+    /// read them.
+    pub(crate) fn flush_uploads(&mut self, enc: &mut wgpu::CommandEncoder) {
+        self.upload();
+        let (bytes, copies) = self.scatter.encode(enc);
+        self.timers.bytes_up += bytes;
+        self.timers.copies += copies;
+    }
+
+    /// The dispatch's pending uploads (target 3 is the assembler's node increments).
+    pub(crate) fn scatter_mut(&mut self) -> &mut Scatter {
+        &mut self.scatter
     }
 
     /// The element output buffer (read by the assembly pass).
@@ -484,7 +513,7 @@ impl ElementKernel {
         tangent: TangentSlots<'_>,
     ) {
         let t0 = Instant::now();
-        self.upload();
+        self.flush_uploads(enc);
         let n_tan = match tangent {
             TangentSlots::None => 0,
             TangentSlots::All => self.cap,
@@ -605,27 +634,6 @@ impl ElementKernel {
     }
 }
 
-/// Writes `src` into `buf` from scalar `at` on (converted to f32 for
-/// [`Precision::F32`]); returns the bytes written.
-pub(crate) fn write_scalars(
-    queue: &wgpu::Queue,
-    buf: &wgpu::Buffer,
-    at: usize,
-    src: &[f64],
-    precision: Precision,
-) -> u64 {
-    let w = ElementKernel::width(precision);
-    let off = (at * w) as u64;
-    match precision {
-        Precision::F64 => queue.write_buffer(buf, off, bytemuck::cast_slice(src)),
-        Precision::F32 => {
-            let v: Vec<f32> = src.iter().map(|&x| x as f32).collect();
-            queue.write_buffer(buf, off, bytemuck::cast_slice(&v));
-        }
-    }
-    (src.len() * w) as u64
-}
-
 /// Clean slots between two changed ones up to which both go up in one copy: each copy
 /// has a fixed cost (a staging allocation and a command) worth a few hundred bytes, and
 /// the host mirrors of clean slots are current, so re-sending them is harmless.
@@ -650,6 +658,15 @@ pub(crate) fn index_runs(indices: impl IntoIterator<Item = usize>) -> Vec<(usize
 /// The runs `(lo, hi)` of set flags, clearing them; runs closer than [`MERGE_GAP`] are
 /// merged.
 pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
+    take_runs_gap(flags, MERGE_GAP)
+}
+
+/// Clean slots between two changed ones up to which a scatter run re-sends them: a run
+/// costs 16 bytes of description, two f64 slots.
+pub(crate) const SCATTER_GAP: usize = 2;
+
+/// [`take_runs`] merging runs at most `gap` apart.
+pub(crate) fn take_runs_gap(flags: &mut [bool], gap: usize) -> Vec<(usize, usize)> {
     let mut runs: Vec<(usize, usize)> = Vec::new();
     let mut i = 0;
     while i < flags.len() {
@@ -660,7 +677,7 @@ pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
                 i += 1;
             }
             match runs.last_mut() {
-                Some(last) if lo - last.1 <= MERGE_GAP => last.1 = i,
+                Some(last) if lo - last.1 <= gap => last.1 = i,
                 _ => runs.push((lo, i)),
             }
         } else {

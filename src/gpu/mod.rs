@@ -25,6 +25,7 @@ pub mod context;
 pub mod kernel;
 pub mod layout;
 pub mod planar;
+pub(crate) mod upload;
 
 pub use assemble::Assembler;
 pub use blocktri::BlockTriSolver;
