@@ -165,7 +165,10 @@ pub(super) fn run(
         }
 
         // 4. Serve every posted evaluation in one dispatch.
-        if gpu.serve() == 0 && !flight.is_empty() {
+        let c0 = thread_cpu_s();
+        let served = gpu.serve();
+        stats.serve_thread_s += thread_cpu_s() - c0;
+        if served == 0 && !flight.is_empty() {
             // Every member in flight is waiting, so each posted a request; none did.
             unreachable!("lockstep batch: members waiting without a posted evaluation");
         }
@@ -174,4 +177,23 @@ pub(super) fn run(
     stats.serve = gpu.serve_timers;
     stats.device_members = gpu.device_members;
     Ok(stats)
+}
+
+/// CPU time of the calling thread, in seconds (wall time where the platform has no
+/// per-thread clock).
+fn thread_cpu_s() -> f64 {
+    #[cfg(unix)]
+    {
+        let mut ts = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: `ts` is a valid, writable timespec; the clock id is a constant.
+        if unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0 {
+            return ts.tv_sec as f64 + 1e-9 * ts.tv_nsec as f64;
+        }
+    }
+    use std::sync::OnceLock;
+    static START: OnceLock<Instant> = OnceLock::new();
+    START.get_or_init(Instant::now).elapsed().as_secs_f64()
 }

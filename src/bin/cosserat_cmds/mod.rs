@@ -705,6 +705,10 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
     obj["model_dispatches_per_step"] = (k.dispatches as f64 / a.steps.max(1) as f64).into();
     obj["model_host_thread_us_per_member_poll"] =
         (1e6 * w.host_s * threads / (w.polls.max(1) as f64)).into();
+    obj["model_serve_thread_us_per_dispatch"] =
+        (1e6 * w.serve_thread_s / (k.dispatches.max(1) as f64)).into();
+    obj["model_serve_thread_us_per_request"] =
+        (1e6 * w.serve_thread_s / (sv.requests.max(1) as f64)).into();
     obj["model_pack_us_per_request"] = (1e6 * sv.pack_s / (sv.requests.max(1) as f64)).into();
     obj["model_unpack_us_per_request"] = (1e6 * k.unpack_s / (sv.requests.max(1) as f64)).into();
     obj["model_dispatch_overhead_us"] =
