@@ -1,19 +1,25 @@
 // UPLOAD SCATTER PASS, run first in a dispatch: the host packs every changed run of the
 // element kernel's input buffers and of the node increments into one array (`vals`) and
 // one run list, uploaded in two copies; each workgroup copies one run into its target
-// buffer. Bookkeeping only, no physics.
+// buffer, transposing the host's slot-major blocks into the device's field-major layout.
+// Bookkeeping only, no physics.
 
 alias Real = f64;
 
+// A block of `slots` slots × `nf` fields: value `s·nf + f` (slot-major, from `src` on)
+// goes to field `f0 + f` of slot `slot0 + s` of the target, at `(f0 + f)·cap + slot0 + s`.
 struct Run {
     // Target buffer (0..3: bindings 2..5).
     dst: u32,
-    // First scalar written in the target.
-    at: u32,
-    // Scalars in the run.
-    len: u32,
+    slot0: u32,
+    slots: u32,
     // First scalar read from `vals`.
     src: u32,
+    f0: u32,
+    nf: u32,
+    // Slots per field of the target.
+    cap: u32,
+    pad: u32,
 }
 
 // runs[0].dst is the number of runs that follow; runs[1..] the runs.
@@ -35,13 +41,15 @@ fn main(
         return;
     }
     let r = runs[k + 1u];
-    for (var i = li; i < r.len; i += 64u) {
+    let n = r.slots * r.nf;
+    for (var i = li; i < n; i += 64u) {
         let v = vals[r.src + i];
+        let at = (r.f0 + i % r.nf) * r.cap + r.slot0 + i / r.nf;
         switch r.dst {
-            case 0u: { t0[r.at + i] = v; }
-            case 1u: { t1[r.at + i] = v; }
-            case 2u: { t2[r.at + i] = v; }
-            default: { t3[r.at + i] = v; }
+            case 0u: { t0[at] = v; }
+            case 1u: { t1[at] = v; }
+            case 2u: { t2[at] = v; }
+            default: { t3[at] = v; }
         }
     }
 }

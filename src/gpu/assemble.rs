@@ -14,6 +14,7 @@ use super::kernel::{
     KernelTimers, Readback, TangentSlots, SCATTER_GAP,
 };
 use super::layout::{AsmLayout, A_NODE};
+use super::upload::Block;
 use super::GpuError;
 use crate::integrator::evaluate::AssembledSystem;
 
@@ -448,11 +449,16 @@ impl Assembler {
             })
             .collect::<Vec<_>>();
         for k in 0..A_NODE {
+            let field = Block {
+                target: NODE_X_TARGET,
+                cap: nn,
+                f0: k,
+                nf: 1,
+            };
             for &(lo, hi) in &runs {
-                let (lo, hi) = (k * nn + lo, k * nn + hi);
                 kernel
                     .scatter_mut()
-                    .push(NODE_X_TARGET, lo, &self.node_x_host[lo..hi]);
+                    .push(field, lo, &self.node_x_host[k * nn + lo..k * nn + hi]);
             }
         }
         // The uploads go first: the gather pass reads the node increments.

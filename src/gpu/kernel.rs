@@ -11,7 +11,7 @@ use nalgebra::Vector6;
 
 use super::context::{GpuContext, Precision};
 use super::layout::*;
-use super::upload::Scatter;
+use super::upload::{Block, Scatter};
 use super::GpuError;
 use crate::element::{
     ElemMat, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars, Increment, StepConsts,
@@ -117,7 +117,9 @@ pub struct ElementKernel {
     /// first [`Self::run`] (the batch path reads assembled systems instead and never
     /// allocates them).
     staging: Option<wgpu::Buffer>,
-    /// Host mirrors (f64) of the element, state and iteration buffers.
+    /// Host mirrors (f64) of the element, state and iteration buffers, slot-major (field
+    /// `f` of slot `i` at `i · FIELDS[b] + f`; the device's are field-major, the upload
+    /// scatter transposes).
     host: [Vec<f64>; 3],
     /// Per buffer and slot: the slot's fields changed since the last upload (only the
     /// changed slots' ranges are uploaded).
@@ -322,7 +324,7 @@ impl ElementKernel {
 
     #[inline]
     fn put(&mut self, buf: usize, f: usize, i: usize, x: f64) {
-        self.host[buf][f * self.cap + i] = x;
+        self.host[buf][i * FIELDS[buf] + f] = x;
     }
 
     #[inline]
@@ -392,9 +394,10 @@ impl ElementKernel {
     /// Writes the state at `n` of slot `i` (and its cached strains). The slot is uploaded
     /// again only when its state changed (once per step, not per Newton iteration).
     pub fn set_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
-        let old: [f64; NS] = std::array::from_fn(|f| self.host[1][f * self.cap + i]);
+        let row = i * NS..(i + 1) * NS;
+        let old: [f64; NS] = std::array::from_fn(|f| self.host[1][row.start + f]);
         self.write_state(i, st, eps_n);
-        let changed = (0..NS).any(|f| self.host[1][f * self.cap + i] != old[f]);
+        let changed = self.host[1][row] != old;
         self.dirty[1][i] |= changed;
     }
 
@@ -435,11 +438,10 @@ impl ElementKernel {
     /// round, not per Newton iteration).
     pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {
         let vals = [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu, 1.0];
-        let cap = self.cap;
         let changed = vals
             .iter()
             .enumerate()
-            .any(|(c, v)| self.host[2][(I_S + c) * cap + i].to_bits() != v.to_bits());
+            .any(|(c, v)| self.host[2][i * NI + I_S + c].to_bits() != v.to_bits());
         if changed {
             for (c, v) in vals.iter().enumerate() {
                 self.put(2, I_S + c, i, *v);
@@ -461,22 +463,35 @@ impl ElementKernel {
 
     /// Marks slot `i` inactive (the kernel skips it).
     pub fn set_inactive(&mut self, i: usize) {
-        if self.host[2][I_ACTIVE * self.cap + i] != 0.0 {
+        if self.host[2][i * NI + I_ACTIVE] != 0.0 {
             self.put(2, I_ACTIVE, i, 0.0);
             self.dirty[2][i] = true;
         }
     }
 
-    /// Queues the changed slots of every input buffer for the dispatch's scatter pass: per
-    /// run of changed slots, one run per field (a slot's fields are `capacity` apart).
+    /// Queues the changed slots of every input buffer for the dispatch's scatter pass: one
+    /// block (slots × uploaded fields) per run of changed slots.
     fn upload(&mut self) {
-        let fields = [0..NE, 0..NS, self.iter_from..NI];
-        for (b, fields) in fields.into_iter().enumerate() {
-            let runs = take_runs_gap(&mut self.dirty[b], SCATTER_GAP);
-            for f in fields {
-                for &(lo, hi) in &runs {
-                    let (lo, hi) = (f * self.cap + lo, f * self.cap + hi);
-                    self.scatter.push(b, lo, &self.host[b][lo..hi]);
+        let from = [0, 0, self.iter_from];
+        let mut rows = Vec::new();
+        for b in 0..3 {
+            let (nf, f0) = (FIELDS[b], from[b]);
+            let block = Block {
+                target: b,
+                cap: self.cap,
+                f0,
+                nf: nf - f0,
+            };
+            for (lo, hi) in take_runs_gap(&mut self.dirty[b], SCATTER_GAP) {
+                let host = &self.host[b];
+                if f0 == 0 {
+                    self.scatter.push(block, lo, &host[lo * nf..hi * nf]);
+                } else {
+                    rows.clear();
+                    for i in lo..hi {
+                        rows.extend_from_slice(&host[i * nf + f0..(i + 1) * nf]);
+                    }
+                    self.scatter.push(block, lo, &rows);
                 }
             }
         }
@@ -661,8 +676,11 @@ pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
     take_runs_gap(flags, MERGE_GAP)
 }
 
+/// Fields per slot of the element, state and iteration buffers.
+const FIELDS: [usize; 3] = [NE, NS, NI];
+
 /// Clean slots between two changed ones up to which a scatter run re-sends them: a run
-/// costs 16 bytes of description, two f64 slots.
+/// costs 32 bytes of description.
 pub(crate) const SCATTER_GAP: usize = 2;
 
 /// [`take_runs`] merging runs at most `gap` apart.

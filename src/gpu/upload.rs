@@ -21,14 +21,32 @@ const RUN_MAX: usize = 1024;
 /// buffers, and the node increments of [`crate::gpu::Assembler`].
 pub(crate) const TARGETS: usize = 4;
 
-/// One run: `len` scalars from `vals[src..]` to `target[dst][at..]`.
+/// One run: a block of `slots` slots × `nf` fields, slot-major in `vals[src..]`, to
+/// fields `f0..f0 + nf` of slots `slot0..slot0 + slots` of the field-major target
+/// `dst` (`cap` slots per field).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 struct Run {
     dst: u32,
-    at: u32,
-    len: u32,
+    slot0: u32,
+    slots: u32,
     src: u32,
+    f0: u32,
+    nf: u32,
+    cap: u32,
+    pad: u32,
+}
+
+/// Where a block goes: target, its slots per field, and the block's fields.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Block {
+    /// Target buffer (0..[`TARGETS`]).
+    pub target: usize,
+    /// Slots per field of the target.
+    pub cap: usize,
+    /// First field of the block and number of fields.
+    pub f0: usize,
+    pub nf: usize,
 }
 
 /// The pending uploads of one dispatch and the pass that scatters them.
@@ -97,14 +115,21 @@ impl Scatter {
         self.group = None;
     }
 
-    /// Queues `src` for `target[t][at..]`.
-    pub(crate) fn push(&mut self, t: usize, at: usize, src: &[f64]) {
-        for (k, chunk) in src.chunks(RUN_MAX).enumerate() {
+    /// Queues the slot-major values `src` (`b.nf` per slot) for slots `slot0..` of block
+    /// `b`.
+    pub(crate) fn push(&mut self, b: Block, slot0: usize, src: &[f64]) {
+        debug_assert_eq!(src.len() % b.nf, 0);
+        let per = (RUN_MAX / b.nf).max(1) * b.nf;
+        for (k, chunk) in src.chunks(per).enumerate() {
             self.runs.push(Run {
-                dst: t as u32,
-                at: (at + k * RUN_MAX) as u32,
-                len: chunk.len() as u32,
+                dst: b.target as u32,
+                slot0: (slot0 + k * per / b.nf) as u32,
+                slots: (chunk.len() / b.nf) as u32,
                 src: self.vals.len() as u32,
+                f0: b.f0 as u32,
+                nf: b.nf as u32,
+                cap: b.cap as u32,
+                pad: 0,
             });
             self.vals.extend_from_slice(chunk);
         }
@@ -119,7 +144,7 @@ impl Scatter {
         }
         self.runs[0].dst = n as u32;
         let w = ElementKernel::width(self.precision);
-        let run_bytes = (16 * self.runs.len()) as u64;
+        let run_bytes = (std::mem::size_of::<Run>() * self.runs.len()) as u64;
         let val_bytes = (w * self.vals.len()) as u64;
         if run_bytes > self.run_buf.size() {
             self.run_buf =
@@ -228,11 +253,12 @@ mod tests {
         ((rng.uniform() * n as f64) as usize).min(n - 1)
     }
 
-    /// Runs of random lengths (one longer than [`RUN_MAX`], split) into four targets of
-    /// different sizes, over two dispatches, in f64 and in f32: every queued value lands
-    /// where it was queued, and nothing else changes.
+    /// Blocks of random slot ranges and field ranges (one longer than [`RUN_MAX`],
+    /// split) into four field-major targets of different shapes, over two dispatches, in
+    /// f64 and in f32: every queued value lands in its field and slot, and nothing else
+    /// changes.
     #[test]
-    fn queued_runs_land_where_they_were_queued_and_nowhere_else() {
+    fn queued_blocks_land_in_their_fields_and_slots_and_nowhere_else() {
         let Some(ctx) = context() else { return };
         scatter_round_trip(&ctx);
         scatter_round_trip(&ctx.with_precision(Precision::F32));
@@ -240,7 +266,9 @@ mod tests {
 
     fn scatter_round_trip(ctx: &GpuContext) {
         let ctx = ctx.with_precision(ctx.precision);
-        let sizes = [3000, 5000, 700, 2500];
+        // (fields, slots per field) of each target.
+        let shapes = [(6, 500), (10, 500), (7, 100), (9, 300)];
+        let sizes: Vec<usize> = shapes.iter().map(|&(f, c)| f * c).collect();
         let w = ElementKernel::width(ctx.precision) as u64;
         let targets: [wgpu::Buffer; TARGETS] = std::array::from_fn(|t| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -257,25 +285,37 @@ mod tests {
         let mut rng = Rng::new(7);
         for dispatch in 0..2 {
             let mut enc = ctx.device.create_command_encoder(&Default::default());
-            // Disjoint runs per target: walk each target with random gaps and lengths.
+            // Disjoint slot ranges per target, each with a random range of fields.
             let mut runs = 0;
-            for (t, &n) in sizes.iter().enumerate() {
-                let mut at = below(&mut rng, 50);
-                while at < n {
-                    let len = if dispatch == 0 && t == 1 && runs == 0 {
-                        RUN_MAX + 300
+            for (t, &(nfields, cap)) in shapes.iter().enumerate() {
+                let mut slot = below(&mut rng, 20);
+                while slot < cap {
+                    let long = dispatch == 0 && t == 1 && runs == 0;
+                    let slots = if long { 300 } else { 1 + below(&mut rng, 30) }.min(cap - slot);
+                    let f0 = if long { 0 } else { below(&mut rng, nfields) };
+                    let nf = if long {
+                        nfields
                     } else {
-                        1 + below(&mut rng, 40)
+                        1 + below(&mut rng, nfields - f0)
+                    };
+                    let vals: Vec<f64> = (0..slots * nf).map(|_| rng.symmetric()).collect();
+                    let b = Block {
+                        target: t,
+                        cap,
+                        f0,
+                        nf,
+                    };
+                    scatter.push(b, slot, &vals);
+                    for s in 0..slots {
+                        for f in 0..nf {
+                            mirror[t][(f0 + f) * cap + slot + s] = vals[s * nf + f];
+                        }
                     }
-                    .min(n - at);
-                    let vals: Vec<f64> = (0..len).map(|_| rng.symmetric()).collect();
-                    scatter.push(t, at, &vals);
-                    mirror[t][at..at + len].copy_from_slice(&vals);
                     runs += 1;
-                    at += len + below(&mut rng, 60);
+                    slot += slots + below(&mut rng, 25);
                 }
             }
-            assert!(runs > 100, "{runs} runs");
+            assert!(runs > 30, "{runs} runs");
             let (bytes, copies) = scatter.encode(&mut enc);
             assert_eq!(copies, 2);
             assert!(bytes > 0);
