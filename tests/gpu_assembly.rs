@@ -238,8 +238,8 @@ fn readback_and_upload_bytes_follow_the_layout() {
     // changed since, and the member's elements stay active between its evaluations, so
     // the next iteration uploads only 9 increments per node whose increment changed
     // (every node with an unknown: here one run of adjacent node slots, so one scatter
-    // run of 32 bytes per field, after the 32-byte header) and the member's tangent flag
-    // (4 bytes: set, then cleared).
+    // run of 32 bytes for all nine fields, after the 32-byte header) and the member's
+    // tangent flag (4 bytes: set, then cleared).
     let moved = gpu
         .dof_map()
         .nodes
@@ -247,7 +247,7 @@ fn readback_and_upload_bytes_follow_the_layout() {
         .filter(|nd| nd.u.iter().chain(&nd.th).chain(&nd.g).any(|&i| i != NONE))
         .count();
     let up = t2.bytes_up - t1.bytes_up;
-    assert_eq!(up, 8 * (9 * moved) as u64 + 32 * (9 + 1) + 4);
+    assert_eq!(up, 8 * (9 * moved) as u64 + 32 * (1 + 1) + 4);
     // In two copies (the values and the run list), not one per field and run.
     assert_eq!(t2.copies - t1.copies, 2);
     assert!(t1.bytes_up - t0.bytes_up >= 8 * ((NS + NI - I_S) * ne) as u64 + 4 * ne as u64);

@@ -10,9 +10,10 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::element::StepConsts;
+use crate::gpu::assemble::MemberIncrements;
 use crate::gpu::blocktri::{Fetched, Readback, Report, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_UPDATE};
-use crate::gpu::kernel::KernelTimers;
-use crate::gpu::layout::AsmLayout;
+use crate::gpu::kernel::{KernelTimers, MemberPack};
+use crate::gpu::layout::{AsmLayout, A_NODE};
 use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
 use crate::integrator::evaluate::{
     AssembledSystem, DeviceSolution, ElementBackend, EvalPort, EvalRequest, ResidentAnswer,
@@ -333,8 +334,8 @@ impl GpuEvaluator {
         self.assembler.layout()
     }
 
-    /// Writes one request into `slot`'s host buffers; an error names what did not fit.
-    fn pack(&mut self, slot: usize, req: &EvalRequest) -> Result<(), String> {
+    /// Whether `req` fits `slot` (an error names what did not fit).
+    fn fits(&self, slot: usize, req: &EvalRequest) -> Result<(), String> {
         let (n_elems, n_nodes) = self.sizes[slot];
         let states_ok = req.states.as_ref().is_none_or(|s| s.len() == n_elems);
         let resident = req.resident.filter(|_| self.device[slot]);
@@ -347,27 +348,50 @@ impl GpuEvaluator {
                 req.increments.len()
             ));
         }
-        let base = slot * self.per_slot;
-        if let Some(states) = &req.states {
-            for (e, (st, eps)) in states.iter().enumerate() {
-                self.kernel.set_state(base + e, st, eps);
-            }
-        }
-        for (e, s) in req.scalars.iter().enumerate() {
-            self.kernel.set_scalars(base + e, s);
-        }
-        match resident {
-            // The device's copy may differ from the host's mirror.
-            Some(r) if r.upload => self.assembler.set_increments_forced(slot, &req.increments),
-            Some(_) => {}
-            // A host-side request on a slot the device owns (the test entry points of a
-            // resident member): the host copy is stale, upload everything.
-            None if self.device[slot] && self.resident => {
-                self.assembler.set_increments_forced(slot, &req.increments)
-            }
-            None => self.assembler.set_increments(slot, &req.increments),
-        }
         Ok(())
+    }
+
+    /// Writes every request that fits its slot into the host buffers — states, frozen
+    /// scalars, increments — in parallel over members (their slots are contiguous in the
+    /// host mirrors); one outcome per request (fetches write nothing).
+    fn pack(&mut self, reqs: &[(usize, EvalRequest)]) -> Vec<Result<(), String>> {
+        let slots = self.sizes.len();
+        let mut members: Vec<Option<MemberPack<'_>>> = vec![None; slots];
+        let mut increments: Vec<Option<MemberIncrements<'_>>> = vec![None; slots];
+        // The host's nodal terms of device-solved members (the right-hand side's extra).
+        let mut extras: Vec<Option<&[[f64; A_NODE]]>> = vec![None; slots];
+        let outcomes = reqs
+            .iter()
+            .map(|(slot, req)| {
+                let resident = req.resident.filter(|_| self.device[*slot]);
+                if resident.is_some_and(|r| r.fetch) {
+                    return Ok(());
+                }
+                self.fits(*slot, req)?;
+                if self.device[*slot] {
+                    extras[*slot] = req.device_extra.as_deref();
+                }
+                members[*slot] = Some(MemberPack {
+                    states: req.states.as_deref(),
+                    scalars: &req.scalars,
+                });
+                increments[*slot] = match resident {
+                    // The device's copy may differ from the host's mirror.
+                    Some(r) if r.upload => Some((&req.increments, true)),
+                    Some(_) => None,
+                    // A host-side request on a slot the device owns (the test entry points
+                    // of a resident member): the host copy is stale, upload everything.
+                    None => Some((&req.increments, self.device[*slot] && self.resident)),
+                };
+                Ok(())
+            })
+            .collect();
+        self.kernel.pack_members(self.per_slot, &members);
+        self.assembler.pack_increments(&increments);
+        if let Some(solver) = &mut self.solver {
+            solver.set_extras(&extras);
+        }
+        outcomes
     }
 
     /// Evaluates the given (slot, request) pairs in one dispatch; one answer per pair, in
@@ -401,18 +425,18 @@ impl GpuEvaluator {
         let mut iterating: Vec<usize> = Vec::new();
         let mut fetching: Vec<usize> = Vec::new();
         let mut with_iterate: Vec<usize> = Vec::new();
-        for (slot, req) in reqs {
+        let packed = self.pack(&reqs);
+        for ((slot, req), packed) in reqs.into_iter().zip(packed) {
             let resident = req.resident.filter(|_| self.device[slot]);
             if resident.is_some_and(|r| r.fetch) {
                 fetching.push(slot);
                 continue;
             }
-            match self.pack(slot, &req) {
+            match packed {
                 Ok(()) => {
-                    if let (Some(extra), Some(solver), true) =
+                    if let (Some(_), Some(solver), true) =
                         (&req.device_extra, &mut self.solver, self.device[slot])
                     {
-                        solver.set_extra(slot, extra);
                         let mut op = if req.tangent {
                             OP_FACTOR | OP_SOLVE
                         } else {

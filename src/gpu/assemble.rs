@@ -79,7 +79,8 @@ pub struct Assembler {
     gather_pipeline: wgpu::ComputePipeline,
     gather_group: wgpu::BindGroup,
     /// Node increments (9 per node slot, field-major) on the device, their host mirror
-    /// and which node slots changed since the last upload.
+    /// (node-major: a member's node slots contiguous) and which node slots changed since
+    /// the last upload.
     node_x: wgpu::Buffer,
     node_x_host: Vec<f64>,
     node_x_dirty: Vec<bool>,
@@ -340,17 +341,30 @@ impl Assembler {
     /// Writes member `m`'s node increments (node-local order, zero for removed unknowns);
     /// only changed node slots are uploaded at the next run.
     pub fn set_increments(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
-        let nn = self.n_nodes;
-        for (j, x) in nodes.iter().enumerate() {
-            let slot = m * self.layout.nodes_per_slot + j;
-            for (k, &v) in x.iter().enumerate() {
-                let h = &mut self.node_x_host[k * nn + slot];
-                if *h != v {
-                    *h = v;
-                    self.node_x_dirty[slot] = true;
+        let npn = self.layout.nodes_per_slot;
+        increment_rows(
+            &mut self.node_x_host[A_NODE * m * npn..A_NODE * (m + 1) * npn],
+            &mut self.node_x_dirty[m * npn..(m + 1) * npn],
+            nodes,
+            false,
+        );
+    }
+
+    /// [`Self::set_increments`] (or, where `forced`, [`Self::set_increments_forced`]) for
+    /// many members at once, in parallel: `members[m]` for member slot `m`, `None` leaves
+    /// it as it is.
+    pub(crate) fn pack_increments(&mut self, members: &[Option<MemberIncrements<'_>>]) {
+        use rayon::prelude::*;
+        let npn = self.layout.nodes_per_slot;
+        self.node_x_host
+            .par_chunks_mut(A_NODE * npn)
+            .zip(self.node_x_dirty.par_chunks_mut(npn))
+            .zip(members.par_iter())
+            .for_each(|((rows, dirty), member)| {
+                if let Some((nodes, forced)) = member {
+                    increment_rows(rows, dirty, nodes, *forced);
                 }
-            }
-        }
+            });
     }
 
     /// Runs the gather pass, the element passes of `kernel` (frozen scalars) and the
@@ -383,18 +397,20 @@ impl Assembler {
     /// [`Self::set_increments`] uploading every node slot of member `m` whatever the host
     /// copy holds (the device may have changed them: device-resident Newton).
     pub fn set_increments_forced(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
-        self.set_increments(m, nodes);
         let npn = self.layout.nodes_per_slot;
-        self.node_x_dirty[m * npn..m * npn + nodes.len()].fill(true);
+        increment_rows(
+            &mut self.node_x_host[A_NODE * m * npn..A_NODE * (m + 1) * npn],
+            &mut self.node_x_dirty[m * npn..(m + 1) * npn],
+            nodes,
+            true,
+        );
     }
 
     /// Forgets the host copy of member slot `m`'s increments (the device changed them), so
     /// that the next [`Self::set_increments`] uploads every value.
     pub fn invalidate_increments(&mut self, m: usize) {
-        let (nn, npn) = (self.n_nodes, self.layout.nodes_per_slot);
-        for k in 0..A_NODE {
-            self.node_x_host[k * nn + m * npn..k * nn + (m + 1) * npn].fill(f64::NAN);
-        }
+        let npn = self.layout.nodes_per_slot;
+        self.node_x_host[A_NODE * m * npn..A_NODE * (m + 1) * npn].fill(f64::NAN);
     }
 
     /// Marks member slot `m`'s increments as owned by the device (device-resident Newton
@@ -448,18 +464,16 @@ impl Assembler {
                 parts
             })
             .collect::<Vec<_>>();
-        for k in 0..A_NODE {
-            let field = Block {
-                target: NODE_X_TARGET,
-                cap: nn,
-                f0: k,
-                nf: 1,
-            };
-            for &(lo, hi) in &runs {
-                kernel
-                    .scatter_mut()
-                    .push(field, lo, &self.node_x_host[k * nn + lo..k * nn + hi]);
-            }
+        let rows = Block {
+            target: NODE_X_TARGET,
+            cap: nn,
+            f0: 0,
+            nf: A_NODE,
+        };
+        for &(lo, hi) in &runs {
+            kernel
+                .scatter_mut()
+                .push(rows, lo, &self.node_x_host[A_NODE * lo..A_NODE * hi]);
         }
         // The uploads go first: the gather pass reads the node increments.
         kernel.flush_uploads(&mut enc);
@@ -594,6 +608,20 @@ impl Assembler {
             solution: None,
             resident: None,
         }
+    }
+}
+
+/// One member's node increments (node-local order) and whether every node slot goes up
+/// whatever the host copy holds ([`Assembler::set_increments_forced`]).
+pub(crate) type MemberIncrements<'a> = (&'a [[f64; A_NODE]], bool);
+
+/// Writes one member's node increments into its rows of the node-major increment mirror
+/// (`A_NODE` values per node slot), marking the node slots that changed, or all of them
+/// when `forced`.
+fn increment_rows(rows: &mut [f64], dirty: &mut [bool], nodes: &[[f64; A_NODE]], forced: bool) {
+    for ((row, d), x) in rows.chunks_mut(A_NODE).zip(dirty.iter_mut()).zip(nodes) {
+        *d |= forced || *row != x[..];
+        row.copy_from_slice(x);
     }
 }
 

@@ -150,6 +150,17 @@ pub struct BlockTriSolver {
     pub bytes_up: u64,
 }
 
+/// Writes one member's extra right-hand-side rows (node-major, 9 per node slot); whether
+/// anything changed.
+fn extra_rows(dst: &mut [f64], rows: &[[f64; 9]]) -> bool {
+    let mut changed = false;
+    for (d, row) in dst.chunks_mut(9).zip(rows) {
+        changed |= *d != row[..];
+        d.copy_from_slice(row);
+    }
+    changed
+}
+
 fn storage(
     device: &wgpu::Device,
     label: &str,
@@ -420,16 +431,24 @@ impl BlockTriSolver {
     /// per node) before it becomes the right-hand side; uploaded with the next
     /// [`Self::encode`] where they changed.
     pub fn set_extra(&mut self, m: usize, rows: &[[f64; 9]]) {
-        let npn = self.layout.npn;
-        let dst = &mut self.extra_host[9 * m * npn..9 * (m + 1) * npn];
-        let mut changed = false;
-        for (j, row) in rows.iter().enumerate().take(npn) {
-            for (k, &v) in row.iter().enumerate() {
-                changed |= dst[9 * j + k] != v;
-                dst[9 * j + k] = v;
-            }
-        }
-        self.extra_dirty[m] |= changed;
+        let w = 9 * self.layout.npn;
+        self.extra_dirty[m] |= extra_rows(&mut self.extra_host[w * m..w * (m + 1)], rows);
+    }
+
+    /// [`Self::set_extra`] for many members at once, in parallel: `members[m]` for member
+    /// `m`, `None` leaves it as it is.
+    pub fn set_extras(&mut self, members: &[Option<&[[f64; 9]]>]) {
+        use rayon::prelude::*;
+        let w = 9 * self.layout.npn;
+        self.extra_host
+            .par_chunks_mut(w)
+            .zip(self.extra_dirty.par_iter_mut())
+            .zip(members.par_iter())
+            .for_each(|((dst, dirty), rows)| {
+                if let Some(rows) = rows {
+                    *dirty |= extra_rows(dst, rows);
+                }
+            });
     }
 
     /// Records the factor and solve passes into `enc` for the members of `ops`

@@ -394,32 +394,7 @@ impl ElementKernel {
     /// Writes the state at `n` of slot `i` (and its cached strains). The slot is uploaded
     /// again only when its state changed (once per step, not per Newton iteration).
     pub fn set_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
-        let row = i * NS..(i + 1) * NS;
-        let old: [f64; NS] = std::array::from_fn(|f| self.host[1][row.start + f]);
-        self.write_state(i, st, eps_n);
-        let changed = self.host[1][row] != old;
-        self.dirty[1][i] |= changed;
-    }
-
-    fn write_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
-        for l in 0..2 {
-            self.put3(1, S_R + 3 * l, i, &st.cfg.r[l]);
-            self.put3(1, S_V + 3 * l, i, &st.v[l]);
-            for c in 0..3 {
-                self.put3(
-                    1,
-                    S_D + 9 * l + 3 * c,
-                    i,
-                    &st.cfg.d[l].column(c).into_owned(),
-                );
-            }
-            for a in 0..2 {
-                self.put3(1, S_VD + 6 * l + 3 * a, i, &st.vd[l][a]);
-            }
-        }
-        for c in 0..6 {
-            self.put(1, S_EPS + c, i, eps_n[c]);
-        }
+        self.dirty[1][i] |= state_row(&mut self.host[1][i * NS..(i + 1) * NS], st, eps_n);
     }
 
     /// Writes the increment and frozen scalars of slot `i` and marks it active.
@@ -437,17 +412,33 @@ impl ElementKernel {
     /// next dispatch only if that changed something (the scalars change once per staggered
     /// round, not per Newton iteration).
     pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {
-        let vals = [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu, 1.0];
-        let changed = vals
-            .iter()
-            .enumerate()
-            .any(|(c, v)| self.host[2][i * NI + I_S + c].to_bits() != v.to_bits());
-        if changed {
-            for (c, v) in vals.iter().enumerate() {
-                self.put(2, I_S + c, i, *v);
-            }
-            self.dirty[2][i] = true;
-        }
+        self.dirty[2][i] |= scalars_row(&mut self.host[2][i * NI..(i + 1) * NI], s);
+    }
+
+    /// [`Self::set_state`] and [`Self::set_scalars`] for whole members at once, in
+    /// parallel (a member's slots are contiguous in the host mirrors): member slot `m`
+    /// holds element slots `m·per_slot..(m + 1)·per_slot`; `None` leaves it as it is.
+    pub(crate) fn pack_members(&mut self, per_slot: usize, members: &[Option<MemberPack<'_>>]) {
+        use rayon::prelude::*;
+        let [_, states, iters] = &mut self.host;
+        let [_, d_states, d_iters] = &mut self.dirty;
+        states
+            .par_chunks_mut(per_slot * NS)
+            .zip(d_states.par_chunks_mut(per_slot))
+            .zip(iters.par_chunks_mut(per_slot * NI))
+            .zip(d_iters.par_chunks_mut(per_slot))
+            .zip(members.par_iter())
+            .for_each(|((((st, d_st), it), d_it), member)| {
+                let Some(m) = member else { return };
+                if let Some(states) = m.states {
+                    for ((row, d), (s, eps)) in st.chunks_mut(NS).zip(d_st).zip(states) {
+                        *d |= state_row(row, s, eps);
+                    }
+                }
+                for ((row, d), s) in it.chunks_mut(NI).zip(d_it).zip(m.scalars) {
+                    *d |= scalars_row(row, s);
+                }
+            });
     }
 
     /// From now on the increments ([`I_X`] fields) are written by a pass on the device
@@ -674,6 +665,53 @@ pub(crate) fn index_runs(indices: impl IntoIterator<Item = usize>) -> Vec<(usize
 /// merged.
 pub(crate) fn take_runs(flags: &mut [bool]) -> Vec<(usize, usize)> {
     take_runs_gap(flags, MERGE_GAP)
+}
+
+/// What [`ElementKernel::pack_members`] writes for one member.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct MemberPack<'a> {
+    /// The element states at `n` and their strains, when they changed.
+    pub states: Option<&'a [(ElementState, Vector6<f64>)]>,
+    /// The frozen scalars, per element.
+    pub scalars: &'a [FrozenScalars],
+}
+
+/// Writes the state at `n` and its cached strains into one slot's row of the state
+/// mirror; whether anything changed.
+fn state_row(row: &mut [f64], st: &ElementState, eps_n: &Vector6<f64>) -> bool {
+    let old: [f64; NS] = std::array::from_fn(|f| row[f]);
+    let mut put3 = |f: usize, v: &crate::model::Vec3| row[f..f + 3].copy_from_slice(v.as_slice());
+    for l in 0..2 {
+        put3(S_R + 3 * l, &st.cfg.r[l]);
+        put3(S_V + 3 * l, &st.v[l]);
+        for c in 0..3 {
+            put3(S_D + 9 * l + 3 * c, &st.cfg.d[l].column(c).into_owned());
+        }
+        for a in 0..2 {
+            put3(S_VD + 6 * l + 3 * a, &st.vd[l][a]);
+        }
+    }
+    row[S_EPS..S_EPS + 6].copy_from_slice(eps_n.as_slice());
+    *row != old
+}
+
+/// Writes the frozen scalars and the active flag into one slot's row of the iteration
+/// mirror; whether anything changed (bit for bit).
+fn scalars_row(row: &mut [f64], s: &FrozenScalars) -> bool {
+    const _: () = assert!(
+        I_ACTIVE == I_S + 4,
+        "the active flag follows the four scalars"
+    );
+    let vals = [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu, 1.0];
+    let dst = &mut row[I_S..=I_ACTIVE];
+    let changed = dst
+        .iter()
+        .zip(&vals)
+        .any(|(a, b)| a.to_bits() != b.to_bits());
+    if changed {
+        dst.copy_from_slice(&vals);
+    }
+    changed
 }
 
 /// Fields per slot of the element, state and iteration buffers.
