@@ -341,12 +341,18 @@ impl Assembler {
     /// Writes member `m`'s node increments (node-local order, zero for removed unknowns);
     /// only changed node slots are uploaded at the next run.
     pub fn set_increments(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
+        self.write_increments(m, nodes, false);
+    }
+
+    /// Writes member `m`'s rows of the increment mirror, marking the changed node slots
+    /// (all of them when `forced`).
+    fn write_increments(&mut self, m: usize, nodes: &[[f64; A_NODE]], forced: bool) {
         let npn = self.layout.nodes_per_slot;
         increment_rows(
             &mut self.node_x_host[A_NODE * m * npn..A_NODE * (m + 1) * npn],
             &mut self.node_x_dirty[m * npn..(m + 1) * npn],
             nodes,
-            false,
+            forced,
         );
     }
 
@@ -397,13 +403,7 @@ impl Assembler {
     /// [`Self::set_increments`] uploading every node slot of member `m` whatever the host
     /// copy holds (the device may have changed them: device-resident Newton).
     pub fn set_increments_forced(&mut self, m: usize, nodes: &[[f64; A_NODE]]) {
-        let npn = self.layout.nodes_per_slot;
-        increment_rows(
-            &mut self.node_x_host[A_NODE * m * npn..A_NODE * (m + 1) * npn],
-            &mut self.node_x_dirty[m * npn..(m + 1) * npn],
-            nodes,
-            true,
-        );
+        self.write_increments(m, nodes, true);
     }
 
     /// Forgets the host copy of member slot `m`'s increments (the device changed them), so
