@@ -202,9 +202,10 @@ pub struct BatchStats {
     pub polls: u64,
     /// GPU path: batch iterations (parallel member phase + one dispatch).
     pub iterations: u64,
-    /// GPU path: CPU time of the driver thread serving the dispatches (packing, uploads,
-    /// encoding, submission, read-back and unpacking; not the time it waits for the
-    /// device): the sequential host share of a batch iteration.
+    /// GPU path: CPU time of the driver thread serving the dispatches (taking requests,
+    /// uploads, encoding, submission, read-back, answers; not the time it waits for the
+    /// device, nor the parallel packing and unpacking it hands to the rayon pool): the
+    /// sequential host share of a batch iteration.
     pub serve_thread_s: f64,
     /// GPU path: members in flight at once (slots).
     pub slots: usize,

@@ -620,8 +620,11 @@ pub(crate) type MemberIncrements<'a> = (&'a [[f64; A_NODE]], bool);
 /// when `forced`.
 fn increment_rows(rows: &mut [f64], dirty: &mut [bool], nodes: &[[f64; A_NODE]], forced: bool) {
     for ((row, d), x) in rows.chunks_mut(A_NODE).zip(dirty.iter_mut()).zip(nodes) {
-        *d |= forced || *row != x[..];
-        row.copy_from_slice(x);
+        let changed = *row != x[..];
+        if changed {
+            row.copy_from_slice(x);
+        }
+        *d |= forced || changed;
     }
 }
 

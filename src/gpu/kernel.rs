@@ -490,7 +490,9 @@ impl ElementKernel {
 
     /// Records the uploads queued so far (the kernel's changed slots and whatever
     /// [`Self::scatter_mut`] queued) as the next pass of `enc`, ahead of the passes that
-    /// read them.
+    /// read them. At most one such pass per command buffer may carry data: its two copies
+    /// run at submission, before every pass of the buffer (the assembler flushes ahead of
+    /// its gather pass; the flush in [`Self::encode`] then finds nothing queued).
     pub(crate) fn flush_uploads(&mut self, enc: &mut wgpu::CommandEncoder) {
         self.upload();
         let (bytes, copies) = self.scatter.encode(enc);

@@ -289,8 +289,12 @@ mod tests {
             let mut runs = 0;
             for (t, &(nfields, cap)) in shapes.iter().enumerate() {
                 let mut slot = below(&mut rng, 20);
+                let mut first = true;
                 while slot < cap {
-                    let long = dispatch == 0 && t == 1 && runs == 0;
+                    // The first block of target 1 in the first dispatch: 300 slots × 10
+                    // fields, split into runs of at most RUN_MAX values.
+                    let long = dispatch == 0 && t == 1 && first;
+                    first = false;
                     let slots = if long { 300 } else { 1 + below(&mut rng, 30) }.min(cap - slot);
                     let f0 = if long { 0 } else { below(&mut rng, nfields) };
                     let nf = if long {
@@ -316,6 +320,14 @@ mod tests {
                 }
             }
             assert!(runs > 30, "{runs} runs");
+            if dispatch == 0 {
+                let split = scatter
+                    .runs
+                    .iter()
+                    .filter(|r| r.dst == 1 && r.nf == 10)
+                    .count();
+                assert!(split >= 3, "the long block went up as {split} runs");
+            }
             let (bytes, copies) = scatter.encode(&mut enc);
             assert_eq!(copies, 2);
             assert!(bytes > 0);
