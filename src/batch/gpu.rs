@@ -530,6 +530,8 @@ impl GpuEvaluator {
             }
             self.kernel.timers.bytes_down += solver.last_bytes_down;
             self.kernel.timers.bytes_up += std::mem::take(&mut solver.bytes_up);
+            self.kernel.timers.copies += std::mem::take(&mut solver.copies_up);
+            self.kernel.timers.readback_copies += solver.last_copies_down;
             // When every evaluated member is device-resident the assembly read nothing
             // back, so this read is where the wait for the passes happens: kernel time.
             let waited = t0.elapsed().as_secs_f64();

@@ -6,6 +6,7 @@
 //! only what the caller asks for comes back: per member a status and a backward error
 //! (12 bytes), the solution when wanted.
 
+use super::compact::Compact;
 use super::context::{GpuContext, Precision};
 use super::kernel::index_runs;
 use super::GpuError;
@@ -134,6 +135,8 @@ pub struct BlockTriSolver {
     extra_dirty: Vec<bool>,
     /// Device-resident Newton: `[q_prev, host_scale, report, rwork, q_prev2]`.
     resident: [wgpu::Buffer; 5],
+    /// Packs the reports and iterates asked for into one buffer for the read-back.
+    compact: Compact,
     scale_host: Vec<f64>,
     scale_dirty: Vec<bool>,
     /// Factors, pivots and backward-error terms: only ever touched by the shader (kept
@@ -148,6 +151,10 @@ pub struct BlockTriSolver {
     /// Bytes uploaded since this was last reset (topology, extras, host scales,
     /// operation words).
     pub bytes_up: u64,
+    /// Host → device copies (`write_buffer` calls) since this was last reset.
+    pub copies_up: u64,
+    /// Device → host copy commands recorded by the last [`Self::read_back`].
+    pub last_copies_down: u64,
 }
 
 /// Writes one member's extra right-hand-side rows (node-major, 9 per node slot); whether
@@ -308,6 +315,14 @@ impl BlockTriSolver {
             storage(&device, "residual work", 8 * members as u64, src),
             storage(&device, "iterates before the previous", 8 * xn, none),
         ];
+        let compact = Compact::new(
+            ctx,
+            members,
+            layout.x_per_member(),
+            &resident[2],
+            &resident[0],
+            &resident[3],
+        );
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("blocktri staging"),
             size: 16 * xn + 36 * members as u64,
@@ -390,6 +405,7 @@ impl BlockTriSolver {
             extra_host: vec![0.0; xn as usize],
             extra_dirty: vec![false; members],
             resident,
+            compact,
             scale_host: vec![0.0; 3 * members],
             scale_dirty: vec![false; members],
             mask_host: vec![0; layout.npn * members],
@@ -398,6 +414,8 @@ impl BlockTriSolver {
             ops_host: vec![0; members],
             last_bytes_down: 0,
             bytes_up: 0,
+            copies_up: 0,
+            last_copies_down: 0,
         })
     }
 
@@ -518,6 +536,7 @@ impl BlockTriSolver {
             self.queue
                 .write_buffer(&self.member_n, 0, bytemuck::cast_slice(&self.n_host));
             self.bytes_up += 4 * (self.mask_host.len() + self.n_host.len()) as u64;
+            self.copies_up += 2;
             self.topo_dirty = false;
         }
         let w = 9 * self.layout.npn;
@@ -528,6 +547,7 @@ impl BlockTriSolver {
                 bytemuck::cast_slice(&self.extra_host[w * lo..w * hi]),
             );
             self.bytes_up += 8 * (w * (hi - lo)) as u64;
+            self.copies_up += 1;
         }
         let mut new = vec![0u32; self.members];
         for &(m, o) in ops {
@@ -540,18 +560,20 @@ impl BlockTriSolver {
                 bytemuck::cast_slice(&self.scale_host[3 * lo..3 * hi]),
             );
             self.bytes_up += 24 * (hi - lo) as u64;
+            self.copies_up += 1;
         }
-        if new != self.ops_host {
-            // Only the words that changed.
-            let changed = (0..new.len()).filter(|&i| new[i] != self.ops_host[i]);
-            for (lo, hi) in super::kernel::index_runs(changed) {
-                self.queue.write_buffer(
-                    &self.ops,
-                    4 * lo as u64,
-                    bytemuck::cast_slice(&new[lo..hi]),
-                );
-                self.bytes_up += 4 * (hi - lo) as u64;
-            }
+        // The operation words that changed, as one span (one copy: a copy per run of
+        // changed words cost a staging buffer each).
+        let first = (0..new.len()).find(|&i| new[i] != self.ops_host[i]);
+        if let Some(lo) = first {
+            let hi = (lo..new.len())
+                .rfind(|&i| new[i] != self.ops_host[i])
+                .unwrap()
+                + 1;
+            self.queue
+                .write_buffer(&self.ops, 4 * lo as u64, bytemuck::cast_slice(&new[lo..hi]));
+            self.bytes_up += 4 * (hi - lo) as u64;
+            self.copies_up += 1;
             self.ops_host = new;
         }
     }
@@ -603,18 +625,17 @@ impl BlockTriSolver {
         for &(lo, hi) in &x_runs {
             copies.push((&self.xs, per * lo as u64, per * (hi - lo) as u64));
         }
-        let r_runs = index_runs(what.report.iter().copied());
-        for &(lo, hi) in &r_runs {
-            copies.push((&self.resident[2], 16 * lo as u64, 16 * (hi - lo) as u64));
-        }
-        let f_runs = index_runs(what.fetch.iter().copied());
-        for &(lo, hi) in &f_runs {
-            copies.push((&self.resident[0], per * lo as u64, per * (hi - lo) as u64));
-            copies.push((&self.resident[3], 8 * lo as u64, 8 * (hi - lo) as u64));
+        // Reports and iterates: packed by a pass, then one copy.
+        let (packed, up) = self.compact.encode(&mut enc, &what.report, &what.fetch);
+        self.bytes_up += up;
+        self.copies_up += u64::from(up > 0);
+        if packed > 0 {
+            copies.push((self.compact.out(), 0, packed));
         }
         let mut out = Solved::default();
         let down: u64 = copies.iter().map(|c| c.2).sum();
         self.last_bytes_down = down;
+        self.last_copies_down = copies.len() as u64;
         if down == 0 {
             return Ok(out);
         }
@@ -661,27 +682,33 @@ impl BlockTriSolver {
                 }
                 out.x = Some(x);
             }
-            for &(lo, hi) in &r_runs {
-                let v: Vec<f64> = bytemuck::pod_collect_to_vec(take(16 * (hi - lo)));
+            if packed > 0 {
+                let v: Vec<f64> = bytemuck::pod_collect_to_vec(take(packed as usize));
+                let (reports, iterates) = v.split_at(2 * what.report.len());
                 out.reports.extend(
-                    (lo..hi).map(|m| (m, Report::decode(v[2 * (m - lo)], v[2 * (m - lo) + 1]))),
+                    what.report
+                        .iter()
+                        .zip(reports.chunks_exact(2))
+                        .map(|(&m, r)| (m, Report::decode(r[0], r[1]))),
                 );
-            }
-            for &(lo, hi) in &f_runs {
-                let q: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * w * (hi - lo)));
-                let rw: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * (hi - lo)));
-                out.fetched.extend((lo..hi).map(|m| {
-                    let base = w * (m - lo);
-                    (
-                        m,
-                        Fetched {
-                            q: (0..w / 9)
-                                .map(|j| std::array::from_fn(|k| q[base + 9 * j + k]))
-                                .collect(),
-                            residual_work: rw[m - lo],
-                        },
-                    )
-                }));
+                out.fetched
+                    .extend(
+                        what.fetch
+                            .iter()
+                            .zip(iterates.chunks_exact(w + 1))
+                            .map(|(&m, f)| {
+                                (
+                                    m,
+                                    Fetched {
+                                        q: f[..w]
+                                            .chunks_exact(9)
+                                            .map(|row| std::array::from_fn(|k| row[k]))
+                                            .collect(),
+                                        residual_work: f[w],
+                                    },
+                                )
+                            }),
+                    );
             }
         }
         self.staging.unmap();

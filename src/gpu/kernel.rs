@@ -70,9 +70,12 @@ pub struct KernelTimers {
     pub bytes_up: u64,
     /// Bytes read back.
     pub bytes_down: u64,
-    /// Host → device copies of the uploads (two per dispatch that uploads anything: see
-    /// [`crate::gpu::upload`]).
+    /// Host → device copies (`write_buffer` calls) of the uploads: two per dispatch that
+    /// uploads kernel inputs ([`crate::gpu::upload`]), plus the device solver's operation
+    /// words and read-back list when they change.
     pub copies: u64,
+    /// Device → host copy commands of the read-backs.
+    pub readback_copies: u64,
     /// Element slots dispatched to the tangent pass (four invocations each), summed over
     /// dispatches: the tangent work done (every slot runs the residual pass).
     pub tangent_elements: u64,
@@ -773,6 +776,7 @@ impl Readback<'_> {
         for &(off, len) in ranges {
             enc.copy_buffer_to_buffer(self.src, off, self.staging, off, len);
         }
+        timers.readback_copies += ranges.len() as u64;
         self.queue.submit(Some(enc.finish()));
         // One mapping covering every copied range (a buffer admits one pending map).
         let end = ranges.iter().map(|&(o, l)| o + l).max().unwrap_or(0);

@@ -21,6 +21,7 @@
 
 pub mod assemble;
 pub mod blocktri;
+pub(crate) mod compact;
 pub mod context;
 pub mod kernel;
 pub mod layout;

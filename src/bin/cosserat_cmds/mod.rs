@@ -688,12 +688,15 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
     obj["gpu_bytes_up"] = k.bytes_up.into();
     obj["gpu_bytes_down"] = k.bytes_down.into();
     obj["gpu_copies"] = k.copies.into();
+    obj["gpu_readback_copies"] = k.readback_copies.into();
     obj["gpu_requests"] = sv.requests.into();
     obj["gpu_tangent_requests"] = sv.tangent_requests.into();
     obj["gpu_element_evals"] = sv.element_evals.into();
     obj["gpu_element_tangent_evals"] = sv.element_tangent_evals.into();
     // Model inputs.
     obj["model_copies_per_dispatch"] = (k.copies as f64 / k.dispatches.max(1) as f64).into();
+    obj["model_readback_copies_per_dispatch"] =
+        (k.readback_copies as f64 / k.dispatches.max(1) as f64).into();
     obj["model_kernel_us_per_element_eval"] = (1e6 * k.kernel_s / evals).into();
     obj["model_tangent_fraction"] = (sv.element_tangent_evals as f64 / evals).into();
     obj["model_bytes_up_per_element_eval"] = (k.bytes_up as f64 / evals).into();
