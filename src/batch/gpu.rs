@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use crate::element::StepConsts;
 use crate::gpu::assemble::MemberIncrements;
-use crate::gpu::blocktri::{Fetched, Readback, Report, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_UPDATE};
+use crate::gpu::blocktri::{Readback, Report, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_UPDATE};
 use crate::gpu::kernel::{KernelTimers, MemberPack};
 use crate::gpu::layout::{AsmLayout, A_NODE};
 use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
@@ -426,7 +426,7 @@ impl GpuEvaluator {
         let mut fetching: Vec<usize> = Vec::new();
         let mut with_iterate: Vec<usize> = Vec::new();
         let packed = self.pack(&reqs);
-        for ((slot, req), packed) in reqs.into_iter().zip(packed) {
+        for (&(slot, ref req), packed) in reqs.iter().zip(packed) {
             let resident = req.resident.filter(|_| self.device[slot]);
             if resident.is_some_and(|r| r.fetch) {
                 fetching.push(slot);
@@ -471,6 +471,9 @@ impl GpuEvaluator {
                 Err(e) => answers.push((slot, Err(e))),
             }
         }
+        // The requests' vectors were allocated by the member threads: freeing them is
+        // per-member work, done on the pool, not on this (the driver's) thread.
+        rayon::spawn(move || drop(reqs));
         self.serve_timers.pack_s += t0.elapsed().as_secs_f64();
         if pending.is_empty() && fetching.is_empty() {
             return answers;
@@ -548,22 +551,28 @@ impl GpuEvaluator {
         // Reports and iterates by slot (a slot posts one request per dispatch, so an
         // iterate read back belongs to its fetch or rides with its report).
         let mut report_of: Vec<Option<&Report>> = vec![None; sizes.len()];
-        let mut iterate_of: Vec<Option<&Fetched>> = vec![None; sizes.len()];
+        let mut iterate_of: Vec<Option<(&[f64], f64)>> = vec![None; sizes.len()];
         if let Some(s) = &solved {
             for (m, r) in &s.reports {
                 report_of[*m] = Some(r);
             }
-            for (m, f) in &s.fetched {
-                iterate_of[*m] = Some(f);
+            for (m, q, rw) in s.iterates() {
+                iterate_of[m] = Some((q, rw));
             }
         }
+        // A fetched iterate's node rows (the member's own nodes of its slot).
+        let rows = |q: &[f64], n_nodes: usize| -> Vec<[f64; 9]> {
+            q[..9 * n_nodes]
+                .chunks_exact(9)
+                .map(|r| std::array::from_fn(|k| r[k]))
+                .collect()
+        };
         let (solved, report_of, iterate_of) = (&solved, &report_of, &iterate_of);
         answers.par_extend(pending.par_iter().map(|&(slot, tangent)| {
             let (n_elems, n_nodes) = sizes[slot];
             let out = match &res {
                 Ok(()) if is_resident(slot) => {
-                    let iterate =
-                        iterate_of[slot].map(|f| (f.q[..n_nodes].to_vec(), f.residual_work));
+                    let iterate = iterate_of[slot].map(|(q, rw)| (rows(q, n_nodes), rw));
                     match report_of[slot] {
                         Some(r) => Ok(AssembledSystem {
                             resident: Some(resident_outcome(r, iterate)),
@@ -591,14 +600,14 @@ impl GpuEvaluator {
             };
             (slot, out)
         }));
-        for slot in fetching {
-            let n_nodes = self.sizes[slot].1;
+        answers.par_extend(fetching.par_iter().map(|&slot| {
+            let n_nodes = sizes[slot].1;
             let out = match (&res, solved.as_ref()) {
                 (Ok(()), Some(_)) => match iterate_of[slot] {
-                    Some(f) => Ok(AssembledSystem {
+                    Some((q, residual_work)) => Ok(AssembledSystem {
                         resident: Some(ResidentAnswer::Fetched {
-                            q: f.q[..n_nodes].to_vec(),
-                            residual_work: f.residual_work,
+                            q: rows(q, n_nodes),
+                            residual_work,
                         }),
                         ..AssembledSystem::default()
                     }),
@@ -607,8 +616,8 @@ impl GpuEvaluator {
                 (Err(e), _) => Err(e.to_string()),
                 (Ok(()), None) => Err("no device solver for a resident fetch".into()),
             };
-            answers.push((slot, out));
-        }
+            (slot, out)
+        }));
         for &(slot, _) in &pending {
             self.active[slot] = true;
         }

@@ -59,16 +59,6 @@ impl Report {
     }
 }
 
-/// A device-resident member's accepted iterate, fetched at convergence.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Fetched {
-    /// Per node slot of the member (`NPN`), node-local order: the iterate before the last
-    /// update.
-    pub q: Vec<[f64; 9]>,
-    /// `Σ |R_i q_i|` of that iterate.
-    pub residual_work: f64,
-}
-
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
@@ -94,8 +84,28 @@ pub struct Solved {
     pub x: Option<Vec<f64>>,
     /// Per member slot asked for ([`Readback::report`]): its [`Report`].
     pub reports: Vec<(usize, Report)>,
-    /// Per member slot asked for ([`Readback::fetch`]): its accepted iterate.
-    pub fetched: Vec<(usize, Fetched)>,
+    /// The member slots asked for ([`Readback::fetch`]), in that order.
+    pub fetched: Vec<usize>,
+    /// Their accepted iterates, packed in the same order: per member `9 · NPN` scalars
+    /// (node slots in node-local order, 9 each: the iterate before the last update), then
+    /// `Σ |R_i q_i|` of that iterate. See [`Self::iterates`].
+    pub iterates: Vec<f64>,
+}
+
+impl Solved {
+    /// The fetched members' accepted iterates: (member slot, `9 · NPN` scalars of the
+    /// iterate, its residual work).
+    pub fn iterates(&self) -> impl Iterator<Item = (usize, &[f64], f64)> + '_ {
+        let w = self
+            .iterates
+            .len()
+            .checked_div(self.fetched.len())
+            .unwrap_or(1);
+        self.fetched
+            .iter()
+            .zip(self.iterates.chunks_exact(w))
+            .map(move |(&m, f)| (m, &f[..w - 1], f[w - 1]))
+    }
 }
 
 /// What [`BlockTriSolver::read`] copies back, by member slot.
@@ -107,7 +117,7 @@ pub struct Readback {
     pub x: Vec<usize>,
     /// [`Report`]s of these slots (16 bytes each).
     pub report: Vec<usize>,
-    /// Accepted iterates of these slots ([`Fetched`]).
+    /// Accepted iterates of these slots ([`Solved::iterates`]).
     pub fetch: Vec<usize>,
 }
 
@@ -608,7 +618,7 @@ impl BlockTriSolver {
 
     /// Reads back what `what` asks for, in one copy and map: statuses and backward errors
     /// of every slot, solutions, device-resident [`Report`]s (16 bytes per slot) and
-    /// accepted iterates ([`Fetched`]: 72 bytes per node slot and 8 for the residual work).
+    /// accepted iterates ([`Solved::iterates`]: 72 bytes per node slot and 8 for the residual work).
     pub fn read_back(&mut self, what: &Readback) -> Result<Solved, GpuError> {
         let mut enc = self
             .device
@@ -683,32 +693,17 @@ impl BlockTriSolver {
                 out.x = Some(x);
             }
             if packed > 0 {
-                let v: Vec<f64> = bytemuck::pod_collect_to_vec(take(packed as usize));
-                let (reports, iterates) = v.split_at(2 * what.report.len());
+                let nr = what.report.len();
+                let reports: Vec<f64> = bytemuck::pod_collect_to_vec(take(16 * nr));
                 out.reports.extend(
                     what.report
                         .iter()
                         .zip(reports.chunks_exact(2))
                         .map(|(&m, r)| (m, Report::decode(r[0], r[1]))),
                 );
-                out.fetched
-                    .extend(
-                        what.fetch
-                            .iter()
-                            .zip(iterates.chunks_exact(w + 1))
-                            .map(|(&m, f)| {
-                                (
-                                    m,
-                                    Fetched {
-                                        q: f[..w]
-                                            .chunks_exact(9)
-                                            .map(|row| std::array::from_fn(|k| row[k]))
-                                            .collect(),
-                                        residual_work: f[w],
-                                    },
-                                )
-                            }),
-                    );
+                // Decoded per member by the caller (in parallel), not here.
+                out.fetched = what.fetch.clone();
+                out.iterates = bytemuck::pod_collect_to_vec(take(packed as usize - 16 * nr));
             }
         }
         self.staging.unmap();
