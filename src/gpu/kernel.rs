@@ -11,7 +11,7 @@ use nalgebra::Vector6;
 
 use super::context::{GpuContext, Precision};
 use super::layout::*;
-use super::upload::{Block, Scatter};
+use super::upload::{Block, MirrorRows, Scatter};
 use super::GpuError;
 use crate::element::{
     ElemMat, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars, Increment, StepConsts,
@@ -465,7 +465,14 @@ impl ElementKernel {
 
     /// Queues the changed slots of every input buffer for the dispatch's scatter pass: one
     /// block (slots × uploaded fields) per run of changed slots.
-    fn upload(&mut self) {
+    /// Records the uploads queued so far (the kernel's changed slots and whatever
+    /// [`Self::scatter_mut`] queued) as the next pass of `enc`, ahead of the passes that
+    /// read them. At most one such pass per command buffer may carry data: its two copies
+    /// run at submission, before every pass of the buffer (the assembler flushes ahead of
+    /// its gather pass; the flush in [`Self::encode`] then finds nothing queued).
+    pub(crate) fn flush_uploads(&mut self, enc: &mut wgpu::CommandEncoder) {
+        // The changed slot runs of the element, state and iteration mirrors (the
+        // iteration buffer from its first field that changes per iteration).
         let from = [0, 0, self.iter_from];
         let mut rows = Vec::new();
         for b in 0..3 {
@@ -477,28 +484,16 @@ impl ElementKernel {
                 nf: nf - f0,
             };
             for (lo, hi) in take_runs_gap(&mut self.dirty[b], SCATTER_GAP) {
-                let host = &self.host[b];
-                if f0 == 0 {
-                    self.scatter.push(block, lo, &host[lo * nf..hi * nf]);
-                } else {
-                    rows.clear();
-                    for i in lo..hi {
-                        rows.extend_from_slice(&host[i * nf + f0..(i + 1) * nf]);
-                    }
-                    self.scatter.push(block, lo, &rows);
-                }
+                rows.push(MirrorRows {
+                    block,
+                    lo,
+                    hi,
+                    host: &self.host[b],
+                    stride: nf,
+                });
             }
         }
-    }
-
-    /// Records the uploads queued so far (the kernel's changed slots and whatever
-    /// [`Self::scatter_mut`] queued) as the next pass of `enc`, ahead of the passes that
-    /// read them. At most one such pass per command buffer may carry data: its two copies
-    /// run at submission, before every pass of the buffer (the assembler flushes ahead of
-    /// its gather pass; the flush in [`Self::encode`] then finds nothing queued).
-    pub(crate) fn flush_uploads(&mut self, enc: &mut wgpu::CommandEncoder) {
-        self.upload();
-        let (bytes, copies) = self.scatter.encode(enc);
+        let (bytes, copies) = self.scatter.encode(enc, &rows);
         self.timers.bytes_up += bytes;
         self.timers.copies += copies;
     }

@@ -12,6 +12,7 @@
 
 use super::context::{GpuContext, Precision};
 use super::kernel::{shader_precision, ElementKernel};
+use rayon::prelude::*;
 
 /// Scalars per run at most (one workgroup of 64 invocations copies a run; longer runs
 /// are split so that no workgroup walks a whole buffer).
@@ -47,6 +48,37 @@ pub(crate) struct Block {
     /// First field of the block and number of fields.
     pub f0: usize,
     pub nf: usize,
+}
+
+/// Rows of a slot-major host mirror to upload (uploaded straight from the mirror by
+/// [`Scatter::encode`]): slots `lo..hi`, fields `block.f0..block.f0 + block.nf` of the
+/// `stride` values of each slot.
+pub(crate) struct MirrorRows<'a> {
+    pub block: Block,
+    pub lo: usize,
+    pub hi: usize,
+    pub host: &'a [f64],
+    pub stride: usize,
+}
+
+/// A disjoint piece of the staging view, to be filled on another thread.
+struct Piece<'a>(wgpu::WriteOnly<'a, [u8]>);
+
+// SAFETY: a `WriteOnly<'a, [u8]>` is an exclusive, write-only borrow of bytes, like
+// `&'a mut [u8]` (which is `Send`); wgpu 30 implements `Send` for `WriteOnly<T>` only for
+// sized `T` (its impl lacks `?Sized`), not for slices. The pieces come from `split_at`, so
+// no two overlap.
+unsafe impl Send for Piece<'_> {}
+
+/// Writes `vals` into `dst` in the device's precision (`dst` is exactly their size).
+fn write_values(dst: &mut wgpu::WriteOnly<'_, [u8]>, vals: &[f64], precision: Precision) {
+    match precision {
+        Precision::F64 => dst.copy_from_slice(bytemuck::cast_slice(vals)),
+        Precision::F32 => {
+            let v: Vec<f32> = vals.iter().map(|&x| x as f32).collect();
+            dst.copy_from_slice(bytemuck::cast_slice(&v));
+        }
+    }
 }
 
 /// The pending uploads of one dispatch and the pass that scatters them.
@@ -119,25 +151,44 @@ impl Scatter {
     /// `b`.
     pub(crate) fn push(&mut self, b: Block, slot0: usize, src: &[f64]) {
         debug_assert_eq!(src.len() % b.nf, 0);
-        let per = (RUN_MAX / b.nf).max(1) * b.nf;
-        for (k, chunk) in src.chunks(per).enumerate() {
+        self.add_runs(b, slot0, src.len() / b.nf, self.vals.len());
+        self.vals.extend_from_slice(src);
+    }
+
+    /// The run descriptions of `slots` slots of block `b` from slot `slot0`, their values
+    /// at `src..` of the value array (split so that no run exceeds [`RUN_MAX`] values).
+    fn add_runs(&mut self, b: Block, slot0: usize, slots: usize, src: usize) {
+        let per = (RUN_MAX / b.nf).max(1);
+        for k in (0..slots).step_by(per) {
+            let n = per.min(slots - k);
             self.runs.push(Run {
                 dst: b.target as u32,
-                slot0: (slot0 + k * per / b.nf) as u32,
-                slots: (chunk.len() / b.nf) as u32,
-                src: self.vals.len() as u32,
+                slot0: (slot0 + k) as u32,
+                slots: n as u32,
+                src: (src + k * b.nf) as u32,
                 f0: b.f0 as u32,
                 nf: b.nf as u32,
                 cap: b.cap as u32,
                 pad: 0,
             });
-            self.vals.extend_from_slice(chunk);
         }
     }
 
-    /// Uploads what is queued (two copies) and records the scatter pass into `enc`;
-    /// returns the bytes uploaded and the copies made (0 and 0 when nothing is queued).
-    pub(crate) fn encode(&mut self, enc: &mut wgpu::CommandEncoder) -> (u64, u64) {
+    /// Uploads what is queued and the mirror rows `rows` (two copies) and records the
+    /// scatter pass into `enc`; returns the bytes uploaded and the copies made (0 and 0
+    /// when nothing is queued). The rows are written once, straight into the staging
+    /// memory, in parallel over chunks of slots (not copied into the value array first).
+    pub(crate) fn encode(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        rows: &[MirrorRows<'_>],
+    ) -> (u64, u64) {
+        let queued = self.vals.len();
+        let mut at = queued;
+        for r in rows {
+            self.add_runs(r.block, r.lo, r.hi - r.lo, at);
+            at += (r.hi - r.lo) * r.block.nf;
+        }
         let n = self.runs.len() - 1;
         if n == 0 {
             return (0, 0);
@@ -145,7 +196,7 @@ impl Scatter {
         self.runs[0].dst = n as u32;
         let w = ElementKernel::width(self.precision);
         let run_bytes = (std::mem::size_of::<Run>() * self.runs.len()) as u64;
-        let val_bytes = (w * self.vals.len()) as u64;
+        let val_bytes = (w * at) as u64;
         if run_bytes > self.run_buf.size() {
             self.run_buf =
                 Self::buffer(&self.device, "scatter runs", run_bytes.next_power_of_two());
@@ -161,16 +212,40 @@ impl Scatter {
         }
         self.queue
             .write_buffer(&self.run_buf, 0, bytemuck::cast_slice(&self.runs));
-        match self.precision {
-            Precision::F64 => {
-                self.queue
-                    .write_buffer(&self.val_buf, 0, bytemuck::cast_slice(&self.vals))
+        if let Some(size) = wgpu::BufferSize::new(val_bytes) {
+            let mut view = self
+                .queue
+                .write_buffer_with(&self.val_buf, 0, size)
+                .expect("scatter values: write within the buffer");
+            let (head, mut rest) = view.slice(..).split_at(w * queued);
+            let mut head = head;
+            write_values(&mut head, &self.vals, self.precision);
+            // Disjoint pieces of at most CHUNK slots, filled in parallel.
+            const CHUNK: usize = 32;
+            let mut pieces = Vec::new();
+            for r in rows {
+                for lo in (r.lo..r.hi).step_by(CHUNK) {
+                    let hi = (lo + CHUNK).min(r.hi);
+                    let (piece, tail) = rest.split_at(w * (hi - lo) * r.block.nf);
+                    rest = tail;
+                    pieces.push((Piece(piece), r, lo, hi));
+                }
             }
-            Precision::F32 => {
-                let v: Vec<f32> = self.vals.iter().map(|&x| x as f32).collect();
-                self.queue
-                    .write_buffer(&self.val_buf, 0, bytemuck::cast_slice(&v));
-            }
+            let precision = self.precision;
+            pieces
+                .into_par_iter()
+                .for_each(|(Piece(mut piece), r, lo, hi)| {
+                    let (f0, nf, stride) = (r.block.f0, r.block.nf, r.stride);
+                    if f0 == 0 && nf == stride {
+                        write_values(&mut piece, &r.host[lo * stride..hi * stride], precision);
+                    } else {
+                        for (k, i) in (lo..hi).enumerate() {
+                            let row = &r.host[i * stride + f0..i * stride + f0 + nf];
+                            let mut dst = piece.slice(w * k * nf..w * (k + 1) * nf);
+                            write_values(&mut dst, row, precision);
+                        }
+                    }
+                });
         }
         let group = self.group.get_or_insert_with(|| {
             let bufs = [&self.run_buf, &self.val_buf]
@@ -254,9 +329,10 @@ mod tests {
     }
 
     /// Blocks of random slot ranges and field ranges (one longer than [`RUN_MAX`],
-    /// split) into four field-major targets of different shapes, over two dispatches, in
-    /// f64 and in f32: every queued value lands in its field and slot, and nothing else
-    /// changes.
+    /// split) into three field-major targets of different shapes, and rows of a host
+    /// mirror (all fields, and a range of fields; over several parallel pieces and runs)
+    /// into a fourth, over two dispatches, in f64 and in f32: every queued value lands in
+    /// its field and slot, and nothing else changes.
     #[test]
     fn queued_blocks_land_in_their_fields_and_slots_and_nowhere_else() {
         let Some(ctx) = context() else { return };
@@ -267,7 +343,9 @@ mod tests {
     fn scatter_round_trip(ctx: &GpuContext) {
         let ctx = ctx.with_precision(ctx.precision);
         // (fields, slots per field) of each target.
-        let shapes = [(6, 500), (10, 500), (7, 100), (9, 300)];
+        // Target 2 gets mirror rows only (written straight from a slot-major host mirror),
+        // the others queued blocks.
+        let shapes = [(6, 500), (10, 500), (7, 400), (9, 300)];
         let sizes: Vec<usize> = shapes.iter().map(|&(f, c)| f * c).collect();
         let w = ElementKernel::width(ctx.precision) as u64;
         let targets: [wgpu::Buffer; TARGETS] = std::array::from_fn(|t| {
@@ -288,6 +366,9 @@ mod tests {
             // Disjoint slot ranges per target, each with a random range of fields.
             let mut runs = 0;
             for (t, &(nfields, cap)) in shapes.iter().enumerate() {
+                if t == 2 {
+                    continue;
+                }
                 let mut slot = below(&mut rng, 20);
                 let mut first = true;
                 while slot < cap {
@@ -328,7 +409,33 @@ mod tests {
                     .count();
                 assert!(split >= 3, "the long block went up as {split} runs");
             }
-            let (bytes, copies) = scatter.encode(&mut enc);
+            // Mirror rows into target 2: all 7 fields of slots 0..200 (1 400 values: split
+            // into runs, and into pieces of 32 slots), fields 0..3 of slots 210..240 and
+            // fields 3..7 of slots 250..400.
+            let (nf2, cap2) = shapes[2];
+            let host: Vec<f64> = (0..cap2 * nf2).map(|_| rng.symmetric()).collect();
+            let rows = [(0, 200, 0, nf2), (210, 240, 0, 3), (250, 400, 3, nf2 - 3)].map(
+                |(lo, hi, f0, nf)| MirrorRows {
+                    block: Block {
+                        target: 2,
+                        cap: cap2,
+                        f0,
+                        nf,
+                    },
+                    lo,
+                    hi,
+                    host: &host,
+                    stride: nf2,
+                },
+            );
+            for r in &rows {
+                for slot in r.lo..r.hi {
+                    for f in r.block.f0..r.block.f0 + r.block.nf {
+                        mirror[2][f * cap2 + slot] = host[slot * nf2 + f];
+                    }
+                }
+            }
+            let (bytes, copies) = scatter.encode(&mut enc, &rows);
             assert_eq!(copies, 2);
             assert!(bytes > 0);
             ctx.queue.submit([enc.finish()]);
@@ -345,6 +452,6 @@ mod tests {
         }
         // Nothing queued: no copies, no pass.
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        assert_eq!(scatter.encode(&mut enc), (0, 0));
+        assert_eq!(scatter.encode(&mut enc, &[]), (0, 0));
     }
 }
