@@ -628,7 +628,9 @@ fn increment_rows(rows: &mut [f64], dirty: &mut [bool], nodes: &[[f64; A_NODE]],
     }
 }
 
-fn compute_pipeline(ctx: &GpuContext, label: &str, src: &str) -> wgpu::ComputePipeline {
+/// A compute pipeline of `src` (entry point `main`, layout from the shader) in the
+/// context's precision, through the pipeline cache.
+pub(crate) fn compute_pipeline(ctx: &GpuContext, label: &str, src: &str) -> wgpu::ComputePipeline {
     let module = ctx
         .device
         .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -647,7 +649,7 @@ fn compute_pipeline(ctx: &GpuContext, label: &str, src: &str) -> wgpu::ComputePi
 }
 
 /// A bind group of `pipeline`'s group 0 with `buffers` at bindings 0, 1, ….
-fn make_bind_group(
+pub(crate) fn make_bind_group(
     device: &wgpu::Device,
     pipeline: &wgpu::ComputePipeline,
     label: &str,

@@ -4,6 +4,8 @@
 //! buffer, so the read-back is one copy command of exactly the bytes asked for (a copy
 //! per run of members cost a command, a barrier and driver bookkeeping each).
 
+use super::assemble::{compute_pipeline, make_bind_group};
+
 /// The compaction pass over a solver's report, iterate and residual-work buffers.
 pub(crate) struct Compact {
     queue: wgpu::Queue,
@@ -28,18 +30,7 @@ impl Compact {
         rwork: &wgpu::Buffer,
     ) -> Self {
         let device = ctx.device.clone();
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("compact.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/compact.wgsl").into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("compact"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: ctx.pipeline_cache(),
-        });
+        let pipeline = compute_pipeline(ctx, "compact", include_str!("../../shaders/compact.wgsl"));
         ctx.save_pipeline_cache();
         let storage = |label: &str, bytes: usize, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -60,19 +51,12 @@ impl Compact {
             8 * (2 + w + 1) * members,
             wgpu::BufferUsages::COPY_SRC,
         );
-        let entries: Vec<wgpu::BindGroupEntry> = [&list, report, q, rwork, &out]
-            .into_iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("compact"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
+        let group = make_bind_group(
+            &device,
+            &pipeline,
+            "compact",
+            &[&list, report, q, rwork, &out],
+        );
         Self {
             queue: ctx.queue.clone(),
             pipeline,
@@ -181,22 +165,8 @@ mod tests {
         let (bytes, up) = compact.encode(&mut enc, reports, &fetches);
         assert_eq!(bytes, 8 * (2 * 100 + (w + 1) * 50) as u64);
         assert_eq!(up, 4 * (4 + 150) as u64);
-        let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: None,
-            size: bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        enc.copy_buffer_to_buffer(compact.out(), 0, &staging, 0, bytes);
         ctx.queue.submit([enc.finish()]);
-        staging
-            .slice(..)
-            .map_async(wgpu::MapMode::Read, |r| r.unwrap());
-        ctx.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .unwrap();
-        let got: Vec<f64> =
-            bytemuck::pod_collect_to_vec(&staging.slice(..).get_mapped_range().unwrap());
+        let got = crate::gpu::upload::tests::read(&ctx, compact.out(), bytes as usize / 8);
         let mut want = Vec::new();
         for &m in reports {
             want.extend_from_slice(&report[2 * m..2 * m + 2]);

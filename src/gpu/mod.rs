@@ -14,6 +14,9 @@
 //!   systems are read back.
 //! * [`blocktri`]: batched block-tridiagonal LU and solve of the assembled systems on the
 //!   device (CPU twin: [`crate::linsolve::batched`]).
+//! * `upload`: a dispatch's uploads (changed mirror rows, node increments) in two copies
+//!   and a scatter pass; `compact`: the solver's reports and iterates packed by a pass
+//!   and read back in one copy.
 //!
 //! f64 is used whenever the adapter offers `SHADER_F64`; otherwise the same shader runs in
 //! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (docs/gpu.md,

@@ -281,7 +281,7 @@ impl Scatter {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::math::rng::Rng;
 
@@ -297,7 +297,7 @@ mod tests {
     }
 
     /// Reads `buf` (`n` scalars of `precision`) back to the host as f64.
-    fn read(ctx: &GpuContext, buf: &wgpu::Buffer, n: usize) -> Vec<f64> {
+    pub(crate) fn read(ctx: &GpuContext, buf: &wgpu::Buffer, n: usize) -> Vec<f64> {
         let w = ElementKernel::width(ctx.precision);
         let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: None,
