@@ -30,12 +30,18 @@ use cosserat::batch::{
     bench_members, run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
 };
 use cosserat::integrator::{NewtonVariant, Scheme};
+use cosserat::model::{NodalLoad, Vec3};
 use cosserat::observe::record::RunStatus;
+use cosserat::table::TimeTable;
 
 /// Whole-run parity, device solve against the CPU path (the issue asks 1e-10; measured
 /// ≤ 7.6e-12 over full and modified Newton, modified Newton stopping anywhere inside its
 /// tolerance).
 const STATE_RTOL: f64 = 6e-11;
+
+/// The member-by-member test's bound: measured 1.17e-12 over full and modified Newton
+/// since its members carry tip loads (2026-11-26; 7.6e-12 before, under `STATE_RTOL`).
+const MEMBER_RTOL: f64 = 1e-11;
 
 struct Rng(u64);
 impl Rng {
@@ -49,10 +55,32 @@ impl Rng {
 
 /// 14 members of 10 elements: 0..9 random, 9 ends after 3 steps, 10 fails on its
 /// staggered cap, 11 fails on its Newton cap, 12 is generalized-α, 13 has a point mass.
+/// Members 0..9 carry a random tip force and moment ramping up over the run (nodal terms
+/// that change every step: on the device they join the right-hand side as extras sent
+/// with a Newton solve's first request and kept for its later ones).
 fn members() -> Vec<Member> {
+    members_with(true)
+}
+
+/// [`members`], with or without the tip loads.
+fn members_with(loads: bool) -> Vec<Member> {
     let mut ms = bench_members(14, 10, 6).unwrap();
     let mut rng = Rng(0x00de_71ce);
     for (i, m) in ms.iter_mut().enumerate() {
+        if loads && i < 9 {
+            let tip = m.model.n_nodes() - 1;
+            let mut v = || Vec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
+            let (force, moment) = (2.0 * v(), 0.5 * v());
+            m.model.loads.push(NodalLoad {
+                node: tip,
+                force,
+                moment,
+                table: TimeTable {
+                    times: vec![0.0, 0.1],
+                    values: vec![0.2, 1.0],
+                },
+            });
+        }
         let kick = 0.5 + 1.5 * rng.next();
         m.model.velocity0.iter_mut().for_each(|v| *v *= kick);
         let stiff = 0.5 + rng.next();
@@ -219,7 +247,7 @@ fn device_solve_matches_cpu_member_by_member() {
                 ),
             ];
             for (what, x) in diffs {
-                assert!(x <= STATE_RTOL, "{tag}: {what} differ by {x:.3e}");
+                assert!(x <= MEMBER_RTOL, "{tag}: {what} differ by {x:.3e}");
                 worst = worst.max(x);
             }
         }
@@ -236,8 +264,9 @@ fn device_solve_matches_cpu_member_by_member() {
 #[test]
 fn device_resident_newton_matches_host_update_with_16_bytes_per_iteration() {
     let Some(exec) = gpu() else { return };
-    // The members the device covers (no generalized-α, no point mass).
-    let ms: Vec<Member> = members().into_iter().take(12).collect();
+    // The members the device covers (no generalized-α, no point mass), without loads:
+    // the batch-iteration bound below was measured on them.
+    let ms: Vec<Member> = members_with(false).into_iter().take(12).collect();
     let mut worst = 0.0f64;
     for newton in [NewtonVariant::Full, NewtonVariant::Modified] {
         let (host, hs) = run_with(&ms, &exec, newton, SolveMode::Device, true);

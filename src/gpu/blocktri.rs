@@ -464,7 +464,7 @@ impl BlockTriSolver {
     }
 
     /// [`Self::set_extra`] for many members at once, in parallel: `members[m]` for member
-    /// `m`, `None` leaves it as it is.
+    /// `m`; `None` or no rows leave it as it is.
     pub fn set_extras(&mut self, members: &[Option<&[[f64; 9]]>]) {
         use rayon::prelude::*;
         let w = 9 * self.layout.npn;

@@ -51,7 +51,8 @@ pub struct EvalRequest {
     /// with the assembled tangent `K` (factorized when `tangent`, else the factors it kept
     /// from this member's last tangent) and answers the solution instead of the blocks.
     /// Per node: `extra`, the host's nodal residual terms (loads, moments) in node-local
-    /// order. `None`: the host solves.
+    /// order. `None`: the host solves. Empty: as in this member's previous request (the
+    /// later requests of a device-resident Newton solve, whose nodal terms are constant).
     pub device_extra: Option<Vec<[f64; 9]>>,
     /// Device-resident Newton (with `device_extra`): the device keeps the increment, adds
     /// its own correction after the solve and answers the relative residual only

@@ -50,10 +50,19 @@ impl Simulation {
                 self.solver.values_mut().iter_mut().for_each(|x| *x = 0.0);
             }
         }
-        if device {
-            self.nodal_terms(q, false, r, &mut scale);
-        }
         let resident = device && self.resident_now;
+        // Inside a device-resident Newton solve the nodal terms cannot change: the device
+        // solve covers no nodal term that depends on the iterate (`device_solve_refusal`:
+        // no point masses, links, line loads, drag; no contact on the GPU), and loads
+        // change per step. They go up with the solve's first request; the later ones send
+        // none (the device keeps them) and reuse their row scales.
+        let keep_nodal = resident && !self.resident_next.upload;
+        if keep_nodal {
+            scale = self.resident_scale;
+        } else if device {
+            self.nodal_terms(q, false, r, &mut scale);
+            self.resident_scale = scale;
+        }
         if external {
             let upload = !resident || self.resident_next.upload;
             let mut req = self.eval_request(upload.then_some(q), tangent);
@@ -65,13 +74,15 @@ impl Simulation {
                 });
             }
             if device {
-                req.device_extra = Some(
+                req.device_extra = Some(if keep_nodal {
+                    Vec::new()
+                } else {
                     self.dofs
                         .nodes
                         .iter()
                         .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { r[i] }))
-                        .collect(),
-                );
+                        .collect()
+                });
             }
             let t0 = Instant::now();
             let answer = match &self.backend {
@@ -100,6 +111,10 @@ impl Simulation {
                     return (residual, scale);
                 }
                 Ok(mut sys) => {
+                    if keep_nodal {
+                        // (Not expected: a resident request answered as a host one.)
+                        self.nodal_terms(q, false, r, &mut scale);
+                    }
                     if device {
                         self.device_x = Some(sys.solution.take().unwrap_or_else(|| {
                             Err("the evaluator did not solve on the device".into())

@@ -177,6 +177,9 @@ pub struct Simulation {
     /// host's iterate, restore, predicted acceptance, send the iterate back; its `scale`
     /// is filled in when it is posted).
     resident_next: crate::integrator::evaluate::Resident,
+    /// The row scales of the nodal terms sent with the current resident solve's first
+    /// request (the later requests reuse them).
+    resident_scale: [f64; 3],
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
@@ -248,6 +251,7 @@ impl Simulation {
             device_resident: false,
             resident_now: false,
             resident_next: Default::default(),
+            resident_scale: [0.0; 3],
             resident_iterate: None,
             residual_work: None,
         })
