@@ -261,3 +261,41 @@ fn bare_command_runs_the_default_frame_into_out_frame() {
         .collect();
     assert_eq!(top, ["out"]);
 }
+
+/// `bench --modified-newton`, the option's earlier name (hidden, kept for scripts such as
+/// a staged GPU benchmark), runs exactly `--newton modified`; it cannot be combined with
+/// `--newton` (exit 2).
+#[test]
+fn bench_modified_newton_is_newton_modified() {
+    let json = |extra: &[&str]| -> serde_json::Value {
+        let o = cosserat()
+            .args(["bench", "--rods", "3", "--elements", "4", "--steps", "3"])
+            .args(["--cpu-only", "--json"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8(o.stdout).unwrap();
+        serde_json::from_str(text.lines().last().unwrap()).unwrap()
+    };
+    let old = json(&["--modified-newton"]);
+    let new = json(&["--newton", "modified"]);
+    let full = json(&[]);
+    assert_eq!(old["newton"], "modified");
+    assert_eq!(full["newton"], "full");
+    assert_eq!(old["cpu_newton_iters"], new["cpu_newton_iters"]);
+    assert_eq!(old["cpu_factorizations"], new["cpu_factorizations"]);
+    assert_ne!(old["cpu_factorizations"], full["cpu_factorizations"]);
+    let o = cosserat()
+        .args([
+            "bench",
+            "--modified-newton",
+            "--newton",
+            "full",
+            "--cpu-only",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));
+}

@@ -560,6 +560,10 @@ pub struct BenchArgs {
     /// Newton variant (default: full).
     #[arg(long, value_enum, default_value_t = NewtonArg::Full)]
     pub newton: NewtonArg,
+    /// The same as `--newton modified`: the option's earlier name, kept (hidden) for the
+    /// scripts that still pass it.
+    #[arg(long, hide = true, conflicts_with = "newton")]
+    pub modified_newton: bool,
     /// GPU path: members in flight at once (default: as many as fit, at most 4096).
     #[arg(long, default_value_t = 0)]
     pub slots: usize,
@@ -745,7 +749,12 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         bench_members(a.rods, a.elements, a.steps).context("bench: the benchmark cantilever")?;
     let work = (a.rods * a.elements * a.steps) as f64;
     let rod_steps = (a.rods * a.steps) as f64;
-    let newton = a.newton.variant();
+    let newton = if a.modified_newton {
+        NewtonArg::Modified
+    } else {
+        a.newton
+    }
+    .variant();
     let rss0 = peak_rss_bytes();
     let cpu = if a.gpu_only {
         None
