@@ -618,7 +618,8 @@ impl BlockTriSolver {
 
     /// Reads back what `what` asks for, in one copy and map: statuses and backward errors
     /// of every slot, solutions, device-resident [`Report`]s (16 bytes per slot) and
-    /// accepted iterates ([`Solved::iterates`]: 72 bytes per node slot and 8 for the residual work).
+    /// accepted iterates ([`Solved::iterates`]: 72 bytes per node slot and 8 for the
+    /// residual work).
     pub fn read_back(&mut self, what: &Readback) -> Result<Solved, GpuError> {
         let mut enc = self
             .device

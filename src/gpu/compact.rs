@@ -145,8 +145,8 @@ mod tests {
         b
     }
 
-    /// 300 member slots of 135 iterate scalars (over two strides of a workgroup); unsorted lists of 100 reports (four report workgroups) and 50
-    /// iterates, one slot in both: the output holds exactly the listed values, reports
+    /// 300 member slots of 135 iterate scalars (over two strides of a workgroup); unsorted
+    /// lists of 100 reports (four report workgroups) and 50 iterates, one slot in both: the output holds exactly the listed values, reports
     /// first, in list order; then an empty request records nothing.
     #[test]
     fn listed_reports_and_iterates_come_out_packed_in_list_order() {

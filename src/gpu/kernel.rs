@@ -463,10 +463,8 @@ impl ElementKernel {
         }
     }
 
-    /// Queues the changed slots of every input buffer for the dispatch's scatter pass: one
-    /// block (slots × uploaded fields) per run of changed slots.
-    /// Records the uploads queued so far (the kernel's changed slots and whatever
-    /// [`Self::scatter_mut`] queued) as the next pass of `enc`, ahead of the passes that
+    /// Records the uploads queued so far (the kernel's changed slots, one block of slots ×
+    /// uploaded fields per run, and whatever [`Self::scatter_mut`] queued) as the next pass of `enc`, ahead of the passes that
     /// read them. At most one such pass per command buffer may carry data: its two copies
     /// run at submission, before every pass of the buffer (the assembler flushes ahead of
     /// its gather pass; the flush in [`Self::encode`] then finds nothing queued).

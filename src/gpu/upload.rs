@@ -1,7 +1,8 @@
 //! The uploads of a dispatch in two copies: the changed runs of the element kernel's input
-//! buffers and of the node increments are packed on the host into one value array and one
-//! run list, copied to the device, and scattered into place by the first pass of the
-//! dispatch (`shaders/scatter.wgsl`).
+//! buffers (written straight from its host mirrors into the staging memory, in parallel)
+//! and of the node increments are packed into one value array and one run list, copied to
+//! the device, and scattered into place by the first pass of the dispatch
+//! (`shaders/scatter.wgsl`).
 //!
 //! A `write_buffer` per run costs a staging allocation, a copy command and their
 //! bookkeeping (≈ 2.3 µs each on lavapipe, where a byte costs ≈ 0.1–0.5 ns), and a
@@ -217,8 +218,7 @@ impl Scatter {
                 .queue
                 .write_buffer_with(&self.val_buf, 0, size)
                 .expect("scatter values: write within the buffer");
-            let (head, mut rest) = view.slice(..).split_at(w * queued);
-            let mut head = head;
+            let (mut head, mut rest) = view.slice(..).split_at(w * queued);
             write_values(&mut head, &self.vals, self.precision);
             // Disjoint pieces of at most CHUNK slots, filled in parallel.
             const CHUNK: usize = 32;
