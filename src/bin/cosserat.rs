@@ -8,7 +8,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 
 use cosserat::driver::{run_sim_to_dir, RunOptions};
-use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
+use cosserat::integrator::{IntegratorParams, Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, RunSummary};
 use cosserat::output::OutputTimes;
 use cosserat::reproduce::reproduce;
@@ -218,7 +218,7 @@ struct RunArgs {
     rho_inf: Option<f64>,
     /// Dissipation strategy (default: the scene's, else staggered).
     #[arg(long, value_enum)]
-    strategy: Option<StrategyArg>,
+    strategy: Option<cmds::StrategyArg>,
     /// Newton variant (default: the scene's `[integrator] newton`, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
@@ -306,12 +306,6 @@ enum SchemeArg {
     Midpoint,
     /// Baseline: Lie-group generalized-α (`--rho-inf`).
     GenAlpha,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
-enum StrategyArg {
-    Staggered,
-    Monolithic,
 }
 
 fn main() -> ExitCode {
@@ -515,10 +509,7 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
         );
     }
     if let Some(s) = a.strategy {
-        p.strategy = match s {
-            StrategyArg::Staggered => Strategy::Staggered,
-            StrategyArg::Monolithic => Strategy::Monolithic,
-        };
+        p.strategy = s.strategy();
     }
     if let Some(n) = a.newton {
         p.newton = n.variant();

@@ -16,6 +16,15 @@ pub enum Strategy {
     /// One Newton iteration on everything, the local dissipation scalars linearized
     /// inside it.
     Monolithic,
+    /// The monolithic equations (the local dissipation scalars re-evaluated at every
+    /// Newton iterate) solved with the frozen-scalar tangent: an inexact Newton that
+    /// leaves out the scalars' linearization. Each iteration costs what a staggered one
+    /// costs plus the scalars' local solve, and one solve replaces the staggered loop's
+    /// rounds; the accepted step passes the same checks (energy, dissipation identity to
+    /// `outer_tol`). The element evaluation stays on the CPU kernel (as for
+    /// [`Strategy::Monolithic`]); with `fallback` a failed step is retried with the
+    /// monolithic strategy.
+    Inexact,
 }
 
 /// How Newton treats the tangent within one solve.

@@ -831,11 +831,12 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
         p.strategy = match s {
             "monolithic" => Strategy::Monolithic,
             "staggered" => Strategy::Staggered,
+            "inexact" => Strategy::Inexact,
             other => {
                 return Err(cx.err(
                     &k("strategy"),
                     format!(
-                        "unknown strategy `{other}` (expected \"monolithic\" or \"staggered\")"
+                        "unknown strategy `{other}` (expected \"staggered\", \"monolithic\" or \"inexact\")"
                     ),
                 ))
             }

@@ -591,6 +591,8 @@ impl Scene {
             Strategy::Monolithic => "monolithic",
             Strategy::Staggered if p.fallback => "staggered (monolithic fallback)",
             Strategy::Staggered => "staggered (no fallback)",
+            Strategy::Inexact if p.fallback => "inexact (monolithic fallback)",
+            Strategy::Inexact => "inexact (no fallback)",
         };
         let _ = writeln!(s, "integrator: {scheme}");
         let _ = writeln!(

@@ -13,7 +13,7 @@ use cosserat::batch::{
     bench_members, run_members, BackendChoice, BatchOptions, BatchStats, Executor, GpuBatcher,
     SolveMode,
 };
-use cosserat::integrator::{NewtonVariant, Simulation, SolveTimers};
+use cosserat::integrator::{NewtonVariant, Simulation, SolveTimers, Strategy};
 use cosserat::observe::record::RunStatus;
 use cosserat::sweep::slurm::{self, JobSpec};
 use cosserat::sweep::{
@@ -58,6 +58,37 @@ impl NewtonArg {
         match self {
             NewtonArg::Full => NewtonVariant::Full,
             NewtonArg::Modified => NewtonVariant::Modified,
+        }
+    }
+}
+
+/// Dissipation strategy (`--strategy`; docs/damping.md, "Strategies").
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum StrategyArg {
+    /// The paper's staggered loop: freeze the scalars, Newton, re-evaluate, repeat.
+    Staggered,
+    /// Newton on the monolithic equations, the scalars linearized in the tangent.
+    Monolithic,
+    /// The monolithic equations with the frozen-scalar tangent (one solve, no rounds).
+    Inexact,
+}
+
+impl StrategyArg {
+    /// The integrator's strategy.
+    pub fn strategy(self) -> Strategy {
+        match self {
+            StrategyArg::Staggered => Strategy::Staggered,
+            StrategyArg::Monolithic => Strategy::Monolithic,
+            StrategyArg::Inexact => Strategy::Inexact,
+        }
+    }
+
+    /// The name the JSON reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            StrategyArg::Staggered => "staggered",
+            StrategyArg::Monolithic => "monolithic",
+            StrategyArg::Inexact => "inexact",
         }
     }
 }
@@ -564,6 +595,11 @@ pub struct BenchArgs {
     /// scripts that still pass it.
     #[arg(long, hide = true, conflicts_with = "newton")]
     pub modified_newton: bool,
+    /// Dissipation strategy of the benchmark's EDMC-2 members (default: staggered). The
+    /// monolithic and inexact strategies evaluate their elements on the CPU kernel, also
+    /// in a GPU batch.
+    #[arg(long, value_enum, default_value_t = StrategyArg::Staggered)]
+    pub strategy: StrategyArg,
     /// GPU path: members in flight at once (default: as many as fit, at most 4096).
     #[arg(long, default_value_t = 0)]
     pub slots: usize,
@@ -745,8 +781,11 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     }
     limits::check_memory("bench", a.rods as u64, a.elements as u64)
         .context("--rods × --elements")?;
-    let members =
+    let mut members =
         bench_members(a.rods, a.elements, a.steps).context("bench: the benchmark cantilever")?;
+    for m in &mut members {
+        m.params.strategy = a.strategy.strategy();
+    }
     let work = (a.rods * a.elements * a.steps) as f64;
     let rod_steps = (a.rods * a.steps) as f64;
     let newton = if a.modified_newton {
@@ -819,6 +858,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             "elements": a.elements,
             "steps": a.steps,
             "newton": newton.name(),
+            "strategy": a.strategy.name(),
             "cpu_element_steps_per_s": cpu_rate,
             "gpu_element_steps_per_s": gpu_rate,
             "cpu_rod_steps_per_s": cpu.as_ref().map(|c| rod_steps / c.stats.wall_s),

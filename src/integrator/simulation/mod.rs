@@ -159,6 +159,9 @@ pub struct Simulation {
     /// Set when the current step's staggered loop failed and the monolithic fallback
     /// solved it (reset at the start of every step).
     fell_back: bool,
+    /// Consistent-mode tangents leave out the scalars' linearization (the inexact
+    /// strategy's solve; false otherwise).
+    inexact_tangent: bool,
     /// The planar element kernel of a planar model (`None` for a 3D model).
     planar: Option<planar::PlanarKernel>,
     /// `--solve device`: the attached lockstep evaluator also solves each frozen-scalar
@@ -245,6 +248,7 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
+            inexact_tangent: false,
             planar: parts.planar,
             device_solve: false,
             device_x: None,

@@ -176,7 +176,7 @@ impl Simulation {
                 // The driven supports' share of W, with the scalars the step was solved
                 // with (frozen, unless the monolithic strategy or fallback solved it).
                 let mode = if self.params.scheme.is_dissipative()
-                    && (self.params.strategy == Strategy::Monolithic || self.fell_back)
+                    && (self.params.strategy != Strategy::Staggered || self.fell_back)
                 {
                     Mode::Consistent
                 } else {

@@ -31,18 +31,18 @@ impl Simulation {
             }
             return self.solve_once(q, Mode::Frozen, total_iters).await;
         }
-        match self.params.strategy {
+        let strategy = self.params.strategy;
+        match strategy {
             Strategy::Monolithic => self.solve_once(q, Mode::Consistent, total_iters).await,
-            Strategy::Staggered if !self.params.fallback => {
-                self.solve_staggered(q, total_iters).await
-            }
-            Strategy::Staggered => {
-                // Fallback: a staggered failure (outer cap, Newton failure, acceptance
-                // check) is retried from the same predictor with the monolithic Newton,
-                // which solves the same scheme's equations with the scalars linearized.
+            _ if !self.params.fallback => self.solve_first(strategy, q, total_iters).await,
+            _ => {
+                // Fallback: a staggered (or inexact) failure (outer cap, Newton failure,
+                // acceptance check) is retried from the same predictor with the monolithic
+                // Newton, which solves the same scheme's equations with the scalars
+                // linearized.
                 let q0 = q.to_vec();
                 let frozen0 = self.frozen.clone();
-                match self.solve_staggered(q, total_iters).await {
+                match self.solve_first(strategy, q, total_iters).await {
                     Ok(x) => Ok(x),
                     Err(staggered) => {
                         q.copy_from_slice(&q0);
@@ -66,6 +66,23 @@ impl Simulation {
                 }
             }
         }
+    }
+
+    /// The staggered loop, or the inexact strategy's single solve.
+    #[allow(clippy::type_complexity)]
+    async fn solve_first(
+        &mut self,
+        strategy: Strategy,
+        q: &mut [f64],
+        iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
+        if strategy != Strategy::Inexact {
+            return self.solve_staggered(q, iters).await;
+        }
+        self.inexact_tangent = true;
+        let out = self.solve_once(q, Mode::Consistent, iters).await;
+        self.inexact_tangent = false;
+        out
     }
 
     #[allow(clippy::type_complexity)]
