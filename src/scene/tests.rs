@@ -340,3 +340,25 @@ fn builtin_source_names_default_scene_name() {
     let s = parse_scene(&text, "builtin:frame").unwrap();
     assert_eq!(s.name, "frame");
 }
+
+#[test]
+fn strategy_inexact_parses_and_unknown_strategies_list_the_three() {
+    let text = |strategy: &str| {
+        format!(
+            "{BASE}[[rod]]\nmaterial = \"m\"\nsection = \"s\"\npoints = [[0,0,0],[1,0,0]]\n\
+             elements = 2\n[integrator]\nscheme = \"edmc2\"\nalpha_gv = 0.5\ndt = 0.1\n\
+             t_end = 1\nstrategy = \"{strategy}\"\n"
+        )
+    };
+    let s = parse_scene(&text("inexact"), "in.toml").unwrap();
+    assert_eq!(s.params.strategy, Strategy::Inexact);
+    assert!(s.describe().contains("inexact (monolithic fallback)"));
+    let e = parse_scene(&text("lagged"), "in.toml").unwrap_err();
+    assert_eq!(e.key(), Some("integrator.strategy"));
+    assert!(
+        e.to_string().contains(
+            "unknown strategy `lagged` (expected \"staggered\", \"monolithic\" or \"inexact\")"
+        ),
+        "{e}"
+    );
+}

@@ -159,7 +159,10 @@ impl Simulation {
                 }
             };
             residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
-            if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() && !self.inexact_tangent
+            if tangent
+                && mode == Mode::Consistent
+                && k.scheme.is_dissipative()
+                && !self.inexact_tangent
             {
                 let map = &self.dofs.elements[e];
                 let active: [bool; NDOF] = std::array::from_fn(|i| map[i] != NONE);

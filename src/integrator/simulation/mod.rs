@@ -162,6 +162,9 @@ pub struct Simulation {
     /// Consistent-mode tangents leave out the scalars' linearization (the inexact
     /// strategy's solve; false otherwise).
     inexact_tangent: bool,
+    /// The next Newton solve polishes an inexact solution: its first correction reuses
+    /// the kept factorization and its next iterate is expected to be accepted.
+    polish: bool,
     /// The planar element kernel of a planar model (`None` for a 3D model).
     planar: Option<planar::PlanarKernel>,
     /// `--solve device`: the attached lockstep evaluator also solves each frozen-scalar
@@ -249,6 +252,7 @@ impl Simulation {
             factored: None,
             fell_back: false,
             inexact_tangent: false,
+            polish: false,
             planar: parts.planar,
             device_solve: false,
             device_x: None,

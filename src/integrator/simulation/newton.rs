@@ -44,6 +44,9 @@ impl Simulation {
         let mut history = Vec::new();
         let tol = self.params.newton_tol;
         let modified = self.params.newton == NewtonVariant::Modified;
+        // Modified Newton and the inexact strategy's tangent (the scalars' linearization
+        // left out) contract linearly: no quadratic-rate signs.
+        let quadratic = !modified && !(self.inexact_tangent && mode == Mode::Consistent);
         // Whether the correction that led to the current iterate was made with a kept
         // (not freshly evaluated) tangent, and the iterate before it.
         let mut last_kept = false;
@@ -52,6 +55,8 @@ impl Simulation {
         // on (uploaded then), adds its own corrections, and the host fetches the iterate
         // it accepts; `q` is stale in between.
         let resident = self.resident_now;
+        // (Not where the device solves: its factors are not the host's.)
+        let polish = std::mem::take(&mut self.polish) && !self.device_solve;
         self.resident_next = Resident {
             upload: true,
             ..Resident::default()
@@ -60,14 +65,18 @@ impl Simulation {
         for it in 0..=self.params.max_iter {
             // Modified Newton keeps the factorized tangent of this mode (from an earlier
             // iteration, outer round or step) and evaluates the residual only.
-            let reuse = modified && self.factored == Some(mode);
+            // Polishing an inexact solution: its first correction reuses the inexact
+            // solve's last factorization (the frozen-scalar tangent of a nearby iterate).
+            let reuse = (modified && self.factored == Some(mode))
+                || (polish && it == 0 && self.factored.is_some());
             // Full Newton on the CPU kernel skips the tangent of an iterate whose residual
             // the history predicts to be accepted (and assembles it after all if not);
             // device-resident Newton skips the factorization and solve there, and the
             // iterate comes back with the report.
-            let skip = !modified
+            let skip = (quadratic
                 && (resident || matches!(self.backend, Backend::Cpu))
-                && expect_accept(&history, tol);
+                && expect_accept(&history, tol))
+                || (polish && it == 1);
             self.timers.tangents_skipped += u64::from(skip);
             self.resident_next.predict_accept = skip;
             // Device-resident: an iterate that may well be accepted comes back with its
@@ -78,7 +87,7 @@ impl Simulation {
             self.resident_next.predict_accept = false;
             self.resident_next.send_iterate = false;
             let accepted = |res: f64, history: &[f64]| {
-                (res <= tol && scaling::may_accept(it)) || at_floor(history, res, tol, !modified)
+                (res <= tol && scaling::may_accept(it)) || at_floor(history, res, tol, quadratic)
             };
             if skip && !accepted(res, &history) {
                 self.timers.tangent_skip_misses += 1;

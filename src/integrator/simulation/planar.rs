@@ -229,7 +229,10 @@ impl Simulation {
                 }
             };
             let mut ev = planar::residual_tangent(pd, st, &kin, &s, &k, self.trans_diss, tangent);
-            if tangent && mode == Mode::Consistent && k.scheme.is_dissipative() && !self.inexact_tangent
+            if tangent
+                && mode == Mode::Consistent
+                && k.scheme.is_dissipative()
+                && !self.inexact_tangent
             {
                 let active: [bool; NDOF_P] = std::array::from_fn(|i| map[i] != NONE);
                 planar::monolithic_correction(

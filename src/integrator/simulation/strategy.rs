@@ -68,7 +68,11 @@ impl Simulation {
         }
     }
 
-    /// The staggered loop, or the inexact strategy's single solve.
+    /// The staggered loop, or the inexact strategy: Newton on the monolithic equations
+    /// with the frozen-scalar tangent, then the staggered loop's rounds from the scalars
+    /// consistent with its solution (normally one round of one or two iterations: it
+    /// takes the residual from the Newton tolerance to its round-off floor with the
+    /// scalars frozen, where momenta are conserved to round-off).
     #[allow(clippy::type_complexity)]
     async fn solve_first(
         &mut self,
@@ -77,11 +81,32 @@ impl Simulation {
         iters: &mut usize,
     ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
         if strategy != Strategy::Inexact {
-            return self.solve_staggered(q, iters).await;
+            let (_, _, c0) = self.advance(q, Mode::Consistent);
+            self.frozen = c0;
+            return self.staggered_rounds(q, iters).await;
         }
         self.inexact_tangent = true;
-        let out = self.solve_once(q, Mode::Consistent, iters).await;
+        let solved = self.newton(q, Mode::Consistent).await;
         self.inexact_tangent = false;
+        let (it, hist) = solved?;
+        *iters += it;
+        let res = *hist.last().unwrap_or(&0.0);
+        if res > self.params.newton_tol {
+            // Accepted on its round-off floor: nothing left to polish.
+            match self.check(q, Mode::Consistent) {
+                Ok((s, inv, d, w, c)) => return Ok((s, inv, d, w, 1, res, c)),
+                Err(refused) => self.frozen = refused.consistent,
+            }
+        } else {
+            // Within the tolerance but possibly just below it (the inexact iteration
+            // contracts linearly): one frozen-scalar correction with the kept
+            // factorization takes it to the floor, where momenta hold to round-off.
+            let (_, _, c0) = self.advance(q, Mode::Consistent);
+            self.frozen = c0;
+            self.polish = true;
+        }
+        let out = self.staggered_rounds(q, iters).await;
+        self.polish = false;
         out
     }
 
@@ -104,15 +129,12 @@ impl Simulation {
         }
     }
 
-    #[allow(clippy::type_complexity)]
-    pub(super) async fn solve_staggered(
+    /// The staggered loop's rounds from the current frozen scalars.
+    async fn staggered_rounds(
         &mut self,
         q: &mut [f64],
         iters: &mut usize,
     ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
-        // Start from the scalars consistent with the predictor.
-        let (_, _, c0) = self.advance(q, Mode::Consistent);
-        self.frozen = c0;
         let mut last_reason = String::new();
         let mut hist_all = Vec::new();
         for outer in 1..=self.params.max_outer {
