@@ -46,7 +46,8 @@ impl Simulation {
         let modified = self.params.newton == NewtonVariant::Modified;
         // Modified Newton and the inexact strategy's tangent (the scalars' linearization
         // left out) contract linearly: no quadratic-rate signs.
-        let quadratic = !modified && !(self.inexact_tangent && mode == Mode::Consistent);
+        let linear = modified || (self.inexact_tangent && mode == Mode::Consistent);
+        let quadratic = !linear;
         // Whether the correction that led to the current iterate was made with a kept
         // (not freshly evaluated) tangent, and the iterate before it.
         let mut last_kept = false;
