@@ -491,3 +491,44 @@ fn device_solve_from_the_command_line() {
         "energy {ec} vs {ed}"
     );
 }
+
+/// The inexact strategy in GPU batches: its consistent-scalar iterations run on the CPU
+/// kernel and host solver, its frozen-scalar polish round on the GPU (host or device
+/// solve). Every member ends as on the CPU path: same status, reason, steps and Newton
+/// iterations, states within `INEXACT_RTOL`.
+#[test]
+fn inexact_strategy_members_end_as_on_the_cpu_path() {
+    // Measured 1.3e-13 (2026-11-27).
+    const INEXACT_RTOL: f64 = 1e-12;
+    let Some(exec) = gpu() else { return };
+    let mut ms = members();
+    for m in &mut ms {
+        m.params.strategy = cosserat::integrator::Strategy::Inexact;
+    }
+    let (cpu, _) = run(&ms, &Executor::Cpu, NewtonVariant::Full, SolveMode::Host);
+    assert!(cpu[..9]
+        .iter()
+        .all(|r| r.outcome.status != RunStatus::Failed));
+    let mut worst = 0.0f64;
+    for solve in [SolveMode::Host, SolveMode::Device] {
+        let (gpu_run, _) = run(&ms, &exec, NewtonVariant::Full, solve);
+        for (c, g) in cpu.iter().zip(&gpu_run) {
+            let tag = format!("{solve:?} solve, member {}", c.index);
+            assert_eq!(c.outcome.status, g.outcome.status, "{tag}");
+            assert_eq!(c.outcome.reason, g.outcome.reason, "{tag}");
+            assert_eq!(c.outcome.steps, g.outcome.steps, "{tag}");
+            assert_eq!(
+                c.outcome.newton_iters_total, g.outcome.newton_iters_total,
+                "{tag}"
+            );
+            let (sc, sg) = (c.state.as_ref().unwrap(), g.state.as_ref().unwrap());
+            let x = rel(
+                sc.r.iter().chain(&sc.v).flat_map(|x| x.iter().copied()),
+                sg.r.iter().chain(&sg.v).flat_map(|x| x.iter().copied()),
+            );
+            assert!(x <= INEXACT_RTOL, "{tag}: states differ by {x:.3e}");
+            worst = worst.max(x);
+        }
+    }
+    println!("inexact strategy, largest relative difference GPU vs CPU: {worst:.3e}");
+}
