@@ -374,6 +374,7 @@ impl GpuEvaluator {
                 members[*slot] = Some(MemberPack {
                     states: req.states.as_deref(),
                     scalars: &req.scalars,
+                    consistent: req.consistent,
                 });
                 increments[*slot] = match resident {
                     // The device's copy may differ from the host's mirror.

@@ -415,7 +415,7 @@ impl ElementKernel {
     /// next dispatch only if that changed something (the scalars change once per staggered
     /// round, not per Newton iteration).
     pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {
-        self.dirty[2][i] |= scalars_row(&mut self.host[2][i * NI..(i + 1) * NI], s);
+        self.dirty[2][i] |= scalars_row(&mut self.host[2][i * NI..(i + 1) * NI], s, false);
     }
 
     /// [`Self::set_state`] and [`Self::set_scalars`] for whole members at once, in
@@ -439,7 +439,7 @@ impl ElementKernel {
                     }
                 }
                 for ((row, d), s) in it.chunks_mut(NI).zip(d_it).zip(m.scalars) {
-                    *d |= scalars_row(row, s);
+                    *d |= scalars_row(row, s, m.consistent);
                 }
             });
     }
@@ -672,6 +672,9 @@ pub(crate) struct MemberPack<'a> {
     pub states: Option<&'a [(ElementState, Vector6<f64>)]>,
     /// The frozen scalars, per element.
     pub scalars: &'a [FrozenScalars],
+    /// Evaluate with the scalars consistent with the increment instead (the inexact
+    /// strategy's iterations; the frozen ones are ignored then).
+    pub consistent: bool,
 }
 
 /// Writes the state at `n` and its cached strains into one slot's row of the state
@@ -693,14 +696,16 @@ fn state_row(row: &mut [f64], st: &ElementState, eps_n: &Vector6<f64>) -> bool {
     *row != old
 }
 
-/// Writes the frozen scalars and the active flag into one slot's row of the iteration
-/// mirror; whether anything changed (bit for bit).
-fn scalars_row(row: &mut [f64], s: &FrozenScalars) -> bool {
+/// Writes the frozen scalars and the active flag (2: evaluate with the consistent scalars
+/// instead) into one slot's row of the iteration mirror; whether anything changed (bit for
+/// bit).
+fn scalars_row(row: &mut [f64], s: &FrozenScalars, consistent: bool) -> bool {
     const _: () = assert!(
         I_ACTIVE == I_S + 4,
         "the active flag follows the four scalars"
     );
-    let vals = [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu, 1.0];
+    let active = if consistent { 2.0 } else { 1.0 };
+    let vals = [s.beta_gamma, s.beta_omega, s.c_v, s.c_nu, active];
     let dst = &mut row[I_S..=I_ACTIVE];
     let changed = dst
         .iter()

@@ -42,6 +42,9 @@ pub struct EvalRequest {
     pub states: Option<Vec<(ElementState, Vector6<f64>)>>,
     /// Per element: the frozen dissipation scalars.
     pub scalars: Vec<FrozenScalars>,
+    /// Evaluate with the scalars consistent with the increment instead of `scalars`, the
+    /// tangent without their linearization (the inexact strategy's iterations).
+    pub consistent: bool,
     /// Per node: the Newton increment in node-local order `u0..2 θ0..2 g0..2` (zero for
     /// removed unknowns).
     pub increments: Vec<[f64; 9]>,

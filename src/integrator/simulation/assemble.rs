@@ -36,7 +36,10 @@ impl Simulation {
         let mut scale = [0.0f64; 3]; // u, θ, g rows
                                      // With an evaluator the elements arrive already summed per node; the CPU kernel
                                      // loop below is skipped.
-        let external = mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+                                     // (The inexact strategy's consistent-scalar iterations too: their tangent is the
+                                     // frozen-scalar one at the consistent scalars, which the GPU kernel evaluates.)
+        let external = (mode == Mode::Frozen || self.inexact_on_gpu(mode))
+            && !matches!(self.backend, Backend::Cpu);
         // A device solve needs the nodal terms before the evaluation (they join the
         // right-hand side on the device); the host then neither assembles nor
         // factorizes the matrix.
@@ -314,9 +317,17 @@ impl Simulation {
         self.resident_next.upload = true;
     }
 
+    /// Whether an assembly in `mode` is one of the inexact strategy's consistent-scalar
+    /// iterations, which an attached evaluator runs like a frozen-scalar one (its kernel
+    /// evaluates the consistent scalars itself).
+    pub(super) fn inexact_on_gpu(&self, mode: Mode) -> bool {
+        mode == Mode::Consistent && self.inexact_tangent
+    }
+
     /// What an evaluator needs for this iteration: the element states only when they
-    /// changed since the last request, the frozen scalars, the increments per node
-    /// (none without `q`: a device-resident iteration continues from the device's).
+    /// changed since the last request, the frozen scalars (or the flag to use the
+    /// consistent ones), the increments per node (none without `q`: a device-resident
+    /// iteration continues from the device's).
     pub(super) fn eval_request(&mut self, q: Option<&[f64]>, tangent: bool) -> EvalRequest {
         let states = (self.sent_version != Some(self.state_version)).then(|| {
             (0..self.model.elements.len())
@@ -346,6 +357,7 @@ impl Simulation {
                     .collect()
             }),
             tangent,
+            consistent: self.inexact_tangent,
             device_extra: None,
             resident: None,
         }

@@ -27,8 +27,9 @@ impl Simulation {
     ) -> Result<(usize, Vec<f64>), StepFailure> {
         // Device-resident evaluations exist only inside a Newton solve (the test entry
         // points of `probe.rs` assemble on the host's `q` and read the residual back).
-        self.resident_now =
-            self.device_resident() && mode == Mode::Frozen && !matches!(self.backend, Backend::Cpu);
+        self.resident_now = self.device_resident()
+            && (mode == Mode::Frozen || self.inexact_on_gpu(mode))
+            && !matches!(self.backend, Backend::Cpu);
         let out = self.newton_iterations(q, mode).await;
         self.resident_now = false;
         out
