@@ -21,9 +21,9 @@ pub enum Strategy {
     /// leaves out the scalars' linearization. Each iteration costs what a staggered one
     /// costs plus the scalars' local solve, and one solve replaces the staggered loop's
     /// rounds; the accepted step passes the same checks (energy, dissipation identity to
-    /// `outer_tol`). The element evaluation stays on the CPU kernel (as for
-    /// [`Strategy::Monolithic`]); with `fallback` a failed step is retried with the
-    /// monolithic strategy.
+    /// `outer_tol`). An attached GPU evaluator runs its iterations too (its kernel
+    /// evaluates the consistent scalars); with `fallback` a failed step is retried with
+    /// the monolithic strategy.
     Inexact,
 }
 

@@ -596,8 +596,7 @@ pub struct BenchArgs {
     #[arg(long, hide = true, conflicts_with = "newton")]
     pub modified_newton: bool,
     /// Dissipation strategy of the benchmark's EDMC-2 members (default: staggered). The
-    /// monolithic and inexact strategies evaluate their elements on the CPU kernel, also
-    /// in a GPU batch.
+    /// monolithic strategy evaluates its elements on the CPU kernel, also in a GPU batch.
     #[arg(long, value_enum, default_value_t = StrategyArg::Staggered)]
     pub strategy: StrategyArg,
     /// GPU path: members in flight at once (default: as many as fit, at most 4096).
