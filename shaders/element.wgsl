@@ -49,7 +49,7 @@ const S_EPS: u32 = 42u;   // 6
 // ---- per Newton iteration (binding 2), NI fields ----
 const I_X: u32 = 0u;      // 18: element-local increment (u0 θ0 u1 θ1 g0 g1)
 const I_S: u32 = 18u;     // 4: frozen β_Γ β_Ω c_v c_ν
-const I_ACTIVE: u32 = 22u; // 1 = evaluate this element
+const I_ACTIVE: u32 = 22u; // 1 = evaluate this element; 2 = evaluate it with consistent scalars
 // ---- output (binding 3), NO fields ----
 const O_R: u32 = 0u;      // 18
 const O_SC: u32 = 18u;    // 18
@@ -605,7 +605,7 @@ fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var x: array<Real, 18>;
     for (var i = 0u; i < 18u; i++) { x[i] = ld_i(I_X + i); }
     let keep = prm.want_tangent != 0u;
-    if prm.mode == 1u {
+    if prm.mode == 1u || ld_i(I_ACTIVE) == 2.0 {
         let c = consistent_scalars(st, x, dt);
         residual(st, c.kin, c.s, dt, keep);
     } else {
