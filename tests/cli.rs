@@ -262,22 +262,27 @@ fn bare_command_runs_the_default_frame_into_out_frame() {
     assert_eq!(top, ["out"]);
 }
 
+/// The JSON object of `cosserat bench SIZE --cpu-only --json EXTRA` (which must succeed).
+fn bench_json(size: &[&str], extra: &[&str]) -> serde_json::Value {
+    let o = cosserat()
+        .arg("bench")
+        .args(size)
+        .args(["--cpu-only", "--json"])
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8(o.stdout).unwrap();
+    serde_json::from_str(text.lines().last().unwrap()).unwrap()
+}
+
 /// `bench --modified-newton`, the option's earlier name (hidden, kept for scripts such as
 /// a staged GPU benchmark), runs exactly `--newton modified`; it cannot be combined with
 /// `--newton` (exit 2).
 #[test]
 fn bench_modified_newton_is_newton_modified() {
-    let json = |extra: &[&str]| -> serde_json::Value {
-        let o = cosserat()
-            .args(["bench", "--rods", "3", "--elements", "4", "--steps", "3"])
-            .args(["--cpu-only", "--json"])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let text = String::from_utf8(o.stdout).unwrap();
-        serde_json::from_str(text.lines().last().unwrap()).unwrap()
-    };
+    let json =
+        |extra: &[&str]| bench_json(&["--rods", "3", "--elements", "4", "--steps", "3"], extra);
     let old = json(&["--modified-newton"]);
     let new = json(&["--newton", "modified"]);
     let full = json(&[]);
@@ -304,17 +309,8 @@ fn bench_modified_newton_is_newton_modified() {
 /// than the default staggered loop (measured 4 496 vs 6 344 at 64 rods × 30 elements).
 #[test]
 fn bench_strategy_inexact_is_recorded_and_takes_fewer_iterations() {
-    let json = |extra: &[&str]| -> serde_json::Value {
-        let o = cosserat()
-            .args(["bench", "--rods", "2", "--elements", "10", "--steps", "4"])
-            .args(["--cpu-only", "--json"])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let text = String::from_utf8(o.stdout).unwrap();
-        serde_json::from_str(text.lines().last().unwrap()).unwrap()
-    };
+    let json =
+        |extra: &[&str]| bench_json(&["--rods", "2", "--elements", "10", "--steps", "4"], extra);
     let staggered = json(&[]);
     let inexact = json(&["--strategy", "inexact"]);
     assert_eq!(staggered["strategy"], "staggered");
