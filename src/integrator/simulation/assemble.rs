@@ -33,11 +33,12 @@ impl Simulation {
         let k = self.consts();
         let dt = k.dt;
         r.iter_mut().for_each(|x| *x = 0.0);
-        let mut scale = [0.0f64; 3]; // u, θ, g rows
-                                     // With an evaluator the elements arrive already summed per node; the CPU kernel
-                                     // loop below is skipped.
-                                     // (The inexact strategy's consistent-scalar iterations too: their tangent is the
-                                     // frozen-scalar one at the consistent scalars, which the GPU kernel evaluates.)
+        // Per-kind scales: u, θ, g rows.
+        let mut scale = [0.0f64; 3];
+        // With an evaluator the elements arrive already summed per node; the CPU kernel
+        // loop below is skipped. So do the inexact strategy's consistent-scalar
+        // iterations: their tangent is the frozen-scalar one at the consistent scalars,
+        // which the GPU kernel evaluates.
         let external = (mode == Mode::Frozen || self.inexact_on_gpu(mode))
             && !matches!(self.backend, Backend::Cpu);
         // A device solve needs the nodal terms before the evaluation (they join the

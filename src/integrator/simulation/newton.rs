@@ -84,7 +84,7 @@ impl Simulation {
             // Device-resident: an iterate that may well be accepted comes back with its
             // report, which saves the fetch's round trip.
             self.resident_next.send_iterate =
-                resident && scaling::may_accept(it) && may_be_accepted(&history, tol, modified);
+                resident && scaling::may_accept(it) && may_be_accepted(&history, tol, linear);
             let mut res = self.timed_assemble(q, mode, !reuse && !skip, &mut r).await;
             self.resident_next.predict_accept = false;
             self.resident_next.send_iterate = false;
@@ -267,10 +267,11 @@ fn quadratic(r2: f64, r1: f64) -> f64 {
 
 /// Whether the next residual after `history` may well be accepted (device-resident Newton
 /// then has the iterate sent back with its report): full Newton, the last residual within
-/// `√tol` (quadratic convergence with a unit constant reaches tol); modified Newton, the
-/// last contraction rate carried once more reaches tol.
-fn may_be_accepted(history: &[f64], tol: f64, modified: bool) -> bool {
-    match (history, modified) {
+/// `√tol` (quadratic convergence with a unit constant reaches tol); a linearly contracting
+/// iteration (modified Newton, the inexact strategy's tangent), the last contraction rate
+/// carried once more reaches tol.
+fn may_be_accepted(history: &[f64], tol: f64, linear: bool) -> bool {
+    match (history, linear) {
         ([.., r1], false) => r1 * r1 <= tol,
         ([.., r2, r1], true) => r1 < r2 && r1 * (r1 / r2) <= tol,
         _ => false,
