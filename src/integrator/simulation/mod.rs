@@ -159,6 +159,10 @@ pub struct Simulation {
     /// Set when the current step's staggered loop failed and the monolithic fallback
     /// solved it (reset at the start of every step).
     fell_back: bool,
+    /// The last checked solve was accepted with the consistent scalars (monolithic, its
+    /// fallback, or an inexact solve on its floor), not frozen ones: the mode of the
+    /// step's support work.
+    solved_consistent: bool,
     /// Consistent-mode tangents leave out the scalars' linearization (the inexact
     /// strategy's solve; false otherwise).
     inexact_tangent: bool,
@@ -251,6 +255,7 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
+            solved_consistent: false,
             inexact_tangent: false,
             polish: false,
             planar: parts.planar,

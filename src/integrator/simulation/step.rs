@@ -5,7 +5,6 @@
 
 use super::{Backend, Mode, Simulation};
 use crate::integrator::evaluate::now;
-use crate::integrator::params::Strategy;
 use crate::integrator::report::{StepFailure, StepReport};
 use crate::integrator::{finite, links};
 use crate::model::Vec3;
@@ -174,10 +173,9 @@ impl Simulation {
                     .collect();
                 let max_link_g = g1.iter().fold(0.0f64, |m, g| m.max(g.abs()));
                 // The driven supports' share of W, with the scalars the step was solved
-                // with (frozen, unless the monolithic strategy or fallback solved it).
-                let mode = if self.params.scheme.is_dissipative()
-                    && (self.params.strategy != Strategy::Staggered || self.fell_back)
-                {
+                // with (frozen, unless the monolithic strategy, its fallback or an inexact
+                // solve on its floor accepted it).
+                let mode = if self.params.scheme.is_dissipative() && self.solved_consistent {
                     Mode::Consistent
                 } else {
                     Mode::Frozen

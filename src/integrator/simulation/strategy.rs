@@ -1,7 +1,9 @@
 //! Stage 2 of a step: one checked solve with the link multipliers fixed, by the
 //! dissipation strategy — frozen scalars for the conserving schemes, the paper's
 //! staggered loop (freeze the local scalars, Newton, re-evaluate, until the dissipation
-//! identity holds), or the monolithic Newton with the scalars linearized inside it.
+//! identity holds), the monolithic Newton with the scalars linearized inside it, or the
+//! inexact strategy (the monolithic equations with the frozen-scalar tangent, then a
+//! frozen-scalar polish round where it stopped within the tolerance).
 
 use super::{Mode, Simulation};
 use crate::element::FrozenScalars;
@@ -32,6 +34,7 @@ impl Simulation {
             return self.solve_once(q, Mode::Frozen, total_iters).await;
         }
         let strategy = self.params.strategy;
+        self.solved_consistent = strategy == Strategy::Monolithic;
         match strategy {
             Strategy::Monolithic => self.solve_once(q, Mode::Consistent, total_iters).await,
             _ if !self.params.fallback => self.solve_first(strategy, q, total_iters).await,
@@ -49,6 +52,7 @@ impl Simulation {
                         match self.solve_once(q, Mode::Consistent, total_iters).await {
                             Ok(x) => {
                                 self.fell_back = true;
+                                self.solved_consistent = true;
                                 Ok(x)
                             }
                             Err(mono) => {
@@ -94,7 +98,10 @@ impl Simulation {
         if res > self.params.newton_tol {
             // Accepted on its round-off floor: nothing left to polish.
             match self.check(q, Mode::Consistent) {
-                Ok((s, inv, d, w, c)) => return Ok((s, inv, d, w, 1, res, c)),
+                Ok((s, inv, d, w, c)) => {
+                    self.solved_consistent = true;
+                    return Ok((s, inv, d, w, 1, res, c));
+                }
                 Err(refused) => self.frozen = refused.consistent,
             }
         } else {
