@@ -1,4 +1,4 @@
-//! The inexact strategy (docs/damping.md, "Strategies"): Newton on the monolithic
+//! The inexact strategy (docs/theory.md §4): Newton on the monolithic
 //! equations with the frozen-scalar tangent solves the same equations as the monolithic
 //! strategy — final states agree to the Newton tolerance, within the staggered loop's
 //! `outer_tol` of its answer — with fewer Newton iterations than the staggered loop on the

@@ -62,7 +62,7 @@ impl NewtonArg {
     }
 }
 
-/// Dissipation strategy (`--strategy`; docs/damping.md, "Strategies").
+/// Dissipation strategy (`--strategy`; docs/theory.md §4, docs/benchmarks.md "Inexact strategy").
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum StrategyArg {
     /// The paper's staggered loop: freeze the scalars, Newton, re-evaluate, repeat.
