@@ -193,7 +193,7 @@ fn device_solve_matches_cpu_member_by_member() {
             assert_eq!(c.outcome.steps, g.outcome.steps, "{tag}");
             let (ic, ig) = (c.outcome.newton_iters_total, g.outcome.newton_iters_total);
             match newton {
-                NewtonVariant::Full => {
+                NewtonVariant::Full | NewtonVariant::Fresh => {
                     assert_eq!(ic, ig, "{tag}");
                     // The same tangents skipped (device-resident: no factorization of an
                     // iterate predicted to be accepted), so the same factorizations.
@@ -335,7 +335,7 @@ fn device_resident_newton_matches_host_update_with_16_bytes_per_iteration() {
                 r.outcome.timers.factorizations,
             );
             match newton {
-                NewtonVariant::Full => {
+                NewtonVariant::Full | NewtonVariant::Fresh => {
                     assert!(fr <= fh, "{tag}: {fr} vs {fh}")
                 }
                 NewtonVariant::Modified => assert_eq!(fh, fr, "{tag}"),
@@ -456,7 +456,8 @@ fn device_solve_from_the_command_line() {
     assert!(!dir.path().join("mech").exists());
     let mut summaries = Vec::new();
     for (name, extra) in [
-        ("host", &["--backend", "cpu"][..]),
+        // (`full`, the default, runs as `fresh` on the GPU paths.)
+        ("host", &["--backend", "cpu", "--newton", "fresh"][..]),
         ("device", &["--backend", "gpu", "--solve", "device"][..]),
     ] {
         let st = cosserat()

@@ -121,7 +121,7 @@ fn lockstep_gpu_batch_matches_cpu_member_by_member() {
             // iteration; the converged states still agree (below).
             let (ic, ig) = (c.outcome.newton_iters_total, g.outcome.newton_iters_total);
             match newton {
-                NewtonVariant::Full => assert_eq!(ic, ig, "{tag}"),
+                NewtonVariant::Full | NewtonVariant::Fresh => assert_eq!(ic, ig, "{tag}"),
                 NewtonVariant::Modified => {
                     assert!(
                         ic.abs_diff(ig) <= 2 + ic / 50,

@@ -25,7 +25,7 @@ pub mod strain;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
 
-use crate::math::{cay_with_factor, hat};
+use crate::math::{cay_with_factor, hat, hat_mul, mul_hat};
 use crate::model::{ElementProps, Mat3, Vec3};
 use crate::scheme::Scheme;
 pub use crate::scheme::StressRule;
@@ -798,11 +798,11 @@ fn tangent(
             view += hat(&w);
             // (u_l, θ_m)
             let mut view = kt.fixed_view_mut::<3, 3>(u_idx(l), th_idx(m));
-            view -= amat[m] * hat(&vsum(rl));
+            view -= mul_hat(&amat[m], &vsum(rl));
             // (θ_l, θ_m)
             let mut blk = Mat3::zeros();
             for i in 0..3 {
-                blk += hat(&dcol[l][i]) * (amat[m] * hat(&vsum(field_of(l, i))));
+                blk += hat_mul(&dcol[l][i], &mul_hat(&amat[m], &vsum(field_of(l, i))));
             }
             let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
             view -= blk;
@@ -813,7 +813,7 @@ fn tangent(
         let base = if l == 0 { A0 } else { B0 };
         let mut blk = Mat3::zeros();
         for i in 0..3 {
-            blk += hat(&f[base + i]) * amat[l] * hat(&dcol[l][i]);
+            blk += hat_mul(&f[base + i], &mul_hat(&amat[l], &dcol[l][i]));
         }
         let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), th_idx(l));
         view += 0.5 * blk;

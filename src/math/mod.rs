@@ -12,6 +12,29 @@ pub fn hat(a: &Vec3) -> Mat3 {
     Mat3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0)
 }
 
+/// `â M` without forming `â`: the cross product of `a` with each column of `M`
+/// (27 flops instead of a 3×3 product's 45).
+#[inline]
+pub fn hat_mul(a: &Vec3, m: &Mat3) -> Mat3 {
+    Mat3::from_columns(&[
+        a.cross(&m.column(0)),
+        a.cross(&m.column(1)),
+        a.cross(&m.column(2)),
+    ])
+}
+
+/// `M v̂` without forming `v̂`: column j is `M (v × e_j)`, a combination of two columns
+/// of `M` (27 flops instead of a 3×3 product's 45).
+#[inline]
+pub fn mul_hat(m: &Mat3, v: &Vec3) -> Mat3 {
+    let (c0, c1, c2) = (m.column(0), m.column(1), m.column(2));
+    Mat3::from_columns(&[
+        c1 * v.z - c2 * v.y,
+        c2 * v.x - c0 * v.z,
+        c0 * v.y - c1 * v.x,
+    ])
+}
+
 /// Cayley transform `cay(θ) = (I − ½θ̂)⁻¹(I + ½θ̂) = I + (θ̂ + ½θ̂²)/(1 + ¼|θ|²)`.
 #[inline]
 pub fn cay(theta: &Vec3) -> Mat3 {
@@ -110,5 +133,15 @@ mod tests {
             let c = cay(&(th * (2.0 * (0.5 * n).tan() / n)));
             assert!((r - c).norm() < 1e-13);
         }
+    }
+
+    #[test]
+    fn skew_products_match_the_skew_matrix() {
+        let a = Vec3::new(0.3, -1.2, 0.7);
+        let m = Mat3::new(1.0, 2.0, -3.0, 0.5, -4.0, 6.0, 7.0, 0.25, -1.5);
+        assert!((hat_mul(&a, &m) - hat(&a) * m).norm() < 1e-14);
+        assert!((mul_hat(&m, &a) - m * hat(&a)).norm() < 1e-14);
+        // Not symmetric in the roles: a wrong column pairing is caught.
+        assert!((mul_hat(&m, &a) - hat(&a) * m).norm() > 1.0);
     }
 }

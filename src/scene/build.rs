@@ -859,11 +859,14 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
     if let Some(s) = r.newton.as_deref() {
         p.newton = match s {
             "full" => NewtonVariant::Full,
+            "fresh" => NewtonVariant::Fresh,
             "modified" => NewtonVariant::Modified,
             other => {
                 return Err(cx.err(
                     &k("newton"),
-                    format!("unknown Newton variant `{other}` (expected \"full\" or \"modified\")"),
+                    format!(
+                        "unknown Newton variant `{other}` (expected \"full\", \"fresh\" or \"modified\")"
+                    ),
                 ))
             }
         };

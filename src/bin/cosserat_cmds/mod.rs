@@ -45,8 +45,12 @@ impl BackendArg {
 /// Newton variant (`--newton`).
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum NewtonArg {
-    /// A fresh tangent and LU factorization every iteration.
+    /// A fresh tangent and LU factorization every iteration, except (CPU path) a step's
+    /// first correction far from the solution, which reuses the last step's factorization.
     Full,
+    /// A fresh tangent and LU factorization every iteration, a step's first included
+    /// (what the GPU paths run for `full`).
+    Fresh,
     /// Keep the tangent and its factorization while the residual contracts ≥ 5× per
     /// iteration (those iterations evaluate the residual only).
     Modified,
@@ -57,6 +61,7 @@ impl NewtonArg {
     pub fn variant(self) -> NewtonVariant {
         match self {
             NewtonArg::Full => NewtonVariant::Full,
+            NewtonArg::Fresh => NewtonVariant::Fresh,
             NewtonArg::Modified => NewtonVariant::Modified,
         }
     }

@@ -169,6 +169,11 @@ pub struct Simulation {
     /// The next Newton solve polishes an inexact solution: its first correction reuses
     /// the kept factorization and its next iterate is expected to be accepted.
     polish: bool,
+    /// Set at the start of a step, taken by its first Newton solve: that solve's first
+    /// correction reuses the last factorization (of the previous step) where it exists.
+    step_start: bool,
+    /// The relative residual of the last step's predictor (its first Newton iterate).
+    step_r0: f64,
     /// The planar element kernel of a planar model (`None` for a 3D model).
     planar: Option<planar::PlanarKernel>,
     /// `--solve device`: the attached lockstep evaluator also solves each frozen-scalar
@@ -258,6 +263,8 @@ impl Simulation {
             solved_consistent: false,
             inexact_tangent: false,
             polish: false,
+            step_start: false,
+            step_r0: 0.0,
             planar: parts.planar,
             device_solve: false,
             device_x: None,

@@ -147,6 +147,7 @@ impl Simulation {
             residuals: vec![],
         };
         let (lambda0, inv0) = (self.state.lambda.clone(), self.inv);
+        self.step_start = true;
         for pred in predictors {
             let mut q = pred;
             let mut multipliers = links::MultiplierIteration::default();
