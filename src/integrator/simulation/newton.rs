@@ -1,5 +1,7 @@
-//! Stage 3 of a step: Newton on the nodal increments. Full Newton takes a fresh tangent
-//! every iteration. Modified Newton keeps the last factorized tangent — across iterations,
+//! Stage 3 of a step: Newton on the nodal increments. Fresh Newton takes a fresh tangent
+//! every iteration; full Newton too, except that on the CPU path a step's first
+//! correction far from the solution reuses the last step's factorization
+//! ([`REUSE_FIRST_FROM`]). Modified Newton keeps the last factorized tangent — across iterations,
 //! staggered rounds and steps — as long as each correction made with it cuts the residual
 //! by at least [`MODIFIED_NEWTON_RATE`]; the iterations that keep it assemble the residual
 //! only.
