@@ -1,4 +1,5 @@
 use super::*;
+use crate::integrator::NewtonVariant;
 use crate::model::Mat3;
 use nalgebra::Matrix2;
 
@@ -358,6 +359,34 @@ fn strategy_inexact_parses_and_unknown_strategies_list_the_three() {
     assert!(
         e.to_string().contains(
             "unknown strategy `lagged` (expected \"staggered\", \"monolithic\" or \"inexact\")"
+        ),
+        "{e}"
+    );
+}
+
+#[test]
+fn newton_fresh_parses_and_unknown_variants_list_the_three() {
+    let text = |newton: &str| {
+        format!(
+            "{BASE}[[rod]]\nmaterial = \"m\"\nsection = \"s\"\npoints = [[0,0,0],[1,0,0]]\n\
+             elements = 2\n[integrator]\nscheme = \"em\"\ndt = 0.1\nt_end = 1\n\
+             newton = \"{newton}\"\n"
+        )
+    };
+    for (name, variant) in [
+        ("full", NewtonVariant::Full),
+        ("fresh", NewtonVariant::Fresh),
+        ("modified", NewtonVariant::Modified),
+    ] {
+        let s = parse_scene(&text(name), "in.toml").unwrap();
+        assert_eq!(s.params.newton, variant);
+        assert_eq!(variant.name(), name);
+    }
+    let e = parse_scene(&text("quasi"), "in.toml").unwrap_err();
+    assert_eq!(e.key(), Some("integrator.newton"));
+    assert!(
+        e.to_string().contains(
+            "unknown Newton variant `quasi` (expected \"full\", \"fresh\" or \"modified\")"
         ),
         "{e}"
     );
