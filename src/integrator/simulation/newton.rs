@@ -67,11 +67,17 @@ impl Simulation {
         // Whether the correction that led to the current iterate was made with a kept
         // (not freshly evaluated) tangent, and the iterate before it.
         let mut last_kept = false;
-        // History index from which every correction used a fresh tangent (1 after a
-        // step's first correction made with the last step's factorization).
-        let mut fresh_from = 0usize;
-        // The step's first correction was made with the last step's factorization.
+        // The step's first correction was made with the last step's factorization: the
+        // quadratic-rate signs then read the history from the first fresh correction on
+        // ([`after_kept_first`]), and a residual is accepted below a tenth of the tolerance.
         let mut kept_first = false;
+        let accept_tol = |kept_first: bool| {
+            if kept_first {
+                KEPT_FIRST_TOL * tol
+            } else {
+                tol
+            }
+        };
         let mut q_prev = vec![0.0; n];
         // Device-resident Newton: the device holds the iterate from the first evaluation
         // on (uploaded then), adds its own corrections, and the host fetches the iterate
@@ -104,24 +110,17 @@ impl Simulation {
             let mut reuse = (modified && self.factored == Some(mode))
                 || (polish && it == 0 && self.factored.is_some())
                 || (reuse_first && it == 0 && self.factored == Some(mode));
-            if reuse_first && reuse && it == 0 {
-                // The quadratic-rate signs read the history from the first fresh
-                // correction on.
-                fresh_from = 1;
-                kept_first = true;
-            }
+            kept_first |= reuse_first && reuse && it == 0;
             // Full Newton on the CPU kernel skips the tangent of an iterate whose residual
             // the history predicts to be accepted (and assembles it after all if not);
             // device-resident Newton skips the factorization and solve there, and the
             // iterate comes back with the report.
-            let accept_tol = if kept_first {
-                KEPT_FIRST_TOL * tol
-            } else {
-                tol
-            };
             let skip = (quadratic
                 && (resident || matches!(self.backend, Backend::Cpu))
-                && expect_accept(&history[fresh_from.min(history.len())..], accept_tol))
+                && expect_accept(
+                    after_kept_first(&history, kept_first),
+                    accept_tol(kept_first),
+                ))
                 || (polish && it == 1);
             self.timers.tangents_skipped += u64::from(skip);
             self.resident_next.predict_accept = skip;
@@ -135,24 +134,16 @@ impl Simulation {
                 if kept_first && res < REUSE_FIRST_FROM {
                     // Close to the solution: a fresh tangent converges quadratically.
                     res = self.timed_assemble(q, mode, true, &mut r).await;
-                    (reuse, kept_first, fresh_from) = (false, false, 0);
+                    (reuse, kept_first) = (false, false);
                 }
             }
             self.resident_next.predict_accept = false;
             self.resident_next.send_iterate = false;
-            let accept_tol = if kept_first {
-                KEPT_FIRST_TOL * tol
-            } else {
-                tol
-            };
             let accepted = |res: f64, history: &[f64]| {
-                (res <= accept_tol && scaling::may_accept(it) && !(kept_first && it == 1))
-                    || at_floor(
-                        &history[fresh_from.min(history.len())..],
-                        res,
-                        tol,
-                        quadratic,
-                    )
+                (res <= accept_tol(kept_first)
+                    && scaling::may_accept(it)
+                    && !(kept_first && it == 1))
+                    || at_floor(after_kept_first(history, kept_first), res, tol, quadratic)
             };
             if skip && !accepted(res, &history) {
                 self.timers.tangent_skip_misses += 1;
@@ -290,6 +281,12 @@ impl Simulation {
         self.timers.assemble_s += t0.elapsed().as_secs_f64() - waited;
         res
     }
+}
+
+/// The part of a solve's residual history after a kept first correction (all of it
+/// otherwise): the residuals that fresh-tangent corrections produced from there on.
+fn after_kept_first(history: &[f64], kept_first: bool) -> &[f64] {
+    &history[usize::from(kept_first).min(history.len())..]
 }
 
 /// Whether the residual `res` that follows `history` sits on its f64 round-off floor, where
