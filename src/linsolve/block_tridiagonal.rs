@@ -30,6 +30,10 @@ pub(super) trait BlockLu: Send + Sync {
     fn factor(&mut self, vals: &[f64]) -> Result<(), String>;
     /// Solves `A x = b` in place with the last factorization.
     fn solve(&self, rhs: &mut [f64]);
+    /// `r = b − A x` with the matrix of the last factorization, block by block (the
+    /// backward-error check of a solve: dense node blocks instead of the compressed
+    /// columns' index chasing).
+    fn residual(&self, b: &[f64], x: &[f64], r: &mut [f64]);
     /// Padded block size.
     fn block_size(&self) -> usize;
 }
@@ -78,6 +82,8 @@ where
     lu: Vec<LU<f64, Const<B>, Const<B>>>,
     /// Inverses of the `S_i` (3 × 3 blocks: closed form, cheaper than LU and its solves).
     inv: Vec<Block<B>>,
+    /// The diagonal blocks `D_i` as loaded (the factorization overwrites them).
+    diag: Vec<Block<B>>,
 }
 
 impl<const B: usize> BlockTri<B>
@@ -117,6 +123,7 @@ where
             w: vec![Block::<B>::zeros(); m - 1],
             lu: Vec::with_capacity(m),
             inv: Vec::with_capacity(m),
+            diag: Vec::with_capacity(m),
         })
     }
 
@@ -156,6 +163,8 @@ where
     fn factor(&mut self, vals: &[f64]) -> Result<(), String> {
         self.load(vals);
         let m = self.m();
+        self.diag.clear();
+        self.diag.extend_from_slice(&self.blocks[..m]);
         self.lu.clear();
         self.inv.clear();
         for i in 0..m {
@@ -211,6 +220,24 @@ where
         for (i, yi) in y.iter().enumerate() {
             let (s, k) = (self.starts[i], self.sizes[i]);
             rhs[s..s + k].copy_from_slice(&yi.as_slice()[..k]);
+        }
+    }
+
+    fn residual(&self, b: &[f64], x: &[f64], r: &mut [f64]) {
+        let m = self.m();
+        let xb: Vec<SVector<f64, B>> = (0..m).map(|i| self.rhs_block(x, i)).collect();
+        for i in 0..m {
+            let mut ax = self.diag[i] * xb[i];
+            if i + 1 < m {
+                ax += self.blocks[m + i] * xb[i + 1];
+            }
+            if i > 0 {
+                ax += self.blocks[2 * m - 1 + (i - 1)] * xb[i - 1];
+            }
+            let (s, k) = (self.starts[i], self.sizes[i]);
+            for c in 0..k {
+                r[s + c] = b[s + c] - ax[c];
+            }
         }
     }
 
