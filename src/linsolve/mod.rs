@@ -870,8 +870,10 @@ mod tests {
             blocks.residual(&b, &x, &mut r);
             let ax = matvec(&s, &x);
             let worst = (0..n).fold(0.0f64, |m, i| m.max((r[i] - (b[i] - ax[i])).abs()));
-            // Same products summed in another order: round-off of entries of size ≈ 10.
-            assert!(worst <= 1e-13, "{sizes:?}: residuals differ by {worst:e}");
+            eprintln!("{sizes:?}: block vs compressed-column residual {worst:.1e}");
+            // Same products summed in another order: round-off of entries of size ≈ 10
+            // (measured 1.3e-15 … 3.6e-15; dropping the sub-diagonal blocks gives 2.7).
+            assert!(worst <= 2e-14, "{sizes:?}: residuals differ by {worst:e}");
         }
     }
 
