@@ -429,7 +429,9 @@ impl SparseSolver {
     /// Values in pattern order (compressed sparse column), writable. Writing invalidates
     /// the factorization only once [`factor`](Self::factor) is called again: until then
     /// [`solve`](Self::solve) keeps using the factors (and checks its backward error
-    /// against these values, so change them only together with a new factorization).
+    /// against the factorized matrix: the block backend against the blocks it loaded,
+    /// the others against these values; so change them only together with a new
+    /// factorization).
     pub fn values_mut(&mut self) -> &mut [f64] {
         self.a.val_mut()
     }
@@ -533,7 +535,8 @@ impl SparseSolver {
 
     /// Solves `A x = b` in place with the last factorization (`rhs`: b on entry, x on
     /// successful return; unchanged on error). The solution is checked (finite, backward
-    /// error at most [`MAX_BACKWARD_ERROR`] against the current values); a block
+    /// error at most [`MAX_BACKWARD_ERROR`] against the factorized matrix; see
+    /// [`values_mut`](Self::values_mut)); a block
     /// factorization that fails the check is replaced by the pivoted fallback, which then
     /// serves until the next [`factor`](Self::factor).
     ///
