@@ -224,6 +224,7 @@ fn director_speed(vh: &[Vec3; 2], i_rho: &Matrix2<f64>, a_rho: f64) -> f64 {
 }
 
 /// `(Γ, Ω)` as one 6-vector.
+#[inline]
 pub fn strains6(cfg: &Config, h: f64) -> Vector6<f64> {
     let (g, o) = raw_strains(cfg, h);
     Vector6::new(g.x, g.y, g.z, o.x, o.y, o.z)
@@ -241,7 +242,51 @@ fn strain_energies(de: &Vector6<f64>, p: &ElementProps) -> (f64, f64) {
 
 /// Kinematic update of one element for an increment, with the director-dissipation
 /// factor `c_ν` given (it enters the director velocities at `n+1`).
+#[inline]
 pub fn kinematics(
+    data: &ElementData,
+    st: &ElementState,
+    eps_n: &Vector6<f64>,
+    inc: &Increment,
+    c_nu: f64,
+    dt: f64,
+) -> Kinematics {
+    let mut kin = kinematics_core(data, st, eps_n, inc, c_nu, dt);
+    kin.inputs = local_inputs(data, st, &kin);
+    kin
+}
+
+/// The local dissipation inputs of a kinematic update (speeds and strain-increment
+/// energies): what the dissipation scalars are computed from.
+#[inline]
+fn local_inputs(data: &ElementData, st: &ElementState, kin: &Kinematics) -> LocalInputs {
+    let p = &data.props;
+    let vh_n = 0.5 * (st.v[0] + st.v[1]);
+    let vh_1 = 0.5 * (kin.v1[0] + kin.v1[1]);
+    let vdh_n = [
+        0.5 * (st.vd[0][0] + st.vd[1][0]),
+        0.5 * (st.vd[0][1] + st.vd[1][1]),
+    ];
+    let vdh_1 = [
+        0.5 * (kin.vd1[0][0] + kin.vd1[1][0]),
+        0.5 * (kin.vd1[0][1] + kin.vd1[1][1]),
+    ];
+    let (x_gamma, x_omega) = strain_energies(&(kin.eps1 - kin.eps_n), p);
+    LocalInputs {
+        v_n: vh_n.norm(),
+        v_n1: vh_1.norm(),
+        nu_n: director_speed(&vdh_n, &p.i_rho, p.a_rho),
+        nu_n1: director_speed(&vdh_1, &p.i_rho, p.a_rho),
+        x_gamma,
+        x_omega,
+    }
+}
+
+/// [`kinematics`] without the local dissipation inputs (left at their default): what the
+/// frozen-scalar residual and tangent need (they skip four square roots and the strain
+/// energies).
+#[inline]
+pub fn kinematics_core(
     data: &ElementData,
     st: &ElementState,
     eps_n: &Vector6<f64>,
@@ -279,22 +324,6 @@ pub fn kinematics(
             vd1[l][a] = 2.0 * dd[l] / dt - st.vd[l][a] - 2.0 * kappa[l] * w[a];
         }
     }
-    let vh_n = 0.5 * (st.v[0] + st.v[1]);
-    let vh_1 = 0.5 * (v1[0] + v1[1]);
-    let vdh_n = [
-        0.5 * (st.vd[0][0] + st.vd[1][0]),
-        0.5 * (st.vd[0][1] + st.vd[1][1]),
-    ];
-    let vdh_1 = [0.5 * (vd1[0][0] + vd1[1][0]), 0.5 * (vd1[0][1] + vd1[1][1])];
-    let (x_gamma, x_omega) = strain_energies(&(eps1 - eps_n), p);
-    let inputs = LocalInputs {
-        v_n: vh_n.norm(),
-        v_n1: vh_1.norm(),
-        nu_n: director_speed(&vdh_n, &p.i_rho, p.a_rho),
-        nu_n1: director_speed(&vdh_1, &p.i_rho, p.a_rho),
-        x_gamma,
-        x_omega,
-    };
     Kinematics {
         cfg1,
         mid,
@@ -304,7 +333,7 @@ pub fn kinematics(
         v1,
         vd1,
         w,
-        inputs,
+        inputs: LocalInputs::default(),
     }
 }
 
@@ -362,6 +391,7 @@ pub fn consistent_scalars(
 
 /// Generalized stresses `S* = (N*, M*)`: the strains of `rule` (mean of the strains, or
 /// the strain of the mid-point configuration) plus the dissipative parts.
+#[inline]
 pub fn stresses(
     data: &ElementData,
     kin: &Kinematics,
@@ -394,6 +424,7 @@ const GROSS_WEIGHT: f64 = 1e-4;
 /// Round-off floor of the stress forces on the eight fields: `GROSS_WEIGHT · h |B|ᵀ |C|
 /// (|ε| + |ε0|)`, with `ε` the strains the stresses are computed from. In f64 the forces
 /// are uncertain by ~1e-16 of the "gross" forces, whatever the load.
+#[inline]
 pub fn stress_force_floor(
     data: &ElementData,
     b: &strain::StrainGradient,
@@ -405,21 +436,32 @@ pub fn stress_force_floor(
     let m = p.c_omega.abs() * e.fixed_rows::<3>(3);
     let gross = [n.x, n.y, n.z, m.x, m.y, m.z];
     let mut f = [0.0f64; NFIELDS];
-    for ((row, gk), fields) in b.iter().zip(gross).zip(GRADIENT_FIELDS) {
-        for q in fields {
-            f[q] += GROSS_WEIGHT * row[q].amax() * p.h * gk;
+    // Index loops over the constant field table unroll fully: `f` stays in registers.
+    for k in 0..6 {
+        for j in 0..4 {
+            let q = GRADIENT_FIELDS[k][j];
+            f[q] += GROSS_WEIGHT * amax3(&b[k][q]) * p.h * gross[k];
         }
     }
     f
 }
 
+/// `max_i |v_i|` of a 3-vector (nalgebra's `amax`, without its generic fold).
+#[inline(always)]
+pub(crate) fn amax3(v: &Vec3) -> f64 {
+    v.x.abs().max(v.y.abs()).max(v.z.abs())
+}
+
 /// Generalized stress forces `h Bᵀ S` on the eight vector fields of an element
 /// (one-point rule).
+#[inline]
 pub fn field_forces(b: &strain::StrainGradient, s: &Vector6<f64>, h: f64) -> [Vec3; NFIELDS] {
     let mut f = [strain::ZERO3; NFIELDS];
-    for ((row, &sk), fields) in b.iter().zip(s.iter()).zip(GRADIENT_FIELDS) {
-        for q in fields {
-            f[q] += row[q] * (h * sk);
+    for k in 0..6 {
+        let hs = h * s[k];
+        for j in 0..4 {
+            let q = GRADIENT_FIELDS[k][j];
+            f[q] += b[k][q] * hs;
         }
     }
     f
@@ -542,7 +584,10 @@ pub fn residual_tangent_into(
     let f_gross = stress_force_floor(data, &b_mid, &(0.5 * (kin.eps_n + kin.eps1)));
     let scale = &mut out.scale;
     *scale = ElemVec::zeros();
-    let stress_scale = [f[R0].amax().max(f_gross[R0]), f[R1].amax().max(f_gross[R1])];
+    let stress_scale = [
+        amax3(&f[R0]).max(f_gross[R0]),
+        amax3(&f[R1]).max(f_gross[R1]),
+    ];
     let mut inertia_r = [Vec3::zeros(); 2];
     for l in 0..2 {
         for m in 0..2 {
@@ -560,15 +605,15 @@ pub fn residual_tangent_into(
                     fi += (h * M2[l][m] * p.i_rho[(a, b)] / dt) * (kin.vd1[m][b] - st.vd[m][b]);
                 }
             }
-            let rate = h * p.i_rho.amax() * (st.vd[l][a].amax() + kin.vd1[l][a].amax()) / dt;
+            let rate = h * p.i_rho.amax() * (amax3(&st.vd[l][a]) + amax3(&kin.vd1[l][a])) / dt;
             fd_scale[l] = fd_scale[l]
-                .max(fi.amax())
-                .max(f[base + a].amax())
+                .max(amax3(&fi))
+                .max(amax3(&f[base + a]))
                 .max(rate)
                 .max(f_gross[base + a]);
             f[base + a] += fi;
         }
-        fd_scale[l] = fd_scale[l].max(f[base + 2].amax()).max(f_gross[base + 2]);
+        fd_scale[l] = fd_scale[l].max(amax3(&f[base + 2])).max(f_gross[base + 2]);
     }
 
     let r = &mut out.r;
@@ -585,8 +630,8 @@ pub fn residual_tangent_into(
         r.fixed_rows_mut::<3>(th_idx(l)).copy_from(&rt);
         // Round-off floor: the inertia term is a difference of terms of size
         // Aρ h |v|/Δt, which dominate it when Δt is small.
-        let momentum_rate = p.a_rho * h * (st.v[l].amax() + kin.v1[l].amax()) / dt;
-        let su = stress_scale[l].max(inertia_r[l].amax()).max(momentum_rate);
+        let momentum_rate = p.a_rho * h * (amax3(&st.v[l]) + amax3(&kin.v1[l])) / dt;
+        let su = stress_scale[l].max(amax3(&inertia_r[l])).max(momentum_rate);
         let dnorm = dmid[l]
             .column(0)
             .norm()
@@ -608,7 +653,7 @@ pub fn residual_tangent_into(
             r.fixed_rows_mut::<3>(g_idx(l)).copy_from(&(mg - b));
             // The g rows balance momenta: measure them against the element's momentum,
             // not against g itself (which vanishes where nothing dissipates).
-            let momentum = 0.5 * p.a_rho * h * st.v[l].amax().max(kin.v1[l].amax());
+            let momentum = 0.5 * p.a_rho * h * amax3(&st.v[l]).max(amax3(&kin.v1[l]));
             // b is c_v times a difference of u/Δt and g, each possibly much larger.
             let pieces = 0.5
                 * h
@@ -616,18 +661,21 @@ pub fn residual_tangent_into(
                 * s.c_v.abs()
                 * (0..2)
                     .map(|m| {
-                        ((kin.cfg1.r[m] - st.cfg.r[m]) / dt).amax() + kin_g(st, kin, m, dt).amax()
+                        amax3(&((kin.cfg1.r[m] - st.cfg.r[m]) / dt)) + amax3(&kin_g(st, kin, m, dt))
                     })
                     .sum::<f64>();
             let momentum = momentum.max(pieces);
             for c in 0..3 {
-                scale[g_idx(l) + c] = mg.amax().max(b.amax()).max(momentum);
+                scale[g_idx(l) + c] = amax3(&mg).max(amax3(&b)).max(momentum);
             }
         }
     }
 
     if want_tangent {
-        out.k = ElemMat::zeros();
+        // The (u, θ) block is written whole by the material term (a product with β = 0,
+        // which never reads it); only the g rows and columns are cleared here.
+        out.k.fixed_view_mut::<6, NDOF>(12, 0).fill(0.0);
+        out.k.fixed_view_mut::<12, 6>(0, 12).fill(0.0);
         tangent(data, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut out.k);
     }
 }
@@ -740,7 +788,7 @@ fn tangent(
         }
         db += scaled(&bt_end, 0.5 * h * bg, 0.5 * h * bo);
     }
-    // Written in place (no 12×12 temporary, no transposed copy).
+    // Written in place (no 12×12 temporary, no transposed copy); β = 0 overwrites the block.
     kt.fixed_view_mut::<12, 12>(0, 0)
         .gemm_tr(1.0, &bt_mid, &db, 0.0);
 
@@ -876,7 +924,7 @@ pub fn monolithic_correction(
             let incj = Increment::from_local(&x);
             let (sj, _, _) = consistent_scalars(data, st, eps_n, &incj, k);
             // R(q; s(q ± h e_j)) − R(q; s(q)) isolates the scalar dependence.
-            let kin_s = kinematics(data, st, eps_n, inc, sj.c_nu, k.dt);
+            let kin_s = kinematics_core(data, st, eps_n, inc, sj.c_nu, k.dt);
             let rj = residual_tangent(data, st, &kin_s, &sj, k, trans_diss, false).r;
             col += rj * w;
         }

@@ -65,6 +65,7 @@ impl Config {
     }
 
     /// Componentwise mean `½(self + other)` (the mid-point configuration).
+    #[inline]
     pub fn mean(&self, other: &Config) -> Config {
         Config {
             r: [
@@ -80,6 +81,7 @@ impl Config {
 }
 
 /// Raw strains `(Γ, Ω)` of a configuration (without subtracting the reference values).
+#[inline]
 pub fn raw_strains(c: &Config, h: f64) -> (Vec3, Vec3) {
     let dr = (c.r[1] - c.r[0]) / h;
     let a = &c.d[0];
@@ -103,6 +105,7 @@ pub fn raw_strains(c: &Config, h: f64) -> (Vec3, Vec3) {
 pub type StrainGradient = [[Vec3; NFIELDS]; 6];
 
 /// `B(Φ)` for the bilinear strains of [`raw_strains`].
+#[inline]
 pub fn strain_gradient(c: &Config, h: f64) -> StrainGradient {
     let mut bm = [[ZERO3; NFIELDS]; 6];
     let dr = (c.r[1] - c.r[0]) / h;

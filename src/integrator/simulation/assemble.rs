@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::{
-    consistent_scalars, kinematics, monolithic_correction, residual_tangent_into, ElemMat, ElemVec,
-    ElementEval, NDOF,
+    consistent_scalars, kinematics_core, monolithic_correction, residual_tangent_into, ElemMat,
+    ElemVec, ElementEval, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
@@ -155,7 +155,7 @@ impl Simulation {
             let (s, kin) = match mode {
                 Mode::Frozen => {
                     let s = self.frozen[e];
-                    (s, kinematics(data, &st, &eps_n, &inc, s.c_nu, dt))
+                    (s, kinematics_core(data, &st, &eps_n, &inc, s.c_nu, dt))
                 }
                 Mode::Consistent => {
                     let (s, _, kin) = consistent_scalars(data, &st, &eps_n, &inc, &k);
