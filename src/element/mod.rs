@@ -294,6 +294,21 @@ pub fn kinematics_core(
     c_nu: f64,
     dt: f64,
 ) -> Kinematics {
+    kinematics_at(data, st, eps_n, inc, |ksum| c_nu / (1.0 + ksum * c_nu), dt)
+}
+
+/// [`kinematics_core`] with the factor `φ = c_ν/(1 + K c_ν)` of the director dissipative
+/// velocity `w_α = φ Y_α` given as a function of `K = Σ κ_l`. The update is affine in φ
+/// ([`monolithic_correction`] uses that).
+#[inline]
+fn kinematics_at(
+    data: &ElementData,
+    st: &ElementState,
+    eps_n: &Vector6<f64>,
+    inc: &Increment,
+    phi: impl FnOnce(f64) -> f64,
+    dt: f64,
+) -> Kinematics {
     let p = &data.props;
     let (rot0, amat0) = cay_with_factor(&inc.theta[0]);
     let (rot1, amat1) = cay_with_factor(&inc.theta[1]);
@@ -310,6 +325,7 @@ pub fn kinematics_core(
     ];
     let kappa = data.kappa();
     let ksum = kappa[0] + kappa[1];
+    let phi = phi(ksum);
     // v^h_{α,n} + v^h_{α,n+1} = Y_α/(1 + K c_ν), Y_α = Σ_l (d^l_{α,n+1} − d^l_{α,n})/Δt.
     let mut w = [Vec3::zeros(); 2];
     let mut vd1 = [[Vec3::zeros(); 2]; 2];
@@ -319,7 +335,7 @@ pub fn kinematics_core(
             cfg1.d[1].column(a) - st.cfg.d[1].column(a),
         ];
         let y = (dd[0] + dd[1]) / dt;
-        w[a] = y * (c_nu / (1.0 + ksum * c_nu));
+        w[a] = y * phi;
         for l in 0..2 {
             vd1[l][a] = 2.0 * dd[l] / dt - st.vd[l][a] - 2.0 * kappa[l] * w[a];
         }
@@ -896,10 +912,7 @@ fn field_of(l: usize, a: usize) -> usize {
 
 /// Monolithic strategy: the change of the element residual caused by the dependence of
 /// the dissipation scalars on the increment, `(∂R/∂s)(∂s/∂q)`, added to a frozen-scalar
-/// tangent. Computed by central differences of the scalars alone (the scalars are smooth
-/// functions of the iterate away from `v_n + v_{n+1} = 0`; their law is a small local
-/// solve whose derivative by hand would duplicate it). `active` marks the element-local
-/// unknowns that exist.
+/// tangent ([`scalar_correction`]). `active` marks the element-local unknowns that exist.
 #[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     data: &ElementData,
@@ -911,24 +924,87 @@ pub fn monolithic_correction(
     active: &[bool; NDOF],
     kt: &mut ElemMat,
 ) {
-    let x0 = inc.to_local();
-    for j in 0..NDOF {
-        if !active[j] {
-            continue;
-        }
+    scalar_correction(
+        &inc.to_local(),
+        active,
+        data.kappa().iter().sum(),
+        |x| consistent_scalars(data, st, eps_n, &Increment::from_local(x), k).0,
+        |s, phi| {
+            let kin = kinematics_at(data, st, eps_n, inc, |_| phi, k.dt);
+            residual_tangent(data, st, &kin, s, k, trans_diss, false).r
+        },
+        kt,
+    );
+}
+
+/// `(∂R/∂s)(∂s/∂q)` of an element with local unknowns `x0` (those marked `active`), added
+/// to `kt`; shared by the 3D and the planar kernel. `scalars_at(x)` gives the consistent
+/// scalars at the unknowns `x`, `residual_at(s, φ)` the residual at `x0` with the frozen
+/// scalars `s` and the director factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its
+/// kinematics.
+///
+/// The residual is affine in `σ = (β_Γ, β_Ω, c_v, φ)` (the stresses are linear in the β,
+/// the `g` rows in `c_v`, the director velocities in φ), so `∂R/∂σ_i = R(σ + e_i) − R(σ)`
+/// exactly, from at most five residuals. `∂σ/∂x_j` is a central difference of the scalars
+/// alone (smooth functions of the iterate away from `v_n + v_{n+1} = 0`; their law is a
+/// small local solve whose derivative by hand would duplicate it). Column j is
+/// `Σ_i ∂R/∂σ_i ∂σ_i/∂x_j`: the same quantity as differencing whole residuals at the
+/// perturbed scalars, `(R(s(x + h e_j)) − R(s(x − h e_j)))/2h`, without two residuals per
+/// column and without that difference's cancellation.
+pub(crate) fn scalar_correction<const N: usize>(
+    x0: &SVector<f64, N>,
+    active: &[bool; N],
+    ksum: f64,
+    scalars_at: impl Fn(&SVector<f64, N>) -> FrozenScalars,
+    residual_at: impl Fn(&FrozenScalars, f64) -> SVector<f64, N>,
+    kt: &mut SMatrix<f64, N, N>,
+) {
+    let sigma = |s: &FrozenScalars| {
+        [
+            s.beta_gamma,
+            s.beta_omega,
+            s.c_v,
+            s.c_nu / (1.0 + ksum * s.c_nu),
+        ]
+    };
+    // ∂σ/∂x_j by central differences of the consistent scalars.
+    let mut dsigma = [[0.0f64; 4]; N];
+    let mut varies = [false; 4];
+    for j in (0..N).filter(|&j| active[j]) {
         let hstep = 1e-7 * (1.0 + x0[j].abs());
-        let mut col = ElemVec::zeros();
-        for (sign, w) in [(1.0, 0.5 / hstep), (-1.0, -0.5 / hstep)] {
-            let mut x = x0;
+        let at = |sign: f64| {
+            let mut x = *x0;
             x[j] += sign * hstep;
-            let incj = Increment::from_local(&x);
-            let (sj, _, _) = consistent_scalars(data, st, eps_n, &incj, k);
-            // R(q; s(q ± h e_j)) − R(q; s(q)) isolates the scalar dependence.
-            let kin_s = kinematics_core(data, st, eps_n, inc, sj.c_nu, k.dt);
-            let rj = residual_tangent(data, st, &kin_s, &sj, k, trans_diss, false).r;
-            col += rj * w;
+            sigma(&scalars_at(&x))
+        };
+        let (sp, sm) = (at(1.0), at(-1.0));
+        for i in 0..4 {
+            dsigma[j][i] = (sp[i] - sm[i]) * (0.5 / hstep);
+            varies[i] |= dsigma[j][i] != 0.0;
         }
+    }
+    if !varies.contains(&true) {
+        return;
+    }
+    // ∂R/∂σ_i: R is affine in σ, so a unit change gives the derivative.
+    let s0 = scalars_at(x0);
+    let phi0 = sigma(&s0)[3];
+    let r0 = residual_at(&s0, phi0);
+    let mut d_r = [SVector::<f64, N>::zeros(); 4];
+    for (i, d) in d_r.iter_mut().enumerate().filter(|(i, _)| varies[*i]) {
+        let (mut s, mut phi) = (s0, phi0);
+        match i {
+            0 => s.beta_gamma += 1.0,
+            1 => s.beta_omega += 1.0,
+            2 => s.c_v += 1.0,
+            _ => phi += 1.0,
+        }
+        *d = residual_at(&s, phi) - r0;
+    }
+    for j in (0..N).filter(|&j| active[j]) {
         let mut c = kt.column_mut(j);
-        c += col;
+        for i in (0..4).filter(|&i| varies[i]) {
+            c.axpy(dsigma[j][i], &d_r[i], 1.0);
+        }
     }
 }

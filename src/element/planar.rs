@@ -428,6 +428,20 @@ pub fn kinematics_core(
     c_nu: f64,
     dt: f64,
 ) -> PKinematics {
+    kinematics_at(pd, st, eps_n, inc, |ksum| c_nu / (1.0 + ksum * c_nu), dt)
+}
+
+/// [`kinematics_core`] with the director factor `φ = c_ν/(1 + K c_ν)` given as a function
+/// of `K` (as the 3D kernel's).
+#[inline]
+fn kinematics_at(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    phi: impl FnOnce(f64) -> f64,
+    dt: f64,
+) -> PKinematics {
     let rot = [cay2(inc.theta[0]), cay2(inc.theta[1])];
     let cfg1 = PConfig {
         r: [st.cfg.r[0] + inc.u[0], st.cfg.r[1] + inc.u[1]],
@@ -443,7 +457,7 @@ pub fn kinematics_core(
     let ksum = kappa[0] + kappa[1];
     let dd = [cfg1.d[0][0] - st.cfg.d[0][0], cfg1.d[1][0] - st.cfg.d[1][0]];
     let y = (dd[0] + dd[1]) / dt;
-    let w = y * (c_nu / (1.0 + ksum * c_nu));
+    let w = y * phi(ksum);
     let vs1 = [
         2.0 * dd[0] / dt - st.vs[0] - 2.0 * kappa[0] * w,
         2.0 * dd[1] / dt - st.vs[1] - 2.0 * kappa[1] * w,
@@ -801,8 +815,8 @@ fn tangent(
     }
 }
 
-/// Planar twin of [`super::monolithic_correction`] (central differences of the scalars
-/// over the planar unknowns marked `active`).
+/// Planar twin of [`super::monolithic_correction`] (over the planar unknowns marked
+/// `active`; [`super::scalar_correction`]).
 #[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     pd: &PlanarData,
@@ -814,23 +828,17 @@ pub fn monolithic_correction(
     active: &[bool; NDOF_P],
     kt: &mut PElemMat,
 ) {
-    let x0 = inc.to_local();
-    for j in 0..NDOF_P {
-        if !active[j] {
-            continue;
-        }
-        let hstep = 1e-7 * (1.0 + x0[j].abs());
-        let mut col = PElemVec::zeros();
-        for (sign, w) in [(1.0, 0.5 / hstep), (-1.0, -0.5 / hstep)] {
-            let mut x = x0;
-            x[j] += sign * hstep;
-            let (sj, _, _) = consistent_scalars(pd, st, eps_n, &PIncrement::from_local(&x), k);
-            let kin_s = kinematics(pd, st, eps_n, inc, sj.c_nu, k.dt);
-            col += residual_tangent(pd, st, &kin_s, &sj, k, trans_diss, false).r * w;
-        }
-        let mut c = kt.column_mut(j);
-        c += col;
-    }
+    super::scalar_correction(
+        &inc.to_local(),
+        active,
+        pd.kappa[0] + pd.kappa[1],
+        |x| consistent_scalars(pd, st, eps_n, &PIncrement::from_local(x), k).0,
+        |s, phi| {
+            let kin = kinematics_at(pd, st, eps_n, inc, |_| phi, k.dt);
+            residual_tangent(pd, st, &kin, s, k, trans_diss, false).r
+        },
+        kt,
+    );
 }
 
 /// The 3D element-local index (of the 18) each planar local unknown stands for.
