@@ -15,8 +15,8 @@
 
 use cosserat::element::strain::Config;
 use cosserat::element::{
-    consistent_scalars, kinematics, monolithic_correction, residual_tangent, strains6,
-    ElementData, ElementEval, ElementState, FrozenScalars, Increment, StepConsts, NDOF,
+    consistent_scalars, kinematics, monolithic_correction, residual_tangent, strains6, ElementData,
+    ElementEval, ElementState, FrozenScalars, Increment, StepConsts, NDOF,
 };
 use cosserat::gpu::kernel::{KernelMode, ELEMENT_WGSL};
 use cosserat::gpu::{gpu_required, layout, ElementKernel, GpuContext, Precision};
@@ -444,5 +444,8 @@ fn monolithic_correction_is_the_whole_residual_difference() {
     }
     println!("monolithic correction vs whole-residual differences: worst {worst:.2e} of ε|R|/h over {checked} cases");
     assert!(checked >= 100, "only {checked} dissipative cases");
-    assert!(worst <= 4.0, "monolithic correction differs by {worst:e} of ε|R|/h");
+    assert!(
+        worst <= 4.0,
+        "monolithic correction differs by {worst:e} of ε|R|/h"
+    );
 }
