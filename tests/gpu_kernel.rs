@@ -412,7 +412,7 @@ fn shader_layout_matches_rust_layout() {
 fn monolithic_correction_is_the_whole_residual_difference() {
     let mut worst: f64 = 0.0;
     let mut checked = 0;
-    for c in cases(240, 0x5EED_0F_5CA1A25)
+    for c in cases(240, 0x0005_EED0_F5CA_1A25)
         .iter()
         .filter(|c| c.k.scheme.is_dissipative())
     {
