@@ -648,11 +648,14 @@ pub fn residual_tangent_into(
         // Aρ h |v|/Δt, which dominate it when Δt is small.
         let momentum_rate = p.a_rho * h * (amax3(&st.v[l]) + amax3(&kin.v1[l])) / dt;
         let su = stress_scale[l].max(amax3(&inertia_r[l])).max(momentum_rate);
+        // The largest director length: √ of the largest square (√ is monotone and
+        // correctly rounded, so this is the largest of the three norms, bit for bit).
         let dnorm = dmid[l]
             .column(0)
-            .norm()
-            .max(dmid[l].column(1).norm())
-            .max(dmid[l].column(2).norm());
+            .norm_squared()
+            .max(dmid[l].column(1).norm_squared())
+            .max(dmid[l].column(2).norm_squared())
+            .sqrt();
         for c in 0..3 {
             scale[u_idx(l) + c] = su;
             scale[th_idx(l) + c] = fd_scale[l] * dnorm;
