@@ -462,10 +462,18 @@ pub fn stress_force_floor(
     f
 }
 
-/// `max_i |v_i|` of a 3-vector (nalgebra's `amax`, without its generic fold).
+/// `max_i |v_i|` of a 3-vector: nalgebra's `amax` for finite entries, with plain compares
+/// instead of `f64::max`'s NaN handling (a NaN entry here makes the forces, hence the
+/// residual, NaN, and the Newton test fails on the residual whatever the scale).
 #[inline(always)]
 pub(crate) fn amax3(v: &Vec3) -> f64 {
-    v.x.abs().max(v.y.abs()).max(v.z.abs())
+    let (x, y, z) = (v.x.abs(), v.y.abs(), v.z.abs());
+    let m = if y > x { y } else { x };
+    if z > m {
+        z
+    } else {
+        m
+    }
 }
 
 /// Generalized stress forces `h Bᵀ S` on the eight vector fields of an element
