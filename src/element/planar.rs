@@ -574,7 +574,7 @@ pub fn residual_tangent(
         f[p] += b_mid[2][p] * hs;
         f_gross[p] += amax2(&b_mid[2][p]) * g;
     }
-    let stress_scale = [f[R0].amax().max(f_gross[R0]), f[R1].amax().max(f_gross[R1])];
+    let stress_scale = [amax2(&f[R0]).max(f_gross[R0]), amax2(&f[R1]).max(f_gross[R1])];
     let mut inertia_r = [V2::zeros(); 2];
     for l in 0..2 {
         for m in 0..2 {
@@ -588,13 +588,12 @@ pub fn residual_tangent(
         for m in 0..2 {
             fi += (h * M2[l][m] * pd.i_s / dt) * (kin.vs1[m] - st.vs[m]);
         }
-        let rate = h * pd.i_amax * (st.vs[l].amax() + kin.vs1[l].amax()) / dt;
-        fd_scale[l] = fi
-            .amax()
-            .max(f[fs].amax())
+        let rate = h * pd.i_amax * (amax2(&st.vs[l]) + amax2(&kin.vs1[l])) / dt;
+        fd_scale[l] = amax2(&fi)
+            .max(amax2(&f[fs]))
             .max(rate)
             .max(f_gross[fs])
-            .max(f[dfield(l, 1)].amax())
+            .max(amax2(&f[dfield(l, 1)]))
             .max(f_gross[dfield(l, 1)]);
         f[fs] += fi;
     }
@@ -605,10 +604,11 @@ pub fn residual_tangent(
         r.fixed_rows_mut::<2>(pu_idx(l)).copy_from(&fr);
         let dm = &kin.mid.d[l];
         r[pth_idx(l)] = cross2(&dm[0], &f[dfield(l, 0)]) + cross2(&dm[1], &f[dfield(l, 1)]);
-        let momentum_rate = pd.a_rho * h * (st.v[l].amax() + kin.v1[l].amax()) / dt;
-        let su = stress_scale[l].max(inertia_r[l].amax()).max(momentum_rate);
+        let momentum_rate = pd.a_rho * h * (amax2(&st.v[l]) + amax2(&kin.v1[l])) / dt;
+        let su = stress_scale[l].max(amax2(&inertia_r[l])).max(momentum_rate);
         // The normal director (norm 1) is among the 3D kernel's mid-point directors.
-        let dnorm = dm[0].norm().max(dm[1].norm()).max(1.0);
+        // √ of the largest square: the largest norm, bit for bit (√ is monotone).
+        let dnorm = dm[0].norm_squared().max(dm[1].norm_squared()).max(1.0).sqrt();
         scale[pu_idx(l)] = su;
         scale[pu_idx(l) + 1] = su;
         scale[pth_idx(l)] = fd_scale[l] * dnorm;
@@ -624,7 +624,7 @@ pub fn residual_tangent(
             * pd.a_rho
             * s.c_v.abs()
             * (0..2)
-                .map(|m| ((kin.cfg1.r[m] - st.cfg.r[m]) / dt).amax() + gm[m].amax())
+                .map(|m| amax2(&((kin.cfg1.r[m] - st.cfg.r[m]) / dt)) + amax2(&gm[m]))
                 .sum::<f64>();
         for l in 0..2 {
             let mut mg = V2::zeros();
@@ -632,8 +632,8 @@ pub fn residual_tangent(
                 mg += pd.a_rho * h * M2[l][m] * gm[m];
             }
             r.fixed_rows_mut::<2>(pg_idx(l)).copy_from(&(mg - b));
-            let momentum = (0.5 * pd.a_rho * h * st.v[l].amax().max(kin.v1[l].amax())).max(pieces);
-            let sc = mg.amax().max(b.amax()).max(momentum);
+            let momentum = (0.5 * pd.a_rho * h * amax2(&st.v[l]).max(amax2(&kin.v1[l]))).max(pieces);
+            let sc = amax2(&mg).max(amax2(&b)).max(momentum);
             scale[pg_idx(l)] = sc;
             scale[pg_idx(l) + 1] = sc;
         }
@@ -645,9 +645,16 @@ pub fn residual_tangent(
     PElementEval { r, scale, k: kt }
 }
 
-#[inline]
+/// `max(|x|, |y|)` with a plain compare (as the 3D kernel's `amax3`: a NaN entry makes the
+/// residual NaN, which fails the Newton test whatever the scale).
+#[inline(always)]
 fn amax2(v: &V2) -> f64 {
-    v.x.abs().max(v.y.abs())
+    let (x, y) = (v.x.abs(), v.y.abs());
+    if y > x {
+        y
+    } else {
+        x
+    }
 }
 
 /// Local column of field `p`'s unknown: positions 2 columns at `pu_idx`, directors the
