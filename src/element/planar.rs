@@ -574,7 +574,10 @@ pub fn residual_tangent(
         f[p] += b_mid[2][p] * hs;
         f_gross[p] += amax2(&b_mid[2][p]) * g;
     }
-    let stress_scale = [amax2(&f[R0]).max(f_gross[R0]), amax2(&f[R1]).max(f_gross[R1])];
+    let stress_scale = [
+        amax2(&f[R0]).max(f_gross[R0]),
+        amax2(&f[R1]).max(f_gross[R1]),
+    ];
     let mut inertia_r = [V2::zeros(); 2];
     for l in 0..2 {
         for m in 0..2 {
@@ -608,7 +611,11 @@ pub fn residual_tangent(
         let su = stress_scale[l].max(amax2(&inertia_r[l])).max(momentum_rate);
         // The normal director (norm 1) is among the 3D kernel's mid-point directors.
         // √ of the largest square: the largest norm, bit for bit (√ is monotone).
-        let dnorm = dm[0].norm_squared().max(dm[1].norm_squared()).max(1.0).sqrt();
+        let dnorm = dm[0]
+            .norm_squared()
+            .max(dm[1].norm_squared())
+            .max(1.0)
+            .sqrt();
         scale[pu_idx(l)] = su;
         scale[pu_idx(l) + 1] = su;
         scale[pth_idx(l)] = fd_scale[l] * dnorm;
@@ -632,7 +639,8 @@ pub fn residual_tangent(
                 mg += pd.a_rho * h * M2[l][m] * gm[m];
             }
             r.fixed_rows_mut::<2>(pg_idx(l)).copy_from(&(mg - b));
-            let momentum = (0.5 * pd.a_rho * h * amax2(&st.v[l]).max(amax2(&kin.v1[l]))).max(pieces);
+            let momentum =
+                (0.5 * pd.a_rho * h * amax2(&st.v[l]).max(amax2(&kin.v1[l]))).max(pieces);
             let sc = amax2(&mg).max(amax2(&b)).max(momentum);
             scale[pg_idx(l)] = sc;
             scale[pg_idx(l) + 1] = sc;

@@ -384,8 +384,10 @@ impl Simulation {
             // Active (local, slot) pairs only, in the element matrix's column-major order.
             let ks = ev.k.as_slice();
             let vals = self.solver.values_mut();
-            for &(src, dst) in &self.tangent_map[lo.1..hi.1] {
-                vals[dst] += ks[src];
+            for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {
+                for (v, k) in vals[dst..dst + len].iter_mut().zip(&ks[src..src + len]) {
+                    *v += *k;
+                }
             }
         }
     }
