@@ -452,7 +452,6 @@ pub fn stress_force_floor(
     let m = p.c_omega.abs() * e.fixed_rows::<3>(3);
     let gross = [n.x, n.y, n.z, m.x, m.y, m.z];
     let mut f = [0.0f64; NFIELDS];
-    // Index loops over the constant field table unroll fully: `f` stays in registers.
     for k in 0..6 {
         for j in 0..4 {
             let q = GRADIENT_FIELDS[k][j];

@@ -381,7 +381,8 @@ impl Simulation {
             scale[kind] = scale[kind].max(ev.scale[i]);
         }
         if tangent {
-            // Active (local, slot) pairs only, in the element matrix's column-major order.
+            // Active entries only, as runs contiguous in the element matrix (column-major)
+            // and in the solver's values.
             let ks = ev.k.as_slice();
             let vals = self.solver.values_mut();
             for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {

@@ -98,8 +98,9 @@ pub struct Simulation {
     row_map: Vec<(usize, usize)>,
     /// Active tangent entries of every element as runs `(column-major index into the
     /// 18×18 element matrix, solver slot, length)` that are contiguous on both sides,
-    /// element after element (from `scatter_off[e].1`). An element column's entries fall
-    /// into one or two runs (its two nodes' rows are neighbours in the sorted column).
+    /// element after element (from `scatter_off[e].1`). An element column's (u, θ) entries
+    /// form one run where its two nodes' rows are neighbours in the sorted matrix column
+    /// (12 runs of 12 per interior cantilever element); `g` rows start runs of their own.
     tangent_map: Vec<(usize, usize, usize)>,
     /// Start of each element's entries in `row_map` and `tangent_map` (one past the last
     /// element at the end).
