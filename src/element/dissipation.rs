@@ -146,6 +146,98 @@ pub fn local_scalars(
     }
 }
 
+/// Derivative of [`local_scalars`] with respect to the inputs that vary with the
+/// increment: `d[i][j] = ∂s_i/∂w_j` for `s = (β_Γ, β_Ω, ṽ − v_n, ν̃ − ν_n)` and
+/// `w = (v_{n+1}, ν_{n+1}, X_Γ, X_Ω)` (the speeds at `n` are fixed within a step).
+///
+/// EDMC-2's law is the linear system `M(X) s = r(w)` of [`local_scalars`], so
+/// `∂s/∂w_j = M⁻¹ (∂r/∂w_j − (∂M/∂w_j) s)`: one factorization, four solves.
+pub fn local_scalars_jacobian(
+    scheme: &Scheme,
+    inp: &LocalInputs,
+    a_rho: f64,
+    dt_over_h: f64,
+) -> [[f64; 4]; 4] {
+    let mut d = [[0.0; 4]; 4];
+    match *scheme {
+        Scheme::Em | Scheme::Midpoint | Scheme::GenAlpha { .. } => {}
+        Scheme::Edmc1 { chi_v, chi_nu, .. } => {
+            d[2][0] = chi_v;
+            d[3][1] = chi_nu;
+        }
+        Scheme::Edmc2 {
+            alpha_gv,
+            alpha_gn,
+            alpha_ov,
+            alpha_on,
+        } => {
+            let (agv, agn, aov, aon) = (
+                alpha_gv * dt_over_h,
+                alpha_gn * dt_over_h,
+                alpha_ov * dt_over_h,
+                alpha_on * dt_over_h,
+            );
+            let (xg, xo) = (inp.x_gamma, inp.x_omega);
+            let m = Matrix4::new(
+                1.0,
+                0.0,
+                -agv,
+                -agn,
+                0.0,
+                1.0,
+                -aov,
+                -aon,
+                agv * xg,
+                aov * xo,
+                a_rho,
+                0.0,
+                agn * xg,
+                aon * xo,
+                0.0,
+                a_rho,
+            );
+            let lu = m.lu();
+            let rhs = Vector4::new(
+                -agv * inp.v_n1 - agn * inp.nu_n1,
+                -aov * inp.v_n1 - aon * inp.nu_n1,
+                a_rho * inp.v_n + agv * xg + aov * xo,
+                a_rho * inp.nu_n + agn * xg + aon * xo,
+            );
+            let Some(s) = lu.solve(&rhs) else {
+                return d;
+            };
+            // Columns ∂r/∂w_j − (∂M/∂w_j) s: the speeds enter r's first two rows, the X
+            // both r and M's last two rows (through β_Γ X_Γ and β_Ω X_Ω).
+            let cols = Matrix4::new(
+                -agv,
+                -agn,
+                0.0,
+                0.0,
+                -aov,
+                -aon,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                agv * (1.0 - s[0]),
+                aov * (1.0 - s[1]),
+                0.0,
+                0.0,
+                agn * (1.0 - s[0]),
+                aon * (1.0 - s[1]),
+            );
+            if let Some(ds) = lu.solve(&cols) {
+                for (i, row) in d.iter_mut().enumerate() {
+                    for (j, v) in row.iter_mut().enumerate() {
+                        *v = ds[(i, j)];
+                    }
+                }
+            }
+        }
+    }
+    d
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

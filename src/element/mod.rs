@@ -21,6 +21,7 @@
 pub mod director_factor;
 pub mod dissipation;
 pub mod planar;
+pub mod scalar_gradient;
 pub mod strain;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
@@ -922,23 +923,29 @@ fn field_of(l: usize, a: usize) -> usize {
 
 /// Monolithic strategy: the change of the element residual caused by the dependence of
 /// the dissipation scalars on the increment, `(∂R/∂s)(∂s/∂q)`, added to a frozen-scalar
-/// tangent ([`scalar_correction`]). `active` marks the element-local unknowns that exist.
+/// tangent ([`scalar_correction`], with `∂s/∂q` in closed form from
+/// [`scalar_gradient::scalar_gradient`]). `s` and `kin` are the consistent scalars at
+/// `inc` and their kinematics, as [`consistent_scalars`] returns them; `active` marks the
+/// element-local unknowns that exist.
 #[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     data: &ElementData,
     st: &ElementState,
     eps_n: &Vector6<f64>,
     inc: &Increment,
+    s: &FrozenScalars,
+    kin: &Kinematics,
     k: &StepConsts,
     trans_diss: bool,
     active: &[bool; NDOF],
     kt: &mut ElemMat,
 ) {
+    let dsigma = scalar_gradient::scalar_gradient(data, st, kin, s, k);
     scalar_correction(
-        &inc.to_local(),
+        &dsigma,
         active,
+        s,
         data.kappa().iter().sum(),
-        |x| consistent_scalars(data, st, eps_n, &Increment::from_local(x), k).0,
         |s, phi| {
             let kin = kinematics_at(data, st, eps_n, inc, |_| phi, k.dt);
             residual_tangent(data, st, &kin, s, k, trans_diss, false).r
@@ -947,49 +954,65 @@ pub fn monolithic_correction(
     );
 }
 
-/// `(∂R/∂s)(∂s/∂q)` of an element with local unknowns `x0` (those marked `active`), added
-/// to `kt`; shared by the 3D and the planar kernel. `scalars_at(x)` gives the consistent
-/// scalars at the unknowns `x`, `residual_at(s, φ)` the residual at `x0` with the frozen
-/// scalars `s` and the director factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its
-/// kinematics.
-///
-/// The residual is affine in `σ = (β_Γ, β_Ω, c_v, φ)` (the stresses are linear in the β,
-/// the `g` rows in `c_v`, the director velocities in φ), so `∂R/∂σ_i = R(σ + e_i) − R(σ)`
-/// exactly, from at most five residuals. `∂σ/∂x_j` is a central difference of the scalars
-/// alone (smooth functions of the iterate away from `v_n + v_{n+1} = 0`; their law is a
-/// small local solve whose derivative by hand would duplicate it). Column j is
-/// `Σ_i ∂R/∂σ_i ∂σ_i/∂x_j`: the same quantity as differencing whole residuals at the
-/// perturbed scalars, `(R(s(x + h e_j)) − R(s(x − h e_j)))/2h`, without two residuals per
-/// column and without that difference's cancellation.
-pub(crate) fn scalar_correction<const N: usize>(
+/// `∂σ/∂x_j` (row `j`) by central differences of the consistent scalars `scalars_at(x)`
+/// at the unknowns `x0` marked `active`, for `σ = (β_Γ, β_Ω, c_v, c_ν/(1 + K c_ν))`
+/// (`K = ksum`): the planar kernel's input to [`scalar_correction`], and the reference
+/// the closed form of the 3D kernel is tested against.
+pub fn scalar_gradient_fd<const N: usize>(
     x0: &SVector<f64, N>,
     active: &[bool; N],
     ksum: f64,
     scalars_at: impl Fn(&SVector<f64, N>) -> FrozenScalars,
-    residual_at: impl Fn(&FrozenScalars, f64) -> SVector<f64, N>,
-    kt: &mut SMatrix<f64, N, N>,
-) {
-    let sigma = |s: &FrozenScalars| {
-        [
-            s.beta_gamma,
-            s.beta_omega,
-            s.c_v,
-            s.c_nu / (1.0 + ksum * s.c_nu),
-        ]
-    };
-    // ∂σ/∂x_j by central differences of the consistent scalars.
+) -> [[f64; 4]; N] {
     let mut dsigma = [[0.0f64; 4]; N];
-    let mut varies = [false; 4];
     for j in (0..N).filter(|&j| active[j]) {
         let hstep = 1e-7 * (1.0 + x0[j].abs());
         let at = |sign: f64| {
             let mut x = *x0;
             x[j] += sign * hstep;
-            sigma(&scalars_at(&x))
+            sigma_of(&scalars_at(&x), ksum)
         };
         let (sp, sm) = (at(1.0), at(-1.0));
         for i in 0..4 {
             dsigma[j][i] = (sp[i] - sm[i]) * (0.5 / hstep);
+        }
+    }
+    dsigma
+}
+
+/// `σ = (β_Γ, β_Ω, c_v, φ = c_ν/(1 + K c_ν))`: the scalars the residual is affine in.
+fn sigma_of(s: &FrozenScalars, ksum: f64) -> [f64; 4] {
+    [
+        s.beta_gamma,
+        s.beta_omega,
+        s.c_v,
+        s.c_nu / (1.0 + ksum * s.c_nu),
+    ]
+}
+
+/// `(∂R/∂s)(∂s/∂q)` of an element, added to `kt` over the unknowns marked `active`;
+/// shared by the 3D and the planar kernel. `dsigma[j]` is `∂σ/∂x_j`, `s0` the consistent
+/// scalars at the iterate, `residual_at(s, φ)` the residual at the iterate with the
+/// frozen scalars `s` and the director factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its
+/// kinematics.
+///
+/// The residual is affine in `σ = (β_Γ, β_Ω, c_v, φ)` (the stresses are linear in the β,
+/// the `g` rows in `c_v`, the director velocities in φ), so `∂R/∂σ_i = R(σ + e_i) − R(σ)`
+/// exactly, from at most five residuals. Column j is `Σ_i ∂R/∂σ_i ∂σ_i/∂x_j`: the same
+/// quantity as differencing whole residuals at the perturbed scalars,
+/// `(R(s(x + h e_j)) − R(s(x − h e_j)))/2h`, without two residuals per column and without
+/// that difference's cancellation.
+pub(crate) fn scalar_correction<const N: usize>(
+    dsigma: &[[f64; 4]; N],
+    active: &[bool; N],
+    s0: &FrozenScalars,
+    ksum: f64,
+    residual_at: impl Fn(&FrozenScalars, f64) -> SVector<f64, N>,
+    kt: &mut SMatrix<f64, N, N>,
+) {
+    let mut varies = [false; 4];
+    for j in (0..N).filter(|&j| active[j]) {
+        for i in 0..4 {
             varies[i] |= dsigma[j][i] != 0.0;
         }
     }
@@ -997,8 +1020,8 @@ pub(crate) fn scalar_correction<const N: usize>(
         return;
     }
     // ∂R/∂σ_i: R is affine in σ, so a unit change gives the derivative.
-    let s0 = scalars_at(x0);
-    let phi0 = sigma(&s0)[3];
+    let s0 = *s0;
+    let phi0 = sigma_of(&s0, ksum)[3];
     let r0 = residual_at(&s0, phi0);
     let mut d_r = [SVector::<f64, N>::zeros(); 4];
     for (i, d) in d_r.iter_mut().enumerate().filter(|(i, _)| varies[*i]) {

@@ -831,7 +831,8 @@ fn tangent(
 }
 
 /// Planar twin of [`super::monolithic_correction`] (over the planar unknowns marked
-/// `active`; [`super::scalar_correction`]).
+/// `active`; [`super::scalar_correction`] with the scalars' derivative by central
+/// differences, [`super::scalar_gradient_fd`]).
 #[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     pd: &PlanarData,
@@ -843,11 +844,16 @@ pub fn monolithic_correction(
     active: &[bool; NDOF_P],
     kt: &mut PElemMat,
 ) {
+    let ksum = pd.kappa[0] + pd.kappa[1];
+    let dsigma = super::scalar_gradient_fd(&inc.to_local(), active, ksum, |x| {
+        consistent_scalars(pd, st, eps_n, &PIncrement::from_local(x), k).0
+    });
+    let s0 = consistent_scalars(pd, st, eps_n, inc, k).0;
     super::scalar_correction(
-        &inc.to_local(),
+        &dsigma,
         active,
-        pd.kappa[0] + pd.kappa[1],
-        |x| consistent_scalars(pd, st, eps_n, &PIncrement::from_local(x), k).0,
+        &s0,
+        ksum,
         |s, phi| {
             let kin = kinematics_at(pd, st, eps_n, inc, |_| phi, k.dt);
             residual_tangent(pd, st, &kin, s, k, trans_diss, false).r

@@ -175,6 +175,8 @@ impl Simulation {
                     &st,
                     &eps_n,
                     &inc,
+                    &s,
+                    &kin,
                     &k,
                     self.trans_diss,
                     &active,

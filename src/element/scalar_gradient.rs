@@ -1,0 +1,210 @@
+//! The derivative of an element's consistent dissipation scalars with respect to its
+//! local unknowns, in closed form: what the monolithic tangent multiplies the residual's
+//! dependence on the scalars by ([`super::scalar_correction`]).
+//!
+//! The scalars `σ = (β_Γ, β_Ω, c_v, φ)` (`φ = c_ν/(1 + K c_ν)`) depend on the increment
+//! only through five numbers:
+//!
+//! * `v_{n+1} = |v^h_{n+1}|`, with `v^h_{n+1} = ½(v^0_{n+1} + v^1_{n+1})` affine in `u, g`;
+//! * the strain-increment energies `X_Γ, X_Ω`, through the strains at `n+1`;
+//! * `P₂ = Σ_αβ Iρ^{αβ} Y_α·Y_β` and `P₁ = Σ_αβ Iρ^{αβ} (Y_α·m_β + m_α·Y_β)`, with
+//!   `Y_α = Σ_l (d^l_{α,n+1} − d^l_{α,n})/Δt` and `m_α = ½ Σ_l v^l_{α,n}`. The director
+//!   velocity at the quadrature point is `t Y_α − m_α` with `t = 1/(1 + K c_ν)`, so
+//!   `Aρ ν²_{n+1} = t² P₂ − t P₁ + P₀` (`P₀` fixed within a step).
+//!
+//! Their derivatives with respect to `(u, θ, g)` come from the kinematics (`∂v^h/∂u_l =
+//! I/Δt`, `∂v^h/∂g_l = −I`, `∂d^l_{n+1}/∂θ_l = −A_l \hat{d^l_{n+½}}`, the strain gradient
+//! at `n+1`); the scalars' derivatives with respect to the five numbers come from the
+//! local law's Jacobian ([`super::dissipation::local_scalars_jacobian`]) and, for `c_ν`,
+//! the implicit derivative of its fixed point `c = F(c, w)`:
+//! `dc = (∂F/∂w) dw / (1 − ∂F/∂c)`.
+
+use super::dissipation::local_scalars_jacobian;
+use super::strain::{strain_gradient, A0, B0, GRADIENT_FIELDS, NFIELDS, R0, R1};
+use super::{g_idx, th_idx, u_idx, ElementData, ElementState, FrozenScalars, Kinematics};
+use super::{StepConsts, NDOF};
+use crate::model::Vec3;
+
+/// The five numbers the scalars depend on: `v_{n+1}, X_Γ, X_Ω, P₂, P₁`.
+const NW: usize = 5;
+const W_V: usize = 0;
+const W_XG: usize = 1;
+const W_XO: usize = 2;
+const W_P2: usize = 3;
+const W_P1: usize = 4;
+
+/// `∂σ_i/∂x_j` for `σ = (β_Γ, β_Ω, c_v, φ = c_ν/(1 + K c_ν))` and the element's local
+/// unknowns `x = (u, θ, g)` (row `j` of the result), at the kinematics `kin` of the
+/// consistent scalars `s` ([`super::consistent_scalars`] returns both). Kelvin–Voigt
+/// damping adds a constant to the β and drops out.
+pub fn scalar_gradient(
+    data: &ElementData,
+    st: &ElementState,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+) -> [[f64; 4]; NDOF] {
+    let p = &data.props;
+    let (h, dt) = (p.h, k.dt);
+    let inp = &kin.inputs;
+    let kappa = data.kappa();
+    let ksum = kappa[0] + kappa[1];
+    // ∂(β_Γ, β_Ω, ṽ − v_n, ν̃ − ν_n)/∂(v_{n+1}, ν_{n+1}, X_Γ, X_Ω).
+    let jac = local_scalars_jacobian(&k.scheme, inp, p.a_rho, dt / h);
+    let law = super::dissipation::local_scalars(&k.scheme, inp, p.a_rho, dt / h);
+
+    // The director speed ν_{n+1} as a function of (P₂, P₁) and c_ν.
+    let y: [Vec3; 2] = std::array::from_fn(|a| {
+        (kin.cfg1.d[0].column(a) - st.cfg.d[0].column(a) + kin.cfg1.d[1].column(a)
+            - st.cfg.d[1].column(a))
+            / dt
+    });
+    let m: [Vec3; 2] = std::array::from_fn(|a| 0.5 * (st.vd[0][a] + st.vd[1][a]));
+    let ir = &p.i_rho;
+    let mut p2 = 0.0;
+    let mut p1 = 0.0;
+    for a in 0..2 {
+        for b in 0..2 {
+            p2 += ir[(a, b)] * y[a].dot(&y[b]);
+            p1 += ir[(a, b)] * (y[a].dot(&m[b]) + m[a].dot(&y[b]));
+        }
+    }
+    let t = 1.0 / (1.0 + ksum * s.c_nu);
+    // dν = a_p2 dP₂ + a_p1 dP₁ + a_c dc_ν (zero at ν = 0, where the speed has a kink).
+    let nu1 = inp.nu_n1;
+    let (a_p2, a_p1, a_c) = if nu1 > 0.0 {
+        let f = 1.0 / (2.0 * p.a_rho * nu1);
+        (f * t * t, -f * t, f * (2.0 * t * p2 - p1) * (-ksum * t * t))
+    } else {
+        (0.0, 0.0, 0.0)
+    };
+    let mut dnu = [0.0; NW];
+    dnu[W_P2] = a_p2;
+    dnu[W_P1] = a_p1;
+
+    // Law outputs as linear forms in dw, given dν: d(law_i) = jac[i]·(dv, dν, dX_Γ, dX_Ω).
+    let through_law = |i: usize, dnu: &[f64; NW]| -> [f64; NW] {
+        let mut d = [0.0; NW];
+        d[W_V] += jac[i][0];
+        d[W_XG] += jac[i][2];
+        d[W_XO] += jac[i][3];
+        for (dj, nj) in d.iter_mut().zip(dnu) {
+            *dj += jac[i][1] * nj;
+        }
+        d
+    };
+    // c_ν = ½ (ν̃ − ν_n)/(ν_n + ν_{n+1}), its fixed point solved implicitly.
+    let den_nu = inp.nu_n + nu1;
+    let mut dc = [0.0; NW];
+    if k.scheme.director_dissipation() && den_nu > 1e-300 {
+        // F(c, w) = H(v, ν(c, w), X): ∂H/∂ν includes the ratio's denominator.
+        let dh_dnu = 0.5 * jac[3][1] / den_nu - 0.5 * law.dnu / (den_nu * den_nu);
+        let mut rhs = [0.0; NW];
+        rhs[W_V] = 0.5 * jac[3][0] / den_nu;
+        rhs[W_XG] = 0.5 * jac[3][2] / den_nu;
+        rhs[W_XO] = 0.5 * jac[3][3] / den_nu;
+        rhs[W_P2] = dh_dnu * a_p2;
+        rhs[W_P1] = dh_dnu * a_p1;
+        let denom = 1.0 - dh_dnu * a_c;
+        if denom.is_finite() && denom != 0.0 {
+            for (d, r) in dc.iter_mut().zip(rhs) {
+                *d = r / denom;
+            }
+        }
+        for (n, c) in dnu.iter_mut().zip(&dc) {
+            *n += a_c * c;
+        }
+    }
+    let d_bg = through_law(0, &dnu);
+    let d_bo = through_law(1, &dnu);
+    let d_dv = through_law(2, &dnu);
+    // c_v = ½ (ṽ − v_n)/(v_n + v_{n+1}).
+    let den_v = inp.v_n + inp.v_n1;
+    let mut d_cv = [0.0; NW];
+    if den_v > 1e-300 {
+        for (c, d) in d_cv.iter_mut().zip(&d_dv) {
+            *c = 0.5 * d / den_v;
+        }
+        d_cv[W_V] -= 0.5 * law.dv / (den_v * den_v);
+    }
+    let d_phi: [f64; NW] = std::array::from_fn(|i| dc[i] * t * t);
+    let dsigma_dw = [d_bg, d_bo, d_cv, d_phi];
+
+    // dw/dx, one gradient per number.
+    let mut dw = [[0.0f64; NDOF]; NW];
+    let vh = 0.5 * (kin.v1[0] + kin.v1[1]);
+    let vn = vh.norm();
+    if vn > 0.0 {
+        let vhat = vh / vn;
+        for l in 0..2 {
+            for c in 0..3 {
+                dw[W_V][u_idx(l) + c] = vhat[c] / dt;
+                dw[W_V][g_idx(l) + c] = -vhat[c];
+            }
+        }
+    }
+    let dcol: [[Vec3; 3]; 2] =
+        std::array::from_fn(|l| std::array::from_fn(|i| kin.mid.d[l].column(i).into_owned()));
+    let at = [kin.amat[0].transpose(), kin.amat[1].transpose()];
+    // A gradient with respect to director d^l_{i,n+1} maps to θ_l as d^l_{i,½} × (A_lᵀ ·).
+    let to_theta = |l: usize, i: usize, gvec: &Vec3| dcol[l][i].cross(&(at[l] * gvec));
+    // X_Γ = ΔΓ·C_Γ ΔΓ, X_Ω = ΔΩ·C_Ω ΔΩ: gradients (C + Cᵀ)Δ through the strains at n+1.
+    let de = kin.eps1 - kin.eps_n;
+    let dg = de.fixed_rows::<3>(0).into_owned();
+    let dom = de.fixed_rows::<3>(3).into_owned();
+    let cg = 2.0 * p.c_gamma.component_mul(&dg);
+    let co = (p.c_omega + p.c_omega.transpose()) * dom;
+    let b_end = strain_gradient(&kin.cfg1, h);
+    for (wi, coef, rows) in [(W_XG, cg, 0..3), (W_XO, co, 3..6)] {
+        let mut field = [Vec3::zeros(); NFIELDS];
+        for kk in rows {
+            let c = coef[kk % 3];
+            for q in GRADIENT_FIELDS[kk] {
+                field[q] += c * b_end[kk][q];
+            }
+        }
+        for (q, fv) in field.iter().enumerate() {
+            match q {
+                R0 | R1 => {
+                    let l = q - R0;
+                    for c in 0..3 {
+                        dw[wi][u_idx(l) + c] += fv[c];
+                    }
+                }
+                _ => {
+                    let (l, i) = if q < B0 { (0, q - A0) } else { (1, q - B0) };
+                    let g = to_theta(l, i, fv);
+                    for c in 0..3 {
+                        dw[wi][th_idx(l) + c] += g[c];
+                    }
+                }
+            }
+        }
+    }
+    // P₂ and P₁ through Y_α (∂Y_α/∂d^l_{α,n+1} = I/Δt).
+    for l in 0..2 {
+        for a in 0..2 {
+            let mut g2 = Vec3::zeros();
+            let mut g1 = Vec3::zeros();
+            for b in 0..2 {
+                let i_ab = ir[(a, b)] + ir[(b, a)];
+                g2 += i_ab * y[b];
+                g1 += i_ab * m[b];
+            }
+            let g2 = to_theta(l, a, &(g2 / dt));
+            let g1 = to_theta(l, a, &(g1 / dt));
+            for c in 0..3 {
+                dw[W_P2][th_idx(l) + c] += g2[c];
+                dw[W_P1][th_idx(l) + c] += g1[c];
+            }
+        }
+    }
+
+    let mut out = [[0.0f64; 4]; NDOF];
+    for (j, row) in out.iter_mut().enumerate() {
+        for (i, v) in row.iter_mut().enumerate() {
+            *v = (0..NW).map(|w| dsigma_dw[i][w] * dw[w][j]).sum();
+        }
+    }
+    out
+}
