@@ -302,7 +302,7 @@ pub fn kinematics_core(
 /// velocity `w_α = φ Y_α` given as a function of `K = Σ κ_l`. The update is affine in φ
 /// ([`monolithic_correction`] uses that).
 #[inline]
-fn kinematics_at(
+pub fn kinematics_at(
     data: &ElementData,
     st: &ElementState,
     eps_n: &Vector6<f64>,
@@ -923,16 +923,15 @@ fn field_of(l: usize, a: usize) -> usize {
 
 /// Monolithic strategy: the change of the element residual caused by the dependence of
 /// the dissipation scalars on the increment, `(∂R/∂s)(∂s/∂q)`, added to a frozen-scalar
-/// tangent ([`scalar_correction`], with `∂s/∂q` in closed form from
-/// [`scalar_gradient::scalar_gradient`]). `s` and `kin` are the consistent scalars at
-/// `inc` and their kinematics, as [`consistent_scalars`] returns them; `active` marks the
-/// element-local unknowns that exist.
+/// tangent ([`scalar_correction`], both factors in closed form:
+/// [`scalar_gradient::scalar_gradient`] and [`scalar_gradient::residual_scalar_derivatives`]).
+/// `s` and `kin` are the consistent scalars at the iterate and their kinematics, as
+/// [`consistent_scalars`] returns them; `active` marks the element-local unknowns that
+/// exist.
 #[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     data: &ElementData,
     st: &ElementState,
-    eps_n: &Vector6<f64>,
-    inc: &Increment,
     s: &FrozenScalars,
     kin: &Kinematics,
     k: &StepConsts,
@@ -941,17 +940,8 @@ pub fn monolithic_correction(
     kt: &mut ElemMat,
 ) {
     let dsigma = scalar_gradient::scalar_gradient(data, st, kin, s, k);
-    scalar_correction(
-        &dsigma,
-        active,
-        s,
-        data.kappa().iter().sum(),
-        |s, phi| {
-            let kin = kinematics_at(data, st, eps_n, inc, |_| phi, k.dt);
-            residual_tangent(data, st, &kin, s, k, trans_diss, false).r
-        },
-        kt,
-    );
+    let d_r = scalar_gradient::residual_scalar_derivatives(data, st, kin, k, trans_diss);
+    scalar_correction(&dsigma, &d_r, active, kt);
 }
 
 /// `∂σ/∂x_j` (row `j`) by central differences of the consistent scalars `scalars_at(x)`
@@ -990,36 +980,30 @@ fn sigma_of(s: &FrozenScalars, ksum: f64) -> [f64; 4] {
     ]
 }
 
-/// `(∂R/∂s)(∂s/∂q)` of an element, added to `kt` over the unknowns marked `active`;
-/// shared by the 3D and the planar kernel. `dsigma[j]` is `∂σ/∂x_j`, `s0` the consistent
-/// scalars at the iterate, `residual_at(s, φ)` the residual at the iterate with the
-/// frozen scalars `s` and the director factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its
-/// kinematics.
-///
-/// The residual is affine in `σ = (β_Γ, β_Ω, c_v, φ)` (the stresses are linear in the β,
-/// the `g` rows in `c_v`, the director velocities in φ), so `∂R/∂σ_i = R(σ + e_i) − R(σ)`
-/// exactly, from at most five residuals. Column j is `Σ_i ∂R/∂σ_i ∂σ_i/∂x_j`: the same
-/// quantity as differencing whole residuals at the perturbed scalars,
-/// `(R(s(x + h e_j)) − R(s(x − h e_j)))/2h`, without two residuals per column and without
-/// that difference's cancellation.
-pub(crate) fn scalar_correction<const N: usize>(
-    dsigma: &[[f64; 4]; N],
-    active: &[bool; N],
-    s0: &FrozenScalars,
-    ksum: f64,
-    residual_at: impl Fn(&FrozenScalars, f64) -> SVector<f64, N>,
-    kt: &mut SMatrix<f64, N, N>,
-) {
+/// Which of `σ = (β_Γ, β_Ω, c_v, φ)` vary with the unknowns marked `active`.
+pub fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N]) -> [bool; 4] {
     let mut varies = [false; 4];
     for j in (0..N).filter(|&j| active[j]) {
         for i in 0..4 {
             varies[i] |= dsigma[j][i] != 0.0;
         }
     }
-    if !varies.contains(&true) {
-        return;
-    }
-    // ∂R/∂σ_i: R is affine in σ, so a unit change gives the derivative.
+    varies
+}
+
+/// `∂R/∂σ_i` for the σ marked in `varies`, as `R(σ + e_i) − R(σ)` (exact: the residual is
+/// affine in `σ = (β_Γ, β_Ω, c_v, φ)`, the stresses linear in the β, the `g` rows in
+/// `c_v`, the director velocities in φ). `s0` are the scalars at the iterate,
+/// `residual_at(s, φ)` the residual there with the frozen scalars `s` and the director
+/// factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its kinematics. The planar kernel's
+/// input to [`scalar_correction`]; the 3D kernel has them in closed form
+/// ([`scalar_gradient::residual_scalar_derivatives`]).
+pub fn residual_differences<const N: usize>(
+    s0: &FrozenScalars,
+    ksum: f64,
+    varies: [bool; 4],
+    residual_at: impl Fn(&FrozenScalars, f64) -> SVector<f64, N>,
+) -> [SVector<f64, N>; 4] {
     let s0 = *s0;
     let phi0 = sigma_of(&s0, ksum)[3];
     let r0 = residual_at(&s0, phi0);
@@ -1034,6 +1018,22 @@ pub(crate) fn scalar_correction<const N: usize>(
         }
         *d = residual_at(&s, phi) - r0;
     }
+    d_r
+}
+
+/// `(∂R/∂s)(∂s/∂q)` of an element, added to `kt` over the unknowns marked `active`;
+/// shared by the 3D and the planar kernel. `dsigma[j]` is `∂σ/∂x_j` and `d_r[i]` is
+/// `∂R/∂σ_i` for `σ = (β_Γ, β_Ω, c_v, φ = c_ν/(1 + K c_ν))`, the scalars the residual is
+/// affine in: column j is `Σ_i ∂R/∂σ_i ∂σ_i/∂x_j`, the same quantity as differencing
+/// whole residuals at the perturbed scalars, `(R(s(x + h e_j)) − R(s(x − h e_j)))/2h`,
+/// without two residuals per column and without that difference's cancellation.
+pub(crate) fn scalar_correction<const N: usize>(
+    dsigma: &[[f64; 4]; N],
+    d_r: &[SVector<f64, N>; 4],
+    active: &[bool; N],
+    kt: &mut SMatrix<f64, N, N>,
+) {
+    let varies = scalars_varying(dsigma, active);
     for j in (0..N).filter(|&j| active[j]) {
         let mut c = kt.column_mut(j);
         for i in (0..4).filter(|&i| varies[i]) {

@@ -832,7 +832,8 @@ fn tangent(
 
 /// Planar twin of [`super::monolithic_correction`] (over the planar unknowns marked
 /// `active`; [`super::scalar_correction`] with the scalars' derivative by central
-/// differences, [`super::scalar_gradient_fd`]).
+/// differences, [`super::scalar_gradient_fd`], and the residual's by
+/// [`super::residual_differences`]).
 #[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     pd: &PlanarData,
@@ -849,17 +850,12 @@ pub fn monolithic_correction(
         consistent_scalars(pd, st, eps_n, &PIncrement::from_local(x), k).0
     });
     let s0 = consistent_scalars(pd, st, eps_n, inc, k).0;
-    super::scalar_correction(
-        &dsigma,
-        active,
-        &s0,
-        ksum,
-        |s, phi| {
-            let kin = kinematics_at(pd, st, eps_n, inc, |_| phi, k.dt);
-            residual_tangent(pd, st, &kin, s, k, trans_diss, false).r
-        },
-        kt,
-    );
+    let varies = super::scalars_varying(&dsigma, active);
+    let d_r = super::residual_differences(&s0, ksum, varies, |s, phi| {
+        let kin = kinematics_at(pd, st, eps_n, inc, |_| phi, k.dt);
+        residual_tangent(pd, st, &kin, s, k, trans_diss, false).r
+    });
+    super::scalar_correction(&dsigma, &d_r, active, kt);
 }
 
 /// The 3D element-local index (of the 18) each planar local unknown stands for.

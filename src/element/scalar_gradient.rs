@@ -21,9 +21,10 @@
 
 use super::dissipation::local_scalars_jacobian;
 use super::strain::{strain_gradient, A0, B0, GRADIENT_FIELDS, NFIELDS, R0, R1};
-use super::{g_idx, th_idx, u_idx, ElementData, ElementState, FrozenScalars, Kinematics};
-use super::{StepConsts, NDOF};
+use super::{field_forces, g_idx, th_idx, u_idx, ElemVec, ElementData, ElementState};
+use super::{FrozenScalars, Kinematics, StepConsts, M2, NDOF};
 use crate::model::Vec3;
+use nalgebra::Vector6;
 
 /// The five numbers the scalars depend on: `v_{n+1}, X_Γ, X_Ω, P₂, P₁`.
 const NW: usize = 5;
@@ -205,6 +206,80 @@ pub fn scalar_gradient(
         for (i, v) in row.iter_mut().enumerate() {
             *v = (0..NW).map(|w| dsigma_dw[i][w] * dw[w][j]).sum();
         }
+    }
+    out
+}
+
+/// `∂R/∂σ_i` of the element residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics
+/// `kin` (the residual is affine in σ, so these are exact and independent of σ):
+///
+/// * `β_Γ, β_Ω`: the stresses change by `½ C_Γ ΔΓ` and `½ C_Ω ΔΩ`; their forces
+///   `h B_{n+½}ᵀ ΔS` are projected on `(u, θ)` like the stress forces;
+/// * `c_v`: the `g` rows change by `−½ h Aρ (v^h_n + v^h_{n+1})`;
+/// * `φ`: the director velocities at `n+1` change by `−2 κ_l Y_α`, and with them the
+///   director inertia forces.
+pub fn residual_scalar_derivatives(
+    data: &ElementData,
+    st: &ElementState,
+    kin: &Kinematics,
+    k: &StepConsts,
+    trans_diss: bool,
+) -> [ElemVec; 4] {
+    let p = &data.props;
+    let (h, dt) = (p.h, k.dt);
+    let dmid = [kin.mid.d[0], kin.mid.d[1]];
+    let project = |f: &[Vec3; NFIELDS]| {
+        let mut r = ElemVec::zeros();
+        for l in 0..2 {
+            let (rl, base) = if l == 0 { (R0, A0) } else { (R1, B0) };
+            r.fixed_rows_mut::<3>(u_idx(l)).copy_from(&f[rl]);
+            let mut rt = Vec3::zeros();
+            for i in 0..3 {
+                rt += dmid[l].column(i).cross(&f[base + i]);
+            }
+            r.fixed_rows_mut::<3>(th_idx(l)).copy_from(&rt);
+        }
+        r
+    };
+    let b_mid = strain_gradient(&kin.mid, h);
+    let de = kin.eps1 - kin.eps_n;
+    let dn = 0.5 * p.c_gamma.component_mul(&de.fixed_rows::<3>(0).into_owned());
+    let dm = 0.5 * p.c_omega * de.fixed_rows::<3>(3).into_owned();
+    let ds_gamma = Vector6::new(dn.x, dn.y, dn.z, 0.0, 0.0, 0.0);
+    let ds_omega = Vector6::new(0.0, 0.0, 0.0, dm.x, dm.y, dm.z);
+    let mut out = [
+        project(&field_forces(&b_mid, &ds_gamma, h)),
+        project(&field_forces(&b_mid, &ds_omega, h)),
+        ElemVec::zeros(),
+        ElemVec::zeros(),
+    ];
+    if trans_diss {
+        let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
+        let dg = -0.5 * h * p.a_rho * vsum;
+        for l in 0..2 {
+            out[2].fixed_rows_mut::<3>(g_idx(l)).copy_from(&dg);
+        }
+    }
+    let kappa = data.kappa();
+    if kappa[0] != 0.0 || kappa[1] != 0.0 {
+        let y: [Vec3; 2] = std::array::from_fn(|b| {
+            (kin.cfg1.d[0].column(b) - st.cfg.d[0].column(b) + kin.cfg1.d[1].column(b)
+                - st.cfg.d[1].column(b))
+                / dt
+        });
+        let mut f = [Vec3::zeros(); NFIELDS];
+        for l in 0..2 {
+            let base = if l == 0 { A0 } else { B0 };
+            for a in 0..2 {
+                for m in 0..2 {
+                    for b in 0..2 {
+                        f[base + a] +=
+                            (h * M2[l][m] * p.i_rho[(a, b)] / dt) * (-2.0 * kappa[m]) * y[b];
+                    }
+                }
+            }
+        }
+        out[3] = project(&f);
     }
     out
 }

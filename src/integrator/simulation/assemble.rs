@@ -170,18 +170,7 @@ impl Simulation {
             {
                 let map = &self.dofs.elements[e];
                 let active: [bool; NDOF] = std::array::from_fn(|i| map[i] != NONE);
-                monolithic_correction(
-                    data,
-                    &st,
-                    &eps_n,
-                    &inc,
-                    &s,
-                    &kin,
-                    &k,
-                    self.trans_diss,
-                    &active,
-                    &mut ev.k,
-                );
+                monolithic_correction(data, &st, &s, &kin, &k, self.trans_diss, &active, &mut ev.k);
             }
             self.scatter(e, &ev, tangent, r, &mut scale);
         }
