@@ -19,7 +19,7 @@
 //! the implicit derivative of its fixed point `c = F(c, w)`:
 //! `dc = (∂F/∂w) dw / (1 − ∂F/∂c)`.
 
-use super::dissipation::local_scalars_jacobian;
+use super::dissipation::{local_scalars, local_scalars_jacobian, LocalInputs};
 use super::strain::{strain_gradient, A0, B0, GRADIENT_FIELDS, NFIELDS, R0, R1};
 use super::{field_forces, g_idx, th_idx, u_idx, ElemVec, ElementData, ElementState};
 use super::{FrozenScalars, Kinematics, StepConsts, M2, NDOF};
@@ -47,14 +47,9 @@ pub fn scalar_gradient(
 ) -> [[f64; 4]; NDOF] {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
-    let inp = &kin.inputs;
     let kappa = data.kappa();
-    let ksum = kappa[0] + kappa[1];
-    // ∂(β_Γ, β_Ω, ṽ − v_n, ν̃ − ν_n)/∂(v_{n+1}, ν_{n+1}, X_Γ, X_Ω).
-    let jac = local_scalars_jacobian(&k.scheme, inp, p.a_rho, dt / h);
-    let law = super::dissipation::local_scalars(&k.scheme, inp, p.a_rho, dt / h);
 
-    // The director speed ν_{n+1} as a function of (P₂, P₁) and c_ν.
+    // The director speed's quadratic: Y_α, m_α, P₂, P₁.
     let y: [Vec3; 2] = std::array::from_fn(|a| {
         (kin.cfg1.d[0].column(a) - st.cfg.d[0].column(a) + kin.cfg1.d[1].column(a)
             - st.cfg.d[1].column(a))
@@ -70,66 +65,15 @@ pub fn scalar_gradient(
             p1 += ir[(a, b)] * (y[a].dot(&m[b]) + m[a].dot(&y[b]));
         }
     }
-    let t = 1.0 / (1.0 + ksum * s.c_nu);
-    // dν = a_p2 dP₂ + a_p1 dP₁ + a_c dc_ν (zero at ν = 0, where the speed has a kink).
-    let nu1 = inp.nu_n1;
-    let (a_p2, a_p1, a_c) = if nu1 > 0.0 {
-        let f = 1.0 / (2.0 * p.a_rho * nu1);
-        (f * t * t, -f * t, f * (2.0 * t * p2 - p1) * (-ksum * t * t))
-    } else {
-        (0.0, 0.0, 0.0)
-    };
-    let mut dnu = [0.0; NW];
-    dnu[W_P2] = a_p2;
-    dnu[W_P1] = a_p1;
-
-    // Law outputs as linear forms in dw, given dν: d(law_i) = jac[i]·(dv, dν, dX_Γ, dX_Ω).
-    let through_law = |i: usize, dnu: &[f64; NW]| -> [f64; NW] {
-        let mut d = [0.0; NW];
-        d[W_V] += jac[i][0];
-        d[W_XG] += jac[i][2];
-        d[W_XO] += jac[i][3];
-        for (dj, nj) in d.iter_mut().zip(dnu) {
-            *dj += jac[i][1] * nj;
-        }
-        d
-    };
-    // c_ν = ½ (ν̃ − ν_n)/(ν_n + ν_{n+1}), its fixed point solved implicitly.
-    let den_nu = inp.nu_n + nu1;
-    let mut dc = [0.0; NW];
-    if k.scheme.director_dissipation() && den_nu > 1e-300 {
-        // F(c, w) = H(v, ν(c, w), X): ∂H/∂ν includes the ratio's denominator.
-        let dh_dnu = 0.5 * jac[3][1] / den_nu - 0.5 * law.dnu / (den_nu * den_nu);
-        let mut rhs = [0.0; NW];
-        rhs[W_V] = 0.5 * jac[3][0] / den_nu;
-        rhs[W_XG] = 0.5 * jac[3][2] / den_nu;
-        rhs[W_XO] = 0.5 * jac[3][3] / den_nu;
-        rhs[W_P2] = dh_dnu * a_p2;
-        rhs[W_P1] = dh_dnu * a_p1;
-        let denom = 1.0 - dh_dnu * a_c;
-        if denom.is_finite() && denom != 0.0 {
-            for (d, r) in dc.iter_mut().zip(rhs) {
-                *d = r / denom;
-            }
-        }
-        for (n, c) in dnu.iter_mut().zip(&dc) {
-            *n += a_c * c;
-        }
-    }
-    let d_bg = through_law(0, &dnu);
-    let d_bo = through_law(1, &dnu);
-    let d_dv = through_law(2, &dnu);
-    // c_v = ½ (ṽ − v_n)/(v_n + v_{n+1}).
-    let den_v = inp.v_n + inp.v_n1;
-    let mut d_cv = [0.0; NW];
-    if den_v > 1e-300 {
-        for (c, d) in d_cv.iter_mut().zip(&d_dv) {
-            *c = 0.5 * d / den_v;
-        }
-        d_cv[W_V] -= 0.5 * law.dv / (den_v * den_v);
-    }
-    let d_phi: [f64; NW] = std::array::from_fn(|i| dc[i] * t * t);
-    let dsigma_dw = [d_bg, d_bo, d_cv, d_phi];
+    let dsigma_dw = sigma_over_inputs(
+        k,
+        &kin.inputs,
+        p.a_rho,
+        h,
+        kappa[0] + kappa[1],
+        s.c_nu,
+        [p2, p1],
+    );
 
     // dw/dx, one gradient per number.
     let mut dw = [[0.0f64; NDOF]; NW];
@@ -201,13 +145,96 @@ pub fn scalar_gradient(
         }
     }
 
-    let mut out = [[0.0f64; 4]; NDOF];
-    for (j, row) in out.iter_mut().enumerate() {
-        for (i, v) in row.iter_mut().enumerate() {
-            *v = (0..NW).map(|w| dsigma_dw[i][w] * dw[w][j]).sum();
+    chain(&dsigma_dw, &dw)
+}
+
+/// `∂σ/∂w`: the derivative of `σ = (β_Γ, β_Ω, c_v, φ)` with respect to the five numbers
+/// `w = (v_{n+1}, X_Γ, X_Ω, P₂, P₁)` (the module's introduction), at the local inputs
+/// `inp` of the consistent scalars with director factor `c_nu`; `p = [P₂, P₁]`,
+/// `ksum = K`. Shared by the 3D and the planar kernel, which differ only in `∂w/∂x`.
+pub(crate) fn sigma_over_inputs(
+    k: &StepConsts,
+    inp: &LocalInputs,
+    a_rho: f64,
+    h: f64,
+    ksum: f64,
+    c_nu: f64,
+    p: [f64; 2],
+) -> [[f64; NW]; 4] {
+    let [p2, p1] = p;
+    // ∂(β_Γ, β_Ω, ṽ − v_n, ν̃ − ν_n)/∂(v_{n+1}, ν_{n+1}, X_Γ, X_Ω), and the law's values.
+    let jac = local_scalars_jacobian(&k.scheme, inp, a_rho, k.dt / h);
+    let law = local_scalars(&k.scheme, inp, a_rho, k.dt / h);
+    let t = 1.0 / (1.0 + ksum * c_nu);
+    // dν = a_p2 dP₂ + a_p1 dP₁ + a_c dc_ν (zero at ν = 0, where the speed has a kink).
+    let nu1 = inp.nu_n1;
+    let (a_p2, a_p1, a_c) = if nu1 > 0.0 {
+        let f = 1.0 / (2.0 * a_rho * nu1);
+        (f * t * t, -f * t, f * (2.0 * t * p2 - p1) * (-ksum * t * t))
+    } else {
+        (0.0, 0.0, 0.0)
+    };
+    let mut dnu = [0.0; NW];
+    dnu[W_P2] = a_p2;
+    dnu[W_P1] = a_p1;
+
+    // Law outputs as linear forms in dw, given dν: d(law_i) = jac[i]·(dv, dν, dX_Γ, dX_Ω).
+    let through_law = |i: usize, dnu: &[f64; NW]| -> [f64; NW] {
+        let mut d = [0.0; NW];
+        d[W_V] += jac[i][0];
+        d[W_XG] += jac[i][2];
+        d[W_XO] += jac[i][3];
+        for (dj, nj) in d.iter_mut().zip(dnu) {
+            *dj += jac[i][1] * nj;
+        }
+        d
+    };
+    // c_ν = ½ (ν̃ − ν_n)/(ν_n + ν_{n+1}), its fixed point solved implicitly.
+    let den_nu = inp.nu_n + nu1;
+    let mut dc = [0.0; NW];
+    if k.scheme.director_dissipation() && den_nu > 1e-300 {
+        // F(c, w) = H(v, ν(c, w), X): ∂H/∂ν includes the ratio's denominator.
+        let dh_dnu = 0.5 * jac[3][1] / den_nu - 0.5 * law.dnu / (den_nu * den_nu);
+        let mut rhs = [0.0; NW];
+        rhs[W_V] = 0.5 * jac[3][0] / den_nu;
+        rhs[W_XG] = 0.5 * jac[3][2] / den_nu;
+        rhs[W_XO] = 0.5 * jac[3][3] / den_nu;
+        rhs[W_P2] = dh_dnu * a_p2;
+        rhs[W_P1] = dh_dnu * a_p1;
+        let denom = 1.0 - dh_dnu * a_c;
+        if denom.is_finite() && denom != 0.0 {
+            for (d, r) in dc.iter_mut().zip(rhs) {
+                *d = r / denom;
+            }
+        }
+        for (n, c) in dnu.iter_mut().zip(&dc) {
+            *n += a_c * c;
         }
     }
-    out
+    let d_bg = through_law(0, &dnu);
+    let d_bo = through_law(1, &dnu);
+    let d_dv = through_law(2, &dnu);
+    // c_v = ½ (ṽ − v_n)/(v_n + v_{n+1}).
+    let den_v = inp.v_n + inp.v_n1;
+    let mut d_cv = [0.0; NW];
+    if den_v > 1e-300 {
+        for (c, d) in d_cv.iter_mut().zip(&d_dv) {
+            *c = 0.5 * d / den_v;
+        }
+        d_cv[W_V] -= 0.5 * law.dv / (den_v * den_v);
+    }
+    let d_phi: [f64; NW] = std::array::from_fn(|i| dc[i] * t * t);
+    [d_bg, d_bo, d_cv, d_phi]
+}
+
+/// `∂σ/∂x = (∂σ/∂w)(∂w/∂x)`, row `j` of the result for unknown `j`.
+pub(crate) fn chain<const N: usize>(
+    dsigma_dw: &[[f64; NW]; 4],
+    dw: &[[f64; N]; NW],
+) -> [[f64; 4]; N] {
+    std::array::from_fn(|j| {
+        std::array::from_fn(|i| (0..NW).map(|w| dsigma_dw[i][w] * dw[w][j]).sum())
+    })
 }
 
 /// `∂R/∂σ_i` of the element residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics
