@@ -831,31 +831,145 @@ fn tangent(
 }
 
 /// Planar twin of [`super::monolithic_correction`] (over the planar unknowns marked
-/// `active`; [`super::scalar_correction`] with the scalars' derivative by central
-/// differences, [`super::scalar_gradient_fd`], and the residual's by
-/// [`super::residual_differences`]).
+/// `active`; [`super::scalar_correction`] with both factors in closed form). `s` and `kin`
+/// are the consistent scalars at the iterate and their kinematics, as
+/// [`consistent_scalars`] returns them.
 #[allow(clippy::too_many_arguments)]
 pub fn monolithic_correction(
     pd: &PlanarData,
     st: &PState,
-    eps_n: &Vector3<f64>,
-    inc: &PIncrement,
+    s: &FrozenScalars,
+    kin: &PKinematics,
     k: &StepConsts,
     trans_diss: bool,
     active: &[bool; NDOF_P],
     kt: &mut PElemMat,
 ) {
-    let ksum = pd.kappa[0] + pd.kappa[1];
-    let dsigma = super::scalar_gradient_fd(&inc.to_local(), active, ksum, |x| {
-        consistent_scalars(pd, st, eps_n, &PIncrement::from_local(x), k).0
-    });
-    let s0 = consistent_scalars(pd, st, eps_n, inc, k).0;
-    let varies = super::scalars_varying(&dsigma, active);
-    let d_r = super::residual_differences(&s0, ksum, varies, |s, phi| {
-        let kin = kinematics_at(pd, st, eps_n, inc, |_| phi, k.dt);
-        residual_tangent(pd, st, &kin, s, k, trans_diss, false).r
-    });
+    let dsigma = scalar_gradient(pd, st, kin, s, k);
+    let d_r = residual_scalar_derivatives(pd, st, kin, k, trans_diss);
     super::scalar_correction(&dsigma, &d_r, active, kt);
+}
+
+/// Planar twin of [`super::scalar_gradient::scalar_gradient`]: `∂σ/∂x_j` (row `j`) over
+/// the planar unknowns, at the kinematics `kin` of the consistent scalars `s`. The
+/// director speed is that of `s` alone: `P₂ = Iρ_s Y·Y`, `P₁ = 2 Iρ_s Y·m`.
+pub fn scalar_gradient(
+    pd: &PlanarData,
+    st: &PState,
+    kin: &PKinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+) -> [[f64; 4]; NDOF_P] {
+    use super::scalar_gradient::{chain, sigma_over_inputs, W_P1, W_P2, W_V, W_XG, W_XO};
+    let (h, dt) = (pd.h, k.dt);
+    let y = (kin.cfg1.d[0][0] - st.cfg.d[0][0] + kin.cfg1.d[1][0] - st.cfg.d[1][0]) / dt;
+    let m = 0.5 * (st.vs[0] + st.vs[1]);
+    let p2 = pd.i_s * y.dot(&y);
+    let p1 = 2.0 * pd.i_s * y.dot(&m);
+    let dsigma_dw = sigma_over_inputs(
+        k,
+        &kin.inputs,
+        pd.a_rho,
+        h,
+        pd.kappa[0] + pd.kappa[1],
+        s.c_nu,
+        [p2, p1],
+    );
+    let mut dw = [[0.0f64; NDOF_P]; 5];
+    let vh = 0.5 * (kin.v1[0] + kin.v1[1]);
+    let vn = vh.norm();
+    if vn > 0.0 {
+        let vhat = vh / vn;
+        for l in 0..2 {
+            for c in 0..2 {
+                dw[W_V][pu_idx(l) + c] = vhat[c] / dt;
+                dw[W_V][pg_idx(l) + c] = -vhat[c];
+            }
+        }
+    }
+    // ∂d^l_{i,n+1}/∂θ_l = A_l (n × d^l_{i,½}).
+    let jvec = |l: usize, i: usize| kin.amat[l] * perp(&kin.mid.d[l][i]);
+    // X_Γ = Σ c_k Δ_k² (k = 0, 1), X_Ω = c_2 Δ_2², through the strains at n+1.
+    let de = kin.eps1 - kin.eps_n;
+    let b_end = gradient(&kin.cfg1, h);
+    for (wi, rows) in [(W_XG, 0..2), (W_XO, 2..3)] {
+        for kk in rows {
+            let coef = 2.0 * pd.c[kk] * de[kk];
+            for l in 0..2 {
+                for c in 0..2 {
+                    dw[wi][pu_idx(l) + c] += coef * b_end[kk][l][c];
+                }
+                for i in 0..2 {
+                    dw[wi][pth_idx(l)] += coef * b_end[kk][dfield(l, i)].dot(&jvec(l, i));
+                }
+            }
+        }
+    }
+    // P₂, P₁ through Y (∂Y/∂s^l_{n+1} = I/Δt).
+    for l in 0..2 {
+        let j = jvec(l, 0) / dt;
+        dw[W_P2][pth_idx(l)] += 2.0 * pd.i_s * y.dot(&j);
+        dw[W_P1][pth_idx(l)] += 2.0 * pd.i_s * m.dot(&j);
+    }
+    chain(&dsigma_dw, &dw)
+}
+
+/// Planar twin of [`super::scalar_gradient::residual_scalar_derivatives`]: `∂R/∂σ_i` of
+/// the planar residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics `kin`.
+pub fn residual_scalar_derivatives(
+    pd: &PlanarData,
+    st: &PState,
+    kin: &PKinematics,
+    k: &StepConsts,
+    trans_diss: bool,
+) -> [PElemVec; 4] {
+    let (h, dt) = (pd.h, k.dt);
+    let project = |f: &[V2; NF]| {
+        let mut r = PElemVec::zeros();
+        for l in 0..2 {
+            r.fixed_rows_mut::<2>(pu_idx(l)).copy_from(&f[l]);
+            let dm = &kin.mid.d[l];
+            r[pth_idx(l)] = cross2(&dm[0], &f[dfield(l, 0)]) + cross2(&dm[1], &f[dfield(l, 1)]);
+        }
+        r
+    };
+    let b_mid = gradient(&kin.mid, h);
+    let de = kin.eps1 - kin.eps_n;
+    let forces = |rows: std::ops::Range<usize>| {
+        let mut f = [V2::zeros(); NF];
+        for kk in rows {
+            let hs = h * 0.5 * pd.c[kk] * de[kk];
+            for (p, fp) in f.iter_mut().enumerate() {
+                *fp += b_mid[kk][p] * hs;
+            }
+        }
+        project(&f)
+    };
+    let mut out = [
+        forces(0..2),
+        forces(2..3),
+        PElemVec::zeros(),
+        PElemVec::zeros(),
+    ];
+    if trans_diss {
+        let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
+        let dg = -0.5 * h * pd.a_rho * vsum;
+        for l in 0..2 {
+            out[2].fixed_rows_mut::<2>(pg_idx(l)).copy_from(&dg);
+        }
+    }
+    let kappa = pd.kappa;
+    if kappa[0] != 0.0 || kappa[1] != 0.0 {
+        let y = (kin.cfg1.d[0][0] - st.cfg.d[0][0] + kin.cfg1.d[1][0] - st.cfg.d[1][0]) / dt;
+        let mut f = [V2::zeros(); NF];
+        for l in 0..2 {
+            for m in 0..2 {
+                f[dfield(l, 0)] += (h * M2[l][m] * pd.i_s / dt) * (-2.0 * kappa[m]) * y;
+            }
+        }
+        out[3] = project(&f);
+    }
+    out
 }
 
 /// The 3D element-local index (of the 18) each planar local unknown stands for.

@@ -28,11 +28,11 @@ use nalgebra::Vector6;
 
 /// The five numbers the scalars depend on: `v_{n+1}, X_Γ, X_Ω, P₂, P₁`.
 const NW: usize = 5;
-const W_V: usize = 0;
-const W_XG: usize = 1;
-const W_XO: usize = 2;
-const W_P2: usize = 3;
-const W_P1: usize = 4;
+pub(crate) const W_V: usize = 0;
+pub(crate) const W_XG: usize = 1;
+pub(crate) const W_XO: usize = 2;
+pub(crate) const W_P2: usize = 3;
+pub(crate) const W_P1: usize = 4;
 
 /// `∂σ_i/∂x_j` for `σ = (β_Γ, β_Ω, c_v, φ = c_ν/(1 + K c_ν))` and the element's local
 /// unknowns `x = (u, θ, g)` (row `j` of the result), at the kinematics `kin` of the

@@ -238,8 +238,8 @@ impl Simulation {
                 planar::monolithic_correction(
                     pd,
                     st,
-                    eps_n,
-                    &inc,
+                    &s,
+                    &kin,
                     &k,
                     self.trans_diss,
                     &active,
