@@ -946,8 +946,8 @@ pub fn monolithic_correction(
 
 /// `∂σ/∂x_j` (row `j`) by central differences of the consistent scalars `scalars_at(x)`
 /// at the unknowns `x0` marked `active`, for `σ = (β_Γ, β_Ω, c_v, c_ν/(1 + K c_ν))`
-/// (`K = ksum`): the planar kernel's input to [`scalar_correction`], and the reference
-/// the closed form of the 3D kernel is tested against.
+/// (`K = ksum`): the reference the closed forms ([`scalar_gradient::scalar_gradient`],
+/// [`planar::scalar_gradient`]) are tested against.
 pub fn scalar_gradient_fd<const N: usize>(
     x0: &SVector<f64, N>,
     active: &[bool; N],
@@ -995,9 +995,9 @@ pub fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N
 /// affine in `σ = (β_Γ, β_Ω, c_v, φ)`, the stresses linear in the β, the `g` rows in
 /// `c_v`, the director velocities in φ). `s0` are the scalars at the iterate,
 /// `residual_at(s, φ)` the residual there with the frozen scalars `s` and the director
-/// factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its kinematics. The planar kernel's
-/// input to [`scalar_correction`]; the 3D kernel has them in closed form
-/// ([`scalar_gradient::residual_scalar_derivatives`]).
+/// factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its kinematics. The reference the
+/// closed forms ([`scalar_gradient::residual_scalar_derivatives`],
+/// [`planar::residual_scalar_derivatives`]) are tested against.
 pub fn residual_differences<const N: usize>(
     s0: &FrozenScalars,
     ksum: f64,
