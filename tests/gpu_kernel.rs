@@ -408,10 +408,10 @@ fn shader_layout_matches_rust_layout() {
 /// The monolithic linearization `(∂R/∂s)(∂s/∂q)` (CPU kernel, no GPU needed) uses that the
 /// residual is affine in `(β_Γ, β_Ω, c_v, c_ν/(1 + K c_ν))`: it equals differencing whole
 /// residuals at the perturbed scalars, `(R(s(q + h e_j)) − R(s(q − h e_j)))/2h` (what it
-/// replaced), on every dissipative case. That difference cancels: its round-off,
-/// `ε |R| / h`, sets the bound (measured 3.54; the differenced scalars add the `c_ν`
-/// solver's tolerance, see the next test; 1.22 while the correction differenced the same
-/// scalars, before the closed form).
+/// replaced), on every dissipative case. That difference sets the bound: its round-off
+/// `ε |R| / h` (measured 3.54 with the closed form, which differences nothing; 1.22 while
+/// the correction differenced the same scalars; the scalars' own round-off, amplified by
+/// the law, adds to the reference's error).
 #[test]
 fn monolithic_correction_is_the_whole_residual_difference() {
     let mut worst: f64 = 0.0;
@@ -448,7 +448,7 @@ fn monolithic_correction_is_the_whole_residual_difference() {
     println!("monolithic correction vs whole-residual differences: worst {worst:.2e} of ε|R|/h over {checked} cases");
     assert!(checked >= 100, "only {checked} dissipative cases");
     assert!(
-        worst <= 4.0,
+        worst <= 8.0,
         "monolithic correction differs by {worst:e} of ε|R|/h"
     );
 }

@@ -231,8 +231,12 @@ fn tiny_energy_states_are_stepped_by_every_scheme() {
             miss = miss.max((h0 - h1 + wk - d).abs() / href);
         }
         // χ_ν's cut-back sub-steps each hold the identity against their own energy
-        // scale; summed over a step it is met to 3.7e-9 (measured), the others to 1e-10.
-        let bound = if params_cut(scheme) { 1e-8 } else { 1e-9 };
+        // scale plus the work of their residual (`R·q`, the acceptance's allowance for a
+        // residual at the Newton tolerance rather than its floor). Summed over a step:
+        // measured 5.3e-8 at step 28, which the monolithic fallback now solves in 8
+        // sub-steps at the Newton tolerance (3.7e-9 while the fallback failed there and
+        // the staggered loop took 64 sub-steps to its floor); the others 1e-10.
+        let bound = if params_cut(scheme) { 1e-7 } else { 1e-9 };
         assert!(miss <= bound, "{name}: identity missed by {miss:e}");
     }
 }
