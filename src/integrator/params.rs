@@ -95,12 +95,13 @@ pub struct IntegratorParams {
     /// Rigid links: cap on augmented-Lagrangian rounds (solve, then `λ ← λ + κ g/2`)
     /// per step before the step fails. Default 50.
     pub max_link_rounds: usize,
-    /// Solver fallback: when the staggered loop fails on a step (outer-round cap, Newton
-    /// failure, or an acceptance check), the same step is retried with the monolithic
-    /// strategy before the step is reported as failed. The scheme, and so every energy
-    /// and momentum guarantee, is the same; only the way the dissipation scalars are
-    /// solved differs. Default `true`; `false` (scene `fallback = false`, CLI
-    /// `--no-fallback`) gives the paper's pure staggered strategy.
+    /// Solver fallback: when the staggered loop (or the inexact strategy) fails on a step
+    /// (outer-round cap, Newton failure, or an acceptance check), the same step is
+    /// retried with the monolithic strategy before the step is reported as failed; a
+    /// monolithic failure is retried with the staggered loop. The scheme, and so every
+    /// energy and momentum guarantee, is the same; only the way the dissipation scalars
+    /// are solved differs. Default `true`; `false` (scene `fallback = false`, CLI
+    /// `--no-fallback`) gives the pure strategy (the paper's, for staggered).
     pub fallback: bool,
     /// Step cut-back: a step that fails at Δt is redone as 2, 4, … 2^cutback sub-steps of
     /// the same scheme (each a complete, checked step, so momenta and the energy law hold

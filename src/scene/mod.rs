@@ -588,7 +588,8 @@ impl Scene {
             Scheme::GenAlpha { rho_inf } => format!("gen-alpha (rho_inf {rho_inf})"),
         };
         let strategy = match p.strategy {
-            Strategy::Monolithic => "monolithic",
+            Strategy::Monolithic if p.fallback => "monolithic (staggered fallback)",
+            Strategy::Monolithic => "monolithic (no fallback)",
             Strategy::Staggered if p.fallback => "staggered (monolithic fallback)",
             Strategy::Staggered => "staggered (no fallback)",
             Strategy::Inexact if p.fallback => "inexact (monolithic fallback)",

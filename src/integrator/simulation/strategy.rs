@@ -3,7 +3,9 @@
 //! staggered loop (freeze the local scalars, Newton, re-evaluate, until the dissipation
 //! identity holds), the monolithic Newton with the scalars linearized inside it, or the
 //! inexact strategy (the monolithic equations with the frozen-scalar tangent, then a
-//! frozen-scalar polish round where it stopped within the tolerance).
+//! frozen-scalar polish round where it stopped within the tolerance). With the fallback on,
+//! a step one strategy fails is retried with the other (staggered and inexact fall back
+//! to the monolithic Newton, the monolithic Newton to the staggered loop).
 
 use super::{Mode, Simulation};
 use crate::element::FrozenScalars;
@@ -36,7 +38,40 @@ impl Simulation {
         let strategy = self.params.strategy;
         self.solved_consistent = strategy == Strategy::Monolithic;
         match strategy {
-            Strategy::Monolithic => self.solve_once(q, Mode::Consistent, total_iters).await,
+            Strategy::Monolithic if !self.params.fallback => {
+                self.solve_once(q, Mode::Consistent, total_iters).await
+            }
+            Strategy::Monolithic => {
+                // Fallback the other way: a monolithic failure is retried from the same
+                // predictor with the staggered loop (which carries some violent steps
+                // further: the frame at Δt = 0.5, docs/benchmarks.md).
+                let q0 = q.to_vec();
+                let frozen0 = self.frozen.clone();
+                match self.solve_once(q, Mode::Consistent, total_iters).await {
+                    Ok(x) => Ok(x),
+                    Err(mono) => {
+                        q.copy_from_slice(&q0);
+                        self.solved_consistent = false;
+                        match self.solve_first(Strategy::Staggered, q, total_iters).await {
+                            Ok(x) => {
+                                self.fell_back = true;
+                                Ok(x)
+                            }
+                            Err(staggered) => {
+                                self.frozen = frozen0;
+                                self.solved_consistent = true;
+                                Err(StepFailure {
+                                    reason: format!(
+                                        "{} (the staggered fallback failed too: {})",
+                                        mono.reason, staggered.reason
+                                    ),
+                                    residuals: staggered.residuals,
+                                })
+                            }
+                        }
+                    }
+                }
+            }
             _ if !self.params.fallback => self.solve_first(strategy, q, total_iters).await,
             _ => {
                 // Fallback: a staggered (or inexact) failure (outer cap, Newton failure,
