@@ -292,27 +292,43 @@ impl SparseSolver {
                 "entry ({r}, {c}) out of range for dimension {n}"
             )));
         }
-        // Sort by (col, row) and merge duplicates.
-        let mut cr: Vec<(usize, usize)> = entries.iter().map(|&(r, c)| (c, r)).collect();
-        cr.sort_unstable();
-        cr.dedup();
-
-        let mut col_ptr: Vec<Ix> = vec![0; n + 1];
-        let mut row_idx: Vec<Ix> = Vec::with_capacity(cr.len());
-        let mut row_seen = vec![false; n];
-        for &(c, r) in &cr {
-            col_ptr[c + 1] += 1;
-            row_idx.push(r);
-            row_seen[r] = true;
+        // Sorted by (col, row) with duplicates merged: bucketed by column (a counting
+        // sort), then each column's rows sorted on their own. A rod's pattern has ~10⁴
+        // entries, most of them repeated by the neighbouring element, and one sort of them
+        // all was most of a member's setup; its columns hold a few dozen.
+        let mut bucket: Vec<Ix> = vec![0; n + 1];
+        for &(_, c) in entries {
+            bucket[c + 1] += 1;
         }
-        if let Some(j) = (0..n).find(|&j| col_ptr[j + 1] == 0) {
-            return Err(LinsolveError::Pattern(format!("column {j} is empty")));
+        for j in 0..n {
+            bucket[j + 1] += bucket[j];
+        }
+        let mut rows: Vec<Ix> = vec![0; entries.len()];
+        let mut fill = bucket.clone();
+        for &(r, c) in entries {
+            rows[fill[c]] = r;
+            fill[c] += 1;
+        }
+        let mut col_ptr: Vec<Ix> = vec![0; n + 1];
+        let mut row_idx: Vec<Ix> = Vec::with_capacity(entries.len());
+        let mut row_seen = vec![false; n];
+        for c in 0..n {
+            let col = &mut rows[bucket[c]..bucket[c + 1]];
+            if col.is_empty() {
+                return Err(LinsolveError::Pattern(format!("column {c} is empty")));
+            }
+            col.sort_unstable();
+            let start = row_idx.len();
+            for &r in col.iter() {
+                if row_idx.len() == start || row_idx[row_idx.len() - 1] != r {
+                    row_idx.push(r);
+                    row_seen[r] = true;
+                }
+            }
+            col_ptr[c + 1] = row_idx.len();
         }
         if let Some(i) = row_seen.iter().position(|&seen| !seen) {
             return Err(LinsolveError::Pattern(format!("row {i} is empty")));
-        }
-        for j in 0..n {
-            col_ptr[j + 1] += col_ptr[j];
         }
         let nnz = row_idx.len();
         let blocks = match choice {
