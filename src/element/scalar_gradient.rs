@@ -19,7 +19,7 @@
 //! the implicit derivative of its fixed point `c = F(c, w)`:
 //! `dc = (∂F/∂w) dw / (1 − ∂F/∂c)`.
 
-use super::dissipation::{local_scalars, local_scalars_jacobian, LocalInputs};
+use super::dissipation::{local_scalars_jacobian, LocalInputs};
 use super::strain::{strain_gradient, A0, B0, GRADIENT_FIELDS, NFIELDS, R0, R1};
 use super::{field_forces, g_idx, th_idx, u_idx, ElemVec, ElementData, ElementState};
 use super::{FrozenScalars, Kinematics, StepConsts, M2, NDOF};
@@ -163,8 +163,7 @@ pub(crate) fn sigma_over_inputs(
 ) -> [[f64; NW]; 4] {
     let [p2, p1] = p;
     // ∂(β_Γ, β_Ω, ṽ − v_n, ν̃ − ν_n)/∂(v_{n+1}, ν_{n+1}, X_Γ, X_Ω), and the law's values.
-    let jac = local_scalars_jacobian(&k.scheme, inp, a_rho, k.dt / h);
-    let law = local_scalars(&k.scheme, inp, a_rho, k.dt / h);
+    let (law, jac) = local_scalars_jacobian(&k.scheme, inp, a_rho, k.dt / h);
     let t = 1.0 / (1.0 + ksum * c_nu);
     // dν = a_p2 dP₂ + a_p1 dP₁ + a_c dc_ν (zero at ν = 0, where the speed has a kink).
     let nu1 = inp.nu_n1;
