@@ -91,48 +91,8 @@ pub fn local_scalars(
             dv: chi_v * (inp.v_n1 - inp.v_n),
             dnu: chi_nu * (inp.nu_n1 - inp.nu_n),
         },
-        Scheme::Edmc2 {
-            alpha_gv,
-            alpha_gn,
-            alpha_ov,
-            alpha_on,
-        } => {
-            let (agv, agn, aov, aon) = (
-                alpha_gv * dt_over_h,
-                alpha_gn * dt_over_h,
-                alpha_ov * dt_over_h,
-                alpha_on * dt_over_h,
-            );
-            let (xg, xo) = (inp.x_gamma, inp.x_omega);
-            // Unknowns (β_Γ, β_Ω, ṽ, ν̃):
-            //   β_Γ − a_Γv ṽ − a_Γν ν̃ = −a_Γv v_{n+1} − a_Γν ν_{n+1}
-            //   β_Ω − a_Ωv ṽ − a_Ων ν̃ = −a_Ωv v_{n+1} − a_Ων ν_{n+1}
-            //   a_Γv X_Γ β_Γ + a_Ωv X_Ω β_Ω + Aρ ṽ = Aρ v_n + a_Γv X_Γ + a_Ωv X_Ω
-            //   a_Γν X_Γ β_Γ + a_Ων X_Ω β_Ω + Aρ ν̃ = Aρ ν_n + a_Γν X_Γ + a_Ων X_Ω
-            let m = Matrix4::new(
-                1.0,
-                0.0,
-                -agv,
-                -agn,
-                0.0,
-                1.0,
-                -aov,
-                -aon,
-                agv * xg,
-                aov * xo,
-                a_rho,
-                0.0,
-                agn * xg,
-                aon * xo,
-                0.0,
-                a_rho,
-            );
-            let rhs = Vector4::new(
-                -agv * inp.v_n1 - agn * inp.nu_n1,
-                -aov * inp.v_n1 - aon * inp.nu_n1,
-                a_rho * inp.v_n + agv * xg + aov * xo,
-                a_rho * inp.nu_n + agn * xg + aon * xo,
-            );
+        Scheme::Edmc2 { .. } => {
+            let (m, rhs, _) = edmc2_system(scheme, inp, a_rho, dt_over_h);
             // The matrix is I + (rank-2 coupling) with a positive Aρ block: always regular
             // for X ≥ 0 (its determinant is Aρ² + Aρ Σ a² X > 0 in the single-α case).
             let s = m.lu().solve(&rhs).unwrap_or_else(Vector4::zeros);
@@ -144,6 +104,67 @@ pub fn local_scalars(
             }
         }
     }
+}
+
+/// EDMC-2's local law as the linear system `M s = r` in the unknowns
+/// `s = (β_Γ, β_Ω, ṽ, ν̃)`, and its scaled constants `[a_Γv, a_Γν, a_Ωv, a_Ων]`
+/// (`a = α Δt/h`):
+///
+/// ```text
+/// β_Γ − a_Γv ṽ − a_Γν ν̃ = −a_Γv v_{n+1} − a_Γν ν_{n+1}
+/// β_Ω − a_Ωv ṽ − a_Ων ν̃ = −a_Ωv v_{n+1} − a_Ων ν_{n+1}
+/// a_Γv X_Γ β_Γ + a_Ωv X_Ω β_Ω + Aρ ṽ = Aρ v_n + a_Γv X_Γ + a_Ωv X_Ω
+/// a_Γν X_Γ β_Γ + a_Ων X_Ω β_Ω + Aρ ν̃ = Aρ ν_n + a_Γν X_Γ + a_Ων X_Ω
+/// ```
+///
+/// `scheme` must be EDMC-2 (other schemes give the zero system).
+fn edmc2_system(
+    scheme: &Scheme,
+    inp: &LocalInputs,
+    a_rho: f64,
+    dt_over_h: f64,
+) -> (Matrix4<f64>, Vector4<f64>, [f64; 4]) {
+    let Scheme::Edmc2 {
+        alpha_gv,
+        alpha_gn,
+        alpha_ov,
+        alpha_on,
+    } = *scheme
+    else {
+        return (Matrix4::zeros(), Vector4::zeros(), [0.0; 4]);
+    };
+    let (agv, agn, aov, aon) = (
+        alpha_gv * dt_over_h,
+        alpha_gn * dt_over_h,
+        alpha_ov * dt_over_h,
+        alpha_on * dt_over_h,
+    );
+    let (xg, xo) = (inp.x_gamma, inp.x_omega);
+    let m = Matrix4::new(
+        1.0,
+        0.0,
+        -agv,
+        -agn,
+        0.0,
+        1.0,
+        -aov,
+        -aon,
+        agv * xg,
+        aov * xo,
+        a_rho,
+        0.0,
+        agn * xg,
+        aon * xo,
+        0.0,
+        a_rho,
+    );
+    let rhs = Vector4::new(
+        -agv * inp.v_n1 - agn * inp.nu_n1,
+        -aov * inp.v_n1 - aon * inp.nu_n1,
+        a_rho * inp.v_n + agv * xg + aov * xo,
+        a_rho * inp.nu_n + agn * xg + aon * xo,
+    );
+    (m, rhs, [agv, agn, aov, aon])
 }
 
 /// [`local_scalars`] and its derivative with respect to the inputs that vary with the
@@ -168,44 +189,9 @@ pub fn local_scalars_jacobian(
             }
             (local_scalars(scheme, inp, a_rho, dt_over_h), d)
         }
-        Scheme::Edmc2 {
-            alpha_gv,
-            alpha_gn,
-            alpha_ov,
-            alpha_on,
-        } => {
-            let (agv, agn, aov, aon) = (
-                alpha_gv * dt_over_h,
-                alpha_gn * dt_over_h,
-                alpha_ov * dt_over_h,
-                alpha_on * dt_over_h,
-            );
-            let (xg, xo) = (inp.x_gamma, inp.x_omega);
-            let m = Matrix4::new(
-                1.0,
-                0.0,
-                -agv,
-                -agn,
-                0.0,
-                1.0,
-                -aov,
-                -aon,
-                agv * xg,
-                aov * xo,
-                a_rho,
-                0.0,
-                agn * xg,
-                aon * xo,
-                0.0,
-                a_rho,
-            );
+        Scheme::Edmc2 { .. } => {
+            let (m, rhs, [agv, agn, aov, aon]) = edmc2_system(scheme, inp, a_rho, dt_over_h);
             let lu = m.lu();
-            let rhs = Vector4::new(
-                -agv * inp.v_n1 - agn * inp.nu_n1,
-                -aov * inp.v_n1 - aon * inp.nu_n1,
-                a_rho * inp.v_n + agv * xg + aov * xo,
-                a_rho * inp.nu_n + agn * xg + aon * xo,
-            );
             // As `local_scalars` (the same factorization and solve, so the same values).
             let s = lu.solve(&rhs).unwrap_or_else(Vector4::zeros);
             let law = LocalScalars {
