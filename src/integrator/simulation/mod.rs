@@ -159,9 +159,12 @@ pub struct Simulation {
     /// The mode whose tangent the solver holds factorized (modified Newton reuses it);
     /// `None` before the first factorization or after a failed one.
     factored: Option<Mode>,
-    /// Set when the current step's staggered loop failed and the monolithic fallback
-    /// solved it (reset at the start of every step).
+    /// Set when the current step's strategy failed and the fallback strategy solved it
+    /// (reset at the start of every step).
     fell_back: bool,
+    /// The step is on its last predictor: the monolithic strategy falls back to the
+    /// staggered loop only then (its other predictors come first).
+    last_predictor: bool,
     /// The last checked solve was accepted with the consistent scalars (monolithic, its
     /// fallback, or an inexact solve on its floor), not frozen ones: the mode of the
     /// step's support work.
@@ -263,6 +266,7 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
+            last_predictor: true,
             solved_consistent: false,
             inexact_tangent: false,
             polish: false,

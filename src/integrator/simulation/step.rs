@@ -148,7 +148,9 @@ impl Simulation {
         };
         let (lambda0, inv0) = (self.state.lambda.clone(), self.inv);
         self.step_start = true;
-        for pred in predictors {
+        let n_predictors = predictors.len();
+        for (k, pred) in predictors.into_iter().enumerate() {
+            self.last_predictor = k + 1 == n_predictors;
             let mut q = pred;
             let mut multipliers = links::MultiplierIteration::default();
             // Augmented-Lagrangian rounds (a single round without links): each round is a

@@ -5,7 +5,8 @@
 //! inexact strategy (the monolithic equations with the frozen-scalar tangent, then a
 //! frozen-scalar polish round where it stopped within the tolerance). With the fallback on,
 //! a step one strategy fails is retried with the other (staggered and inexact fall back
-//! to the monolithic Newton, the monolithic Newton to the staggered loop).
+//! to the monolithic Newton from the same predictor, the monolithic Newton to the
+//! staggered loop once it failed from every predictor).
 
 use super::{Mode, Simulation};
 use crate::element::FrozenScalars;
@@ -38,13 +39,14 @@ impl Simulation {
         let strategy = self.params.strategy;
         self.solved_consistent = strategy == Strategy::Monolithic;
         match strategy {
-            Strategy::Monolithic if !self.params.fallback => {
+            Strategy::Monolithic if !self.params.fallback || !self.last_predictor => {
                 self.solve_once(q, Mode::Consistent, total_iters).await
             }
             Strategy::Monolithic => {
-                // Fallback the other way: a monolithic failure is retried from the same
-                // predictor with the staggered loop (which carries some violent steps
-                // further: the frame at Δt = 0.5, docs/benchmarks.md).
+                // Fallback the other way, once the monolithic Newton has failed from every
+                // predictor of the step: retried from the last one with the staggered loop
+                // (which carries some violent steps further: the frame at Δt = 0.5,
+                // docs/benchmarks.md).
                 let q0 = q.to_vec();
                 let frozen0 = self.frozen.clone();
                 match self.solve_once(q, Mode::Consistent, total_iters).await {
