@@ -126,8 +126,8 @@ struct StudyCommon {
     /// Newton variant of every run (default: the scene's, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
-    /// No monolithic fallback when the staggered loop fails on a step (maps of the
-    /// paper's pure staggered strategy; default: the scene's, else fallback on).
+    /// No fallback strategy when the run's strategy fails on a step (maps of a pure
+    /// strategy, e.g. the paper's staggered one; default: the scene's, else fallback on).
     #[arg(long)]
     no_fallback: bool,
     /// Step cut-back of every run: a failed step is redone as up to 2^N sub-steps
@@ -222,8 +222,9 @@ struct RunArgs {
     /// Newton variant (default: the scene's `[integrator] newton`, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
-    /// No monolithic fallback when the staggered loop fails on a step: the paper's pure
-    /// staggered strategy (default: the scene's `[integrator] fallback`, else on).
+    /// No fallback strategy when the run's strategy fails on a step (monolithic for
+    /// staggered, staggered for monolithic): the pure strategy, e.g. the paper's staggered
+    /// one (default: the scene's `[integrator] fallback`, else on).
     #[arg(long)]
     no_fallback: bool,
     /// Step cut-back: redo a failed step as 2, 4, … 2^N sub-steps of the same scheme

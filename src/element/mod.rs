@@ -946,8 +946,8 @@ pub fn monolithic_correction(
 
 /// `∂σ/∂x_j` (row `j`) by central differences of the consistent scalars `scalars_at(x)`
 /// at the unknowns `x0` marked `active`, for `σ = (β_Γ, β_Ω, c_v, c_ν/(1 + K c_ν))`
-/// (`K = ksum`): the reference the closed forms ([`scalar_gradient::scalar_gradient`],
-/// [`planar::scalar_gradient`]) are tested against.
+/// (`K = ksum`): the reference the 3D closed form ([`scalar_gradient::scalar_gradient`])
+/// is tested against (the planar one equals it through `tests/planar_kernel.rs`).
 pub fn scalar_gradient_fd<const N: usize>(
     x0: &SVector<f64, N>,
     active: &[bool; N],
@@ -981,7 +981,7 @@ fn sigma_of(s: &FrozenScalars, ksum: f64) -> [f64; 4] {
 }
 
 /// Which of `σ = (β_Γ, β_Ω, c_v, φ)` vary with the unknowns marked `active`.
-pub fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N]) -> [bool; 4] {
+fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N]) -> [bool; 4] {
     let mut varies = [false; 4];
     for j in (0..N).filter(|&j| active[j]) {
         for i in 0..4 {
@@ -995,9 +995,9 @@ pub fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N
 /// affine in `σ = (β_Γ, β_Ω, c_v, φ)`, the stresses linear in the β, the `g` rows in
 /// `c_v`, the director velocities in φ). `s0` are the scalars at the iterate,
 /// `residual_at(s, φ)` the residual there with the frozen scalars `s` and the director
-/// factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its kinematics. The reference the
-/// closed forms ([`scalar_gradient::residual_scalar_derivatives`],
-/// [`planar::residual_scalar_derivatives`]) are tested against.
+/// factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its kinematics. The reference the 3D
+/// closed form ([`scalar_gradient::residual_scalar_derivatives`]) is tested against (the
+/// planar one equals it through `tests/planar_kernel.rs`).
 pub fn residual_differences<const N: usize>(
     s0: &FrozenScalars,
     ksum: f64,

@@ -80,9 +80,10 @@ pub struct IntegratorParams {
     /// tolerance (4.7e-12 instead of 3.4e-15 over the cantilever's 1000 steps);
     /// docs/benchmarks.md, "Newton variant", has the measurements.
     pub newton: NewtonVariant,
-    /// Dissipative solution strategy. Default [`Strategy::Staggered`]: on the frame it
-    /// converged in every case the monolithic Newton did, went further where both failed
-    /// (Δt = 0.5) and took about half the wall time (README, "Dissipation strategies").
+    /// Dissipative solution strategy. Default [`Strategy::Staggered`], the paper's loop,
+    /// whose frozen-scalar kernel the GPU batch path evaluates. On the CPU
+    /// [`Strategy::Monolithic`] is 1.1–3× faster on the paper's scenes and the cantilever
+    /// (docs/benchmarks.md, "Dissipation strategies").
     pub strategy: Strategy,
     /// Staggered loop: relative tolerance on the dissipation identity (and on the change
     /// of the frozen scalars). Default `1e-10`.

@@ -38,8 +38,9 @@ pub struct StepReport {
     pub max_link_g: f64,
     /// Augmented-Lagrangian rounds the step took (1 without links).
     pub link_rounds: usize,
-    /// True when the staggered loop failed on this step and the monolithic strategy
-    /// ([`crate::integrator::IntegratorParams::fallback`]) solved it.
+    /// True when the step's strategy failed on it and the fallback strategy (monolithic
+    /// for staggered and inexact, staggered for monolithic;
+    /// [`crate::integrator::IntegratorParams::fallback`]) solved it.
     pub fallback: bool,
     /// Sub-steps the step was cut into (`IntegratorParams::cutback`); 1 for a step taken
     /// at the full Δt.

@@ -49,8 +49,8 @@ pub struct StepRecord {
     pub residual: f64,
     /// Largest rigid-link strain `|g|` at this level (0 without links).
     pub max_link_g: f64,
-    /// True when the step that ended here was solved by the monolithic fallback after
-    /// the staggered loop failed on it (`IntegratorParams::fallback`).
+    /// True when the step that ended here was solved by the fallback strategy after the
+    /// run's strategy failed on it (`IntegratorParams::fallback`).
     pub fallback: bool,
     /// Sub-steps the step that ended here was cut into (1: taken at the full Δt; row 0: 0).
     pub substeps: usize,
@@ -117,8 +117,8 @@ pub struct RunSummary {
     pub energy_final: f64,
     /// Largest rigid-link strain `|g|` over the accepted steps (0 without links).
     pub max_link_g: f64,
-    /// Steps the staggered loop could not solve and the monolithic fallback did (0 when
-    /// the fallback is off or never needed).
+    /// Steps the run's strategy could not solve and the fallback strategy did (0 when the
+    /// fallback is off or never needed).
     pub fallback_steps: usize,
     /// What the acceptance checks let through over the run: the largest energy growth
     /// beyond the external work and the largest final Newton residual of an accepted step.

@@ -205,8 +205,8 @@ pub struct MemberOpts {
     /// Newton variant of every member (default: each member's scene, else full).
     #[arg(long, value_enum)]
     pub newton: Option<NewtonArg>,
-    /// No monolithic fallback in any member (the paper's pure staggered strategy;
-    /// default: each member's scene, else fallback on).
+    /// No fallback strategy in any member (a pure strategy, e.g. the paper's staggered
+    /// one; default: each member's scene, else fallback on).
     #[arg(long)]
     pub no_fallback: bool,
     /// Step cut-back in every member: a failed step is redone as up to 2^N sub-steps
