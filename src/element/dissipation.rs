@@ -174,7 +174,7 @@ fn edmc2_system(
 /// EDMC-2's law is the linear system `M(X) s = r(w)` of [`local_scalars`], so
 /// `∂s/∂w_j = M⁻¹ (∂r/∂w_j − (∂M/∂w_j) s)`: one factorization (the law's own), four
 /// more solves.
-pub fn local_scalars_jacobian(
+pub(crate) fn local_scalars_jacobian(
     scheme: &Scheme,
     inp: &LocalInputs,
     a_rho: f64,

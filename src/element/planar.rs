@@ -831,7 +831,7 @@ fn tangent(
 }
 
 /// Planar twin of [`super::monolithic_correction`] (over the planar unknowns marked
-/// `active`; [`super::scalar_correction`] with both factors in closed form). `s` and `kin`
+/// `active`; `scalar_correction` with both factors in closed form). `s` and `kin`
 /// are the consistent scalars at the iterate and their kinematics, as
 /// [`consistent_scalars`] returns them.
 #[allow(clippy::too_many_arguments)]
@@ -853,7 +853,7 @@ pub fn monolithic_correction(
 /// Planar twin of [`super::scalar_gradient::scalar_gradient`]: `∂σ/∂x_j` (row `j`) over
 /// the planar unknowns, at the kinematics `kin` of the consistent scalars `s`. The
 /// director speed is that of `s` alone: `P₂ = Iρ_s Y·Y`, `P₁ = 2 Iρ_s Y·m`.
-pub fn scalar_gradient(
+pub(crate) fn scalar_gradient(
     pd: &PlanarData,
     st: &PState,
     kin: &PKinematics,
@@ -916,7 +916,7 @@ pub fn scalar_gradient(
 
 /// Planar twin of [`super::scalar_gradient::residual_scalar_derivatives`]: `∂R/∂σ_i` of
 /// the planar residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics `kin`.
-pub fn residual_scalar_derivatives(
+pub(crate) fn residual_scalar_derivatives(
     pd: &PlanarData,
     st: &PState,
     kin: &PKinematics,

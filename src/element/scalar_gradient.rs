@@ -1,6 +1,6 @@
 //! The derivative of an element's consistent dissipation scalars with respect to its
 //! local unknowns, in closed form: what the monolithic tangent multiplies the residual's
-//! dependence on the scalars by ([`super::scalar_correction`]).
+//! dependence on the scalars by (`scalar_correction`).
 //!
 //! The scalars `σ = (β_Γ, β_Ω, c_v, φ)` (`φ = c_ν/(1 + K c_ν)`) depend on the increment
 //! only through five numbers:
@@ -15,7 +15,7 @@
 //! Their derivatives with respect to `(u, θ, g)` come from the kinematics (`∂v^h/∂u_l =
 //! I/Δt`, `∂v^h/∂g_l = −I`, `∂d^l_{n+1}/∂θ_l = −A_l \hat{d^l_{n+½}}`, the strain gradient
 //! at `n+1`); the scalars' derivatives with respect to the five numbers come from the
-//! local law's Jacobian ([`super::dissipation::local_scalars_jacobian`]) and, for `c_ν`,
+//! local law's Jacobian (`local_scalars_jacobian`) and, for `c_ν`,
 //! the implicit derivative of its fixed point `c = F(c, w)`:
 //! `dc = (∂F/∂w) dw / (1 − ∂F/∂c)`.
 
