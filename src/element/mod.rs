@@ -300,7 +300,8 @@ pub fn kinematics_core(
 
 /// [`kinematics_core`] with the factor `φ = c_ν/(1 + K c_ν)` of the director dissipative
 /// velocity `w_α = φ Y_α` given as a function of `K = Σ κ_l`. The update is affine in φ
-/// ([`monolithic_correction`] uses that).
+/// (so is the residual: [`scalar_gradient::residual_scalar_derivatives`]; the tests check
+/// it against residuals at perturbed φ).
 #[inline]
 pub fn kinematics_at(
     data: &ElementData,
@@ -944,42 +945,6 @@ pub fn monolithic_correction(
     scalar_correction(&dsigma, &d_r, active, kt);
 }
 
-/// `∂σ/∂x_j` (row `j`) by central differences of the consistent scalars `scalars_at(x)`
-/// at the unknowns `x0` marked `active`, for `σ = (β_Γ, β_Ω, c_v, c_ν/(1 + K c_ν))`
-/// (`K = ksum`): the reference the 3D closed form ([`scalar_gradient::scalar_gradient`])
-/// is tested against (the planar one equals it through `tests/planar_kernel.rs`).
-pub fn scalar_gradient_fd<const N: usize>(
-    x0: &SVector<f64, N>,
-    active: &[bool; N],
-    ksum: f64,
-    scalars_at: impl Fn(&SVector<f64, N>) -> FrozenScalars,
-) -> [[f64; 4]; N] {
-    let mut dsigma = [[0.0f64; 4]; N];
-    for j in (0..N).filter(|&j| active[j]) {
-        let hstep = 1e-7 * (1.0 + x0[j].abs());
-        let at = |sign: f64| {
-            let mut x = *x0;
-            x[j] += sign * hstep;
-            sigma_of(&scalars_at(&x), ksum)
-        };
-        let (sp, sm) = (at(1.0), at(-1.0));
-        for i in 0..4 {
-            dsigma[j][i] = (sp[i] - sm[i]) * (0.5 / hstep);
-        }
-    }
-    dsigma
-}
-
-/// `σ = (β_Γ, β_Ω, c_v, φ = c_ν/(1 + K c_ν))`: the scalars the residual is affine in.
-fn sigma_of(s: &FrozenScalars, ksum: f64) -> [f64; 4] {
-    [
-        s.beta_gamma,
-        s.beta_omega,
-        s.c_v,
-        s.c_nu / (1.0 + ksum * s.c_nu),
-    ]
-}
-
 /// Which of `σ = (β_Γ, β_Ω, c_v, φ)` vary with the unknowns marked `active`.
 fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N]) -> [bool; 4] {
     let mut varies = [false; 4];
@@ -989,36 +954,6 @@ fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N]) -
         }
     }
     varies
-}
-
-/// `∂R/∂σ_i` for the σ marked in `varies`, as `R(σ + e_i) − R(σ)` (exact: the residual is
-/// affine in `σ = (β_Γ, β_Ω, c_v, φ)`, the stresses linear in the β, the `g` rows in
-/// `c_v`, the director velocities in φ). `s0` are the scalars at the iterate,
-/// `residual_at(s, φ)` the residual there with the frozen scalars `s` and the director
-/// factor `φ = c_ν/(1 + K c_ν)` (`K = ksum`) in its kinematics. The reference the 3D
-/// closed form ([`scalar_gradient::residual_scalar_derivatives`]) is tested against (the
-/// planar one equals it through `tests/planar_kernel.rs`).
-pub fn residual_differences<const N: usize>(
-    s0: &FrozenScalars,
-    ksum: f64,
-    varies: [bool; 4],
-    residual_at: impl Fn(&FrozenScalars, f64) -> SVector<f64, N>,
-) -> [SVector<f64, N>; 4] {
-    let s0 = *s0;
-    let phi0 = sigma_of(&s0, ksum)[3];
-    let r0 = residual_at(&s0, phi0);
-    let mut d_r = [SVector::<f64, N>::zeros(); 4];
-    for (i, d) in d_r.iter_mut().enumerate().filter(|(i, _)| varies[*i]) {
-        let (mut s, mut phi) = (s0, phi0);
-        match i {
-            0 => s.beta_gamma += 1.0,
-            1 => s.beta_omega += 1.0,
-            2 => s.c_v += 1.0,
-            _ => phi += 1.0,
-        }
-        *d = residual_at(&s, phi) - r0;
-    }
-    d_r
 }
 
 /// `(∂R/∂s)(∂s/∂q)` of an element, added to `kt` over the unknowns marked `active`;

@@ -862,7 +862,7 @@ pub(crate) fn scalar_gradient(
 ) -> [[f64; 4]; NDOF_P] {
     use super::scalar_gradient::{chain, sigma_over_inputs, W_P1, W_P2, W_V, W_XG, W_XO};
     let (h, dt) = (pd.h, k.dt);
-    let y = (kin.cfg1.d[0][0] - st.cfg.d[0][0] + kin.cfg1.d[1][0] - st.cfg.d[1][0]) / dt;
+    let y = director_rate(st, kin, dt);
     let m = 0.5 * (st.vs[0] + st.vs[1]);
     let p2 = pd.i_s * y.dot(&y);
     let p1 = 2.0 * pd.i_s * y.dot(&m);
@@ -914,6 +914,11 @@ pub(crate) fn scalar_gradient(
     chain(&dsigma_dw, &dw)
 }
 
+/// `Y = Σ_l (s^l_{n+1} − s^l_n)/Δt`: the rate of `s` the director factor scales.
+fn director_rate(st: &PState, kin: &PKinematics, dt: f64) -> V2 {
+    (kin.cfg1.d[0][0] - st.cfg.d[0][0] + kin.cfg1.d[1][0] - st.cfg.d[1][0]) / dt
+}
+
 /// Planar twin of [`super::scalar_gradient::residual_scalar_derivatives`]: `∂R/∂σ_i` of
 /// the planar residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics `kin`.
 pub(crate) fn residual_scalar_derivatives(
@@ -960,7 +965,7 @@ pub(crate) fn residual_scalar_derivatives(
     }
     let kappa = pd.kappa;
     if kappa[0] != 0.0 || kappa[1] != 0.0 {
-        let y = (kin.cfg1.d[0][0] - st.cfg.d[0][0] + kin.cfg1.d[1][0] - st.cfg.d[1][0]) / dt;
+        let y = director_rate(st, kin, dt);
         let mut f = [V2::zeros(); NF];
         for l in 0..2 {
             for m in 0..2 {

@@ -50,11 +50,7 @@ pub fn scalar_gradient(
     let kappa = data.kappa();
 
     // The director speed's quadratic: Y_α, m_α, P₂, P₁.
-    let y: [Vec3; 2] = std::array::from_fn(|a| {
-        (kin.cfg1.d[0].column(a) - st.cfg.d[0].column(a) + kin.cfg1.d[1].column(a)
-            - st.cfg.d[1].column(a))
-            / dt
-    });
+    let y = director_rates(st, kin, dt);
     let m: [Vec3; 2] = std::array::from_fn(|a| 0.5 * (st.vd[0][a] + st.vd[1][a]));
     let ir = &p.i_rho;
     let mut p2 = 0.0;
@@ -226,6 +222,16 @@ pub(crate) fn sigma_over_inputs(
     [d_bg, d_bo, d_cv, d_phi]
 }
 
+/// `Y_α = Σ_l (d^l_{α,n+1} − d^l_{α,n})/Δt` (α = 1, 2): the director rates the director
+/// factor scales (`w_α = φ Y_α`).
+fn director_rates(st: &ElementState, kin: &Kinematics, dt: f64) -> [Vec3; 2] {
+    std::array::from_fn(|a| {
+        (kin.cfg1.d[0].column(a) - st.cfg.d[0].column(a) + kin.cfg1.d[1].column(a)
+            - st.cfg.d[1].column(a))
+            / dt
+    })
+}
+
 /// `∂σ/∂x = (∂σ/∂w)(∂w/∂x)`, row `j` of the result for unknown `j`.
 pub(crate) fn chain<const N: usize>(
     dsigma_dw: &[[f64; NW]; 4],
@@ -288,11 +294,7 @@ pub fn residual_scalar_derivatives(
     }
     let kappa = data.kappa();
     if kappa[0] != 0.0 || kappa[1] != 0.0 {
-        let y: [Vec3; 2] = std::array::from_fn(|b| {
-            (kin.cfg1.d[0].column(b) - st.cfg.d[0].column(b) + kin.cfg1.d[1].column(b)
-                - st.cfg.d[1].column(b))
-                / dt
-        });
+        let y = director_rates(st, kin, dt);
         let mut f = [Vec3::zeros(); NFIELDS];
         for l in 0..2 {
             let base = if l == 0 { A0 } else { B0 };

@@ -36,76 +36,60 @@ impl Simulation {
             }
             return self.solve_once(q, Mode::Frozen, total_iters).await;
         }
+        // Fallback: a step the strategy fails (outer cap, Newton failure, acceptance
+        // check) is retried from the same predictor with the other one, which solves the
+        // same scheme's equations: staggered and inexact fall back to the monolithic
+        // Newton (scalars linearized), the monolithic Newton to the staggered loop (which
+        // carries some violent steps further: the frame at Δt = 0.5, docs/benchmarks.md),
+        // the latter only once the monolithic Newton has failed from every predictor.
         let strategy = self.params.strategy;
+        let (fallback, name) = match strategy {
+            Strategy::Monolithic => (Strategy::Staggered, "staggered"),
+            _ => (Strategy::Monolithic, "monolithic"),
+        };
+        if !self.params.fallback || (strategy == Strategy::Monolithic && !self.last_predictor) {
+            return self.solve_by(strategy, q, total_iters).await;
+        }
+        let q0 = q.to_vec();
+        let frozen0 = self.frozen.clone();
+        match self.solve_by(strategy, q, total_iters).await {
+            Ok(x) => Ok(x),
+            Err(first) => {
+                q.copy_from_slice(&q0);
+                match self.solve_by(fallback, q, total_iters).await {
+                    Ok(x) => {
+                        self.fell_back = true;
+                        Ok(x)
+                    }
+                    Err(second) => {
+                        self.frozen = frozen0;
+                        self.solved_consistent = strategy == Strategy::Monolithic;
+                        Err(StepFailure {
+                            reason: format!(
+                                "{} (the {name} fallback failed too: {})",
+                                first.reason, second.reason
+                            ),
+                            residuals: second.residuals,
+                        })
+                    }
+                }
+            }
+        }
+    }
+
+    /// One checked solve by `strategy` alone: the monolithic Newton, or the staggered
+    /// loop / inexact strategy ([`Self::solve_first`]).
+    #[allow(clippy::type_complexity)]
+    async fn solve_by(
+        &mut self,
+        strategy: Strategy,
+        q: &mut [f64],
+        iters: &mut usize,
+    ) -> Result<(State, Invariants, f64, f64, usize, f64, Vec<FrozenScalars>), StepFailure> {
         self.solved_consistent = strategy == Strategy::Monolithic;
         match strategy {
-            Strategy::Monolithic if !self.params.fallback || !self.last_predictor => {
-                self.solve_once(q, Mode::Consistent, total_iters).await
-            }
-            Strategy::Monolithic => {
-                // Fallback the other way, once the monolithic Newton has failed from every
-                // predictor of the step: retried from the last one with the staggered loop
-                // (which carries some violent steps further: the frame at Δt = 0.5,
-                // docs/benchmarks.md).
-                let q0 = q.to_vec();
-                let frozen0 = self.frozen.clone();
-                match self.solve_once(q, Mode::Consistent, total_iters).await {
-                    Ok(x) => Ok(x),
-                    Err(mono) => {
-                        q.copy_from_slice(&q0);
-                        self.solved_consistent = false;
-                        match self.solve_first(Strategy::Staggered, q, total_iters).await {
-                            Ok(x) => {
-                                self.fell_back = true;
-                                Ok(x)
-                            }
-                            Err(staggered) => {
-                                self.frozen = frozen0;
-                                self.solved_consistent = true;
-                                Err(StepFailure {
-                                    reason: format!(
-                                        "{} (the staggered fallback failed too: {})",
-                                        mono.reason, staggered.reason
-                                    ),
-                                    residuals: staggered.residuals,
-                                })
-                            }
-                        }
-                    }
-                }
-            }
-            _ if !self.params.fallback => self.solve_first(strategy, q, total_iters).await,
-            _ => {
-                // Fallback: a staggered (or inexact) failure (outer cap, Newton failure,
-                // acceptance check) is retried from the same predictor with the monolithic
-                // Newton, which solves the same scheme's equations with the scalars
-                // linearized.
-                let q0 = q.to_vec();
-                let frozen0 = self.frozen.clone();
-                match self.solve_first(strategy, q, total_iters).await {
-                    Ok(x) => Ok(x),
-                    Err(staggered) => {
-                        q.copy_from_slice(&q0);
-                        match self.solve_once(q, Mode::Consistent, total_iters).await {
-                            Ok(x) => {
-                                self.fell_back = true;
-                                self.solved_consistent = true;
-                                Ok(x)
-                            }
-                            Err(mono) => {
-                                self.frozen = frozen0;
-                                Err(StepFailure {
-                                    reason: format!(
-                                        "{} (the monolithic fallback failed too: {})",
-                                        staggered.reason, mono.reason
-                                    ),
-                                    residuals: mono.residuals,
-                                })
-                            }
-                        }
-                    }
-                }
-            }
+            Strategy::Monolithic => self.solve_once(q, Mode::Consistent, iters).await,
+            _ => self.solve_first(strategy, q, iters).await,
         }
     }
 
