@@ -331,7 +331,7 @@ fn cosseratbench_result(
         options: serde_json::json!({
             "scheme": sim.params().scheme,
             "dt": sim.params().dt,
-            "strategy": sim.params().strategy,
+            "strategy": sim.strategy(),
         }),
         missing: vec![],
         failure: o.reason.clone(),
@@ -502,6 +502,7 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         smallest_substep: o.smallest_substep,
         accepted: o.accepted,
         backend: sim.backend_name(),
+        strategy: sim.strategy().name().into(),
         linear_solver: sim.linear_solver().0.to_string(),
         solve: if sim.device_solve() { "device" } else { "host" }.into(),
         linear_solver_fallbacks: sim.linear_solver().1,

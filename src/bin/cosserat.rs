@@ -216,7 +216,8 @@ struct RunArgs {
     /// `--scheme` is given.
     #[arg(long, allow_negative_numbers = true)]
     rho_inf: Option<f64>,
-    /// Dissipation strategy (default: the scene's, else staggered).
+    /// Dissipation strategy (default: the scene's, else auto: monolithic on the CPU
+    /// kernel, staggered with a GPU evaluator).
     #[arg(long, value_enum)]
     strategy: Option<cmds::StrategyArg>,
     /// Newton variant (default: the scene's `[integrator] newton`, else full).

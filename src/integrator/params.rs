@@ -9,6 +9,13 @@ pub use crate::scheme::Scheme;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Strategy {
+    /// The default: [`Strategy::Monolithic`] where the CPU element kernel evaluates the
+    /// elements (1.1–3× faster than the staggered loop on the paper's scenes, ≈ 2.4× on
+    /// the CPU batch: docs/benchmarks.md, "Dissipation strategies"), [`Strategy::Staggered`]
+    /// where a GPU evaluator is attached (its kernel evaluates the frozen-scalar system;
+    /// a monolithic member's elements would run on the CPU). [`Strategy::resolve`] picks
+    /// one; `summary.json` records which ran.
+    Auto,
     /// The paper's staggered loop: freeze the local dissipation scalars, solve Newton,
     /// re-evaluate the scalars, repeat until the dissipation identity holds to
     /// `outer_tol` (at most `max_outer` rounds).
@@ -25,6 +32,28 @@ pub enum Strategy {
     /// evaluates the consistent scalars); with `fallback` a failed step is retried with
     /// the monolithic strategy.
     Inexact,
+}
+
+impl Strategy {
+    /// The strategy that runs: `self`, or for [`Strategy::Auto`] the staggered loop where
+    /// a GPU evaluator is attached (`gpu_evaluator`) and the monolithic Newton otherwise.
+    pub fn resolve(self, gpu_evaluator: bool) -> Strategy {
+        match self {
+            Strategy::Auto if gpu_evaluator => Strategy::Staggered,
+            Strategy::Auto => Strategy::Monolithic,
+            s => s,
+        }
+    }
+
+    /// The name scene files, the CLI and `summary.json` use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Strategy::Auto => "auto",
+            Strategy::Staggered => "staggered",
+            Strategy::Monolithic => "monolithic",
+            Strategy::Inexact => "inexact",
+        }
+    }
 }
 
 /// How Newton treats the tangent within one solve.
@@ -80,10 +109,9 @@ pub struct IntegratorParams {
     /// tolerance (4.7e-12 instead of 3.4e-15 over the cantilever's 1000 steps);
     /// docs/benchmarks.md, "Newton variant", has the measurements.
     pub newton: NewtonVariant,
-    /// Dissipative solution strategy. Default [`Strategy::Staggered`], the paper's loop,
-    /// whose frozen-scalar kernel the GPU batch path evaluates. On the CPU
-    /// [`Strategy::Monolithic`] is 1.1–3× faster on the paper's scenes and the cantilever
-    /// (docs/benchmarks.md, "Dissipation strategies").
+    /// Dissipative solution strategy. Default [`Strategy::Auto`]: the monolithic Newton
+    /// on the CPU element kernel, the paper's staggered loop where a GPU evaluator is
+    /// attached (its kernel evaluates the frozen-scalar system).
     pub strategy: Strategy,
     /// Staggered loop: relative tolerance on the dissipation identity (and on the change
     /// of the frozen scalars). Default `1e-10`.
@@ -121,7 +149,7 @@ impl IntegratorParams {
             newton_tol: 1e-11,
             max_iter: 25,
             newton: NewtonVariant::Full,
-            strategy: Strategy::Staggered,
+            strategy: Strategy::Auto,
             outer_tol: 1e-10,
             max_outer: 30,
             energy_tol: 1e-9,

@@ -832,11 +832,12 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
             "monolithic" => Strategy::Monolithic,
             "staggered" => Strategy::Staggered,
             "inexact" => Strategy::Inexact,
+            "auto" => Strategy::Auto,
             other => {
                 return Err(cx.err(
                     &k("strategy"),
                     format!(
-                        "unknown strategy `{other}` (expected \"staggered\", \"monolithic\" or \"inexact\")"
+                        "unknown strategy `{other}` (expected \"auto\", \"staggered\", \"monolithic\" or \"inexact\")"
                     ),
                 ))
             }

@@ -588,6 +588,12 @@ impl Scene {
             Scheme::GenAlpha { rho_inf } => format!("gen-alpha (rho_inf {rho_inf})"),
         };
         let strategy = match p.strategy {
+            Strategy::Auto if p.fallback => {
+                "auto (monolithic on the CPU kernel, staggered on a GPU; with fallback)"
+            }
+            Strategy::Auto => {
+                "auto (monolithic on the CPU kernel, staggered on a GPU; no fallback)"
+            }
             Strategy::Monolithic if p.fallback => "monolithic (staggered fallback)",
             Strategy::Monolithic => "monolithic (no fallback)",
             Strategy::Staggered if p.fallback => "staggered (monolithic fallback)",

@@ -70,6 +70,8 @@ impl NewtonArg {
 /// Dissipation strategy (`--strategy`; docs/theory.md §4, docs/benchmarks.md "Inexact strategy").
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum StrategyArg {
+    /// Monolithic on the CPU element kernel, staggered where a GPU evaluator is attached.
+    Auto,
     /// The paper's staggered loop: freeze the scalars, Newton, re-evaluate, repeat.
     Staggered,
     /// Newton on the monolithic equations, the scalars linearized in the tangent.
@@ -82,6 +84,7 @@ impl StrategyArg {
     /// The integrator's strategy.
     pub fn strategy(self) -> Strategy {
         match self {
+            StrategyArg::Auto => Strategy::Auto,
             StrategyArg::Staggered => Strategy::Staggered,
             StrategyArg::Monolithic => Strategy::Monolithic,
             StrategyArg::Inexact => Strategy::Inexact,
@@ -90,11 +93,20 @@ impl StrategyArg {
 
     /// The name the JSON reports.
     pub fn name(self) -> &'static str {
-        match self {
-            StrategyArg::Staggered => "staggered",
-            StrategyArg::Monolithic => "monolithic",
-            StrategyArg::Inexact => "inexact",
-        }
+        self.strategy().name()
+    }
+}
+
+/// `auto (cpu: monolithic, gpu: staggered)`, or the one strategy's name.
+fn strategy_label(s: Strategy) -> String {
+    if s == Strategy::Auto {
+        format!(
+            "auto (cpu: {}, gpu: {})",
+            s.resolve(false).name(),
+            s.resolve(true).name()
+        )
+    } else {
+        s.name().to_string()
     }
 }
 
@@ -600,9 +612,10 @@ pub struct BenchArgs {
     /// scripts that still pass it.
     #[arg(long, hide = true, conflicts_with = "newton")]
     pub modified_newton: bool,
-    /// Dissipation strategy of the benchmark's EDMC-2 members (default: staggered). The
-    /// monolithic strategy evaluates its elements on the CPU kernel, also in a GPU batch.
-    #[arg(long, value_enum, default_value_t = StrategyArg::Staggered)]
+    /// Dissipation strategy of the benchmark's EDMC-2 members (default: auto, i.e.
+    /// monolithic in the CPU batch, staggered in the GPU batch). The monolithic strategy
+    /// evaluates its elements on the CPU kernel, also in a GPU batch.
+    #[arg(long, value_enum, default_value_t = StrategyArg::Auto)]
     pub strategy: StrategyArg,
     /// GPU path: members in flight at once (default: as many as fit, at most 4096).
     #[arg(long, default_value_t = 0)]
@@ -863,6 +876,8 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             "steps": a.steps,
             "newton": newton.name(),
             "strategy": a.strategy.name(),
+            "cpu_strategy": a.strategy.strategy().resolve(false).name(),
+            "gpu_strategy": a.strategy.strategy().resolve(true).name(),
             "cpu_element_steps_per_s": cpu_rate,
             "gpu_element_steps_per_s": gpu_rate,
             "cpu_rod_steps_per_s": cpu.as_ref().map(|c| rod_steps / c.stats.wall_s),
@@ -913,11 +928,12 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     println!(
-        "batch: {} rods × {} elements × {} steps (EDMC-2 α = 0.5, staggered, Δt = 0.01), {} Newton",
+        "batch: {} rods × {} elements × {} steps (EDMC-2 α = 0.5, Δt = 0.01), {} Newton, strategy {}",
         a.rods,
         a.elements,
         a.steps,
-        newton.name()
+        newton.name(),
+        strategy_label(a.strategy.strategy()),
     );
     if let (Some(c), Some(rate)) = (&cpu, cpu_rate) {
         println!(

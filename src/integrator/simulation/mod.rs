@@ -40,7 +40,7 @@ use crate::element::{
 use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
 use crate::integrator::evaluate::{ElementBackend, EvalPort};
 use crate::integrator::gen_alpha::GenAlpha;
-use crate::integrator::params::{IntegratorParams, Scheme};
+use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
 use crate::integrator::report::SolveTimers;
 use crate::integrator::state::State;
 use crate::linsolve::{SolverKind, SparseSolver};
@@ -416,6 +416,15 @@ impl Simulation {
             Backend::Direct(b, _) => b.describe(),
             Backend::Lockstep(p) => p.describe().to_string(),
         }
+    }
+
+    /// The dissipation strategy the dissipative steps use: the parameters' choice, with
+    /// [`Strategy::Auto`] resolved for this backend (staggered where a GPU evaluator is
+    /// attached, monolithic on the CPU kernel).
+    pub fn strategy(&self) -> Strategy {
+        self.params
+            .strategy
+            .resolve(!matches!(self.backend, Backend::Cpu))
     }
 
     /// The linear solver chosen for this model's tangent, and how many factorizations it

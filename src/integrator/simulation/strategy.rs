@@ -42,7 +42,7 @@ impl Simulation {
         // Newton (scalars linearized), the monolithic Newton to the staggered loop (which
         // carries some violent steps further: the frame at Δt = 0.5, docs/benchmarks.md),
         // the latter only once the monolithic Newton has failed from every predictor.
-        let strategy = self.params.strategy;
+        let strategy = self.strategy();
         let (fallback, name) = match strategy {
             Strategy::Monolithic => (Strategy::Staggered, "staggered"),
             _ => (Strategy::Monolithic, "monolithic"),
