@@ -305,22 +305,30 @@ fn bench_modified_newton_is_newton_modified() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("cannot be used with"));
 }
 
-/// `bench --strategy inexact`: recorded in the JSON, same members, fewer Newton iterations
-/// than the default staggered loop (measured 4 496 vs 6 344 at 64 rods × 30 elements).
+/// `bench --strategy`: the default `auto` runs the CPU batch monolithic (and would run a
+/// GPU batch staggered), recorded in the JSON; `inexact` and the monolithic default take
+/// fewer Newton iterations than the staggered loop on the same members (measured at
+/// 64 rods × 30 elements: staggered 6 344, inexact 4 496; at 256 rods: staggered 25 472,
+/// monolithic 10 208).
 #[test]
-fn bench_strategy_inexact_is_recorded_and_takes_fewer_iterations() {
+fn bench_strategy_is_recorded_and_the_default_takes_fewer_iterations() {
     let json =
         |extra: &[&str]| bench_json(&["--rods", "2", "--elements", "10", "--steps", "4"], extra);
-    let staggered = json(&[]);
+    let auto = json(&[]);
+    let staggered = json(&["--strategy", "staggered"]);
     let inexact = json(&["--strategy", "inexact"]);
+    assert_eq!(auto["strategy"], "auto");
+    assert_eq!(auto["cpu_strategy"], "monolithic");
+    assert_eq!(auto["gpu_strategy"], "staggered");
     assert_eq!(staggered["strategy"], "staggered");
+    assert_eq!(staggered["cpu_strategy"], "staggered");
     assert_eq!(inexact["strategy"], "inexact");
     assert_eq!(inexact["cpu_failed"], 0);
-    let (i, s) = (
-        inexact["cpu_newton_iters"].as_u64().unwrap(),
-        staggered["cpu_newton_iters"].as_u64().unwrap(),
-    );
+    assert_eq!(auto["cpu_failed"], 0);
+    let iters = |j: &serde_json::Value| j["cpu_newton_iters"].as_u64().unwrap();
+    let (a, i, s) = (iters(&auto), iters(&inexact), iters(&staggered));
     assert!(i < s, "inexact {i} vs staggered {s} Newton iterations");
+    assert!(a < i, "monolithic {a} vs inexact {i} Newton iterations");
 }
 
 /// `run --newton fresh` takes a fresh tangent every correction; the default `full` reuses

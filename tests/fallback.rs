@@ -159,6 +159,8 @@ fn cosserat_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, St
             "0.5",
             "--dt",
             "0.05",
+            "--strategy",
+            "staggered",
         ])
         .args(extra)
         .arg("--out")
@@ -176,7 +178,7 @@ fn cosserat_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, St
     (summary, csv)
 }
 
-/// The CLI: the default run counts its fallback steps in summary.json and marks them in
+/// The CLI: the staggered run counts its fallback steps in summary.json and marks them in
 /// history.csv, and stops at t = 5.5 on the soft-branch refusal; `--no-fallback`
 /// reproduces the paper's staggered failure at the same time.
 #[test]
@@ -236,26 +238,78 @@ fn check_names_the_fallback() {
     assert!(st.status.success());
     let text = String::from_utf8_lossy(&st.stdout);
     assert!(
-        text.contains("strategy staggered (monolithic fallback)"),
+        text.contains(
+            "strategy auto (monolithic on the CPU kernel, staggered on a GPU; with fallback)"
+        ),
         "{text}"
     );
 }
 
-/// The stability study: the default cell and the `--no-fallback` cell (the paper's pure
-/// staggered strategy) both fail at t = 5.5, for different reasons.
+/// The default strategy resolves to the monolithic Newton on the CPU kernel, recorded in
+/// summary.json beside the requested `auto`: the mechanism run is refused at t = 5.5 for
+/// its element turn, as the staggered run with its fallback is.
+#[test]
+fn the_default_strategy_runs_monolithic_on_the_cpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("a");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["run", "mechanism", "--alpha", "0.5", "--dt", "0.05"])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["params"]["strategy"], "auto");
+    assert_eq!(s["strategy"], "monolithic");
+    assert_eq!(s["status"], "failed", "{s}");
+    assert!(
+        s["reason"]
+            .as_str()
+            .unwrap_or("")
+            .contains("end triads are turned"),
+        "{s}"
+    );
+    assert!((s["t_reached"].as_f64().unwrap() - 5.5).abs() < 1e-9, "{s}");
+    assert!(
+        s["accepted"]["max_energy_growth"].as_f64().unwrap() <= 0.0,
+        "{s}"
+    );
+}
+
+/// The stability study: the default cell, the staggered cell with its fallback and the
+/// `--strategy staggered --no-fallback` cell (the paper's pure staggered strategy) all fail
+/// at t = 5.5, the first two refused for the element turn, the last failing its Newton
+/// solve; the study's summary.json records the strategy.
 #[test]
 fn stability_study_maps_the_pure_staggered_strategy_with_no_fallback() {
     let dir = tempfile::tempdir().unwrap();
-    for (flag, row) in [
-        // Both stop at t = 5.5: the staggered loop there, the fallback on the element turn.
-        (None, "edmc2,0.5,0.05,5.5,6,failed,"),
-        (Some("--no-fallback"), "edmc2,0.5,0.05,5.5,6,failed,"),
-    ] {
-        let out = dir.path().join(if flag.is_some() { "b" } else { "a" });
+    for (i, (flags, strategy, reason)) in [
+        (&[][..], "auto", "end triads are turned"),
+        (
+            &["--strategy", "staggered"][..],
+            "staggered",
+            "end triads are turned",
+        ),
+        (
+            &["--strategy", "staggered", "--no-fallback"][..],
+            "staggered",
+            "Newton did not converge",
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let out = dir.path().join(i.to_string());
         let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
             .args(["study", "stability", "mechanism", "--schemes", "edmc2"])
             .args(["--params", "0.5", "--dts", "0.05", "--t-end", "6"])
-            .args(flag)
+            .args(flags)
             .arg("--out")
             .arg(&out)
             .output()
@@ -267,9 +321,18 @@ fn stability_study_maps_the_pure_staggered_strategy_with_no_fallback() {
         );
         let csv = std::fs::read_to_string(out.join("stability.csv")).unwrap();
         assert!(
-            csv.lines().nth(1).unwrap().starts_with(row),
-            "{flag:?}: {csv}"
+            csv.lines()
+                .nth(1)
+                .unwrap()
+                .starts_with("edmc2,0.5,0.05,5.5,6,failed,"),
+            "{flags:?}: {csv}"
         );
+        let failures = std::fs::read_to_string(out.join("failures.txt")).unwrap();
+        assert!(failures.contains(reason), "{flags:?}: {failures}");
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(s["params"]["strategy"], strategy, "{flags:?}");
     }
 }
 
@@ -282,6 +345,7 @@ fn staggered_cap_is_reported_naming_the_cap() {
     let scene = load_scene("frame").unwrap();
     let mut p = scene.params;
     p.scheme = Scheme::edmc2(0.5);
+    p.strategy = Strategy::Staggered;
     p.max_outer = 2;
     p.fallback = false;
     let mut sim = Simulation::new(scene.model.clone(), p).unwrap();

@@ -126,8 +126,13 @@ struct StudyCommon {
     /// Newton variant of every run (default: the scene's, else full).
     #[arg(long, value_enum)]
     newton: Option<cmds::NewtonArg>,
+    /// Dissipation strategy of every run (default: the scene's, else auto: monolithic on
+    /// the CPU kernel, staggered with a GPU evaluator).
+    #[arg(long, value_enum)]
+    strategy: Option<cmds::StrategyArg>,
     /// No fallback strategy when the run's strategy fails on a step (maps of a pure
-    /// strategy, e.g. the paper's staggered one; default: the scene's, else fallback on).
+    /// strategy, e.g. the paper's staggered one with `--strategy staggered`; default: the
+    /// scene's, else fallback on).
     #[arg(long)]
     no_fallback: bool,
     /// Step cut-back of every run: a failed step is redone as up to 2^N sub-steps
@@ -641,7 +646,7 @@ fn default_jobs(jobs: Option<usize>) -> usize {
 /// Loads a study's scene, with `--newton-tol` applied to its integrator parameters,
 /// creates the output directory and records the solver settings every run of the study
 /// shares in its `summary.json` (`study`, `scene`, `params`: the integrator parameters
-/// with `newton`, `newton_tol`, `fallback`, `cutback`).
+/// with `newton`, `newton_tol`, `strategy`, `fallback`, `cutback`).
 fn study_scene(c: &StudyCommon, study: &str) -> Result<Scene> {
     let mut scene = load_scene(&c.scene)?;
     create_out(&c.out)?;
@@ -653,6 +658,9 @@ fn study_scene(c: &StudyCommon, study: &str) -> Result<Scene> {
     }
     if let Some(n) = c.newton {
         scene.params.newton = n.variant();
+    }
+    if let Some(s) = c.strategy {
+        scene.params.strategy = s.strategy();
     }
     if c.no_fallback {
         scene.params.fallback = false;

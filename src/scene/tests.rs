@@ -103,7 +103,9 @@ fn frame_mesh_is_the_staircase() {
     assert_eq!(s.params.dt, 0.2);
     assert_eq!(s.params.t_end, 10.0);
     assert_eq!(s.params.n_steps(), 50);
-    assert_eq!(s.params.strategy, Strategy::Staggered);
+    assert_eq!(s.params.strategy, Strategy::Auto);
+    assert_eq!(s.params.strategy.resolve(false), Strategy::Monolithic);
+    assert_eq!(s.params.strategy.resolve(true), Strategy::Staggered);
     assert!(s.params.fallback, "the fallback is on by default");
     assert_eq!(s.output_every, 1);
 }
@@ -343,7 +345,7 @@ fn builtin_source_names_default_scene_name() {
 }
 
 #[test]
-fn strategy_inexact_parses_and_unknown_strategies_list_the_three() {
+fn strategy_inexact_parses_and_unknown_strategies_list_the_four() {
     let text = |strategy: &str| {
         format!(
             "{BASE}[[rod]]\nmaterial = \"m\"\nsection = \"s\"\npoints = [[0,0,0],[1,0,0]]\n\
@@ -354,11 +356,13 @@ fn strategy_inexact_parses_and_unknown_strategies_list_the_three() {
     let s = parse_scene(&text("inexact"), "in.toml").unwrap();
     assert_eq!(s.params.strategy, Strategy::Inexact);
     assert!(s.describe().contains("inexact (monolithic fallback)"));
+    let s = parse_scene(&text("auto"), "in.toml").unwrap();
+    assert_eq!(s.params.strategy, Strategy::Auto);
     let e = parse_scene(&text("lagged"), "in.toml").unwrap_err();
     assert_eq!(e.key(), Some("integrator.strategy"));
     assert!(
         e.to_string().contains(
-            "unknown strategy `lagged` (expected \"staggered\", \"monolithic\" or \"inexact\")"
+            "unknown strategy `lagged` (expected \"auto\", \"staggered\", \"monolithic\" or \"inexact\")"
         ),
         "{e}"
     );
