@@ -29,7 +29,7 @@ use common::gpu;
 use cosserat::batch::{
     bench_members, run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
 };
-use cosserat::integrator::{NewtonVariant, Scheme};
+use cosserat::integrator::{NewtonVariant, Scheme, Strategy};
 use cosserat::model::{NodalLoad, Vec3};
 use cosserat::observe::record::RunStatus;
 use cosserat::table::TimeTable;
@@ -67,6 +67,9 @@ fn members_with(loads: bool) -> Vec<Member> {
     let mut ms = bench_members(14, 10, 6).unwrap();
     let mut rng = Rng(0x00de_71ce);
     for (i, m) in ms.iter_mut().enumerate() {
+        // The same strategy on both paths (the default `auto` is monolithic on the CPU,
+        // staggered with a GPU evaluator).
+        m.params.strategy = Strategy::Staggered;
         if loads && i < 9 {
             let tip = m.model.n_nodes() - 1;
             let mut v = || Vec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
@@ -376,6 +379,9 @@ fn device_solve_frame_matches_cpu() {
     let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
     let mut params = scene.params;
     params.t_end = 15.0 * params.dt;
+    // The same strategy on both paths (the default `auto` is monolithic on the CPU,
+    // staggered with a GPU evaluator).
+    params.strategy = Strategy::Staggered;
     let ms = vec![Member {
         model: scene.model.clone(),
         params,
@@ -505,7 +511,7 @@ fn inexact_strategy_members_end_as_on_the_cpu_path() {
     let Some(exec) = gpu() else { return };
     let mut ms = members();
     for m in &mut ms {
-        m.params.strategy = cosserat::integrator::Strategy::Inexact;
+        m.params.strategy = Strategy::Inexact;
     }
     let (cpu, _) = run(&ms, &Executor::Cpu, NewtonVariant::Full, SolveMode::Host);
     assert!(cpu[..9]

@@ -16,7 +16,7 @@
 mod common;
 use common::gpu;
 use cosserat::batch::{run_members, BatchOptions, Executor, Member, MemberResult};
-use cosserat::integrator::{NewtonVariant, Scheme};
+use cosserat::integrator::{NewtonVariant, Scheme, Strategy};
 use cosserat::observe::record::RunStatus;
 use cosserat::scene::load_scene;
 
@@ -67,6 +67,9 @@ fn members(n: usize, scheme_of: impl Fn(usize) -> Scheme, t_end: f64) -> Vec<Mem
             let mut params = scene.params;
             params.scheme = scheme_of(i);
             params.t_end = t_end;
+            // The same strategy on both paths (the default `auto` is monolithic on the CPU,
+            // staggered with a GPU evaluator).
+            params.strategy = Strategy::Staggered;
             Member { model, params }
         })
         .collect()
@@ -194,6 +197,8 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
                 "frame",
                 "--t-end",
                 "1",
+                "--strategy",
+                "staggered",
                 "--backend",
                 backend,
                 "--out",

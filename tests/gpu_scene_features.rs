@@ -11,7 +11,7 @@
 mod common;
 use common::gpu;
 use cosserat::batch::{run_members, BatchOptions, Executor, Member, MemberResult};
-use cosserat::integrator::NewtonVariant;
+use cosserat::integrator::{NewtonVariant, Strategy};
 use cosserat::scene::parse_scene;
 
 /// Final positions agree to this (measured 1.1e-16 to 2.2e-16 on lavapipe over these 10 steps; the
@@ -72,9 +72,13 @@ fn members(extra: &str) -> Vec<Member> {
         .iter()
         .map(|s| {
             let sc = parse_scene(&scene(s, extra), "t.toml").unwrap();
+            let mut params = sc.params;
+            // The same strategy on both paths (the default `auto` is monolithic on the CPU,
+            // staggered with a GPU evaluator).
+            params.strategy = Strategy::Staggered;
             Member {
                 model: sc.model,
-                params: sc.params,
+                params,
             }
         })
         .collect()

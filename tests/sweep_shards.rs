@@ -542,7 +542,21 @@ fn a_shard_runs_on_the_backend_it_is_given() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let file = write(dir.path(), "s.toml", SWEEP);
+    // The same strategy on both backends (the default `auto` is monolithic on the CPU,
+    // staggered with a GPU evaluator): the frame with `strategy = "staggered"`.
+    let frame = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .unwrap()
+        .toml
+        .replace("[integrator]\n", "[integrator]\nstrategy = \"staggered\"\n");
+    assert!(frame.contains("strategy = \"staggered\""));
+    write(dir.path(), "frame_staggered.toml", &frame);
+    let file = write(
+        dir.path(),
+        "s.toml",
+        &SWEEP.replace("base = \"frame\"", "base = \"frame_staggered.toml\""),
+    );
     let spec = load_sweep(&file).unwrap();
     let reference = dir.path().join("ref");
     run(&file, &reference, None, false);
