@@ -701,9 +701,16 @@ pub fn residual_tangent_into(
 
     if want_tangent {
         // The (u, θ) block is written whole by the material term (a product with β = 0,
-        // which never reads it); only the g rows and columns are cleared here.
-        out.k.fixed_view_mut::<6, NDOF>(12, 0).fill(0.0);
-        out.k.fixed_view_mut::<12, 6>(0, 12).fill(0.0);
+        // which never reads it); only the g rows and columns are cleared here, column by
+        // column on the contiguous (column-major) storage: a strided view's `fill` walks
+        // nalgebra's element iterator, ≈ 10 instructions per entry.
+        for (c, col) in out.k.as_mut_slice().chunks_exact_mut(NDOF).enumerate() {
+            if c < 12 {
+                col[12..].fill(0.0);
+            } else {
+                col.fill(0.0);
+            }
+        }
         tangent(data, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut out.k);
     }
 }
