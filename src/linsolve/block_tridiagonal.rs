@@ -142,9 +142,11 @@ where
         self.blocks[m..]
             .iter_mut()
             .for_each(|b| *b = Block::<B>::zeros());
+        // The blocks are contiguous column-major `B × B` arrays, so `dest` indexes them
+        // as one flat slice (no division per entry).
+        let flat: &mut [f64] = bytemuck::cast_slice_mut(&mut self.blocks);
         for (&p, &v) in self.dest.iter().zip(vals) {
-            let (which, pos) = (p / (B * B), p % (B * B));
-            self.blocks[which].as_mut_slice()[pos] = v;
+            flat[p] = v;
         }
     }
 
