@@ -321,9 +321,10 @@ pub fn kinematics_at(
     };
     let mid = st.cfg.mean(&cfg1);
     let eps1 = strains6(&cfg1, p.h);
+    let inv_dt = 1.0 / dt;
     let v1 = [
-        2.0 * inc.u[0] / dt - st.v[0] - 2.0 * inc.g[0],
-        2.0 * inc.u[1] / dt - st.v[1] - 2.0 * inc.g[1],
+        2.0 * inc.u[0] * inv_dt - st.v[0] - 2.0 * inc.g[0],
+        2.0 * inc.u[1] * inv_dt - st.v[1] - 2.0 * inc.g[1],
     ];
     let kappa = data.kappa();
     let ksum = kappa[0] + kappa[1];
@@ -336,10 +337,10 @@ pub fn kinematics_at(
             cfg1.d[0].column(a) - st.cfg.d[0].column(a),
             cfg1.d[1].column(a) - st.cfg.d[1].column(a),
         ];
-        let y = (dd[0] + dd[1]) / dt;
+        let y = (dd[0] + dd[1]) * inv_dt;
         w[a] = y * phi;
         for l in 0..2 {
-            vd1[l][a] = 2.0 * dd[l] / dt - st.vd[l][a] - 2.0 * kappa[l] * w[a];
+            vd1[l][a] = 2.0 * dd[l] * inv_dt - st.vd[l][a] - 2.0 * kappa[l] * w[a];
         }
     }
     Kinematics {
@@ -613,10 +614,13 @@ pub fn residual_tangent_into(
         amax3(&f[R0]).max(f_gross[R0]),
         amax3(&f[R1]).max(f_gross[R1]),
     ];
+    // 1/Δt once: a division costs several multiplications' throughput, and the kernel
+    // has dozens of them per element.
+    let inv_dt = 1.0 / dt;
     let mut inertia_r = [Vec3::zeros(); 2];
     for l in 0..2 {
         for m in 0..2 {
-            let c = p.a_rho * h * M2[l][m] / dt;
+            let c = p.a_rho * h * M2[l][m] * inv_dt;
             inertia_r[l] += c * (kin.v1[m] - st.v[m]);
         }
     }
@@ -627,10 +631,10 @@ pub fn residual_tangent_into(
             let mut fi = Vec3::zeros();
             for m in 0..2 {
                 for b in 0..2 {
-                    fi += (h * M2[l][m] * p.i_rho[(a, b)] / dt) * (kin.vd1[m][b] - st.vd[m][b]);
+                    fi += (h * M2[l][m] * p.i_rho[(a, b)] * inv_dt) * (kin.vd1[m][b] - st.vd[m][b]);
                 }
             }
-            let rate = h * p.i_rho.amax() * (amax3(&st.vd[l][a]) + amax3(&kin.vd1[l][a])) / dt;
+            let rate = h * p.i_rho.amax() * (amax3(&st.vd[l][a]) + amax3(&kin.vd1[l][a])) * inv_dt;
             fd_scale[l] = fd_scale[l]
                 .max(amax3(&fi))
                 .max(amax3(&f[base + a]))
@@ -655,7 +659,7 @@ pub fn residual_tangent_into(
         r.fixed_rows_mut::<3>(th_idx(l)).copy_from(&rt);
         // Round-off floor: the inertia term is a difference of terms of size
         // Aρ h |v|/Δt, which dominate it when Δt is small.
-        let momentum_rate = p.a_rho * h * (amax3(&st.v[l]) + amax3(&kin.v1[l])) / dt;
+        let momentum_rate = p.a_rho * h * (amax3(&st.v[l]) + amax3(&kin.v1[l])) * inv_dt;
         let su = stress_scale[l].max(amax3(&inertia_r[l])).max(momentum_rate);
         // The largest director length: √ of the largest square (√ is monotone and
         // correctly rounded, so this is the largest of the three norms, bit for bit).
@@ -676,7 +680,7 @@ pub fn residual_tangent_into(
         for l in 0..2 {
             let mut mg = Vec3::zeros();
             for m in 0..2 {
-                mg += p.a_rho * h * M2[l][m] * kin_g(st, kin, m, dt);
+                mg += p.a_rho * h * M2[l][m] * kin_g(st, kin, m, inv_dt);
             }
             r.fixed_rows_mut::<3>(g_idx(l)).copy_from(&(mg - b));
             // The g rows balance momenta: measure them against the element's momentum,
@@ -689,7 +693,8 @@ pub fn residual_tangent_into(
                 * s.c_v.abs()
                 * (0..2)
                     .map(|m| {
-                        amax3(&((kin.cfg1.r[m] - st.cfg.r[m]) / dt)) + amax3(&kin_g(st, kin, m, dt))
+                        amax3(&((kin.cfg1.r[m] - st.cfg.r[m]) * inv_dt))
+                            + amax3(&kin_g(st, kin, m, inv_dt))
                     })
                     .sum::<f64>();
             let momentum = momentum.max(pieces);
@@ -718,9 +723,9 @@ pub fn residual_tangent_into(
 /// The `g` an element end carries, recovered from `v_{n+1} = 2u/Δt − v_n − 2g`
 /// (kinematics stores `v_{n+1}`; the increment is not kept).
 #[inline]
-fn kin_g(st: &ElementState, kin: &Kinematics, m: usize, dt: f64) -> Vec3 {
+fn kin_g(st: &ElementState, kin: &Kinematics, m: usize, inv_dt: f64) -> Vec3 {
     // g = u/Δt − ½(v_n + v_{n+1}) and u = r_{n+1} − r_n.
-    (kin.cfg1.r[m] - st.cfg.r[m]) / dt - 0.5 * (st.v[m] + kin.v1[m])
+    (kin.cfg1.r[m] - st.cfg.r[m]) * inv_dt - 0.5 * (st.v[m] + kin.v1[m])
 }
 
 /// Block of the tangent a field maps to: (row/col start of its unknown, is director).
@@ -829,7 +834,8 @@ fn tangent(
 
     // Scalar field couplings G_s ⊗ I₃: geometric stiffness ½ h H(S*) and inertia.
     let mut gs = stress_hessian(sstar, h) * (0.5 * h);
-    let two_dt2 = 2.0 / (dt * dt);
+    let inv_dt = 1.0 / dt;
+    let two_dt2 = 2.0 * inv_dt * inv_dt;
     for l in 0..2 {
         for m in 0..2 {
             gs[(l, m)] += two_dt2 * p.a_rho * h * M2[l][m];
@@ -843,9 +849,9 @@ fn tangent(
         for m in 0..2 {
             for a in 0..2 {
                 for b in 0..2 {
-                    let mass = h * M2[l][m] * p.i_rho[(a, b)] / dt;
+                    let mass = h * M2[l][m] * p.i_rho[(a, b)] * inv_dt;
                     let (pl, qm) = (field_of(l, a), field_of(m, b));
-                    gs[(pl, qm)] += mass * 2.0 / dt;
+                    gs[(pl, qm)] += mass * (2.0 * inv_dt);
                     for qq in 0..2 {
                         if data.rot_free[qq] {
                             gs[(pl, field_of(qq, b))] -= mass * 2.0 * kappa[m] * dw;
@@ -909,9 +915,9 @@ fn tangent(
             for m in 0..2 {
                 let mm = p.a_rho * h * M2[l][m];
                 let mut v = kt.fixed_view_mut::<3, 3>(u_idx(l), g_idx(m));
-                v += i3 * (-2.0 * mm / dt);
+                v += i3 * (-2.0 * mm * inv_dt);
                 let mut v = kt.fixed_view_mut::<3, 3>(g_idx(l), u_idx(m));
-                v += i3 * (-cv / dt);
+                v += i3 * (-cv * inv_dt);
                 let mut v = kt.fixed_view_mut::<3, 3>(g_idx(l), g_idx(m));
                 v += i3 * (mm + cv);
             }

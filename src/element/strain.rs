@@ -108,13 +108,15 @@ pub type StrainGradient = [[Vec3; NFIELDS]; 6];
 #[inline]
 pub fn strain_gradient(c: &Config, h: f64) -> StrainGradient {
     let mut bm = [[ZERO3; NFIELDS]; 6];
-    let dr = (c.r[1] - c.r[0]) / h;
+    // 1/h once (divisions cost several multiplications' throughput).
+    let inv_h = 1.0 / h;
+    let dr = (c.r[1] - c.r[0]) * inv_h;
     let a = &c.d[0];
     let b = &c.d[1];
     for i in 0..3 {
         let di: Vec3 = 0.5 * (a.column(i) + b.column(i));
-        bm[i][R0] = -di / h;
-        bm[i][R1] = di / h;
+        bm[i][R0] = -di * inv_h;
+        bm[i][R1] = di * inv_h;
         bm[i][A0 + i] = 0.5 * dr;
         bm[i][B0 + i] = 0.5 * dr;
     }
