@@ -148,7 +148,19 @@ fn without_the_fallback_the_staggered_loop_fails_as_in_the_paper() {
     assert!(!reason.contains("fallback"), "{reason}");
 }
 
+/// `cosserat run mechanism --scheme edmc2 --alpha 0.5 --dt 0.05 --strategy staggered`
+/// with `extra`: its summary.json and history.csv.
 fn cosserat_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, String) {
+    let args: Vec<&str> = ["--strategy", "staggered"]
+        .iter()
+        .chain(extra)
+        .copied()
+        .collect();
+    mechanism_run(&args, out)
+}
+
+/// `cosserat run mechanism --scheme edmc2 --alpha 0.5 --dt 0.05` with `extra`.
+fn mechanism_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, String) {
     let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
         .args([
             "run",
@@ -159,8 +171,6 @@ fn cosserat_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, St
             "0.5",
             "--dt",
             "0.05",
-            "--strategy",
-            "staggered",
         ])
         .args(extra)
         .arg("--out")
@@ -251,20 +261,7 @@ fn check_names_the_fallback() {
 #[test]
 fn the_default_strategy_runs_monolithic_on_the_cpu() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("a");
-    let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
-        .args(["run", "mechanism", "--alpha", "0.5", "--dt", "0.05"])
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let (s, _) = mechanism_run(&[], &dir.path().join("a"));
     assert_eq!(s["params"]["strategy"], "auto");
     assert_eq!(s["strategy"], "monolithic");
     assert_eq!(s["status"], "failed", "{s}");

@@ -190,31 +190,14 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
     let dir = tempfile::tempdir().unwrap();
     let mut totals = Vec::new();
     for backend in ["cpu", "gpu"] {
-        let out = dir.path().join(backend);
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
-            .args([
-                "run",
-                "frame",
-                "--t-end",
-                "1",
-                "--strategy",
-                "staggered",
-                "--backend",
-                backend,
-                "--out",
-            ])
-            .arg(&out)
-            .output()
-            .unwrap();
-        let stdout = String::from_utf8_lossy(&o.stdout);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        assert!(stdout.contains("completed"), "{stdout}");
+        let (s, stdout) = frame_run(
+            &dir.path().join(backend),
+            backend,
+            &["--strategy", "staggered"],
+        );
         if backend == "gpu" {
             assert!(stdout.contains("backend: gpu:"), "{stdout}");
         }
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
-                .unwrap();
         // The summary names where the kernel ran (the adapter on the GPU path).
         let named = s["backend"].as_str().unwrap();
         assert!(named.starts_with(backend), "summary backend {named}");
@@ -223,6 +206,24 @@ fn cli_run_with_gpu_backend_matches_cpu_run() {
     let rel = (totals[0] - totals[1]).abs() / totals[0].abs();
     println!("run --backend gpu vs cpu: final energy differs by {rel:.1e}");
     assert!(rel <= PARITY_RTOL, "cpu {} gpu {}", totals[0], totals[1]);
+}
+
+/// `cosserat run frame --t-end 1 --backend BACKEND` with `extra` into `out`: it completes;
+/// its summary.json and stdout.
+fn frame_run(out: &std::path::Path, backend: &str, extra: &[&str]) -> (serde_json::Value, String) {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["run", "frame", "--t-end", "1", "--backend", backend])
+        .args(extra)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("completed"), "{backend}: {stdout}");
+    let s =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    (s, stdout)
 }
 
 /// The default strategy `auto` resolves by backend: a `run --backend gpu` of the frame
@@ -238,24 +239,7 @@ fn the_default_strategy_is_staggered_on_the_gpu_and_monolithic_on_the_cpu() {
     let dir = tempfile::tempdir().unwrap();
     let mut totals = Vec::new();
     for (backend, strategy) in [("cpu", "monolithic"), ("gpu", "staggered")] {
-        let out = dir.path().join(backend);
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
-            .args([
-                "run",
-                "frame",
-                "--t-end",
-                "1",
-                "--backend",
-                backend,
-                "--out",
-            ])
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
-                .unwrap();
+        let (s, _) = frame_run(&dir.path().join(backend), backend, &[]);
         assert_eq!(s["status"], "completed", "{backend}: {s}");
         assert_eq!(s["params"]["strategy"], "auto", "{backend}");
         assert_eq!(s["strategy"], strategy, "{backend}");
