@@ -502,7 +502,11 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
         smallest_substep: o.smallest_substep,
         accepted: o.accepted,
         backend: sim.backend_name(),
-        strategy: sim.strategy().name().into(),
+        strategy: sim
+            .params()
+            .scheme
+            .is_dissipative()
+            .then(|| sim.strategy().name().into()),
         linear_solver: sim.linear_solver().0.to_string(),
         solve: if sim.device_solve() { "device" } else { "host" }.into(),
         linear_solver_fallbacks: sim.linear_solver().1,

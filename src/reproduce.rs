@@ -307,7 +307,7 @@ fn write_report(
         s,
         "Every run uses the same Newton solver: relative residual tolerance 1e-11, at most 25 \
          iterations per solve, predictor = previous increment then zero; EDMC-2 by the paper's \
-         staggered loop (without the monolithic fallback that `cosserat run` applies by default) and, for the mechanisms, also by the monolithic Newton (\"monolithic\"); rigid links by the augmented Lagrangian (|g| ≤ 1e-10, at most 50 rounds per step). \
+         staggered loop (without the fallback that `cosserat run` applies by default) and, for the mechanisms, also by the monolithic Newton (\"monolithic\"); rigid links by the augmented Lagrangian (|g| ≤ 1e-10, at most 50 rounds per step). \
          Nothing is tuned per scheme. Geometry the paper does not give is reconstructed as DESIGN §6 \
          says (see the comments in `scenes/*.toml`).{}\n",
         if quick { " **Quick mode**: the arch stops at t = 1200 and the mechanisms at t = 6 with Δt = 0.05 only." } else { "" }

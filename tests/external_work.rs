@@ -14,8 +14,9 @@ fn bound(scheme: &str) -> f64 {
 }
 /// EM: exact up to round-off (measured 1.3e-13).
 const BALANCE_RTOL_EM: f64 = 1e-12;
-/// EDMC-2: the staggered loop closes the identity to `outer_tol` = 1e-10 (measured 9.7e-11).
-const BALANCE_RTOL_EDMC: f64 = 1e-9;
+/// EDMC-2 by the default strategy on the CPU (monolithic): the identity to round-off
+/// (measured 4.2e-15; the staggered loop closes it only to `outer_tol` = 1e-10: 9.7e-11).
+const BALANCE_RTOL_EDMC: f64 = 5e-14;
 
 fn loaded_cantilever(scheme: &str) -> cosserat::scene::Scene {
     let base = builtin_scenes()

@@ -190,9 +190,10 @@ fn thinned_history_closes_the_energy_balance() {
     }
     assert!(rows.last().unwrap().work_total > 1e-3, "the load did work");
     assert!(rows.last().unwrap().dissipation_total > 0.0);
-    // Each step meets its identity to outer_tol = 1e-10 relative; measured 1.6e-10 over
-    // the 15 steps.
-    assert!(worst < 1e-9, "energy balance residual {worst:e}");
+    // The default strategy on the CPU (monolithic) solves each step's identity to its
+    // round-off floor: measured 2.4e-14 over the 15 steps (the staggered loop closes it to
+    // outer_tol = 1e-10 relative: 1.6e-10).
+    assert!(worst < 2e-13, "energy balance residual {worst:e}");
     let e = &res.summary.energy_balance;
     assert!(e.max_rel_residual < 1e-9, "{e:?}");
 }

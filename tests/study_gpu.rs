@@ -6,7 +6,7 @@
 //! Without an adapter this prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU` is
 //! set (CI sets it), in which case it fails.
 use cosserat::batch::{BackendChoice, Executor};
-use cosserat::integrator::NewtonVariant;
+use cosserat::integrator::{NewtonVariant, Strategy};
 use cosserat::scene::load_scene;
 use cosserat::study::{stability, stability_on, SchemeKind, StabilityConfig};
 
@@ -24,6 +24,9 @@ fn stability_grid_on_the_gpu_matches_the_cpu() {
     // `full` reuses a factorization at a step's start on the CPU path only (the GPU paths
     // run it as `fresh`): compare like with like.
     scene.params.newton = NewtonVariant::Fresh;
+    // The same strategy on both paths (the default `auto` is monolithic on the CPU,
+    // staggered with a GPU evaluator).
+    scene.params.strategy = Strategy::Staggered;
     let cfg = StabilityConfig {
         kinds: vec![SchemeKind::Em, SchemeKind::Edmc2, SchemeKind::Midpoint],
         params: vec![0.5],

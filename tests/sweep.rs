@@ -92,6 +92,8 @@ fn sweep_writes_rows_and_resume_skips_recorded_members() {
     assert!(out.join("member_1/history.csv").exists());
     let info = std::fs::read_to_string(out.join("sweep.json")).unwrap();
     assert!(info.contains("\"backend\": \"cpu\""), "{info}");
+    // The frame's EDMC-2 members on the CPU: `auto` ran the monolithic Newton.
+    assert!(info.contains("\"strategy\": \"monolithic\""), "{info}");
     // Drop member 1's row, resume: only member 1 runs again.
     let kept: Vec<&str> = csv.lines().filter(|l| !l.starts_with("1,")).collect();
     std::fs::write(out.join("members.csv"), kept.join("\n") + "\n").unwrap();

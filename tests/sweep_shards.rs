@@ -142,6 +142,7 @@ fn shards_merge_to_the_one_process_result() {
     assert_eq!(info["members"], 7);
     assert_eq!(info["merged_shards"], 3);
     assert_eq!(info["backend"], "cpu");
+    assert_eq!(info["strategy"], "monolithic");
     assert_eq!(info["shards"].as_array().unwrap().len(), 3);
     // The merged folder is a one-machine sweep's: `--resume` finds every member recorded.
     let s = run(&file, &out, None, true);
@@ -570,6 +571,12 @@ fn a_shard_runs_on_the_backend_it_is_given() {
     let m = merge_shards(&out).unwrap();
     assert_eq!(m.backends.len(), 2, "{:?}", m.backends);
     assert!(m.backends[1].starts_with("gpu"), "{:?}", m.backends);
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("sweep.json")).unwrap()).unwrap();
+    assert_eq!(
+        info["strategy"], "staggered",
+        "the scene names it for both backends"
+    );
     // GPU members agree with the CPU ones (to round-off, not bit for bit).
     let want = sorted(rows(&reference.join("members.csv")));
     let got = rows(&out.join("members.csv"));

@@ -316,8 +316,8 @@ pub fn run_members(
 }
 
 /// The benchmark batch of `cosserat bench`: `rods` clamped 3D cantilevers of `elements`
-/// elements each (the built-in `cantilever` scene's rod and section), EDMC-2 α = 0.5,
-/// staggered, Δt = 0.01, `steps` steps, each member's tip kicked with a different speed
+/// elements each (the built-in `cantilever` scene's rod and section), EDMC-2 α = 0.5
+/// (the default strategy), Δt = 0.01, `steps` steps, each member's tip kicked with a different speed
 /// (so the members need different Newton iteration counts, as in a real sweep).
 ///
 /// An error (never another size than asked) when the scene with `elements` elements does

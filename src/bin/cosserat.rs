@@ -646,8 +646,9 @@ fn default_jobs(jobs: Option<usize>) -> usize {
 /// Loads a study's scene, with `--newton-tol` applied to its integrator parameters,
 /// creates the output directory and records the solver settings every run of the study
 /// shares in its `summary.json` (`study`, `scene`, `params`: the integrator parameters
-/// with `newton`, `newton_tol`, `strategy`, `fallback`, `cutback`).
-fn study_scene(c: &StudyCommon, study: &str) -> Result<Scene> {
+/// with `newton`, `newton_tol`, `strategy`, `fallback`, `cutback`; `strategy`: the one the
+/// dissipative runs use, `auto` resolved for the GPU path when `gpu`, else the CPU path).
+fn study_scene(c: &StudyCommon, study: &str, gpu: bool) -> Result<Scene> {
     let mut scene = load_scene(&c.scene)?;
     create_out(&c.out)?;
     if let Some(tol) = c.newton_tol {
@@ -673,6 +674,7 @@ fn study_scene(c: &StudyCommon, study: &str) -> Result<Scene> {
         "scene": scene.name,
         "t_end": c.t_end.unwrap_or(scene.params.t_end),
         "params": scene.params,
+        "strategy": scene.params.strategy.resolve(gpu).name(),
     });
     let path = c.out.join("summary.json");
     std::fs::write(&path, format!("{summary:#}\n"))
@@ -686,7 +688,7 @@ fn create_out(out: &Path) -> Result<()> {
 }
 
 fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
-    let scene = study_scene(&a.common, "work-precision")?;
+    let scene = study_scene(&a.common, "work-precision", false)?;
     let schemes = a
         .schemes
         .iter()
@@ -788,7 +790,12 @@ fn damping_command(a: &DampingArgs) -> Result<ExitCode> {
 }
 
 fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
-    let scene = study_scene(&a.common, "stability")?;
+    let exec = cmds::executor(a.backend, a.adapter.as_deref())?;
+    let scene = study_scene(
+        &a.common,
+        "stability",
+        matches!(exec, cosserat::batch::Executor::Gpu(_)),
+    )?;
     let kinds = a
         .schemes
         .iter()
@@ -810,7 +817,6 @@ fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
         t_end: a.common.t_end.unwrap_or(scene.params.t_end),
         jobs: default_jobs(a.common.jobs),
     };
-    let exec = cmds::executor(a.backend, a.adapter.as_deref())?;
     if a.backend != cmds::BackendArg::Cpu {
         println!("backend: {}", exec.describe());
     }

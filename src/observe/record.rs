@@ -130,9 +130,9 @@ pub struct RunSummary {
     /// Where the element kernel ran (`cpu` or `gpu: ADAPTER, f64`).
     pub backend: String,
     /// The dissipation strategy the run used (`params.strategy` resolved: `auto` is
-    /// `monolithic` on the CPU kernel, `staggered` with a GPU evaluator). Conserving
-    /// schemes (EM, midpoint, generalized-α) solve no dissipation scalars.
-    pub strategy: String,
+    /// `monolithic` on the CPU kernel, `staggered` with a GPU evaluator); `null` for the
+    /// conserving schemes (EM, midpoint, generalized-α), which solve no dissipation scalars.
+    pub strategy: Option<String>,
     /// The Newton linear solver (`dense`, `sparse`, `block-tridiagonal-B`).
     pub linear_solver: String,
     /// Where the frozen-scalar Newton systems were solved: `host`, or `device`

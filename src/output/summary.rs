@@ -58,7 +58,7 @@ mod tests {
             smallest_substep: None,
             accepted: Default::default(),
             backend: "cpu".into(),
-            strategy: "monolithic".into(),
+            strategy: Some("monolithic".into()),
             linear_solver: "block-tridiagonal-6".into(),
             solve: "host".into(),
             linear_solver_fallbacks: 0,

@@ -736,10 +736,25 @@ pub fn run_sweep(
         "skipped": summary.skipped,
         "repaired_bytes": summary.repaired_bytes,
         "backend": exec.describe(),
+        // The dissipation strategy of the members (`auto` resolved for this backend:
+        // staggered with the GPU evaluator, monolithic on the CPU kernel); `null` for
+        // conserving schemes.
+        "strategy": members.iter().find_map(|m| member_strategy(m, exec)),
         "solve": opts.solve.name(),
         "wall_s": summary.wall_s,
     });
     write_atomic(&json_path, &format!("{info:#}\n"))
         .map_err(ctx(format!("cannot write {}", json_path.display())))?;
     Ok(summary)
+}
+
+/// The dissipation strategy `m` runs with on `exec`: its parameters' choice with `auto`
+/// resolved (staggered where the GPU kernel evaluates it, monolithic on the CPU kernel);
+/// `None` for a conserving scheme, which solves no dissipation scalars.
+fn member_strategy(m: &crate::batch::Member, exec: &Executor) -> Option<&'static str> {
+    let p = &m.params;
+    let gpu = matches!(exec, Executor::Gpu(_)) && p.scheme.has_gpu_kernel();
+    p.scheme
+        .is_dissipative()
+        .then(|| p.strategy.resolve(gpu).name())
 }

@@ -429,6 +429,7 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
     let (mut completed, mut failed) = (0usize, 0usize);
     let mut shard_info = Vec::new();
     let mut backends: Vec<String> = Vec::new();
+    let mut strategies: Vec<String> = Vec::new();
     let mut template: Option<serde_json::Value> = None;
     let mut wall_max = 0.0f64;
     for &sh in &shards {
@@ -536,6 +537,15 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
             .and_then(|v| v["backend"].as_str())
             .map(str::to_string);
         let wall = info.as_ref().and_then(|v| v["wall_s"].as_f64());
+        let strategy = info
+            .as_ref()
+            .and_then(|v| v["strategy"].as_str())
+            .map(str::to_string);
+        if let Some(s) = &strategy {
+            if !strategies.contains(s) {
+                strategies.push(s.clone());
+            }
+        }
         if let Some(b) = &backend {
             if !backends.contains(b) {
                 backends.push(b.clone());
@@ -551,6 +561,7 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
             "completed": c,
             "failed": f,
             "backend": backend,
+            "strategy": strategy,
             "wall_s": wall,
         }));
     }
@@ -600,6 +611,7 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         "skipped": 0,
         "repaired_bytes": 0,
         "backend": backends.join(" + "),
+        "strategy": (!strategies.is_empty()).then(|| strategies.join(" + ")),
         "wall_s": wall_max,
         "merged_shards": count,
         "merge_wall_s": start.elapsed().as_secs_f64(),

@@ -217,8 +217,9 @@ pub struct MemberOpts {
     /// Newton variant of every member (default: each member's scene, else full).
     #[arg(long, value_enum)]
     pub newton: Option<NewtonArg>,
-    /// No fallback strategy in any member (a pure strategy, e.g. the paper's staggered
-    /// one; default: each member's scene, else fallback on).
+    /// No fallback strategy in any member (a pure strategy: the paper's staggered one with
+    /// `strategy = "staggered"` in the base scene; default: each member's scene, else
+    /// fallback on).
     #[arg(long)]
     pub no_fallback: bool,
     /// Step cut-back in every member: a failed step is redone as up to 2^N sub-steps
@@ -876,8 +877,9 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             "steps": a.steps,
             "newton": newton.name(),
             "strategy": a.strategy.name(),
-            "cpu_strategy": a.strategy.strategy().resolve(false).name(),
-            "gpu_strategy": a.strategy.strategy().resolve(true).name(),
+            "cpu_strategy": cpu.as_ref().map(|_| a.strategy.strategy().resolve(false).name()),
+            "gpu_strategy": (gpu.is_some() || dev.is_some())
+                .then(|| a.strategy.strategy().resolve(true).name()),
             "cpu_element_steps_per_s": cpu_rate,
             "gpu_element_steps_per_s": gpu_rate,
             "cpu_rod_steps_per_s": cpu.as_ref().map(|c| rod_steps / c.stats.wall_s),
