@@ -70,8 +70,9 @@ fn files_below(dir: &Path) -> Vec<String> {
 
 fn all_finite(v: &serde_json::Value, path: &str, bad: &mut Vec<String>) {
     match v {
-        // Documented nulls: no failure reason, no step cut back.
-        serde_json::Value::Null if !matches!(path, "reason" | "smallest_substep") => {
+        // Documented nulls: no failure reason, no step cut back, no dissipation strategy
+        // (a conserving scheme).
+        serde_json::Value::Null if !matches!(path, "reason" | "smallest_substep" | "strategy") => {
             bad.push(path.to_string())
         }
         serde_json::Value::Number(n) if !n.as_f64().is_some_and(f64::is_finite) => {
