@@ -265,6 +265,18 @@ mod tests {
         assert!((d - positive).abs() < 1e-13 * positive.abs().max(1.0));
     }
 
+    /// Local inputs with every kind of dissipation active and the scalars coupled.
+    fn coupled_inputs() -> LocalInputs {
+        LocalInputs {
+            v_n: 0.3,
+            v_n1: 0.9,
+            nu_n: 0.2,
+            nu_n1: 0.05,
+            x_gamma: 1.5,
+            x_omega: 2.0,
+        }
+    }
+
     #[test]
     fn coupled_edmc2_dissipation_is_the_positive_form() {
         let scheme = Scheme::Edmc2 {
@@ -273,14 +285,7 @@ mod tests {
             alpha_ov: 0.2,
             alpha_on: 0.9,
         };
-        let inp = LocalInputs {
-            v_n: 0.3,
-            v_n1: 0.9,
-            nu_n: 0.2,
-            nu_n1: 0.05,
-            x_gamma: 1.5,
-            x_omega: 2.0,
-        };
+        let inp = coupled_inputs();
         let s = local_scalars(&scheme, &inp, 2.0, 0.3);
         let d = s.dissipation_density(&inp, 2.0);
         let positive = 0.5 * 2.0 * (s.dv * s.dv + s.dnu * s.dnu)
@@ -310,14 +315,7 @@ mod tests {
                 chi_nu: 0.4,
             },
         ];
-        let inp = LocalInputs {
-            v_n: 0.3,
-            v_n1: 0.9,
-            nu_n: 0.2,
-            nu_n1: 0.05,
-            x_gamma: 1.5,
-            x_omega: 2.0,
-        };
+        let inp = coupled_inputs();
         let out = |s: &LocalScalars| [s.beta_gamma, s.beta_omega, s.dv, s.dnu];
         let mut worst: f64 = 0.0;
         for scheme in schemes {

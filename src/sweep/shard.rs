@@ -532,25 +532,20 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         let info: Option<serde_json::Value> = std::fs::read_to_string(file(out, sh, "json"))
             .ok()
             .and_then(|t| serde_json::from_str(&t).ok());
-        let backend = info
-            .as_ref()
-            .and_then(|v| v["backend"].as_str())
-            .map(str::to_string);
+        // A text field of the shard's record, also collected (once each) into `seen`.
+        let field = |key: &str, seen: &mut Vec<String>| {
+            let v = info
+                .as_ref()
+                .and_then(|v| v[key].as_str())
+                .map(str::to_string);
+            if let Some(x) = v.as_ref().filter(|x| !seen.contains(x)) {
+                seen.push(x.clone());
+            }
+            v
+        };
+        let backend = field("backend", &mut backends);
+        let strategy = field("strategy", &mut strategies);
         let wall = info.as_ref().and_then(|v| v["wall_s"].as_f64());
-        let strategy = info
-            .as_ref()
-            .and_then(|v| v["strategy"].as_str())
-            .map(str::to_string);
-        if let Some(s) = &strategy {
-            if !strategies.contains(s) {
-                strategies.push(s.clone());
-            }
-        }
-        if let Some(b) = &backend {
-            if !backends.contains(b) {
-                backends.push(b.clone());
-            }
-        }
         wall_max = wall_max.max(wall.unwrap_or(0.0));
         if template.is_none() {
             template = info.clone();
