@@ -17,7 +17,8 @@ use cosserat::element::scalar_gradient::{residual_scalar_derivatives, scalar_gra
 use cosserat::element::strain::Config;
 use cosserat::element::{
     consistent_scalars, kinematics, kinematics_at, monolithic_correction, residual_tangent,
-    strains6, ElementData, ElementEval, ElementState, FrozenScalars, Increment, StepConsts, NDOF,
+    strains6, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars, Increment,
+    StepConsts, NDOF,
 };
 use cosserat::gpu::kernel::{KernelMode, ELEMENT_WGSL};
 use cosserat::gpu::{gpu_required, layout, ElementKernel, GpuContext, Precision};
@@ -578,7 +579,16 @@ fn residual_scalar_derivatives_are_the_residual_differences() {
     let mut checked = 0;
     for c in &dissipative_variants() {
         let (s0, _, kin0) = consistent_scalars(&c.data, &c.st, &c.eps_n, &c.inc, &c.k);
-        let exact = residual_scalar_derivatives(&c.data, &c.st, &kin0, &c.k, c.trans);
+        let exact = residual_scalar_derivatives(&c.data, &c.st, &kin0, &c.k, c.trans, [true; 4]);
+        // Asked for one derivative at a time, each is the same to the bit and the rest zero.
+        for i in 0..4 {
+            let which: [bool; 4] = std::array::from_fn(|j| j == i);
+            let one = residual_scalar_derivatives(&c.data, &c.st, &kin0, &c.k, c.trans, which);
+            for j in 0..4 {
+                let want = if j == i { exact[j] } else { ElemVec::zeros() };
+                assert_eq!(one[j], want, "derivative {j} asked for {which:?}");
+            }
+        }
         let ksum: f64 = c.data.kappa().iter().sum();
         let size = std::cell::Cell::new(0.0f64);
         let diff = residual_differences(&s0, ksum, |s, phi| {

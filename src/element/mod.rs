@@ -954,12 +954,16 @@ pub fn monolithic_correction(
     kt: &mut ElemMat,
 ) {
     let dsigma = scalar_gradient::scalar_gradient(data, st, kin, s, k);
-    let d_r = scalar_gradient::residual_scalar_derivatives(data, st, kin, k, trans_diss);
+    let varies = scalars_varying(&dsigma, active);
+    let d_r = scalar_gradient::residual_scalar_derivatives(data, st, kin, k, trans_diss, varies);
     scalar_correction(&dsigma, &d_r, active, kt);
 }
 
 /// Which of `σ = (β_Γ, β_Ω, c_v, φ)` vary with the unknowns marked `active`.
-fn scalars_varying<const N: usize>(dsigma: &[[f64; 4]; N], active: &[bool; N]) -> [bool; 4] {
+pub(crate) fn scalars_varying<const N: usize>(
+    dsigma: &[[f64; 4]; N],
+    active: &[bool; N],
+) -> [bool; 4] {
     let mut varies = [false; 4];
     for j in (0..N).filter(|&j| active[j]) {
         for i in 0..4 {

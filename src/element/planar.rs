@@ -846,7 +846,8 @@ pub fn monolithic_correction(
     kt: &mut PElemMat,
 ) {
     let dsigma = scalar_gradient(pd, st, kin, s, k);
-    let d_r = residual_scalar_derivatives(pd, st, kin, k, trans_diss);
+    let varies = super::scalars_varying(&dsigma, active);
+    let d_r = residual_scalar_derivatives(pd, st, kin, k, trans_diss, varies);
     super::scalar_correction(&dsigma, &d_r, active, kt);
 }
 
@@ -860,7 +861,9 @@ pub(crate) fn scalar_gradient(
     s: &FrozenScalars,
     k: &StepConsts,
 ) -> [[f64; 4]; NDOF_P] {
-    use super::scalar_gradient::{chain, sigma_over_inputs, W_P1, W_P2, W_V, W_XG, W_XO};
+    use super::scalar_gradient::{
+        chain, needed_numbers, sigma_over_inputs, W_P1, W_P2, W_V, W_XG, W_XO,
+    };
     let (h, dt) = (pd.h, k.dt);
     let y = director_rate(st, kin, dt);
     let m = 0.5 * (st.vs[0] + st.vs[1]);
@@ -875,10 +878,12 @@ pub(crate) fn scalar_gradient(
         s.c_nu,
         [p2, p1],
     );
+    // Only the gradients of the numbers some scalar depends on (as in 3D).
+    let needed = needed_numbers(&dsigma_dw);
     let mut dw = [[0.0f64; NDOF_P]; 5];
     let vh = 0.5 * (kin.v1[0] + kin.v1[1]);
     let vn = vh.norm();
-    if vn > 0.0 {
+    if needed[W_V] && vn > 0.0 {
         let vhat = vh / vn;
         for l in 0..2 {
             for c in 0..2 {
@@ -891,8 +896,11 @@ pub(crate) fn scalar_gradient(
     let jvec = |l: usize, i: usize| kin.amat[l] * perp(&kin.mid.d[l][i]);
     // X_Γ = Σ c_k Δ_k² (k = 0, 1), X_Ω = c_2 Δ_2², through the strains at n+1.
     let de = kin.eps1 - kin.eps_n;
-    let b_end = gradient(&kin.cfg1, h);
+    let b_end = (needed[W_XG] || needed[W_XO]).then(|| gradient(&kin.cfg1, h));
     for (wi, rows) in [(W_XG, 0..2), (W_XO, 2..3)] {
+        let Some(b_end) = b_end.as_ref().filter(|_| needed[wi]) else {
+            continue;
+        };
         for kk in rows {
             let coef = 2.0 * pd.c[kk] * de[kk];
             for l in 0..2 {
@@ -906,7 +914,7 @@ pub(crate) fn scalar_gradient(
         }
     }
     // P₂, P₁ through Y (∂Y/∂s^l_{n+1} = I/Δt).
-    for l in 0..2 {
+    for l in (0..2).filter(|_| needed[W_P2] || needed[W_P1]) {
         let j = jvec(l, 0) / dt;
         dw[W_P2][pth_idx(l)] += 2.0 * pd.i_s * y.dot(&j);
         dw[W_P1][pth_idx(l)] += 2.0 * pd.i_s * m.dot(&j);
@@ -920,13 +928,15 @@ fn director_rate(st: &PState, kin: &PKinematics, dt: f64) -> V2 {
 }
 
 /// Planar twin of [`super::scalar_gradient::residual_scalar_derivatives`]: `∂R/∂σ_i` of
-/// the planar residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics `kin`.
+/// the planar residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics `kin`, those
+/// marked in `which` only (the others are zero).
 pub(crate) fn residual_scalar_derivatives(
     pd: &PlanarData,
     st: &PState,
     kin: &PKinematics,
     k: &StepConsts,
     trans_diss: bool,
+    which: [bool; 4],
 ) -> [PElemVec; 4] {
     let (h, dt) = (pd.h, k.dt);
     let project = |f: &[V2; NF]| {
@@ -938,25 +948,28 @@ pub(crate) fn residual_scalar_derivatives(
         }
         r
     };
-    let b_mid = gradient(&kin.mid, h);
-    let de = kin.eps1 - kin.eps_n;
-    let forces = |rows: std::ops::Range<usize>| {
-        let mut f = [V2::zeros(); NF];
-        for kk in rows {
-            let hs = h * 0.5 * pd.c[kk] * de[kk];
-            for (p, fp) in f.iter_mut().enumerate() {
-                *fp += b_mid[kk][p] * hs;
+    let mut out = [PElemVec::zeros(); 4];
+    if which[0] || which[1] {
+        let b_mid = gradient(&kin.mid, h);
+        let de = kin.eps1 - kin.eps_n;
+        let forces = |rows: std::ops::Range<usize>| {
+            let mut f = [V2::zeros(); NF];
+            for kk in rows {
+                let hs = h * 0.5 * pd.c[kk] * de[kk];
+                for (p, fp) in f.iter_mut().enumerate() {
+                    *fp += b_mid[kk][p] * hs;
+                }
             }
+            project(&f)
+        };
+        if which[0] {
+            out[0] = forces(0..2);
         }
-        project(&f)
-    };
-    let mut out = [
-        forces(0..2),
-        forces(2..3),
-        PElemVec::zeros(),
-        PElemVec::zeros(),
-    ];
-    if trans_diss {
+        if which[1] {
+            out[1] = forces(2..3);
+        }
+    }
+    if trans_diss && which[2] {
         let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
         let dg = -0.5 * h * pd.a_rho * vsum;
         for l in 0..2 {
@@ -964,7 +977,7 @@ pub(crate) fn residual_scalar_derivatives(
         }
     }
     let kappa = pd.kappa;
-    if kappa[0] != 0.0 || kappa[1] != 0.0 {
+    if which[3] && (kappa[0] != 0.0 || kappa[1] != 0.0) {
         let y = director_rate(st, kin, dt);
         let mut f = [V2::zeros(); NF];
         for l in 0..2 {

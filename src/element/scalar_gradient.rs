@@ -71,11 +71,15 @@ pub fn scalar_gradient(
         [p2, p1],
     );
 
-    // dw/dx, one gradient per number.
+    // dw/dx, one gradient per number, formed only for the numbers some scalar depends
+    // on (`needed`): a scheme with the stress or director dissipation off has no scalar
+    // that varies with X_Γ, X_Ω or P₂, P₁, and their gradients (a strain gradient, the
+    // director maps) would be multiplied by zeros.
+    let needed = needed_numbers(&dsigma_dw);
     let mut dw = [[0.0f64; NDOF]; NW];
     let vh = 0.5 * (kin.v1[0] + kin.v1[1]);
     let vn = vh.norm();
-    if vn > 0.0 {
+    if needed[W_V] && vn > 0.0 {
         let vhat = vh / vn;
         for l in 0..2 {
             for c in 0..3 {
@@ -95,8 +99,11 @@ pub fn scalar_gradient(
     let dom = de.fixed_rows::<3>(3).into_owned();
     let cg = 2.0 * p.c_gamma.component_mul(&dg);
     let co = (p.c_omega + p.c_omega.transpose()) * dom;
-    let b_end = strain_gradient(&kin.cfg1, h);
+    let b_end = (needed[W_XG] || needed[W_XO]).then(|| strain_gradient(&kin.cfg1, h));
     for (wi, coef, rows) in [(W_XG, cg, 0..3), (W_XO, co, 3..6)] {
+        let Some(b_end) = b_end.as_ref().filter(|_| needed[wi]) else {
+            continue;
+        };
         let mut field = [Vec3::zeros(); NFIELDS];
         for kk in rows {
             let c = coef[kk % 3];
@@ -123,7 +130,7 @@ pub fn scalar_gradient(
         }
     }
     // P₂ and P₁ through Y_α (∂Y_α/∂d^l_{α,n+1} = I/Δt).
-    for l in 0..2 {
+    for l in (0..2).filter(|_| needed[W_P2] || needed[W_P1]) {
         for a in 0..2 {
             let mut g2 = Vec3::zeros();
             let mut g1 = Vec3::zeros();
@@ -222,6 +229,12 @@ pub(crate) fn sigma_over_inputs(
     [d_bg, d_bo, d_cv, d_phi]
 }
 
+/// Which of the five numbers `w` some scalar depends on (a nonzero column of
+/// `∂σ/∂w`): the gradients of the others are left at zero (shared by both kernels).
+pub(crate) fn needed_numbers(dsigma_dw: &[[f64; NW]; 4]) -> [bool; NW] {
+    std::array::from_fn(|w| dsigma_dw.iter().any(|row| row[w] != 0.0))
+}
+
 /// `Y_α = Σ_l (d^l_{α,n+1} − d^l_{α,n})/Δt` (α = 1, 2): the director rates the director
 /// factor scales (`w_α = φ Y_α`).
 fn director_rates(st: &ElementState, kin: &Kinematics, dt: f64) -> [Vec3; 2] {
@@ -250,12 +263,16 @@ pub(crate) fn chain<const N: usize>(
 /// * `c_v`: the `g` rows change by `−½ h Aρ (v^h_n + v^h_{n+1})`;
 /// * `φ`: the director velocities at `n+1` change by `−2 κ_l Y_α`, and with them the
 ///   director inertia forces.
+///
+/// Only the derivatives marked in `which` are formed (the others are zero): the
+/// monolithic tangent needs those of the scalars that vary.
 pub fn residual_scalar_derivatives(
     data: &ElementData,
     st: &ElementState,
     kin: &Kinematics,
     k: &StepConsts,
     trans_diss: bool,
+    which: [bool; 4],
 ) -> [ElemVec; 4] {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
@@ -273,19 +290,22 @@ pub fn residual_scalar_derivatives(
         }
         r
     };
-    let b_mid = strain_gradient(&kin.mid, h);
-    let de = kin.eps1 - kin.eps_n;
-    let dn = 0.5 * p.c_gamma.component_mul(&de.fixed_rows::<3>(0).into_owned());
-    let dm = 0.5 * p.c_omega * de.fixed_rows::<3>(3).into_owned();
-    let ds_gamma = Vector6::new(dn.x, dn.y, dn.z, 0.0, 0.0, 0.0);
-    let ds_omega = Vector6::new(0.0, 0.0, 0.0, dm.x, dm.y, dm.z);
-    let mut out = [
-        project(&field_forces(&b_mid, &ds_gamma, h)),
-        project(&field_forces(&b_mid, &ds_omega, h)),
-        ElemVec::zeros(),
-        ElemVec::zeros(),
-    ];
-    if trans_diss {
+    let mut out = [ElemVec::zeros(); 4];
+    if which[0] || which[1] {
+        let b_mid = strain_gradient(&kin.mid, h);
+        let de = kin.eps1 - kin.eps_n;
+        let dn = 0.5 * p.c_gamma.component_mul(&de.fixed_rows::<3>(0).into_owned());
+        let dm = 0.5 * p.c_omega * de.fixed_rows::<3>(3).into_owned();
+        let ds_gamma = Vector6::new(dn.x, dn.y, dn.z, 0.0, 0.0, 0.0);
+        let ds_omega = Vector6::new(0.0, 0.0, 0.0, dm.x, dm.y, dm.z);
+        if which[0] {
+            out[0] = project(&field_forces(&b_mid, &ds_gamma, h));
+        }
+        if which[1] {
+            out[1] = project(&field_forces(&b_mid, &ds_omega, h));
+        }
+    }
+    if trans_diss && which[2] {
         let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
         let dg = -0.5 * h * p.a_rho * vsum;
         for l in 0..2 {
@@ -293,7 +313,7 @@ pub fn residual_scalar_derivatives(
         }
     }
     let kappa = data.kappa();
-    if kappa[0] != 0.0 || kappa[1] != 0.0 {
+    if which[3] && (kappa[0] != 0.0 || kappa[1] != 0.0) {
         let y = director_rates(st, kin, dt);
         let mut f = [Vec3::zeros(); NFIELDS];
         for l in 0..2 {

@@ -140,7 +140,7 @@ impl DofMap {
 
     /// Sparsity pattern: every pair of unknowns of a common element.
     pub fn pattern(&self) -> Vec<(usize, usize)> {
-        let mut p = Vec::new();
+        let mut p = Vec::with_capacity(self.elements.len() * NDOF * NDOF);
         for m in &self.elements {
             for &i in m.iter().filter(|&&i| i != NONE) {
                 for &j in m.iter().filter(|&&j| j != NONE) {

@@ -43,7 +43,7 @@ use crate::integrator::gen_alpha::GenAlpha;
 use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
 use crate::integrator::report::SolveTimers;
 use crate::integrator::state::State;
-use crate::linsolve::{SolverKind, SparseSolver};
+use crate::linsolve::{SlotLookup, SolverKind, SparseSolver};
 use crate::model::{Model, Vec3};
 use crate::observe::{invariants, Invariants};
 
@@ -294,6 +294,7 @@ impl Simulation {
         extra: &[(usize, usize)],
     ) -> Result<SystemParts, crate::linsolve::LinsolveError> {
         let mut pattern = dofs.pattern();
+        pattern.reserve(dofs.n + 9 * model.links.len() + extra.len());
         for i in 0..dofs.n {
             pattern.push((i, i));
         }
@@ -307,16 +308,16 @@ impl Simulation {
         }
         pattern.extend_from_slice(extra);
         let solver = SparseSolver::with_blocks(dofs.n, &pattern, &dofs.node_block_sizes())?;
+        // Every lookup below goes column by column through one lookup table.
+        let mut look = solver.slot_lookup();
         let slots: Vec<Vec<usize>> = dofs
             .elements
             .iter()
             .map(|m| {
                 let mut s = vec![NONE; NDOF * NDOF];
-                for i in 0..NDOF {
-                    for j in 0..NDOF {
-                        if m[i] != NONE && m[j] != NONE {
-                            s[i * NDOF + j] = solver.slot(m[i], m[j]);
-                        }
+                for j in (0..NDOF).filter(|&j| m[j] != NONE) {
+                    for i in (0..NDOF).filter(|&i| m[i] != NONE) {
+                        s[i * NDOF + j] = look.slot(m[i], m[j]);
                     }
                 }
                 s
@@ -327,11 +328,11 @@ impl Simulation {
             .nodes
             .iter()
             .map(|nd| {
-                let slot = |a: [usize; 3], b: [usize; 3], c: usize| {
+                let mut slot = |a: [usize; 3], b: [usize; 3], c: usize| {
                     if a[c] == NONE || b[c] == NONE {
                         NONE
                     } else {
-                        solver.slot(a[c], b[c])
+                        look.slot(a[c], b[c])
                     }
                 };
                 [
@@ -342,7 +343,7 @@ impl Simulation {
                 ]
             })
             .collect();
-        let (node_block_slots, off_block_slots) = Self::block_slots(model, dofs, &solver);
+        let (node_block_slots, off_block_slots) = Self::block_slots(model, dofs, &mut look);
         let link_slots = link_dofs
             .iter()
             .map(|ix| {
@@ -351,7 +352,7 @@ impl Simulation {
                         if ix[c] == NONE || ix[d] == NONE {
                             NONE
                         } else {
-                            solver.slot(ix[c], ix[d])
+                            look.slot(ix[c], ix[d])
                         }
                     })
                 })
@@ -559,17 +560,17 @@ impl Simulation {
     fn block_slots(
         model: &Model,
         dofs: &DofMap,
-        solver: &SparseSolver,
+        look: &mut SlotLookup<'_>,
     ) -> (Vec<[usize; 81]>, Vec<[[usize; 81]; 2]>) {
-        let table = |a: &[usize; 9], b: &[usize; 9]| -> [usize; 81] {
-            std::array::from_fn(|f| {
-                let (i, j) = (a[f / 9], b[f % 9]);
-                if i == NONE || j == NONE {
-                    NONE
-                } else {
-                    solver.slot(i, j)
+        // Entry f = 9 i + j of a table is (a_i, b_j); looked up column by column.
+        let mut table = |a: &[usize; 9], b: &[usize; 9]| -> [usize; 81] {
+            let mut t = [NONE; 81];
+            for (j, &bj) in b.iter().enumerate().filter(|&(_, &bj)| bj != NONE) {
+                for (i, &ai) in a.iter().enumerate().filter(|&(_, &ai)| ai != NONE) {
+                    t[9 * i + j] = look.slot(ai, bj);
                 }
-            })
+            }
+            t
         };
         let mut has_element = vec![false; dofs.nodes.len()];
         for e in &model.elements {
