@@ -956,7 +956,7 @@ pub fn monolithic_correction(
     let dsigma = scalar_gradient::scalar_gradient(data, st, kin, s, k);
     let varies = scalars_varying(&dsigma, active);
     let d_r = scalar_gradient::residual_scalar_derivatives(data, st, kin, k, trans_diss, varies);
-    scalar_correction(&dsigma, &d_r, active, kt);
+    scalar_correction(&dsigma, &d_r, active, varies, kt);
 }
 
 /// Which of `σ = (β_Γ, β_Ω, c_v, φ)` vary with the unknowns marked `active`.
@@ -979,13 +979,15 @@ pub(crate) fn scalars_varying<const N: usize>(
 /// affine in: column j is `Σ_i ∂R/∂σ_i ∂σ_i/∂x_j`, the same quantity as differencing
 /// whole residuals at the perturbed scalars, `(R(s(x + h e_j)) − R(s(x − h e_j)))/2h`,
 /// without two residuals per column and without that difference's cancellation.
+/// `varies` is [`scalars_varying`] of `dsigma` and `active` (the terms of the other
+/// scalars are zero).
 pub(crate) fn scalar_correction<const N: usize>(
     dsigma: &[[f64; 4]; N],
     d_r: &[SVector<f64, N>; 4],
     active: &[bool; N],
+    varies: [bool; 4],
     kt: &mut SMatrix<f64, N, N>,
 ) {
-    let varies = scalars_varying(dsigma, active);
     for j in (0..N).filter(|&j| active[j]) {
         let mut c = kt.column_mut(j);
         for i in (0..4).filter(|&i| varies[i]) {

@@ -848,7 +848,7 @@ pub fn monolithic_correction(
     let dsigma = scalar_gradient(pd, st, kin, s, k);
     let varies = super::scalars_varying(&dsigma, active);
     let d_r = residual_scalar_derivatives(pd, st, kin, k, trans_diss, varies);
-    super::scalar_correction(&dsigma, &d_r, active, kt);
+    super::scalar_correction(&dsigma, &d_r, active, varies, kt);
 }
 
 /// Planar twin of [`super::scalar_gradient::scalar_gradient`]: `∂σ/∂x_j` (row `j`) over
@@ -919,7 +919,7 @@ pub(crate) fn scalar_gradient(
         dw[W_P2][pth_idx(l)] += 2.0 * pd.i_s * y.dot(&j);
         dw[W_P1][pth_idx(l)] += 2.0 * pd.i_s * m.dot(&j);
     }
-    chain(&dsigma_dw, &dw)
+    chain(&dsigma_dw, &dw, &needed)
 }
 
 /// `Y = Σ_l (s^l_{n+1} − s^l_n)/Δt`: the rate of `s` the director factor scales.

@@ -148,7 +148,7 @@ pub fn scalar_gradient(
         }
     }
 
-    chain(&dsigma_dw, &dw)
+    chain(&dsigma_dw, &dw, &needed)
 }
 
 /// `∂σ/∂w`: the derivative of `σ = (β_Γ, β_Ω, c_v, φ)` with respect to the five numbers
@@ -245,14 +245,22 @@ fn director_rates(st: &ElementState, kin: &Kinematics, dt: f64) -> [Vec3; 2] {
     })
 }
 
-/// `∂σ/∂x = (∂σ/∂w)(∂w/∂x)`, row `j` of the result for unknown `j`.
+/// `∂σ/∂x = (∂σ/∂w)(∂w/∂x)`, row `j` of the result for unknown `j`, summed over the
+/// numbers marked `needed` ([`needed_numbers`]: the others' columns of `∂σ/∂w` are zero).
 pub(crate) fn chain<const N: usize>(
     dsigma_dw: &[[f64; NW]; 4],
     dw: &[[f64; N]; NW],
+    needed: &[bool; NW],
 ) -> [[f64; 4]; N] {
-    std::array::from_fn(|j| {
-        std::array::from_fn(|i| (0..NW).map(|w| dsigma_dw[i][w] * dw[w][j]).sum())
-    })
+    let mut out = [[0.0f64; 4]; N];
+    for w in (0..NW).filter(|&w| needed[w]) {
+        for (j, row) in out.iter_mut().enumerate() {
+            for (i, o) in row.iter_mut().enumerate() {
+                *o += dsigma_dw[i][w] * dw[w][j];
+            }
+        }
+    }
+    out
 }
 
 /// `∂R/∂σ_i` of the element residual for `σ = (β_Γ, β_Ω, c_v, φ)` at the kinematics
