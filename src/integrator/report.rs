@@ -73,6 +73,10 @@ pub struct SolveTimers {
     /// … and of those, the ones whose residual was not accepted after all (the tangent
     /// was then assembled at the same iterate).
     pub tangent_skip_misses: u64,
+    /// Full-Newton iterates assembled without the tangent whose residual landed just
+    /// above the tolerance, corrected with the last factorization instead (no tangent is
+    /// assembled for them).
+    pub chord_corrections: u64,
 }
 
 impl SolveTimers {
@@ -86,6 +90,7 @@ impl SolveTimers {
         self.solves += o.solves;
         self.tangents_skipped += o.tangents_skipped;
         self.tangent_skip_misses += o.tangent_skip_misses;
+        self.chord_corrections += o.chord_corrections;
     }
 }
 
