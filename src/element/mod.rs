@@ -852,10 +852,9 @@ fn tangent(
                     let mass = h * M2[l][m] * p.i_rho[(a, b)] * inv_dt;
                     let (pl, qm) = (field_of(l, a), field_of(m, b));
                     gs[(pl, qm)] += mass * (2.0 * inv_dt);
-                    for qq in 0..2 {
-                        if data.rot_free[qq] {
-                            gs[(pl, field_of(qq, b))] -= mass * 2.0 * kappa[m] * dw;
-                        }
+                    // (Without director dissipation dw = 0: nothing to subtract.)
+                    for qq in (0..2).filter(|&qq| dw != 0.0 && data.rot_free[qq]) {
+                        gs[(pl, field_of(qq, b))] -= mass * 2.0 * kappa[m] * dw;
                     }
                 }
             }
