@@ -376,3 +376,31 @@ fn run_newton_fresh_is_recorded_and_full_factorizes_less() {
     );
     assert!((ea - eb).abs() <= 1e-13 * ea.abs(), "{ea} vs {eb}");
 }
+
+/// `bench --json` counts the full-Newton chord corrections (`cpu_chord_corrections`): the
+/// batch's monolithic members take them (their steps end just above the tolerance), `fresh`
+/// never does, and they save factorizations for about the same Newton iterations (measured
+/// at 2 rods × 30 elements × 10 steps: 15 chords; 42 against 76 factorizations; 75 against
+/// 76 iterations).
+#[test]
+fn bench_counts_chord_corrections() {
+    let json =
+        |extra: &[&str]| bench_json(&["--rods", "2", "--elements", "30", "--steps", "10"], extra);
+    let (full, fresh) = (json(&[]), json(&["--newton", "fresh"]));
+    let n = |j: &serde_json::Value, k: &str| j[k].as_u64().unwrap_or_else(|| panic!("{k}: {j}"));
+    println!(
+        "chords {}, factorizations {} (fresh {}), iterations {} (fresh {})",
+        n(&full, "cpu_chord_corrections"),
+        n(&full, "cpu_factorizations"),
+        n(&fresh, "cpu_factorizations"),
+        n(&full, "cpu_newton_iters"),
+        n(&fresh, "cpu_newton_iters")
+    );
+    assert_eq!(n(&fresh, "cpu_chord_corrections"), 0);
+    assert!(n(&full, "cpu_chord_corrections") >= 10, "{full}");
+    assert!(
+        10 * n(&full, "cpu_factorizations") <= 7 * n(&fresh, "cpu_factorizations"),
+        "{full}\n{fresh}"
+    );
+    assert_eq!(full["cpu_failed"], 0);
+}
