@@ -845,6 +845,8 @@ fn tangent(
     let ksum = kappa[0] + kappa[1];
     // dw_α/dd^q_{α,n+1} = c_ν/(Δt(1+K c_ν)) on rotation-free ends.
     let dw = s.c_nu / (dt * (1.0 + ksum * s.c_nu));
+    // (Without director dissipation dw = 0: nothing to subtract below.)
+    let director_diss = dw != 0.0;
     for l in 0..2 {
         for m in 0..2 {
             for a in 0..2 {
@@ -852,9 +854,10 @@ fn tangent(
                     let mass = h * M2[l][m] * p.i_rho[(a, b)] * inv_dt;
                     let (pl, qm) = (field_of(l, a), field_of(m, b));
                     gs[(pl, qm)] += mass * (2.0 * inv_dt);
-                    // (Without director dissipation dw = 0: nothing to subtract.)
-                    for qq in (0..2).filter(|&qq| dw != 0.0 && data.rot_free[qq]) {
-                        gs[(pl, field_of(qq, b))] -= mass * 2.0 * kappa[m] * dw;
+                    if director_diss {
+                        for qq in (0..2).filter(|&qq| data.rot_free[qq]) {
+                            gs[(pl, field_of(qq, b))] -= mass * 2.0 * kappa[m] * dw;
+                        }
                     }
                 }
             }

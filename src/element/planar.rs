@@ -914,10 +914,12 @@ pub(crate) fn scalar_gradient(
         }
     }
     // P₂, P₁ through Y (∂Y/∂s^l_{n+1} = I/Δt).
-    for l in (0..2).filter(|_| needed[W_P2] || needed[W_P1]) {
-        let j = jvec(l, 0) / dt;
-        dw[W_P2][pth_idx(l)] += 2.0 * pd.i_s * y.dot(&j);
-        dw[W_P1][pth_idx(l)] += 2.0 * pd.i_s * m.dot(&j);
+    if needed[W_P2] || needed[W_P1] {
+        for l in 0..2 {
+            let j = jvec(l, 0) / dt;
+            dw[W_P2][pth_idx(l)] += 2.0 * pd.i_s * y.dot(&j);
+            dw[W_P1][pth_idx(l)] += 2.0 * pd.i_s * m.dot(&j);
+        }
     }
     chain(&dsigma_dw, &dw, &needed)
 }

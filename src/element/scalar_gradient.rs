@@ -130,20 +130,22 @@ pub fn scalar_gradient(
         }
     }
     // P₂ and P₁ through Y_α (∂Y_α/∂d^l_{α,n+1} = I/Δt).
-    for l in (0..2).filter(|_| needed[W_P2] || needed[W_P1]) {
-        for a in 0..2 {
-            let mut g2 = Vec3::zeros();
-            let mut g1 = Vec3::zeros();
-            for b in 0..2 {
-                let i_ab = ir[(a, b)] + ir[(b, a)];
-                g2 += i_ab * y[b];
-                g1 += i_ab * m[b];
-            }
-            let g2 = to_theta(l, a, &(g2 / dt));
-            let g1 = to_theta(l, a, &(g1 / dt));
-            for c in 0..3 {
-                dw[W_P2][th_idx(l) + c] += g2[c];
-                dw[W_P1][th_idx(l) + c] += g1[c];
+    if needed[W_P2] || needed[W_P1] {
+        for l in 0..2 {
+            for a in 0..2 {
+                let mut g2 = Vec3::zeros();
+                let mut g1 = Vec3::zeros();
+                for b in 0..2 {
+                    let i_ab = ir[(a, b)] + ir[(b, a)];
+                    g2 += i_ab * y[b];
+                    g1 += i_ab * m[b];
+                }
+                let g2 = to_theta(l, a, &(g2 / dt));
+                let g1 = to_theta(l, a, &(g1 / dt));
+                for c in 0..3 {
+                    dw[W_P2][th_idx(l) + c] += g2[c];
+                    dw[W_P1][th_idx(l) + c] += g1[c];
+                }
             }
         }
     }

@@ -65,10 +65,14 @@ pub enum NewtonVariant {
     /// solution (relative residual ≥ 1e-2): it reuses that step's last factorization and
     /// assembles the residual only, and the solve then accepts below a tenth of the
     /// tolerance or on its round-off floor (the 50-element cantilever: 3 corrections per
-    /// step with 2 factorizations instead of 3). The GPU paths run it as [`Self::Fresh`].
+    /// step with 2 factorizations instead of 3). Also on the CPU path, an iterate whose
+    /// residual lands within 10× the tolerance without being accepted is corrected with
+    /// the last factorization (a chord step onto the round-off floor; `timers.chord_corrections`).
+    /// The GPU paths run it as [`Self::Fresh`].
     #[default]
     Full,
-    /// A fresh tangent (and LU factorization) every iteration, a step's first included.
+    /// A fresh tangent (and LU factorization) every iteration, a step's first and the last
+    /// included.
     Fresh,
     /// From the third iteration of a solve on, the last tangent *and its factorization*
     /// are kept while each iteration cuts the relative residual by at least 5×; a slower

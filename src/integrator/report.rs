@@ -68,13 +68,14 @@ pub struct SolveTimers {
     /// Solves done (more than factorizations under modified Newton).
     pub solves: u64,
     /// Full-Newton iterations that assembled the residual without the tangent because the
-    /// residual history predicted acceptance …
+    /// residual history predicted acceptance, or (CPU path) a residual near the
+    /// tolerance …
     pub tangents_skipped: u64,
-    /// … and of those, the ones whose residual was not accepted after all (the tangent
-    /// was then assembled at the same iterate).
+    /// … of those, the ones whose residual was neither accepted nor within 10× the
+    /// tolerance (the tangent was then assembled at the same iterate) …
     pub tangent_skip_misses: u64,
-    /// Full-Newton iterates assembled without the tangent whose residual landed just
-    /// above the tolerance, corrected with the last factorization instead (no tangent is
+    /// … and the ones whose residual was not accepted but within 10× the tolerance:
+    /// corrected with the last factorization instead (a chord step; no tangent is
     /// assembled for them).
     pub chord_corrections: u64,
 }

@@ -46,7 +46,8 @@ impl BackendArg {
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum NewtonArg {
     /// A fresh tangent and LU factorization every iteration, except (CPU path) a step's
-    /// first correction far from the solution, which reuses the last step's factorization.
+    /// first correction far from the solution and a last one just above the tolerance,
+    /// which reuse the last factorization.
     Full,
     /// A fresh tangent and LU factorization every iteration, a step's first included
     /// (what the GPU paths run for `full`).

@@ -1,7 +1,8 @@
 //! Stage 3 of a step: Newton on the nodal increments. Fresh Newton takes a fresh tangent
 //! every iteration; full Newton too, except that on the CPU path a step's first
 //! correction far from the solution reuses the last step's factorization
-//! ([`REUSE_FIRST_FROM`]). Modified Newton keeps the last factorized tangent — across iterations,
+//! ([`REUSE_FIRST_FROM`]), and so does a correction from an iterate just above the
+//! tolerance (a chord step, [`CHORD_NEAR_TOL`]). Modified Newton keeps the last factorized tangent — across iterations,
 //! staggered rounds and steps — as long as each correction made with it cuts the residual
 //! by at least [`MODIFIED_NEWTON_RATE`]; the iterations that keep it assemble the residual
 //! only.
@@ -163,27 +164,28 @@ impl Simulation {
                     && !(kept_first && it == 1))
                     || at_floor(after_kept_first(history, kept_first), res, tol, quadratic)
             };
+            // A correction made with a kept tangent that did not cut the residual by
+            // MODIFIED_NEWTON_RATE is undone; a chord correction that lands on an accepted
+            // residual within CHORD_NEAR_TOL·tol is kept even where it contracted less (the
+            // floor stops it), one that lands above that is undone.
+            let undo = last_kept
+                && !history
+                    .last()
+                    .is_some_and(|&prev| res <= MODIFIED_NEWTON_RATE * prev)
+                && !(last_chord && res <= CHORD_NEAR_TOL * tol && accepted(res, &history));
             let mut chord = false;
-            if (skip || near) && !accepted(res, &history) {
+            if (skip || near) && !undo && !accepted(res, &history) {
                 if chord_ready && res <= CHORD_NEAR_TOL * tol {
-                    // Just above the tolerance: the last factorization corrects this
-                    // iterate onto the floor (its tangent differs by the last correction's
-                    // size, so the chord contracts by about that much).
+                    // Not accepted, within CHORD_NEAR_TOL·tol: the last factorization
+                    // corrects this iterate onto the floor (its tangent differs by the
+                    // last correction's size, so the chord contracts by about that much).
                     (reuse, chord) = (true, true);
-                    self.timers.chord_corrections += 1;
                 } else {
                     self.timers.tangent_skip_misses += 1;
                     res = self.timed_assemble(q, mode, true, &mut r).await;
                 }
             }
             let mut fresh = !reuse;
-            // (A chord correction that lands on an accepted residual is kept even where it
-            // contracted less than modified Newton asks: the floor stops it.)
-            let undo = last_kept
-                && !history
-                    .last()
-                    .is_some_and(|&prev| res <= MODIFIED_NEWTON_RATE * prev)
-                && !(last_chord && accepted(res, &history));
             if undo {
                 // The kept tangent no longer contracts fast enough (or sent the iterate
                 // astray): undo its correction and take a fresh tangent there (that
@@ -283,6 +285,7 @@ impl Simulation {
                     residuals: history,
                 });
             }
+            self.timers.chord_corrections += u64::from(chord);
             if !resident {
                 q_prev.copy_from_slice(q);
                 for (qi, di) in q.iter_mut().zip(&r) {
