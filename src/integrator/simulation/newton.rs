@@ -138,7 +138,7 @@ impl Simulation {
             let near = !skip
                 && !reuse
                 && chord_ready
-                && expect_near(after_kept_first(&history, kept_first), tol);
+                && expect_accept(after_kept_first(&history, kept_first), CHORD_PREDICT * tol);
             self.timers.tangents_skipped += u64::from(skip || near);
             self.resident_next.predict_accept = skip;
             // Device-resident: an iterate that may well be accepted comes back with its
@@ -168,14 +168,15 @@ impl Simulation {
             // MODIFIED_NEWTON_RATE is undone; a chord correction that lands on an accepted
             // residual within CHORD_NEAR_TOL·tol is kept even where it contracted less (the
             // floor stops it), one that lands above that is undone.
+            let near_tol = res <= CHORD_NEAR_TOL * tol;
             let undo = last_kept
                 && !history
                     .last()
                     .is_some_and(|&prev| res <= MODIFIED_NEWTON_RATE * prev)
-                && !(last_chord && res <= CHORD_NEAR_TOL * tol && accepted(res, &history));
+                && !(last_chord && near_tol && accepted(res, &history));
             let mut chord = false;
             if (skip || near) && !undo && !accepted(res, &history) {
-                if chord_ready && res <= CHORD_NEAR_TOL * tol {
+                if chord_ready && near_tol {
                     // Not accepted, within CHORD_NEAR_TOL·tol: the last factorization
                     // corrects this iterate onto the floor (its tangent differs by the
                     // last correction's size, so the chord contracts by about that much).
@@ -358,21 +359,11 @@ fn at_floor(history: &[f64], res: f64, tol: f64, quadratic_rate: bool) -> bool {
 const CHORD_NEAR_TOL: f64 = FLOOR_NEAR_TOL;
 
 /// An iterate is evaluated without its tangent when quadratic convergence from the last two
-/// residuals predicts its residual within this multiple of the tolerance (2.6e-5 after 0.12
+/// residuals predicts its residual within this multiple of the tolerance
+/// ([`expect_accept`] at `CHORD_PREDICT · tol`; 2.6e-5 after 0.12
 /// predicts 1.2e-12): a miss costs one residual-only evaluation. 1e3 took 9 more chords in
 /// 200 steps of the 30-element cantilever and 28–46 more misses on the mechanisms.
 const CHORD_PREDICT: f64 = 1e2;
-
-/// Whether the next residual after `history` is expected near the tolerance
-/// ([`CHORD_PREDICT`]).
-fn expect_near(history: &[f64], tol: f64) -> bool {
-    let h = history.len();
-    if h < 2 {
-        return false;
-    }
-    let (r2, r1) = (history[h - 2], history[h - 1]);
-    r1 < r2 && quadratic(r2, r1) <= CHORD_PREDICT * tol
-}
 
 /// [`at_floor`]'s second sign: how close to `tol` the floor must be …
 const FLOOR_NEAR_TOL: f64 = 10.0;
@@ -411,7 +402,7 @@ fn expect_accept(history: &[f64], tol: f64) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::{at_floor, expect_accept, expect_near, may_be_accepted};
+    use super::{at_floor, expect_accept, may_be_accepted, CHORD_PREDICT};
 
     const TOL: f64 = 1e-11;
 
@@ -435,12 +426,13 @@ mod tests {
     /// far out, or while diverging, nothing is expected.
     #[test]
     fn a_residual_near_the_tolerance_is_expected_from_the_history() {
-        assert!(expect_near(&[0.12, 2.6e-5], TOL));
+        let near = |h: &[f64]| expect_accept(h, CHORD_PREDICT * TOL);
+        assert!(near(&[0.12, 2.6e-5]));
         assert!(!expect_accept(&[0.12, 2.6e-5], 0.1 * TOL));
-        assert!(!expect_near(&[0.13, 4.1e-4], TOL));
-        assert!(!expect_near(&[1.3, 0.13], TOL));
-        assert!(!expect_near(&[2.6e-5, 0.12], TOL));
-        assert!(!expect_near(&[2.6e-5], TOL));
+        assert!(!near(&[0.13, 4.1e-4]));
+        assert!(!near(&[1.3, 0.13]));
+        assert!(!near(&[2.6e-5, 0.12]));
+        assert!(!near(&[2.6e-5]));
     }
 
     /// Device-resident Newton has the iterate sent back when the next residual may be
