@@ -18,24 +18,27 @@ pub type Mat3 = Matrix3<f64>;
 
 /// Per-element constants of the continuum model, already multiplied out
 /// (stiffnesses, inertias per unit reference length).
+///
+/// Generic over the element kernel's lane type (`ElementProps<F64x4>` holds four
+/// elements' constants, one per lane: [`crate::math::lane`]); `ElementProps` is one element.
 #[derive(Clone, Debug, PartialEq)]
-pub struct ElementProps {
+pub struct ElementProps<T: nalgebra::Scalar = f64> {
     /// Reference length `h` of the element (the one-point quadrature weight).
-    pub h: f64,
+    pub h: T,
     /// Mass per unit length `Aρ`.
-    pub a_rho: f64,
+    pub a_rho: T,
     /// Euler dyadic `Iρ^{αβ} = ρ ∫ ξ^α ξ^β dA` (α, β ∈ {1, 2}).
-    pub i_rho: Matrix2<f64>,
+    pub i_rho: Matrix2<T>,
     /// Diagonal of `C_Γ = diag(G A1, G A2, E A)`.
-    pub c_gamma: Vec3,
+    pub c_gamma: Vector3<T>,
     /// `C_Ω = [[E I11, E I12, 0], [E I12, E I22, 0], [0, 0, G J]]`.
-    pub c_omega: Mat3,
+    pub c_omega: Matrix3<T>,
     /// Kelvin–Voigt retardation time `η` (s): viscous stresses `η C ε̇`, entering a step
     /// as `½ β C Δε` with `β = 2η/Δt` (0: no material damping).
-    pub damping: f64,
+    pub damping: T,
     /// Drag per unit length `c` (N·s/m²): a force `−c (r_{n+1} − r_n)/Δt` on the
     /// centerline, through the consistent mass pattern (0: none).
-    pub drag: f64,
+    pub drag: T,
 }
 
 /// One two-node element.

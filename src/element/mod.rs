@@ -24,8 +24,9 @@ pub mod planar;
 pub mod scalar_gradient;
 pub mod strain;
 
-use nalgebra::{Matrix2, SMatrix, SVector, Vector6};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3, Vector6};
 
+use crate::math::lane::Lane;
 use crate::math::{cay_with_factor, hat, hat_mul, mul_hat};
 use crate::model::{ElementProps, Mat3, Vec3};
 use crate::scheme::Scheme;
@@ -62,17 +63,33 @@ pub const fn g_idx(l: usize) -> usize {
 /// two-point rule for inertia, `K`, `L`, `J`; shared with the observers).
 pub const M2: [[f64; 2]; 2] = [[2.0 / 6.0, 1.0 / 6.0], [1.0 / 6.0, 2.0 / 6.0]];
 
-/// Constant data of one element in a run.
+/// Constant data of one element in a run (generic over the kernel's [`Lane`]: one
+/// element per lane).
 #[derive(Clone, Debug, PartialEq)]
-pub struct ElementData {
+pub struct ElementData<T: Lane = f64> {
     /// Material and section constants.
-    pub props: ElementProps,
+    pub props: ElementProps<T>,
     /// Raw strains `(Γ°, Ω°)` of the reference configuration.
-    pub eps0: Vector6<f64>,
+    pub eps0: Vector6<T>,
     /// Whether the directors of each end node move: its rotation is free (not clamped)
     /// or driven by a time table. Such an end takes its share of the director
     /// dissipation ([`ElementData::kappa`]).
-    pub rot_free: [bool; 2],
+    pub rot_free: [T::Flag; 2],
+}
+
+impl<T: Lane> ElementData<T> {
+    /// Director-dissipation mass factors `κ_l` (DESIGN §4): `g_α^l = κ_l w_α` keeps
+    /// `M_e g = ∫ N_l w` on the free ends: 1 on both ends when both are free, 1.5 on the
+    /// free end of an element whose other end is clamped, 0 on a clamped end.
+    #[inline]
+    pub fn kappa(&self) -> [T; 2] {
+        let [f0, f1] = self.rot_free;
+        let (one, one_half, zero) = (T::splat(1.0), T::splat(1.5), T::zero());
+        [
+            T::choose(f0, T::choose(f1, one, one_half), zero),
+            T::choose(f1, T::choose(f0, one, one_half), zero),
+        ]
+    }
 }
 
 impl ElementData {
@@ -109,40 +126,28 @@ impl ElementData {
             })
             .collect()
     }
-
-    /// Director-dissipation mass factors `κ_l` (DESIGN §4): `g_α^l = κ_l w_α` keeps
-    /// `M_e g = ∫ N_l w` on the free ends: 1 on both ends when both are free, 1.5 on the
-    /// free end of an element whose other end is clamped, 0 on a clamped end.
-    pub fn kappa(&self) -> [f64; 2] {
-        match self.rot_free {
-            [true, true] => [1.0, 1.0],
-            [true, false] => [1.5, 0.0],
-            [false, true] => [0.0, 1.5],
-            [false, false] => [0.0, 0.0],
-        }
-    }
 }
 
 /// State of one element at time level `n`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ElementState {
+pub struct ElementState<T: Lane = f64> {
     /// Configuration (end positions and triads).
-    pub cfg: Config,
+    pub cfg: Config<T>,
     /// Translational velocities of the end nodes.
-    pub v: [Vec3; 2],
+    pub v: [Vector3<T>; 2],
     /// Director velocities `v_α^{(e)l}` (index `[l][α]`, α = 0, 1).
-    pub vd: [[Vec3; 2]; 2],
+    pub vd: [[Vector3<T>; 2]; 2],
 }
 
 /// Increments of the two end nodes.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Increment {
+pub struct Increment<T: Lane = f64> {
     /// `u^l = r^l_{n+1} − r^l_n`.
-    pub u: [Vec3; 2],
+    pub u: [Vector3<T>; 2],
     /// Spatial Cayley increments `θ^l`.
-    pub theta: [Vec3; 2],
+    pub theta: [Vector3<T>; 2],
     /// Dissipative velocity corrections `g^l` (zero unless translational dissipation).
-    pub g: [Vec3; 2],
+    pub g: [Vector3<T>; 2],
 }
 
 impl Increment {
@@ -171,37 +176,38 @@ impl Increment {
 /// The frozen dissipation scalars of one element: `β_Γ, β_Ω` and the velocity factors
 /// `c_v, c_ν` (`v_diss = c_v (v^h_n + v^h_{n+1})`, `w = c_ν (v^h_{α,n} + v^h_{α,n+1})`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct FrozenScalars {
+pub struct FrozenScalars<T: Lane = f64> {
     /// `β_Γ`.
-    pub beta_gamma: f64,
+    pub beta_gamma: T,
     /// `β_Ω`.
-    pub beta_omega: f64,
+    pub beta_omega: T,
     /// `c_v`.
-    pub c_v: f64,
+    pub c_v: T,
     /// `c_ν`.
-    pub c_nu: f64,
+    pub c_nu: T,
 }
 
 /// Everything the kinematic update gives for an increment and frozen scalars.
 #[derive(Clone, Copy, Debug)]
-pub struct Kinematics {
+pub struct Kinematics<T: Lane = f64> {
     /// Configuration at `n+1`.
-    pub cfg1: Config,
+    pub cfg1: Config<T>,
     /// Mid-point configuration `Φ_{n+½}`.
-    pub mid: Config,
+    pub mid: Config<T>,
     /// `(I − ½θ̂^l)⁻¹` per end.
-    pub amat: [Mat3; 2],
+    pub amat: [Matrix3<T>; 2],
     /// Raw strains at `n` and `n+1`.
-    pub eps_n: Vector6<f64>,
+    pub eps_n: Vector6<T>,
     /// Raw strains at `n+1`.
-    pub eps1: Vector6<f64>,
+    pub eps1: Vector6<T>,
     /// Translational end velocities at `n+1`.
-    pub v1: [Vec3; 2],
+    pub v1: [Vector3<T>; 2],
     /// Director end velocities at `n+1` (`[l][α]`).
-    pub vd1: [[Vec3; 2]; 2],
+    pub vd1: [[Vector3<T>; 2]; 2],
     /// Director dissipative velocity `w_α` at the quadrature point.
-    pub w: [Vec3; 2],
-    /// Local dissipation inputs (speeds and strain-increment energies).
+    pub w: [Vector3<T>; 2],
+    /// Local dissipation inputs (speeds and strain-increment energies; one element's,
+    /// left at their default by [`kinematics_core`] and in lane evaluations).
     pub inputs: LocalInputs,
 }
 
@@ -226,7 +232,7 @@ fn director_speed(vh: &[Vec3; 2], i_rho: &Matrix2<f64>, a_rho: f64) -> f64 {
 
 /// `(Γ, Ω)` as one 6-vector.
 #[inline]
-pub fn strains6(cfg: &Config, h: f64) -> Vector6<f64> {
+pub fn strains6<T: Lane>(cfg: &Config<T>, h: T) -> Vector6<T> {
     let (g, o) = raw_strains(cfg, h);
     Vector6::new(g.x, g.y, g.z, o.x, o.y, o.z)
 }
@@ -287,15 +293,15 @@ fn local_inputs(data: &ElementData, st: &ElementState, kin: &Kinematics) -> Loca
 /// frozen-scalar residual and tangent need (they skip four square roots and the strain
 /// energies).
 #[inline]
-pub fn kinematics_core(
-    data: &ElementData,
-    st: &ElementState,
-    eps_n: &Vector6<f64>,
-    inc: &Increment,
-    c_nu: f64,
+pub fn kinematics_core<T: Lane>(
+    data: &ElementData<T>,
+    st: &ElementState<T>,
+    eps_n: &Vector6<T>,
+    inc: &Increment<T>,
+    c_nu: T,
     dt: f64,
-) -> Kinematics {
-    kinematics_at(data, st, eps_n, inc, |ksum| c_nu / (1.0 + ksum * c_nu), dt)
+) -> Kinematics<T> {
+    kinematics_at(data, st, eps_n, inc, |ksum| c_nu / (T::one() + ksum * c_nu), dt)
 }
 
 /// [`kinematics_core`] with the factor `φ = c_ν/(1 + K c_ν)` of the director dissipative
@@ -303,15 +309,16 @@ pub fn kinematics_core(
 /// (so is the residual: [`scalar_gradient::residual_scalar_derivatives`]; the tests check
 /// it against residuals at perturbed φ).
 #[inline]
-pub fn kinematics_at(
-    data: &ElementData,
-    st: &ElementState,
-    eps_n: &Vector6<f64>,
-    inc: &Increment,
-    phi: impl FnOnce(f64) -> f64,
+pub fn kinematics_at<T: Lane>(
+    data: &ElementData<T>,
+    st: &ElementState<T>,
+    eps_n: &Vector6<T>,
+    inc: &Increment<T>,
+    phi: impl FnOnce(T) -> T,
     dt: f64,
-) -> Kinematics {
+) -> Kinematics<T> {
     let p = &data.props;
+    let two = T::splat(2.0);
     let (rot0, amat0) = cay_with_factor(&inc.theta[0]);
     let (rot1, amat1) = cay_with_factor(&inc.theta[1]);
     let rot = [rot0, rot1];
@@ -321,17 +328,17 @@ pub fn kinematics_at(
     };
     let mid = st.cfg.mean(&cfg1);
     let eps1 = strains6(&cfg1, p.h);
-    let inv_dt = 1.0 / dt;
+    let inv_dt = T::splat(1.0 / dt);
     let v1 = [
-        2.0 * inc.u[0] * inv_dt - st.v[0] - 2.0 * inc.g[0],
-        2.0 * inc.u[1] * inv_dt - st.v[1] - 2.0 * inc.g[1],
+        inc.u[0] * two * inv_dt - st.v[0] - inc.g[0] * two,
+        inc.u[1] * two * inv_dt - st.v[1] - inc.g[1] * two,
     ];
     let kappa = data.kappa();
     let ksum = kappa[0] + kappa[1];
     let phi = phi(ksum);
     // v^h_{α,n} + v^h_{α,n+1} = Y_α/(1 + K c_ν), Y_α = Σ_l (d^l_{α,n+1} − d^l_{α,n})/Δt.
-    let mut w = [Vec3::zeros(); 2];
-    let mut vd1 = [[Vec3::zeros(); 2]; 2];
+    let mut w = [Vector3::zeros(); 2];
+    let mut vd1 = [[Vector3::zeros(); 2]; 2];
     for a in 0..2 {
         let dd = [
             cfg1.d[0].column(a) - st.cfg.d[0].column(a),
@@ -340,7 +347,7 @@ pub fn kinematics_at(
         let y = (dd[0] + dd[1]) * inv_dt;
         w[a] = y * phi;
         for l in 0..2 {
-            vd1[l][a] = 2.0 * dd[l] * inv_dt - st.vd[l][a] - 2.0 * kappa[l] * w[a];
+            vd1[l][a] = dd[l] * two * inv_dt - st.vd[l][a] - w[a] * (two * kappa[l]);
         }
     }
     Kinematics {
@@ -411,25 +418,26 @@ pub fn consistent_scalars(
 /// Generalized stresses `S* = (N*, M*)`: the strains of `rule` (mean of the strains, or
 /// the strain of the mid-point configuration) plus the dissipative parts.
 #[inline]
-pub fn stresses(
-    data: &ElementData,
-    kin: &Kinematics,
-    s: &FrozenScalars,
+pub fn stresses<T: Lane>(
+    data: &ElementData<T>,
+    kin: &Kinematics<T>,
+    s: &FrozenScalars<T>,
     rule: StressRule,
-) -> Vector6<f64> {
+) -> Vector6<T> {
     let p = &data.props;
+    let half = T::splat(0.5);
     let mean = match rule {
-        StressRule::MeanOfStrains => 0.5 * (kin.eps_n + kin.eps1),
+        StressRule::MeanOfStrains => (kin.eps_n + kin.eps1) * half,
         StressRule::MidpointStrain => strains6(&kin.mid, p.h),
     } - data.eps0;
     let de = kin.eps1 - kin.eps_n;
-    let g = mean.fixed_rows::<3>(0) + 0.5 * s.beta_gamma * de.fixed_rows::<3>(0);
-    let o = mean.fixed_rows::<3>(3) + 0.5 * s.beta_omega * de.fixed_rows::<3>(3);
+    let g = mean.fixed_rows::<3>(0) + de.fixed_rows::<3>(0) * (half * s.beta_gamma);
+    let o = mean.fixed_rows::<3>(3) + de.fixed_rows::<3>(3) * (half * s.beta_omega);
     constitutive(p, &g.into_owned(), &o.into_owned())
 }
 
 /// `(N, M) = (C_Γ Γ, C_Ω Ω)` for strains measured from the reference.
-fn constitutive(p: &ElementProps, gamma: &Vec3, omega: &Vec3) -> Vector6<f64> {
+fn constitutive<T: Lane>(p: &ElementProps<T>, gamma: &Vector3<T>, omega: &Vector3<T>) -> Vector6<T> {
     let n = p.c_gamma.component_mul(gamma);
     let m = p.c_omega * omega;
     Vector6::new(n.x, n.y, n.z, m.x, m.y, m.z)
@@ -444,21 +452,22 @@ const GROSS_WEIGHT: f64 = 1e-4;
 /// (|ε| + |ε0|)`, with `ε` the strains the stresses are computed from. In f64 the forces
 /// are uncertain by ~1e-16 of the "gross" forces, whatever the load.
 #[inline]
-pub fn stress_force_floor(
-    data: &ElementData,
-    b: &strain::StrainGradient,
-    eps: &Vector6<f64>,
-) -> [f64; NFIELDS] {
+pub fn stress_force_floor<T: Lane>(
+    data: &ElementData<T>,
+    b: &strain::StrainGradient<T>,
+    eps: &Vector6<T>,
+) -> [T; NFIELDS] {
     let p = &data.props;
-    let e = eps.abs() + data.eps0.abs();
-    let n = p.c_gamma.abs().component_mul(&e.fixed_rows::<3>(0));
-    let m = p.c_omega.abs() * e.fixed_rows::<3>(3);
+    let e = eps.map(T::abs) + data.eps0.map(T::abs);
+    let n = p.c_gamma.map(T::abs).component_mul(&e.fixed_rows::<3>(0));
+    let m = p.c_omega.map(T::abs) * e.fixed_rows::<3>(3);
     let gross = [n.x, n.y, n.z, m.x, m.y, m.z];
-    let mut f = [0.0f64; NFIELDS];
+    let mut f = [T::zero(); NFIELDS];
+    let weight = T::splat(GROSS_WEIGHT);
     for k in 0..6 {
         for j in 0..4 {
             let q = GRADIENT_FIELDS[k][j];
-            f[q] += GROSS_WEIGHT * amax3(&b[k][q]) * p.h * gross[k];
+            f[q] += weight * amax3(&b[k][q]) * p.h * gross[k];
         }
     }
     f
@@ -468,21 +477,20 @@ pub fn stress_force_floor(
 /// instead of `f64::max`'s NaN handling (a NaN entry here makes the forces, hence the
 /// residual, NaN, and the Newton test fails on the residual whatever the scale).
 #[inline(always)]
-pub(crate) fn amax3(v: &Vec3) -> f64 {
+pub(crate) fn amax3<T: Lane>(v: &Vector3<T>) -> T {
     let (x, y, z) = (v.x.abs(), v.y.abs(), v.z.abs());
-    let m = if y > x { y } else { x };
-    if z > m {
-        z
-    } else {
-        m
-    }
+    x.max_gt(y).max_gt(z)
 }
 
 /// Generalized stress forces `h Bᵀ S` on the eight vector fields of an element
 /// (one-point rule).
 #[inline]
-pub fn field_forces(b: &strain::StrainGradient, s: &Vector6<f64>, h: f64) -> [Vec3; NFIELDS] {
-    let mut f = [strain::ZERO3; NFIELDS];
+pub fn field_forces<T: Lane>(
+    b: &strain::StrainGradient<T>,
+    s: &Vector6<T>,
+    h: T,
+) -> [Vector3<T>; NFIELDS] {
+    let mut f = [Vector3::zeros(); NFIELDS];
     for k in 0..6 {
         let hs = h * s[k];
         for j in 0..4 {
@@ -551,14 +559,25 @@ pub fn elastic_field_stiffness(
 
 /// Output of [`residual_tangent`].
 #[derive(Clone, Debug)]
-pub struct ElementEval {
+pub struct ElementEval<T: Lane = f64> {
     /// Element residual.
-    pub r: ElemVec,
+    pub r: SVector<T, NDOF>,
     /// Absolute size of the largest force term entering each residual row (for the
     /// relative Newton tolerance).
-    pub scale: ElemVec,
+    pub scale: SVector<T, NDOF>,
     /// Element tangent (zero when not requested).
-    pub k: ElemMat,
+    pub k: SMatrix<T, NDOF, NDOF>,
+}
+
+impl<T: Lane> ElementEval<T> {
+    /// All zeros (a buffer for [`residual_tangent_into`]).
+    pub fn zeros() -> Self {
+        Self {
+            r: SVector::zeros(),
+            scale: SVector::zeros(),
+            k: SMatrix::zeros(),
+        }
+    }
 }
 
 /// Element residual (and tangent if `want_tangent`) for frozen dissipation scalars.
@@ -572,11 +591,7 @@ pub fn residual_tangent(
     trans_diss: bool,
     want_tangent: bool,
 ) -> ElementEval {
-    let mut out = ElementEval {
-        r: ElemVec::zeros(),
-        scale: ElemVec::zeros(),
-        k: ElemMat::zeros(),
-    };
+    let mut out = ElementEval::zeros();
     residual_tangent_into(data, st, kin, s, k, trans_diss, want_tangent, &mut out);
     out
 }
@@ -585,18 +600,20 @@ pub fn residual_tangent(
 /// and `out.scale` are overwritten, and `out.k` too when `want_tangent` (otherwise it is
 /// left as it was).
 #[allow(clippy::too_many_arguments)]
-pub fn residual_tangent_into(
-    data: &ElementData,
-    st: &ElementState,
-    kin: &Kinematics,
-    s: &FrozenScalars,
+pub fn residual_tangent_into<T: Lane>(
+    data: &ElementData<T>,
+    st: &ElementState<T>,
+    kin: &Kinematics<T>,
+    s: &FrozenScalars<T>,
     k: &StepConsts,
     trans_diss: bool,
     want_tangent: bool,
-    out: &mut ElementEval,
+    out: &mut ElementEval<T>,
 ) {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
+    let c = T::splat;
+    let half = c(0.5);
     let sstar = stresses(data, kin, s, k.scheme.stress_rule());
     let b_mid = strain_gradient(&kin.mid, h);
 
@@ -607,34 +624,35 @@ pub fn residual_tangent_into(
     // forces h |B|ᵀ |C| (|ε̄| + |ε0|). Stiff, barely loaded members (the arch at t = 0:
     // EA = 2e8, load 1.25) otherwise never reach a relative tolerance measured against
     // the load alone.
-    let f_gross = stress_force_floor(data, &b_mid, &(0.5 * (kin.eps_n + kin.eps1)));
+    let f_gross = stress_force_floor(data, &b_mid, &((kin.eps_n + kin.eps1) * half));
     let scale = &mut out.scale;
-    *scale = ElemVec::zeros();
+    *scale = SVector::zeros();
     let stress_scale = [
         amax3(&f[R0]).max(f_gross[R0]),
         amax3(&f[R1]).max(f_gross[R1]),
     ];
     // 1/Δt once: a division costs several multiplications' throughput, and the kernel
     // has dozens of them per element.
-    let inv_dt = 1.0 / dt;
-    let mut inertia_r = [Vec3::zeros(); 2];
+    let inv_dt = c(1.0 / dt);
+    let mut inertia_r = [Vector3::zeros(); 2];
     for l in 0..2 {
         for m in 0..2 {
-            let c = p.a_rho * h * M2[l][m] * inv_dt;
-            inertia_r[l] += c * (kin.v1[m] - st.v[m]);
+            let cm = p.a_rho * h * c(M2[l][m]) * inv_dt;
+            inertia_r[l] += (kin.v1[m] - st.v[m]) * cm;
         }
     }
-    let mut fd_scale = [0.0f64; 2];
+    let i_rho_max = p.i_rho.iter().fold(T::zero(), |a, &x| a.max(x.abs()));
+    let mut fd_scale = [T::zero(); 2];
     for l in 0..2 {
         let base = if l == 0 { A0 } else { B0 };
         for a in 0..2 {
-            let mut fi = Vec3::zeros();
+            let mut fi = Vector3::zeros();
             for m in 0..2 {
                 for b in 0..2 {
-                    fi += (h * M2[l][m] * p.i_rho[(a, b)] * inv_dt) * (kin.vd1[m][b] - st.vd[m][b]);
+                    fi += (kin.vd1[m][b] - st.vd[m][b]) * (h * c(M2[l][m]) * p.i_rho[(a, b)] * inv_dt);
                 }
             }
-            let rate = h * p.i_rho.amax() * (amax3(&st.vd[l][a]) + amax3(&kin.vd1[l][a])) * inv_dt;
+            let rate = h * i_rho_max * (amax3(&st.vd[l][a]) + amax3(&kin.vd1[l][a])) * inv_dt;
             fd_scale[l] = fd_scale[l]
                 .max(amax3(&fi))
                 .max(amax3(&f[base + a]))
@@ -646,13 +664,13 @@ pub fn residual_tangent_into(
     }
 
     let r = &mut out.r;
-    *r = ElemVec::zeros();
+    *r = SVector::zeros();
     let dmid = [kin.mid.d[0], kin.mid.d[1]];
     for l in 0..2 {
         let fr = f[if l == 0 { R0 } else { R1 }] + inertia_r[l];
         r.fixed_rows_mut::<3>(u_idx(l)).copy_from(&fr);
         let base = if l == 0 { A0 } else { B0 };
-        let mut rt = Vec3::zeros();
+        let mut rt = Vector3::zeros();
         for i in 0..3 {
             rt += dmid[l].column(i).cross(&f[base + i]);
         }
@@ -663,31 +681,27 @@ pub fn residual_tangent_into(
         let su = stress_scale[l].max(amax3(&inertia_r[l])).max(momentum_rate);
         // The largest director length: √ of the largest square (√ is monotone and
         // correctly rounded, so this is the largest of the three norms, bit for bit).
-        let dnorm = dmid[l]
-            .column(0)
-            .norm_squared()
-            .max(dmid[l].column(1).norm_squared())
-            .max(dmid[l].column(2).norm_squared())
-            .sqrt();
-        for c in 0..3 {
-            scale[u_idx(l) + c] = su;
-            scale[th_idx(l) + c] = fd_scale[l] * dnorm;
+        let sq = |i: usize| dmid[l].column(i).dot(&dmid[l].column(i));
+        let dnorm = sq(0).max(sq(1)).max(sq(2)).sqrt();
+        for cc in 0..3 {
+            scale[u_idx(l) + cc] = su;
+            scale[th_idx(l) + cc] = fd_scale[l] * dnorm;
         }
     }
-    let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
+    let vsum = (st.v[0] + st.v[1]) * half + (kin.v1[0] + kin.v1[1]) * half;
     if trans_diss {
-        let b = 0.5 * h * p.a_rho * s.c_v * vsum;
+        let b = vsum * (half * h * p.a_rho * s.c_v);
         for l in 0..2 {
-            let mut mg = Vec3::zeros();
+            let mut mg = Vector3::zeros();
             for m in 0..2 {
-                mg += p.a_rho * h * M2[l][m] * kin_g(st, kin, m, inv_dt);
+                mg += kin_g(st, kin, m, inv_dt) * (p.a_rho * h * c(M2[l][m]));
             }
             r.fixed_rows_mut::<3>(g_idx(l)).copy_from(&(mg - b));
             // The g rows balance momenta: measure them against the element's momentum,
             // not against g itself (which vanishes where nothing dissipates).
-            let momentum = 0.5 * p.a_rho * h * amax3(&st.v[l]).max(amax3(&kin.v1[l]));
+            let momentum = half * p.a_rho * h * amax3(&st.v[l]).max(amax3(&kin.v1[l]));
             // b is c_v times a difference of u/Δt and g, each possibly much larger.
-            let pieces = 0.5
+            let pieces = half
                 * h
                 * p.a_rho
                 * s.c_v.abs()
@@ -696,10 +710,10 @@ pub fn residual_tangent_into(
                         amax3(&((kin.cfg1.r[m] - st.cfg.r[m]) * inv_dt))
                             + amax3(&kin_g(st, kin, m, inv_dt))
                     })
-                    .sum::<f64>();
+                    .fold(T::zero(), |acc, x| acc + x);
             let momentum = momentum.max(pieces);
-            for c in 0..3 {
-                scale[g_idx(l) + c] = amax3(&mg).max(amax3(&b)).max(momentum);
+            for cc in 0..3 {
+                scale[g_idx(l) + cc] = amax3(&mg).max(amax3(&b)).max(momentum);
             }
         }
     }
@@ -709,11 +723,11 @@ pub fn residual_tangent_into(
         // which never reads it); only the g rows and columns are cleared here, column by
         // column on the contiguous (column-major) storage: a strided view's `fill` walks
         // nalgebra's element iterator, ≈ 10 instructions per entry.
-        for (c, col) in out.k.as_mut_slice().chunks_exact_mut(NDOF).enumerate() {
-            if c < 12 {
-                col[12..].fill(0.0);
+        for (cc, col) in out.k.as_mut_slice().chunks_exact_mut(NDOF).enumerate() {
+            if cc < 12 {
+                col[12..].fill(T::zero());
             } else {
-                col.fill(0.0);
+                col.fill(T::zero());
             }
         }
         tangent(data, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut out.k);
@@ -723,9 +737,9 @@ pub fn residual_tangent_into(
 /// The `g` an element end carries, recovered from `v_{n+1} = 2u/Δt − v_n − 2g`
 /// (kinematics stores `v_{n+1}`; the increment is not kept).
 #[inline]
-fn kin_g(st: &ElementState, kin: &Kinematics, m: usize, inv_dt: f64) -> Vec3 {
+fn kin_g<T: Lane>(st: &ElementState<T>, kin: &Kinematics<T>, m: usize, inv_dt: T) -> Vector3<T> {
     // g = u/Δt − ½(v_n + v_{n+1}) and u = r_{n+1} − r_n.
-    (kin.cfg1.r[m] - st.cfg.r[m]) * inv_dt - 0.5 * (st.v[m] + kin.v1[m])
+    (kin.cfg1.r[m] - st.cfg.r[m]) * inv_dt - (st.v[m] + kin.v1[m]) * T::splat(0.5)
 }
 
 /// Block of the tangent a field maps to: (row/col start of its unknown, is director).
@@ -740,19 +754,21 @@ fn field_block(p: usize) -> (usize, Option<(usize, usize)>) {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn tangent(
-    data: &ElementData,
-    kin: &Kinematics,
-    s: &FrozenScalars,
+fn tangent<T: Lane>(
+    data: &ElementData<T>,
+    kin: &Kinematics<T>,
+    s: &FrozenScalars<T>,
     k: &StepConsts,
     trans_diss: bool,
-    sstar: &Vector6<f64>,
-    b_mid: &strain::StrainGradient,
-    f: &[Vec3; NFIELDS],
-    kt: &mut ElemMat,
+    sstar: &Vector6<T>,
+    b_mid: &strain::StrainGradient<T>,
+    f: &[Vector3<T>; NFIELDS],
+    kt: &mut SMatrix<T, NDOF, NDOF>,
 ) {
     let p = &data.props;
     let (h, dt) = (p.h, k.dt);
+    let c = T::splat;
+    let half = c(0.5);
     // Trial side: ∂ε/∂Φ_{n+1} = ½ B(Φ_{n+1}) for the mean of the strains, ½ B(Φ_{n+½})
     // for the strain of the mid-point configuration (the ½ is in `dmat` below).
     let b1 = match k.scheme.stress_rule() {
@@ -760,7 +776,7 @@ fn tangent(
         StressRule::MidpointStrain => *b_mid,
     };
     // Mid-point directors d_{l,i} and the transposed Cayley factors A_lᵀ.
-    let dcol: [[Vec3; 3]; 2] =
+    let dcol: [[Vector3<T>; 3]; 2] =
         std::array::from_fn(|l| std::array::from_fn(|i| kin.mid.d[l].column(i).into_owned()));
     let amat = kin.amat;
     let at = [amat[0].transpose(), amat[1].transpose()];
@@ -770,8 +786,8 @@ fn tangent(
     // never formed: Tᵀ b = d_½ × b and Jᵀ b = d_½ × (A_lᵀ b).
     //
     // Reduced strain gradients B̃ = B T (mid) and B J (n+1), 6 rows × 12 columns.
-    let mut bt_mid = SMatrix::<f64, 6, 12>::zeros();
-    let mut bt_1 = SMatrix::<f64, 6, 12>::zeros();
+    let mut bt_mid = SMatrix::<T, 6, 12>::zeros();
+    let mut bt_1 = SMatrix::<T, 6, 12>::zeros();
     for kk in 0..6 {
         for q in GRADIENT_FIELDS[kk] {
             let (c0, dir) = field_block(q);
@@ -782,9 +798,9 @@ fn tangent(
                     dcol[l][i].cross(&(at[l] * b1[kk][q])),
                 ),
             };
-            for c in 0..3 {
-                bt_mid[(kk, c0 + c)] += a[c];
-                bt_1[(kk, c0 + c)] += b[c];
+            for cc in 0..3 {
+                bt_mid[(kk, c0 + cc)] += a[cc];
+                bt_1[(kk, c0 + cc)] += b[cc];
             }
         }
     }
@@ -792,28 +808,33 @@ fn tangent(
     // with the strain of the mid-point configuration the dissipative part ½ β C Δε still
     // varies with the strains at n+1: ∂S*/∂q = ½ C B̃_½J + ½ β C B̃_1 (β from Kelvin–Voigt
     // damping). C is diagonal on Γ, a 3×3 block on Ω: applied by rows.
-    let scaled = |bt: &SMatrix<f64, 6, 12>, fg: f64, fo: f64| {
+    let scaled = |bt: &SMatrix<T, 6, 12>, fg: T, fo: T| {
         let mut db = *bt;
         for i in 0..3 {
             let f = fg * p.c_gamma[i];
-            for c in 0..12 {
-                db[(i, c)] *= f;
+            for cc in 0..12 {
+                db[(i, cc)] *= f;
             }
         }
-        let om = (fo * p.c_omega) * bt.fixed_rows::<3>(3);
+        let om = (p.c_omega * fo) * bt.fixed_rows::<3>(3);
         db.fixed_rows_mut::<3>(3).copy_from(&om);
         db
     };
     let (bg, bo) = (s.beta_gamma, s.beta_omega);
     let mean = k.scheme.stress_rule() == StressRule::MeanOfStrains;
     let mut db = if mean {
-        scaled(&bt_1, 0.5 * h * (1.0 + bg), 0.5 * h * (1.0 + bo))
+        scaled(
+            &bt_1,
+            half * h * (T::one() + bg),
+            half * h * (T::one() + bo),
+        )
     } else {
-        scaled(&bt_1, 0.5 * h, 0.5 * h)
+        scaled(&bt_1, half * h, half * h)
     };
-    if !mean && (bg != 0.0 || bo != 0.0) {
+    // (Lanes with β = 0 add exact zeros.)
+    if !mean && (bg.any_nonzero() || bo.any_nonzero()) {
         let b_end = strain_gradient(&kin.cfg1, h);
-        let mut bt_end = SMatrix::<f64, 6, 12>::zeros();
+        let mut bt_end = SMatrix::<T, 6, 12>::zeros();
         for kk in 0..6 {
             for q in GRADIENT_FIELDS[kk] {
                 let (c0, dir) = field_block(q);
@@ -821,42 +842,44 @@ fn tangent(
                     None => b_end[kk][q],
                     Some((l, i)) => dcol[l][i].cross(&(at[l] * b_end[kk][q])),
                 };
-                for c in 0..3 {
-                    bt_end[(kk, c0 + c)] += b[c];
+                for cc in 0..3 {
+                    bt_end[(kk, c0 + cc)] += b[cc];
                 }
             }
         }
-        db += scaled(&bt_end, 0.5 * h * bg, 0.5 * h * bo);
+        db += scaled(&bt_end, half * h * bg, half * h * bo);
     }
     // Written in place (no 12×12 temporary, no transposed copy); β = 0 overwrites the block.
     kt.fixed_view_mut::<12, 12>(0, 0)
-        .gemm_tr(1.0, &bt_mid, &db, 0.0);
+        .gemm_tr(T::one(), &bt_mid, &db, T::zero());
 
     // Scalar field couplings G_s ⊗ I₃: geometric stiffness ½ h H(S*) and inertia.
-    let mut gs = stress_hessian(sstar, h) * (0.5 * h);
-    let inv_dt = 1.0 / dt;
-    let two_dt2 = 2.0 * inv_dt * inv_dt;
+    let mut gs = stress_hessian(sstar, h) * (half * h);
+    let inv_dt = c(1.0 / dt);
+    let two_dt2 = c(2.0) * inv_dt * inv_dt;
     for l in 0..2 {
         for m in 0..2 {
-            gs[(l, m)] += two_dt2 * p.a_rho * h * M2[l][m];
+            gs[(l, m)] += two_dt2 * p.a_rho * h * c(M2[l][m]);
         }
     }
     let kappa = data.kappa();
     let ksum = kappa[0] + kappa[1];
     // dw_α/dd^q_{α,n+1} = c_ν/(Δt(1+K c_ν)) on rotation-free ends.
-    let dw = s.c_nu / (dt * (1.0 + ksum * s.c_nu));
-    // (Without director dissipation dw = 0: nothing to subtract below.)
-    let director_diss = dw != 0.0;
+    let dw = s.c_nu / (c(dt) * (T::one() + ksum * s.c_nu));
+    // (Without director dissipation dw = 0: nothing to subtract below; a lane with
+    // dw = 0, or a clamped end, subtracts an exact zero.)
+    let director_diss = dw.any_nonzero();
     for l in 0..2 {
         for m in 0..2 {
             for a in 0..2 {
                 for b in 0..2 {
-                    let mass = h * M2[l][m] * p.i_rho[(a, b)] * inv_dt;
+                    let mass = h * c(M2[l][m]) * p.i_rho[(a, b)] * inv_dt;
                     let (pl, qm) = (field_of(l, a), field_of(m, b));
-                    gs[(pl, qm)] += mass * (2.0 * inv_dt);
+                    gs[(pl, qm)] += mass * (c(2.0) * inv_dt);
                     if director_diss {
-                        for qq in (0..2).filter(|&qq| data.rot_free[qq]) {
-                            gs[(pl, field_of(qq, b))] -= mass * 2.0 * kappa[m] * dw;
+                        for qq in 0..2 {
+                            let d = mass * c(2.0) * kappa[m] * dw;
+                            gs[(pl, field_of(qq, b))] -= T::select_or_zero(data.rot_free[qq], d);
                         }
                     }
                 }
@@ -871,19 +894,19 @@ fn tangent(
         let rl = if l == 0 { R0 } else { R1 };
         for m in 0..2 {
             let rm = if m == 0 { R0 } else { R1 };
-            let vsum = |pf: usize| -> Vec3 {
-                (0..3).fold(Vec3::zeros(), |acc, j| {
-                    acc + gs[(pf, field_of(m, j))] * dcol[m][j]
+            let vsum = |pf: usize| -> Vector3<T> {
+                (0..3).fold(Vector3::zeros(), |acc, j| {
+                    acc + dcol[m][j] * gs[(pf, field_of(m, j))]
                 })
             };
             // (u_l, u_m)
             let g_uu = gs[(rl, rm)];
-            for c in 0..3 {
-                kt[(u_idx(l) + c, u_idx(m) + c)] += g_uu;
+            for cc in 0..3 {
+                kt[(u_idx(l) + cc, u_idx(m) + cc)] += g_uu;
             }
             // (θ_l, u_m)
-            let w = (0..3).fold(Vec3::zeros(), |acc, i| {
-                acc + gs[(field_of(l, i), rm)] * dcol[l][i]
+            let w = (0..3).fold(Vector3::zeros(), |acc, i| {
+                acc + dcol[l][i] * gs[(field_of(l, i), rm)]
             });
             let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), u_idx(m));
             view += hat(&w);
@@ -891,7 +914,7 @@ fn tangent(
             let mut view = kt.fixed_view_mut::<3, 3>(u_idx(l), th_idx(m));
             view -= mul_hat(&amat[m], &vsum(rl));
             // (θ_l, θ_m)
-            let mut blk = Mat3::zeros();
+            let mut blk = Matrix3::zeros();
             for i in 0..3 {
                 blk += hat_mul(&dcol[l][i], &mul_hat(&amat[m], &vsum(field_of(l, i))));
             }
@@ -902,22 +925,22 @@ fn tangent(
     // Projection term: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.
     for l in 0..2 {
         let base = if l == 0 { A0 } else { B0 };
-        let mut blk = Mat3::zeros();
+        let mut blk = Matrix3::zeros();
         for i in 0..3 {
             blk += hat_mul(&f[base + i], &mul_hat(&amat[l], &dcol[l][i]));
         }
         let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), th_idx(l));
-        view += 0.5 * blk;
+        view += blk * half;
     }
 
     if trans_diss {
-        let i3 = Mat3::identity();
-        let cv = 0.5 * h * p.a_rho * s.c_v;
+        let i3 = Matrix3::<T>::identity();
+        let cv = half * h * p.a_rho * s.c_v;
         for l in 0..2 {
             for m in 0..2 {
-                let mm = p.a_rho * h * M2[l][m];
+                let mm = p.a_rho * h * c(M2[l][m]);
                 let mut v = kt.fixed_view_mut::<3, 3>(u_idx(l), g_idx(m));
-                v += i3 * (-2.0 * mm * inv_dt);
+                v += i3 * (c(-2.0) * mm * inv_dt);
                 let mut v = kt.fixed_view_mut::<3, 3>(g_idx(l), u_idx(m));
                 v += i3 * (-cv * inv_dt);
                 let mut v = kt.fixed_view_mut::<3, 3>(g_idx(l), g_idx(m));

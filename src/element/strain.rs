@@ -12,9 +12,10 @@
 //! so `B(Φ_{n+½})(Φ_{n+1} − Φ_n) = ε(Φ_{n+1}) − ε(Φ_n)` exactly, and the Hessian of
 //! `S·ε` is a constant 8×8 scalar matrix times `I₃`.
 
-use nalgebra::{SMatrix, Vector6};
+use nalgebra::{Matrix3, SMatrix, Vector3, Vector6};
 
-use crate::model::{Mat3, Vec3};
+use crate::math::lane::Lane;
+use crate::model::Vec3;
 
 /// Index of a vector field of the element: `R0, R1` node positions, `A0+i` director `i`
 /// of end 0, `B0+i` director `i` of end 1.
@@ -28,9 +29,6 @@ pub const B0: usize = 5;
 /// Number of vector fields.
 pub const NFIELDS: usize = 8;
 
-/// The zero vector as a constant (an array of it is a plain zero fill, not 48 copies).
-pub(crate) const ZERO3: Vec3 = Vec3::new(0.0, 0.0, 0.0);
-
 /// Element end a field belongs to.
 #[inline]
 pub fn field_end(p: usize) -> usize {
@@ -43,13 +41,14 @@ pub fn field_end(p: usize) -> usize {
 }
 
 /// Configuration of one element: end positions and end triads (columns `d_1, d_2, d_3`).
+/// Generic over the kernel's [`Lane`] (one element per lane); `Config` is one element.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Config {
+pub struct Config<T: Lane = f64> {
     /// Positions of the two ends.
-    pub r: [Vec3; 2],
+    pub r: [Vector3<T>; 2],
     /// Director triads of the two ends (columns are `d_1, d_2, d_3`; not assumed
     /// orthonormal).
-    pub d: [Mat3; 2],
+    pub d: [Matrix3<T>; 2],
 }
 
 impl Config {
@@ -63,36 +62,33 @@ impl Config {
             _ => self.d[1].column(p - B0).into(),
         }
     }
+}
 
+impl<T: Lane> Config<T> {
     /// Componentwise mean `½(self + other)` (the mid-point configuration).
     #[inline]
-    pub fn mean(&self, other: &Config) -> Config {
+    pub fn mean(&self, other: &Config<T>) -> Config<T> {
+        let half = T::splat(0.5);
         Config {
-            r: [
-                0.5 * (self.r[0] + other.r[0]),
-                0.5 * (self.r[1] + other.r[1]),
-            ],
-            d: [
-                0.5 * (self.d[0] + other.d[0]),
-                0.5 * (self.d[1] + other.d[1]),
-            ],
+            r: [(self.r[0] + other.r[0]) * half, (self.r[1] + other.r[1]) * half],
+            d: [(self.d[0] + other.d[0]) * half, (self.d[1] + other.d[1]) * half],
         }
     }
 }
 
 /// Raw strains `(Γ, Ω)` of a configuration (without subtracting the reference values).
 #[inline]
-pub fn raw_strains(c: &Config, h: f64) -> (Vec3, Vec3) {
-    let dr = (c.r[1] - c.r[0]) / h;
+pub fn raw_strains<T: Lane>(c: &Config<T>, h: T) -> (Vector3<T>, Vector3<T>) {
+    let dr = (c.r[1] - c.r[0]).map(|x| x / h);
     let a = &c.d[0];
     let b = &c.d[1];
-    let mut gamma = Vec3::zeros();
+    let mut gamma = Vector3::zeros();
     for i in 0..3 {
-        gamma[i] = 0.5 * (a.column(i) + b.column(i)).dot(&dr);
+        gamma[i] = T::splat(0.5) * (a.column(i) + b.column(i)).dot(&dr);
     }
     let ab = |j: usize, i: usize| a.column(j).dot(&b.column(i));
-    let s = 0.5 / h;
-    let omega = Vec3::new(
+    let s = T::splat(0.5) / h;
+    let omega = Vector3::new(
         s * (ab(2, 1) - ab(1, 2)),
         s * (ab(0, 2) - ab(2, 0)),
         s * (ab(1, 0) - ab(0, 1)),
@@ -102,33 +98,34 @@ pub fn raw_strains(c: &Config, h: f64) -> (Vec3, Vec3) {
 
 /// Strain gradient `B = ∂(Γ, Ω)/∂Φ` at configuration `c`: row `k` (0–2 Γ, 3–5 Ω),
 /// field `p` gives the 3-vector `B[k][p]`.
-pub type StrainGradient = [[Vec3; NFIELDS]; 6];
+pub type StrainGradient<T = f64> = [[Vector3<T>; NFIELDS]; 6];
 
 /// `B(Φ)` for the bilinear strains of [`raw_strains`].
 #[inline]
-pub fn strain_gradient(c: &Config, h: f64) -> StrainGradient {
-    let mut bm = [[ZERO3; NFIELDS]; 6];
+pub fn strain_gradient<T: Lane>(c: &Config<T>, h: T) -> StrainGradient<T> {
+    let mut bm = [[Vector3::zeros(); NFIELDS]; 6];
+    let half = T::splat(0.5);
     // 1/h once (divisions cost several multiplications' throughput).
-    let inv_h = 1.0 / h;
+    let inv_h = T::one() / h;
     let dr = (c.r[1] - c.r[0]) * inv_h;
     let a = &c.d[0];
     let b = &c.d[1];
     for i in 0..3 {
-        let di: Vec3 = 0.5 * (a.column(i) + b.column(i));
+        let di: Vector3<T> = (a.column(i) + b.column(i)) * half;
         bm[i][R0] = -di * inv_h;
         bm[i][R1] = di * inv_h;
-        bm[i][A0 + i] = 0.5 * dr;
-        bm[i][B0 + i] = 0.5 * dr;
+        bm[i][A0 + i] = dr * half;
+        bm[i][B0 + i] = dr * half;
     }
     // Ω_k = ε_kij a_j·b_i /(2h): ∂/∂a_j = ε_kij b_i/(2h), ∂/∂b_i = ε_kij a_j/(2h).
-    let s = 0.5 / h;
+    let s = half / h;
     for (k, i, j) in EPS_POSITIVE {
         // ε_kij = +1 and ε_kji = −1
         let row = &mut bm[3 + k];
-        row[A0 + j] += s * b.column(i);
-        row[B0 + i] += s * a.column(j);
-        row[A0 + i] -= s * b.column(j);
-        row[B0 + j] -= s * a.column(i);
+        row[A0 + j] += b.column(i) * s;
+        row[B0 + i] += a.column(j) * s;
+        row[A0 + i] -= b.column(j) * s;
+        row[B0 + j] -= a.column(i) * s;
     }
     bm
 }
@@ -150,9 +147,9 @@ pub const GRADIENT_FIELDS: [[usize; 4]; 6] = [
 
 /// Hessian of `S·ε(Φ)` with respect to the fields, as the scalar 8×8 matrix `H_s` with
 /// `∂²(S·ε)/∂Φ_p∂Φ_q = H_s[p, q] I₃`. `s = (N, M)`. Constant in Φ because ε is bilinear.
-pub fn stress_hessian(s: &Vector6<f64>, h: f64) -> SMatrix<f64, NFIELDS, NFIELDS> {
-    let mut hs = SMatrix::<f64, NFIELDS, NFIELDS>::zeros();
-    let c = 0.5 / h;
+pub fn stress_hessian<T: Lane>(s: &Vector6<T>, h: T) -> SMatrix<T, NFIELDS, NFIELDS> {
+    let mut hs = SMatrix::<T, NFIELDS, NFIELDS>::zeros();
+    let c = T::splat(0.5) / h;
     for i in 0..3 {
         let n = s[i] * c;
         for p in [A0 + i, B0 + i] {
@@ -185,6 +182,7 @@ pub fn apply_gradient(bm: &StrainGradient, dphi: &[Vec3; NFIELDS]) -> Vector6<f6
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::Mat3;
     use crate::math::cay;
 
     fn sample(seed: f64) -> Config {

@@ -2,21 +2,25 @@
 //! rotation increment (the Cayley transform), never `exp`/`log`: this keeps the CPU and
 //! GPU kernels to `+ − × ÷` and `sqrt`.
 
+pub mod lane;
 pub mod rng;
 
 use crate::model::{Mat3, Vec3};
+use lane::Lane;
+use nalgebra::{Matrix3, Vector3};
 
 /// Skew matrix `â` with `â b = a × b`.
 #[inline]
-pub fn hat(a: &Vec3) -> Mat3 {
-    Mat3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0)
+pub fn hat<T: Lane>(a: &Vector3<T>) -> Matrix3<T> {
+    let z = T::zero();
+    Matrix3::new(z, -a.z, a.y, a.z, z, -a.x, -a.y, a.x, z)
 }
 
 /// `â M` without forming `â`: the cross product of `a` with each column of `M`
 /// (27 flops instead of a 3×3 product's 45).
 #[inline]
-pub fn hat_mul(a: &Vec3, m: &Mat3) -> Mat3 {
-    Mat3::from_columns(&[
+pub fn hat_mul<T: Lane>(a: &Vector3<T>, m: &Matrix3<T>) -> Matrix3<T> {
+    Matrix3::from_columns(&[
         a.cross(&m.column(0)),
         a.cross(&m.column(1)),
         a.cross(&m.column(2)),
@@ -26,9 +30,9 @@ pub fn hat_mul(a: &Vec3, m: &Mat3) -> Mat3 {
 /// `M v̂` without forming `v̂`: column j is `M (v × e_j)`, a combination of two columns
 /// of `M` (27 flops instead of a 3×3 product's 45).
 #[inline]
-pub fn mul_hat(m: &Mat3, v: &Vec3) -> Mat3 {
+pub fn mul_hat<T: Lane>(m: &Matrix3<T>, v: &Vector3<T>) -> Matrix3<T> {
     let (c0, c1, c2) = (m.column(0), m.column(1), m.column(2));
-    Mat3::from_columns(&[
+    Matrix3::from_columns(&[
         c1 * v.z - c2 * v.y,
         c2 * v.x - c0 * v.z,
         c0 * v.y - c1 * v.x,
@@ -56,13 +60,15 @@ pub fn inv_i_minus_half_hat(theta: &Vec3) -> Mat3 {
 /// `θ̂²` and the factor `1/(1 + ¼|θ|²)`; bit-identical to the two calls: the factors ½ and
 /// ¼ are exact in binary).
 #[inline]
-pub fn cay_with_factor(theta: &Vec3) -> (Mat3, Mat3) {
+pub fn cay_with_factor<T: Lane>(theta: &Vector3<T>) -> (Matrix3<T>, Matrix3<T>) {
     let t = hat(theta);
     let tt = t * t;
-    let s = 1.0 / (1.0 + 0.25 * theta.norm_squared());
+    let c = T::splat;
+    // (`dot` of θ with itself is `norm_squared` bit for bit: both sum the three squares.)
+    let s = c(1.0) / (c(1.0) + c(0.25) * theta.dot(theta));
     (
-        Mat3::identity() + (t + 0.5 * tt) * s,
-        Mat3::identity() + (0.5 * t + 0.25 * tt) * s,
+        Matrix3::identity() + (t + tt * c(0.5)) * s,
+        Matrix3::identity() + (t * c(0.5) + tt * c(0.25)) * s,
     )
 }
 

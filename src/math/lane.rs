@@ -1,0 +1,254 @@
+//! Lanes: the scalar type the 3D element kernel is written over. The kernel exists once,
+//! generic over [`Lane`]; it runs on `f64` (one element) and on [`F64x4`] (four elements
+//! at once, one per lane: the CPU assembly's SIMD path).
+//!
+//! Every lane operation is the same IEEE operation as on `f64`, lane by lane (no fused
+//! multiply-add, no reassociation), so the four lanes of an `F64x4` evaluation equal four
+//! `f64` evaluations bit for bit (`tests/lanes.rs`). Branches on data become lane
+//! selects; a branch that only skips work that would add zero (`dw ≠ 0`) is taken when
+//! any lane needs it.
+
+use std::fmt::Debug;
+use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
+
+use nalgebra::{Matrix3, Scalar, Vector3};
+use num_traits::{One, Zero};
+
+/// Number of elements an [`F64x4`] evaluation carries.
+pub const LANES: usize = 4;
+
+/// A scalar of the element kernel: `f64`, or one `f64` per lane.
+pub trait Lane:
+    Scalar
+    + Copy
+    + Debug
+    + Default
+    + Zero
+    + One
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+    + Send
+    + Sync
+{
+    /// Per-element flag: `bool`, or one per lane.
+    type Flag: Copy + Debug + PartialEq + Send + Sync;
+    /// The same value in every lane.
+    fn splat(x: f64) -> Self;
+    /// `f64::max`, lane by lane.
+    fn max(self, other: Self) -> Self;
+    /// `if other > self { other } else { self }`, lane by lane (plain compares: see
+    /// [`crate::element::amax3`]).
+    fn max_gt(self, other: Self) -> Self;
+    /// `|x|`, lane by lane.
+    fn abs(self) -> Self;
+    /// `√x`, lane by lane.
+    fn sqrt(self) -> Self;
+    /// `value` where `flag`, else 0, lane by lane.
+    fn select_or_zero(flag: Self::Flag, value: Self) -> Self;
+    /// Whether any lane is nonzero.
+    fn any_nonzero(self) -> bool;
+    /// Whether `flag` is set in any lane.
+    fn any(flag: Self::Flag) -> bool;
+    /// `a` where `flag`, else `b`, lane by lane.
+    fn choose(flag: Self::Flag, a: Self, b: Self) -> Self;
+}
+
+impl Lane for f64 {
+    type Flag = bool;
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        f64::max(self, other)
+    }
+    #[inline(always)]
+    fn max_gt(self, other: Self) -> Self {
+        if other > self {
+            other
+        } else {
+            self
+        }
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f64::abs(self)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    #[inline(always)]
+    fn select_or_zero(flag: bool, value: Self) -> Self {
+        if flag {
+            value
+        } else {
+            0.0
+        }
+    }
+    #[inline(always)]
+    fn any_nonzero(self) -> bool {
+        self != 0.0
+    }
+    #[inline(always)]
+    fn any(flag: bool) -> bool {
+        flag
+    }
+    #[inline(always)]
+    fn choose(flag: bool, a: Self, b: Self) -> Self {
+        if flag {
+            a
+        } else {
+            b
+        }
+    }
+}
+
+/// Four `f64` lanes, one element each. Plain arrays with lane-by-lane loops: the
+/// compiler turns them into packed SSE2 (or AVX) instructions.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(32))]
+pub struct F64x4(pub [f64; LANES]);
+
+impl F64x4 {
+    /// Lane `i`.
+    #[inline(always)]
+    pub fn lane(self, i: usize) -> f64 {
+        self.0[i]
+    }
+    #[inline(always)]
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        F64x4([f(self.0[0]), f(self.0[1]), f(self.0[2]), f(self.0[3])])
+    }
+    #[inline(always)]
+    fn zip(self, o: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        F64x4([
+            f(self.0[0], o.0[0]),
+            f(self.0[1], o.0[1]),
+            f(self.0[2], o.0[2]),
+            f(self.0[3], o.0[3]),
+        ])
+    }
+}
+
+macro_rules! lane_op {
+    ($tr:ident, $f:ident, $atr:ident, $af:ident, $op:tt) => {
+        impl $tr for F64x4 {
+            type Output = F64x4;
+            #[inline(always)]
+            fn $f(self, o: F64x4) -> F64x4 {
+                self.zip(o, |a, b| a $op b)
+            }
+        }
+        impl $atr for F64x4 {
+            #[inline(always)]
+            fn $af(&mut self, o: F64x4) {
+                *self = self.zip(o, |a, b| a $op b);
+            }
+        }
+    };
+}
+lane_op!(Add, add, AddAssign, add_assign, +);
+lane_op!(Sub, sub, SubAssign, sub_assign, -);
+lane_op!(Mul, mul, MulAssign, mul_assign, *);
+
+impl Div for F64x4 {
+    type Output = F64x4;
+    #[inline(always)]
+    fn div(self, o: F64x4) -> F64x4 {
+        self.zip(o, |a, b| a / b)
+    }
+}
+
+impl Neg for F64x4 {
+    type Output = F64x4;
+    #[inline(always)]
+    fn neg(self) -> F64x4 {
+        self.map(|a| -a)
+    }
+}
+
+impl Zero for F64x4 {
+    #[inline(always)]
+    fn zero() -> Self {
+        F64x4([0.0; LANES])
+    }
+    #[inline(always)]
+    fn is_zero(&self) -> bool {
+        self.0.iter().all(|&x| x == 0.0)
+    }
+}
+
+impl One for F64x4 {
+    #[inline(always)]
+    fn one() -> Self {
+        F64x4([1.0; LANES])
+    }
+}
+
+impl Lane for F64x4 {
+    type Flag = [bool; LANES];
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        F64x4([x; LANES])
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        self.zip(o, f64::max)
+    }
+    #[inline(always)]
+    fn max_gt(self, o: Self) -> Self {
+        self.zip(o, |a, b| if b > a { b } else { a })
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        self.map(f64::abs)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        self.map(f64::sqrt)
+    }
+    #[inline(always)]
+    fn select_or_zero(flag: [bool; LANES], value: Self) -> Self {
+        F64x4(std::array::from_fn(|i| if flag[i] { value.0[i] } else { 0.0 }))
+    }
+    #[inline(always)]
+    fn any_nonzero(self) -> bool {
+        self.0.iter().any(|&x| x != 0.0)
+    }
+    #[inline(always)]
+    fn any(flag: [bool; LANES]) -> bool {
+        flag.iter().any(|&f| f)
+    }
+    #[inline(always)]
+    fn choose(flag: [bool; LANES], a: Self, b: Self) -> Self {
+        F64x4(std::array::from_fn(|i| if flag[i] { a.0[i] } else { b.0[i] }))
+    }
+}
+
+/// Packs lane values: `f(i)` for lane `i`.
+#[inline(always)]
+pub fn pack(f: impl Fn(usize) -> f64) -> F64x4 {
+    F64x4([f(0), f(1), f(2), f(3)])
+}
+
+/// Packs a 3-vector per lane.
+#[inline(always)]
+pub fn pack3(f: impl Fn(usize) -> Vector3<f64>) -> Vector3<F64x4> {
+    let v: [Vector3<f64>; LANES] = std::array::from_fn(f);
+    Vector3::from_fn(|r, _| pack(|i| v[i][r]))
+}
+
+/// Packs a 3×3 matrix per lane.
+#[inline(always)]
+pub fn pack33(f: impl Fn(usize) -> Matrix3<f64>) -> Matrix3<F64x4> {
+    let m: [Matrix3<f64>; LANES] = std::array::from_fn(f);
+    Matrix3::from_fn(|r, c| pack(|i| m[i][(r, c)]))
+}
