@@ -20,13 +20,14 @@
 
 pub mod director_factor;
 pub mod dissipation;
+pub mod lanes;
 pub mod planar;
 pub mod scalar_gradient;
 pub mod strain;
 
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3, Vector6};
 
-use crate::math::lane::Lane;
+use crate::math::lane::{identity3, zeros, Lane};
 use crate::math::{cay_with_factor, hat, hat_mul, mul_hat};
 use crate::model::{ElementProps, Mat3, Vec3};
 use crate::scheme::Scheme;
@@ -301,7 +302,14 @@ pub fn kinematics_core<T: Lane>(
     c_nu: T,
     dt: f64,
 ) -> Kinematics<T> {
-    kinematics_at(data, st, eps_n, inc, |ksum| c_nu / (T::one() + ksum * c_nu), dt)
+    kinematics_at(
+        data,
+        st,
+        eps_n,
+        inc,
+        |ksum| c_nu / (T::one() + ksum * c_nu),
+        dt,
+    )
 }
 
 /// [`kinematics_core`] with the factor `φ = c_ν/(1 + K c_ν)` of the director dissipative
@@ -337,8 +345,8 @@ pub fn kinematics_at<T: Lane>(
     let ksum = kappa[0] + kappa[1];
     let phi = phi(ksum);
     // v^h_{α,n} + v^h_{α,n+1} = Y_α/(1 + K c_ν), Y_α = Σ_l (d^l_{α,n+1} − d^l_{α,n})/Δt.
-    let mut w = [Vector3::zeros(); 2];
-    let mut vd1 = [[Vector3::zeros(); 2]; 2];
+    let mut w = [zeros(); 2];
+    let mut vd1 = [[zeros(); 2]; 2];
     for a in 0..2 {
         let dd = [
             cfg1.d[0].column(a) - st.cfg.d[0].column(a),
@@ -437,7 +445,11 @@ pub fn stresses<T: Lane>(
 }
 
 /// `(N, M) = (C_Γ Γ, C_Ω Ω)` for strains measured from the reference.
-fn constitutive<T: Lane>(p: &ElementProps<T>, gamma: &Vector3<T>, omega: &Vector3<T>) -> Vector6<T> {
+fn constitutive<T: Lane>(
+    p: &ElementProps<T>,
+    gamma: &Vector3<T>,
+    omega: &Vector3<T>,
+) -> Vector6<T> {
     let n = p.c_gamma.component_mul(gamma);
     let m = p.c_omega * omega;
     Vector6::new(n.x, n.y, n.z, m.x, m.y, m.z)
@@ -490,7 +502,7 @@ pub fn field_forces<T: Lane>(
     s: &Vector6<T>,
     h: T,
 ) -> [Vector3<T>; NFIELDS] {
-    let mut f = [Vector3::zeros(); NFIELDS];
+    let mut f = [zeros(); NFIELDS];
     for k in 0..6 {
         let hs = h * s[k];
         for j in 0..4 {
@@ -573,9 +585,9 @@ impl<T: Lane> ElementEval<T> {
     /// All zeros (a buffer for [`residual_tangent_into`]).
     pub fn zeros() -> Self {
         Self {
-            r: SVector::zeros(),
-            scale: SVector::zeros(),
-            k: SMatrix::zeros(),
+            r: zeros(),
+            scale: zeros(),
+            k: zeros(),
         }
     }
 }
@@ -626,7 +638,7 @@ pub fn residual_tangent_into<T: Lane>(
     // the load alone.
     let f_gross = stress_force_floor(data, &b_mid, &((kin.eps_n + kin.eps1) * half));
     let scale = &mut out.scale;
-    *scale = SVector::zeros();
+    *scale = zeros();
     let stress_scale = [
         amax3(&f[R0]).max(f_gross[R0]),
         amax3(&f[R1]).max(f_gross[R1]),
@@ -634,22 +646,26 @@ pub fn residual_tangent_into<T: Lane>(
     // 1/Δt once: a division costs several multiplications' throughput, and the kernel
     // has dozens of them per element.
     let inv_dt = c(1.0 / dt);
-    let mut inertia_r = [Vector3::zeros(); 2];
+    let mut inertia_r = [zeros(); 2];
     for l in 0..2 {
         for m in 0..2 {
             let cm = p.a_rho * h * c(M2[l][m]) * inv_dt;
             inertia_r[l] += (kin.v1[m] - st.v[m]) * cm;
         }
     }
-    let i_rho_max = p.i_rho.iter().fold(T::zero(), |a, &x| a.max(x.abs()));
+    let mut i_rho_max = T::zero();
+    for &x in p.i_rho.iter() {
+        i_rho_max = i_rho_max.max(x.abs());
+    }
     let mut fd_scale = [T::zero(); 2];
     for l in 0..2 {
         let base = if l == 0 { A0 } else { B0 };
         for a in 0..2 {
-            let mut fi = Vector3::zeros();
+            let mut fi = zeros();
             for m in 0..2 {
                 for b in 0..2 {
-                    fi += (kin.vd1[m][b] - st.vd[m][b]) * (h * c(M2[l][m]) * p.i_rho[(a, b)] * inv_dt);
+                    fi += (kin.vd1[m][b] - st.vd[m][b])
+                        * (h * c(M2[l][m]) * p.i_rho[(a, b)] * inv_dt);
                 }
             }
             let rate = h * i_rho_max * (amax3(&st.vd[l][a]) + amax3(&kin.vd1[l][a])) * inv_dt;
@@ -664,13 +680,13 @@ pub fn residual_tangent_into<T: Lane>(
     }
 
     let r = &mut out.r;
-    *r = SVector::zeros();
+    *r = zeros();
     let dmid = [kin.mid.d[0], kin.mid.d[1]];
     for l in 0..2 {
         let fr = f[if l == 0 { R0 } else { R1 }] + inertia_r[l];
         r.fixed_rows_mut::<3>(u_idx(l)).copy_from(&fr);
         let base = if l == 0 { A0 } else { B0 };
-        let mut rt = Vector3::zeros();
+        let mut rt = zeros();
         for i in 0..3 {
             rt += dmid[l].column(i).cross(&f[base + i]);
         }
@@ -692,7 +708,7 @@ pub fn residual_tangent_into<T: Lane>(
     if trans_diss {
         let b = vsum * (half * h * p.a_rho * s.c_v);
         for l in 0..2 {
-            let mut mg = Vector3::zeros();
+            let mut mg = zeros();
             for m in 0..2 {
                 mg += kin_g(st, kin, m, inv_dt) * (p.a_rho * h * c(M2[l][m]));
             }
@@ -771,9 +787,14 @@ fn tangent<T: Lane>(
     let half = c(0.5);
     // Trial side: ∂ε/∂Φ_{n+1} = ½ B(Φ_{n+1}) for the mean of the strains, ½ B(Φ_{n+½})
     // for the strain of the mid-point configuration (the ½ is in `dmat` below).
+    // (By reference: a copy of the gradient is 1.2 kB, 4.6 kB in lanes.)
+    let b_end_own;
     let b1 = match k.scheme.stress_rule() {
-        StressRule::MeanOfStrains => strain_gradient(&kin.cfg1, h),
-        StressRule::MidpointStrain => *b_mid,
+        StressRule::MeanOfStrains => {
+            b_end_own = strain_gradient(&kin.cfg1, h);
+            &b_end_own
+        }
+        StressRule::MidpointStrain => b_mid,
     };
     // Mid-point directors d_{l,i} and the transposed Cayley factors A_lᵀ.
     let dcol: [[Vector3<T>; 3]; 2] =
@@ -786,8 +807,8 @@ fn tangent<T: Lane>(
     // never formed: Tᵀ b = d_½ × b and Jᵀ b = d_½ × (A_lᵀ b).
     //
     // Reduced strain gradients B̃ = B T (mid) and B J (n+1), 6 rows × 12 columns.
-    let mut bt_mid = SMatrix::<T, 6, 12>::zeros();
-    let mut bt_1 = SMatrix::<T, 6, 12>::zeros();
+    let mut bt_mid = zeros::<T, 6, 12>();
+    let mut bt_1 = zeros::<T, 6, 12>();
     for kk in 0..6 {
         for q in GRADIENT_FIELDS[kk] {
             let (c0, dir) = field_block(q);
@@ -808,33 +829,43 @@ fn tangent<T: Lane>(
     // with the strain of the mid-point configuration the dissipative part ½ β C Δε still
     // varies with the strains at n+1: ∂S*/∂q = ½ C B̃_½J + ½ β C B̃_1 (β from Kelvin–Voigt
     // damping). C is diagonal on Γ, a 3×3 block on Ω: applied by rows.
-    let scaled = |bt: &SMatrix<T, 6, 12>, fg: T, fo: T| {
-        let mut db = *bt;
+    // D B̃ into `db` (overwritten, or added to when `add`).
+    let scaled = |db: &mut SMatrix<T, 6, 12>, bt: &SMatrix<T, 6, 12>, fg: T, fo: T, add: bool| {
         for i in 0..3 {
             let f = fg * p.c_gamma[i];
             for cc in 0..12 {
-                db[(i, cc)] *= f;
+                let x = bt[(i, cc)] * f;
+                db[(i, cc)] = if add { db[(i, cc)] + x } else { x };
             }
         }
-        let om = (p.c_omega * fo) * bt.fixed_rows::<3>(3);
-        db.fixed_rows_mut::<3>(3).copy_from(&om);
-        db
+        let co = p.c_omega * fo;
+        for cc in 0..12 {
+            let col = bt.fixed_view::<3, 1>(3, cc);
+            let om = co * col;
+            for i in 0..3 {
+                let x = om[i];
+                db[(3 + i, cc)] = if add { db[(3 + i, cc)] + x } else { x };
+            }
+        }
     };
     let (bg, bo) = (s.beta_gamma, s.beta_omega);
     let mean = k.scheme.stress_rule() == StressRule::MeanOfStrains;
-    let mut db = if mean {
+    let mut db = zeros::<T, 6, 12>();
+    if mean {
         scaled(
+            &mut db,
             &bt_1,
             half * h * (T::one() + bg),
             half * h * (T::one() + bo),
-        )
+            false,
+        );
     } else {
-        scaled(&bt_1, half * h, half * h)
-    };
+        scaled(&mut db, &bt_1, half * h, half * h, false);
+    }
     // (Lanes with β = 0 add exact zeros.)
     if !mean && (bg.any_nonzero() || bo.any_nonzero()) {
         let b_end = strain_gradient(&kin.cfg1, h);
-        let mut bt_end = SMatrix::<T, 6, 12>::zeros();
+        let mut bt_end = zeros::<T, 6, 12>();
         for kk in 0..6 {
             for q in GRADIENT_FIELDS[kk] {
                 let (c0, dir) = field_block(q);
@@ -847,7 +878,7 @@ fn tangent<T: Lane>(
                 }
             }
         }
-        db += scaled(&bt_end, half * h * bg, half * h * bo);
+        scaled(&mut db, &bt_end, half * h * bg, half * h * bo, true);
     }
     // Written in place (no 12×12 temporary, no transposed copy); β = 0 overwrites the block.
     kt.fixed_view_mut::<12, 12>(0, 0)
@@ -895,9 +926,11 @@ fn tangent<T: Lane>(
         for m in 0..2 {
             let rm = if m == 0 { R0 } else { R1 };
             let vsum = |pf: usize| -> Vector3<T> {
-                (0..3).fold(Vector3::zeros(), |acc, j| {
-                    acc + dcol[m][j] * gs[(pf, field_of(m, j))]
-                })
+                let mut acc: Vector3<T> = zeros();
+                for j in 0..3 {
+                    acc += dcol[m][j] * gs[(pf, field_of(m, j))];
+                }
+                acc
             };
             // (u_l, u_m)
             let g_uu = gs[(rl, rm)];
@@ -905,16 +938,17 @@ fn tangent<T: Lane>(
                 kt[(u_idx(l) + cc, u_idx(m) + cc)] += g_uu;
             }
             // (θ_l, u_m)
-            let w = (0..3).fold(Vector3::zeros(), |acc, i| {
-                acc + dcol[l][i] * gs[(field_of(l, i), rm)]
-            });
+            let mut w: Vector3<T> = zeros();
+            for i in 0..3 {
+                w += dcol[l][i] * gs[(field_of(l, i), rm)];
+            }
             let mut view = kt.fixed_view_mut::<3, 3>(th_idx(l), u_idx(m));
             view += hat(&w);
             // (u_l, θ_m)
             let mut view = kt.fixed_view_mut::<3, 3>(u_idx(l), th_idx(m));
             view -= mul_hat(&amat[m], &vsum(rl));
             // (θ_l, θ_m)
-            let mut blk = Matrix3::zeros();
+            let mut blk = zeros();
             for i in 0..3 {
                 blk += hat_mul(&dcol[l][i], &mul_hat(&amat[m], &vsum(field_of(l, i))));
             }
@@ -925,7 +959,7 @@ fn tangent<T: Lane>(
     // Projection term: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.
     for l in 0..2 {
         let base = if l == 0 { A0 } else { B0 };
-        let mut blk = Matrix3::zeros();
+        let mut blk = zeros();
         for i in 0..3 {
             blk += hat_mul(&f[base + i], &mul_hat(&amat[l], &dcol[l][i]));
         }
@@ -934,7 +968,7 @@ fn tangent<T: Lane>(
     }
 
     if trans_diss {
-        let i3 = Matrix3::<T>::identity();
+        let i3 = identity3::<T>();
         let cv = half * h * p.a_rho * s.c_v;
         for l in 0..2 {
             for m in 0..2 {

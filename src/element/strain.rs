@@ -14,7 +14,7 @@
 
 use nalgebra::{Matrix3, SMatrix, Vector3, Vector6};
 
-use crate::math::lane::Lane;
+use crate::math::lane::{zeros, Lane};
 use crate::model::Vec3;
 
 /// Index of a vector field of the element: `R0, R1` node positions, `A0+i` director `i`
@@ -70,8 +70,14 @@ impl<T: Lane> Config<T> {
     pub fn mean(&self, other: &Config<T>) -> Config<T> {
         let half = T::splat(0.5);
         Config {
-            r: [(self.r[0] + other.r[0]) * half, (self.r[1] + other.r[1]) * half],
-            d: [(self.d[0] + other.d[0]) * half, (self.d[1] + other.d[1]) * half],
+            r: [
+                (self.r[0] + other.r[0]) * half,
+                (self.r[1] + other.r[1]) * half,
+            ],
+            d: [
+                (self.d[0] + other.d[0]) * half,
+                (self.d[1] + other.d[1]) * half,
+            ],
         }
     }
 }
@@ -82,7 +88,7 @@ pub fn raw_strains<T: Lane>(c: &Config<T>, h: T) -> (Vector3<T>, Vector3<T>) {
     let dr = (c.r[1] - c.r[0]).map(|x| x / h);
     let a = &c.d[0];
     let b = &c.d[1];
-    let mut gamma = Vector3::zeros();
+    let mut gamma = zeros();
     for i in 0..3 {
         gamma[i] = T::splat(0.5) * (a.column(i) + b.column(i)).dot(&dr);
     }
@@ -103,7 +109,7 @@ pub type StrainGradient<T = f64> = [[Vector3<T>; NFIELDS]; 6];
 /// `B(Φ)` for the bilinear strains of [`raw_strains`].
 #[inline]
 pub fn strain_gradient<T: Lane>(c: &Config<T>, h: T) -> StrainGradient<T> {
-    let mut bm = [[Vector3::zeros(); NFIELDS]; 6];
+    let mut bm = [[zeros(); NFIELDS]; 6];
     let half = T::splat(0.5);
     // 1/h once (divisions cost several multiplications' throughput).
     let inv_h = T::one() / h;
@@ -148,7 +154,7 @@ pub const GRADIENT_FIELDS: [[usize; 4]; 6] = [
 /// Hessian of `S·ε(Φ)` with respect to the fields, as the scalar 8×8 matrix `H_s` with
 /// `∂²(S·ε)/∂Φ_p∂Φ_q = H_s[p, q] I₃`. `s = (N, M)`. Constant in Φ because ε is bilinear.
 pub fn stress_hessian<T: Lane>(s: &Vector6<T>, h: T) -> SMatrix<T, NFIELDS, NFIELDS> {
-    let mut hs = SMatrix::<T, NFIELDS, NFIELDS>::zeros();
+    let mut hs = zeros::<T, NFIELDS, NFIELDS>();
     let c = T::splat(0.5) / h;
     for i in 0..3 {
         let n = s[i] * c;
@@ -182,8 +188,8 @@ pub fn apply_gradient(bm: &StrainGradient, dphi: &[Vec3; NFIELDS]) -> Vector6<f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::Mat3;
     use crate::math::cay;
+    use crate::model::Mat3;
 
     fn sample(seed: f64) -> Config {
         let m = |x: f64| {

@@ -111,30 +111,35 @@ impl Lane for f64 {
     }
 }
 
-/// Four `f64` lanes, one element each. Plain arrays with lane-by-lane loops: the
-/// compiler turns them into packed SSE2 (or AVX) instructions.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-#[repr(C, align(32))]
-pub struct F64x4(pub [f64; LANES]);
+/// Four `f64` lanes, one element each: a `wide::f64x4` (one AVX register; two SSE2
+/// registers where the build does not target AVX), whose arithmetic is the plain IEEE
+/// operation lane by lane.
+#[derive(Clone, Copy, Default, PartialEq)]
+#[repr(transparent)]
+pub struct F64x4(pub wide::f64x4);
+
+impl Debug for F64x4 {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.to_array().fmt(f)
+    }
+}
 
 impl F64x4 {
     /// Lane `i`.
     #[inline(always)]
     pub fn lane(self, i: usize) -> f64 {
-        self.0[i]
+        self.0.as_array()[i]
     }
+    /// The four lanes.
     #[inline(always)]
-    fn map(self, f: impl Fn(f64) -> f64) -> Self {
-        F64x4([f(self.0[0]), f(self.0[1]), f(self.0[2]), f(self.0[3])])
+    pub fn new(x: [f64; LANES]) -> Self {
+        F64x4(wide::f64x4::new(x))
     }
+    /// All-ones bits where `flag`, zero elsewhere (a select mask).
     #[inline(always)]
-    fn zip(self, o: Self, f: impl Fn(f64, f64) -> f64) -> Self {
-        F64x4([
-            f(self.0[0], o.0[0]),
-            f(self.0[1], o.0[1]),
-            f(self.0[2], o.0[2]),
-            f(self.0[3], o.0[3]),
-        ])
+    fn flags(flag: [bool; LANES]) -> wide::f64x4 {
+        let m = |b: bool| if b { f64::from_bits(u64::MAX) } else { 0.0 };
+        wide::f64x4::new([m(flag[0]), m(flag[1]), m(flag[2]), m(flag[3])])
     }
 }
 
@@ -144,13 +149,13 @@ macro_rules! lane_op {
             type Output = F64x4;
             #[inline(always)]
             fn $f(self, o: F64x4) -> F64x4 {
-                self.zip(o, |a, b| a $op b)
+                F64x4(self.0 $op o.0)
             }
         }
         impl $atr for F64x4 {
             #[inline(always)]
             fn $af(&mut self, o: F64x4) {
-                *self = self.zip(o, |a, b| a $op b);
+                self.0 = self.0 $op o.0;
             }
         }
     };
@@ -163,7 +168,7 @@ impl Div for F64x4 {
     type Output = F64x4;
     #[inline(always)]
     fn div(self, o: F64x4) -> F64x4 {
-        self.zip(o, |a, b| a / b)
+        F64x4(self.0 / o.0)
     }
 }
 
@@ -171,25 +176,25 @@ impl Neg for F64x4 {
     type Output = F64x4;
     #[inline(always)]
     fn neg(self) -> F64x4 {
-        self.map(|a| -a)
+        F64x4(-self.0)
     }
 }
 
 impl Zero for F64x4 {
     #[inline(always)]
     fn zero() -> Self {
-        F64x4([0.0; LANES])
+        F64x4(wide::f64x4::ZERO)
     }
     #[inline(always)]
     fn is_zero(&self) -> bool {
-        self.0.iter().all(|&x| x == 0.0)
+        !self.any_nonzero()
     }
 }
 
 impl One for F64x4 {
     #[inline(always)]
     fn one() -> Self {
-        F64x4([1.0; LANES])
+        F64x4(wide::f64x4::ONE)
     }
 }
 
@@ -197,31 +202,32 @@ impl Lane for F64x4 {
     type Flag = [bool; LANES];
     #[inline(always)]
     fn splat(x: f64) -> Self {
-        F64x4([x; LANES])
+        F64x4(wide::f64x4::splat(x))
     }
     #[inline(always)]
     fn max(self, o: Self) -> Self {
-        self.zip(o, f64::max)
+        // wide's `max` takes the other lane where one is NaN, like `f64::max`.
+        F64x4(self.0.max(o.0))
     }
     #[inline(always)]
     fn max_gt(self, o: Self) -> Self {
-        self.zip(o, |a, b| if b > a { b } else { a })
+        F64x4(o.0.simd_gt(self.0).select(o.0, self.0))
     }
     #[inline(always)]
     fn abs(self) -> Self {
-        self.map(f64::abs)
+        F64x4(self.0.abs())
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
-        self.map(f64::sqrt)
+        F64x4(self.0.sqrt())
     }
     #[inline(always)]
     fn select_or_zero(flag: [bool; LANES], value: Self) -> Self {
-        F64x4(std::array::from_fn(|i| if flag[i] { value.0[i] } else { 0.0 }))
+        F64x4(Self::flags(flag).select(value.0, wide::f64x4::ZERO))
     }
     #[inline(always)]
     fn any_nonzero(self) -> bool {
-        self.0.iter().any(|&x| x != 0.0)
+        self.0.simd_ne(wide::f64x4::ZERO).any()
     }
     #[inline(always)]
     fn any(flag: [bool; LANES]) -> bool {
@@ -229,14 +235,14 @@ impl Lane for F64x4 {
     }
     #[inline(always)]
     fn choose(flag: [bool; LANES], a: Self, b: Self) -> Self {
-        F64x4(std::array::from_fn(|i| if flag[i] { a.0[i] } else { b.0[i] }))
+        F64x4(Self::flags(flag).select(a.0, b.0))
     }
 }
 
 /// Packs lane values: `f(i)` for lane `i`.
 #[inline(always)]
 pub fn pack(f: impl Fn(usize) -> f64) -> F64x4 {
-    F64x4([f(0), f(1), f(2), f(3)])
+    F64x4::new([f(0), f(1), f(2), f(3)])
 }
 
 /// Packs a 3-vector per lane.
@@ -251,4 +257,19 @@ pub fn pack3(f: impl Fn(usize) -> Vector3<f64>) -> Vector3<F64x4> {
 pub fn pack33(f: impl Fn(usize) -> Matrix3<f64>) -> Matrix3<F64x4> {
     let m: [Matrix3<f64>; LANES] = std::array::from_fn(f);
     Matrix3::from_fn(|r, c| pack(|i| m[i][(r, c)]))
+}
+
+/// The zero matrix of any fixed size, built as an array of zeros: nalgebra's `zeros()` fills
+/// a generic scalar through an iterator, which for [`F64x4`] compiles to a slow element
+/// loop (for `f64` both are a plain fill).
+#[inline(always)]
+pub fn zeros<T: Lane, const R: usize, const C: usize>() -> nalgebra::SMatrix<T, R, C> {
+    nalgebra::SMatrix::from_array_storage(nalgebra::ArrayStorage([[T::zero(); R]; C]))
+}
+
+/// The 3×3 identity, built like [`zeros`].
+#[inline(always)]
+pub fn identity3<T: Lane>() -> Matrix3<T> {
+    let (z, o) = (T::zero(), T::one());
+    Matrix3::new(o, z, z, z, o, z, z, z, o)
 }

@@ -6,7 +6,7 @@ pub mod lane;
 pub mod rng;
 
 use crate::model::{Mat3, Vec3};
-use lane::Lane;
+use lane::{identity3, Lane};
 use nalgebra::{Matrix3, Vector3};
 
 /// Skew matrix `â` with `â b = a × b`.
@@ -67,8 +67,8 @@ pub fn cay_with_factor<T: Lane>(theta: &Vector3<T>) -> (Matrix3<T>, Matrix3<T>) 
     // (`dot` of θ with itself is `norm_squared` bit for bit: both sum the three squares.)
     let s = c(1.0) / (c(1.0) + c(0.25) * theta.dot(theta));
     (
-        Matrix3::identity() + (t + tt * c(0.5)) * s,
-        Matrix3::identity() + (t * c(0.5) + tt * c(0.25)) * s,
+        identity3() + (t + tt * c(0.5)) * s,
+        identity3() + (t * c(0.5) + tt * c(0.25)) * s,
     )
 }
 

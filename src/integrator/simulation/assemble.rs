@@ -7,13 +7,21 @@
 use std::time::Instant;
 
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
+use crate::element::lanes::pack6;
 use crate::element::{
-    consistent_scalars, kinematics_core, monolithic_correction, residual_tangent_into, ElemMat,
-    ElemVec, ElementEval, NDOF,
+    consistent_scalars, kinematics_core, monolithic_correction, residual_tangent_into, ElementData,
+    ElementEval, ElementState, FrozenScalars, Increment, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
 use crate::integrator::links;
+use crate::math::lane::{F64x4, LANES};
+
+/// Whether the four-element lanes pay: with AVX an [`F64x4`] is one register and the
+/// kernel runs ≈ 1.6× faster per element; with SSE2 only (two registers per value) it
+/// runs slower than one element at a time (docs/benchmarks.md). Results are the same
+/// either way, bit for bit.
+const LANES_PAY: bool = cfg!(target_feature = "avx");
 
 impl Simulation {
     /// Assembles residual `r`, the row scales and (if `tangent`) the matrix values.
@@ -141,13 +149,16 @@ impl Simulation {
         } else {
             self.model.elements.len()
         };
-        // One element buffer for the whole loop (no per-element allocation or copy).
-        let mut ev = ElementEval {
-            r: ElemVec::zeros(),
-            scale: ElemVec::zeros(),
-            k: ElemMat::zeros(),
+        // Frozen scalars: the elements go through the kernel four at a time, one per
+        // lane (bit-identical to one at a time); the rest one by one below.
+        let first_single = if mode == Mode::Frozen && LANES_PAY {
+            self.assemble_lanes(q, n_cpu, tangent, r, &mut scale)
+        } else {
+            0
         };
-        for e in 0..n_cpu {
+        // One element buffer for the whole loop (no per-element allocation or copy).
+        let mut ev = ElementEval::zeros();
+        for e in first_single..n_cpu {
             let inc = self.gather(e, q);
             let st = self.state.element(&self.model, e);
             let eps_n = self.state.eps[e];
@@ -188,6 +199,83 @@ impl Simulation {
             worst = worst.max(rel);
         }
         (worst, scale)
+    }
+
+    /// The frozen-scalar elements `0..4⌊n/4⌋` through the kernel by groups of four, one
+    /// element per [`F64x4`] lane, scattered like [`Self::scatter`]. Returns the first
+    /// element left for the one-by-one loop.
+    fn assemble_lanes(
+        &mut self,
+        q: &[f64],
+        n: usize,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) -> usize {
+        let k = self.consts();
+        let groups = n / LANES;
+        let mut ev = ElementEval::<F64x4>::zeros();
+        for g in 0..groups {
+            let e0 = g * LANES;
+            // (Array literals, not `from_fn`: that moves each element through a buffer.)
+            let inc = Increment::pack(&[
+                self.gather(e0, q),
+                self.gather(e0 + 1, q),
+                self.gather(e0 + 2, q),
+                self.gather(e0 + 3, q),
+            ]);
+            let (m, sv) = (&self.model, &self.state);
+            let st = ElementState::pack(&[
+                sv.element(m, e0),
+                sv.element(m, e0 + 1),
+                sv.element(m, e0 + 2),
+                sv.element(m, e0 + 3),
+            ]);
+            let eps_n = pack6(sv.eps[e0..e0 + LANES].try_into().unwrap());
+            let s = FrozenScalars::pack(self.frozen[e0..e0 + LANES].try_into().unwrap());
+            let data = &self.data_lanes[g];
+            let kin = kinematics_core(data, &st, &eps_n, &inc, s.c_nu, k.dt);
+            residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
+            for i in 0..LANES {
+                self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
+            }
+        }
+        groups * LANES
+    }
+
+    /// [`Self::scatter`] of lane `lane` of a four-element evaluation (element `e`).
+    fn scatter_lane(
+        &mut self,
+        e: usize,
+        ev: &ElementEval<F64x4>,
+        lane: usize,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
+        for &(i, g) in &self.row_map[lo.0..hi.0] {
+            r[g] += ev.r[i].lane(lane);
+            let kind = kind_of_local(i);
+            scale[kind] = scale[kind].max(ev.scale[i].lane(lane));
+        }
+        if tangent {
+            let ks = ev.k.as_slice();
+            let vals = self.solver.values_mut();
+            for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {
+                for (v, k) in vals[dst..dst + len].iter_mut().zip(&ks[src..src + len]) {
+                    *v += k.lane(lane);
+                }
+            }
+        }
+    }
+
+    /// [`ElementData`] by groups of four elements, one per lane; the last group repeats
+    /// its last element (its extra lanes are never scattered).
+    pub(super) fn lane_groups(data: &[ElementData]) -> Vec<ElementData<F64x4>> {
+        data.chunks(LANES)
+            .map(|c| ElementData::pack(std::array::from_fn(|i| &c[i.min(c.len() - 1)])))
+            .collect()
     }
 
     /// Adds the nodal terms (point masses, external loads and moments) and the rigid

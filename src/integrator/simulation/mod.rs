@@ -44,6 +44,7 @@ use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
 use crate::integrator::report::SolveTimers;
 use crate::integrator::state::State;
 use crate::linsolve::{SlotLookup, SolverKind, SparseSolver};
+use crate::math::lane::F64x4;
 use crate::model::{Model, Vec3};
 use crate::observe::{invariants, Invariants};
 
@@ -89,6 +90,9 @@ pub struct Simulation {
     model: Model,
     params: IntegratorParams,
     data: Vec<ElementData>,
+    /// [`Self::data`] by groups of four elements, one per lane (the last group repeats its
+    /// last element): the CPU assembly's SIMD path.
+    data_lanes: Vec<ElementData<F64x4>>,
     dofs: DofMap,
     solver: SparseSolver,
     /// Per element: solver slot of each element-local (i, j) pair, [`NONE`] if inactive.
@@ -241,6 +245,7 @@ impl Simulation {
             prescribed: vec![[Vec3::zeros(); 2]; nn],
             model,
             params,
+            data_lanes: Self::lane_groups(&data),
             data,
             dofs,
             solver: parts.solver,

@@ -1,0 +1,124 @@
+//! Four elements in one kernel call: packing their inputs into [`F64x4`] lanes (lane `i`
+//! is element `i` of the group) and reading lane results back. The kernel itself is the
+//! one in [`super`], instantiated for `F64x4`; each lane's result equals the `f64`
+//! evaluation of that element bit for bit (`tests/lanes.rs`).
+
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3, Vector6};
+
+use super::strain::Config;
+use super::{ElementData, ElementEval, ElementState, FrozenScalars, Increment, NDOF};
+use crate::math::lane::{pack, pack3, pack33, F64x4, LANES};
+use crate::model::ElementProps;
+
+/// Packs a 6-vector per lane.
+#[inline]
+pub fn pack6(v: &[Vector6<f64>; LANES]) -> Vector6<F64x4> {
+    let l = |r: usize| F64x4::new([v[0][r], v[1][r], v[2][r], v[3][r]]);
+    Vector6::new(l(0), l(1), l(2), l(3), l(4), l(5))
+}
+
+impl ElementData<F64x4> {
+    /// The constant data of four elements, one per lane.
+    pub fn pack(d: [&ElementData; LANES]) -> Self {
+        let p = |i: usize| &d[i].props;
+        ElementData {
+            props: ElementProps {
+                h: pack(|i| p(i).h),
+                a_rho: pack(|i| p(i).a_rho),
+                i_rho: Matrix2::from_fn(|r, c| pack(|i| p(i).i_rho[(r, c)])),
+                c_gamma: pack3(|i| p(i).c_gamma),
+                c_omega: pack33(|i| p(i).c_omega),
+                damping: pack(|i| p(i).damping),
+                drag: pack(|i| p(i).drag),
+            },
+            eps0: pack6(&std::array::from_fn(|i| d[i].eps0)),
+            rot_free: [
+                std::array::from_fn(|i| d[i].rot_free[0]),
+                std::array::from_fn(|i| d[i].rot_free[1]),
+            ],
+        }
+    }
+}
+
+/// `[a.x, b.x, c.x, d.x]`, … for four vectors.
+#[inline(always)]
+fn v3(v: [&Vector3<f64>; LANES]) -> Vector3<F64x4> {
+    let l = |r: usize| F64x4::new([v[0][r], v[1][r], v[2][r], v[3][r]]);
+    Vector3::new(l(0), l(1), l(2))
+}
+
+/// Lane packing of four 3×3 matrices.
+#[inline(always)]
+fn m3(m: [&Matrix3<f64>; LANES]) -> Matrix3<F64x4> {
+    let l = |k: usize| {
+        let [a, b, c, d] = m;
+        F64x4::new([
+            a.as_slice()[k],
+            b.as_slice()[k],
+            c.as_slice()[k],
+            d.as_slice()[k],
+        ])
+    };
+    Matrix3::from_column_slice(&[l(0), l(1), l(2), l(3), l(4), l(5), l(6), l(7), l(8)])
+}
+
+impl ElementState<F64x4> {
+    /// The states of four elements, one per lane.
+    #[inline]
+    pub fn pack(s: &[ElementState; LANES]) -> Self {
+        let [a, b, c, d] = s;
+        let r = |l: usize| v3([&a.cfg.r[l], &b.cfg.r[l], &c.cfg.r[l], &d.cfg.r[l]]);
+        let dm = |l: usize| m3([&a.cfg.d[l], &b.cfg.d[l], &c.cfg.d[l], &d.cfg.d[l]]);
+        let v = |l: usize| v3([&a.v[l], &b.v[l], &c.v[l], &d.v[l]]);
+        let vd = |l: usize, k: usize| v3([&a.vd[l][k], &b.vd[l][k], &c.vd[l][k], &d.vd[l][k]]);
+        ElementState {
+            cfg: Config {
+                r: [r(0), r(1)],
+                d: [dm(0), dm(1)],
+            },
+            v: [v(0), v(1)],
+            vd: [[vd(0, 0), vd(0, 1)], [vd(1, 0), vd(1, 1)]],
+        }
+    }
+}
+
+impl Increment<F64x4> {
+    /// The increments of four elements, one per lane.
+    #[inline]
+    pub fn pack(x: &[Increment; LANES]) -> Self {
+        let [a, b, c, d] = x;
+        let u = |l: usize| v3([&a.u[l], &b.u[l], &c.u[l], &d.u[l]]);
+        let t = |l: usize| v3([&a.theta[l], &b.theta[l], &c.theta[l], &d.theta[l]]);
+        let g = |l: usize| v3([&a.g[l], &b.g[l], &c.g[l], &d.g[l]]);
+        Increment {
+            u: [u(0), u(1)],
+            theta: [t(0), t(1)],
+            g: [g(0), g(1)],
+        }
+    }
+}
+
+impl FrozenScalars<F64x4> {
+    /// The frozen scalars of four elements, one per lane.
+    #[inline]
+    pub fn pack(s: &[FrozenScalars; LANES]) -> Self {
+        let [a, b, c, d] = s;
+        FrozenScalars {
+            beta_gamma: F64x4::new([a.beta_gamma, b.beta_gamma, c.beta_gamma, d.beta_gamma]),
+            beta_omega: F64x4::new([a.beta_omega, b.beta_omega, c.beta_omega, d.beta_omega]),
+            c_v: F64x4::new([a.c_v, b.c_v, c.c_v, d.c_v]),
+            c_nu: F64x4::new([a.c_nu, b.c_nu, c.c_nu, d.c_nu]),
+        }
+    }
+}
+
+impl ElementEval<F64x4> {
+    /// Lane `i`'s result as a one-element evaluation.
+    pub fn lane(&self, i: usize) -> ElementEval {
+        ElementEval {
+            r: SVector::<f64, NDOF>::from_fn(|r, _| self.r[r].lane(i)),
+            scale: SVector::<f64, NDOF>::from_fn(|r, _| self.scale[r].lane(i)),
+            k: SMatrix::<f64, NDOF, NDOF>::from_fn(|r, c| self.k[(r, c)].lane(i)),
+        }
+    }
+}

@@ -1,0 +1,225 @@
+//! The element kernel four elements at a time (`F64x4` lanes) equals four one-element
+//! (`f64`) evaluations bit for bit: kinematics, residual, row scales and tangent, for
+//! every scheme family (EM, EDMC-1, EDMC-2 with translational and director dissipation,
+//! the mid-point rule with Kelvin–Voigt damping), clamped and free ends mixed across the
+//! lanes, and elements of different sections in one group. The CPU assembly relies on
+//! it: a run's outputs do not depend on whether its elements went through the lanes.
+
+use nalgebra::{Matrix2, Vector6};
+
+use cosserat::element::lanes::pack6;
+use cosserat::element::strain::Config;
+use cosserat::element::{
+    kinematics_core, residual_tangent_into, strains6, ElementData, ElementEval, ElementState,
+    FrozenScalars, Increment, StepConsts,
+};
+use cosserat::integrator::Scheme;
+use cosserat::math::cay;
+use cosserat::math::lane::{F64x4, LANES};
+use cosserat::math::rng::Rng;
+use cosserat::model::{ElementProps, Mat3, Vec3};
+
+fn v3(rng: &mut Rng, s: f64) -> Vec3 {
+    Vec3::new(rng.symmetric(), rng.symmetric(), rng.symmetric()) * s
+}
+
+/// One element's inputs; `free` sets which end rotations move, `damping` the Kelvin–Voigt
+/// time.
+fn element(rng: &mut Rng, free: [bool; 2], damping: f64) -> (ElementData, ElementState, Increment) {
+    let h = 0.05 + rng.uniform();
+    let a = 1e-3 + 1e-2 * rng.uniform();
+    let i1 = 1e-6 + 1e-5 * rng.uniform();
+    let i12 = 0.2 * i1 * rng.symmetric();
+    let e = 1e5 + 1e7 * rng.uniform();
+    let rho = 100.0 + 1000.0 * rng.uniform();
+    let props = ElementProps {
+        h,
+        a_rho: rho * a,
+        i_rho: Matrix2::new(rho * i1, rho * i12, rho * i12, rho * 1.3 * i1),
+        c_gamma: Vec3::new(0.4 * e * a, 0.38 * e * a, e * a),
+        c_omega: Mat3::new(
+            e * i1,
+            e * i12,
+            0.0,
+            e * i12,
+            1.3 * e * i1,
+            0.0,
+            0.0,
+            0.0,
+            0.8 * e * i1,
+        ),
+        damping,
+        drag: 0.0,
+    };
+    let tri = cay(&v3(rng, 1.0));
+    let r0 = v3(rng, 1.0);
+    let r1 = r0 + tri.column(2) * h;
+    let reference = Config {
+        r: [r0, r1],
+        d: [tri, tri],
+    };
+    let data = ElementData {
+        eps0: strains6(&reference, h),
+        props,
+        rot_free: free,
+    };
+    // Moved, rotated, slightly non-orthonormal triads.
+    let mut distort = || Mat3::identity() + Mat3::from_fn(|_, _| 1e-3 * rng.symmetric());
+    let (q0, q1) = (distort(), distort());
+    let cfg = Config {
+        r: [r0 + v3(rng, 0.05), r1 + v3(rng, 0.05)],
+        d: [cay(&v3(rng, 0.3)) * tri * q0, cay(&v3(rng, 0.3)) * tri * q1],
+    };
+    let vd = [0, 1].map(|l| [0, 1].map(|_| if free[l] { v3(rng, 0.5) } else { Vec3::zeros() }));
+    let st = ElementState {
+        cfg,
+        v: [v3(rng, 1.0), v3(rng, 1.0)],
+        vd,
+    };
+    let th = |rng: &mut Rng, f: bool| if f { v3(rng, 0.2) } else { Vec3::zeros() };
+    let inc = Increment {
+        u: [v3(rng, 0.05), v3(rng, 0.05)],
+        theta: [th(rng, free[0]), th(rng, free[1])],
+        g: [v3(rng, 0.1), v3(rng, 0.1)],
+    };
+    (data, st, inc)
+}
+
+fn same(what: &str, lane: usize, a: f64, b: f64) {
+    assert!(
+        a.to_bits() == b.to_bits(),
+        "{what}, lane {lane}: {a:e} (lanes) vs {b:e} (one element)"
+    );
+}
+
+#[test]
+fn four_lanes_equal_four_single_evaluations_bit_for_bit() {
+    let mut rng = Rng::new(7);
+    let schemes = [
+        Scheme::Em,
+        Scheme::Midpoint,
+        Scheme::Edmc1 {
+            chi_gamma: 0.3,
+            chi_omega: 0.4,
+            chi_v: 0.5,
+            chi_nu: 0.2,
+        },
+        Scheme::Edmc2 {
+            alpha_gv: 0.5,
+            alpha_gn: 0.3,
+            alpha_ov: 0.2,
+            alpha_on: 0.6,
+        },
+    ];
+    let free_sets = [[true, true], [false, true], [true, false], [false, false]];
+    let mut compared = 0usize;
+    for (n, scheme) in schemes.into_iter().cycle().take(16).enumerate() {
+        let trans = scheme.translational_dissipation();
+        let k = StepConsts {
+            dt: 1e-3 + 0.05 * rng.uniform(),
+            scheme,
+        };
+        // Lane i: its own section, end conditions (rotated per group) and, under the
+        // mid-point rule, Kelvin–Voigt damping in some lanes only (β differs per lane).
+        let elems: Vec<_> = (0..LANES)
+            .map(|i| {
+                let damping = if n % 2 == 1 && i % 2 == 0 { 1e-3 } else { 0.0 };
+                element(&mut rng, free_sets[(i + n) % 4], damping)
+            })
+            .collect();
+        let s: Vec<FrozenScalars> = (0..LANES)
+            .map(|i| {
+                let kv = 2.0 * elems[i].0.props.damping / k.dt;
+                if scheme.is_dissipative() {
+                    FrozenScalars {
+                        beta_gamma: rng.uniform() + kv,
+                        beta_omega: rng.uniform() + kv,
+                        c_v: 0.3 * rng.uniform(),
+                        c_nu: if scheme.director_dissipation() {
+                            0.3 * rng.uniform()
+                        } else {
+                            0.0
+                        },
+                    }
+                } else {
+                    FrozenScalars {
+                        beta_gamma: kv,
+                        beta_omega: kv,
+                        ..FrozenScalars::default()
+                    }
+                }
+            })
+            .collect();
+        let eps_n: Vec<Vector6<f64>> = elems
+            .iter()
+            .map(|(d, st, _)| strains6(&st.cfg, d.props.h))
+            .collect();
+        let arr = |f: &dyn Fn(usize) -> usize| -> [usize; LANES] { std::array::from_fn(f) };
+        let idx = arr(&|i| i);
+        let data = ElementData::<F64x4>::pack(idx.map(|i| &elems[i].0));
+        let st = ElementState::pack(&idx.map(|i| elems[i].1));
+        let inc = Increment::pack(&idx.map(|i| elems[i].2));
+        let sl = FrozenScalars::pack(&idx.map(|i| s[i]));
+        let el = pack6(&idx.map(|i| eps_n[i]));
+        for tangent in [false, true] {
+            let kin = kinematics_core(&data, &st, &el, &inc, sl.c_nu, k.dt);
+            let mut ev = ElementEval::<F64x4>::zeros();
+            residual_tangent_into(&data, &st, &kin, &sl, &k, trans, tangent, &mut ev);
+            for i in 0..LANES {
+                let (d, st1, inc1) = &elems[i];
+                let kin1 = kinematics_core(d, st1, &eps_n[i], inc1, s[i].c_nu, k.dt);
+                for (a, b) in kin.cfg1.d[0].iter().zip(kin1.cfg1.d[0].iter()) {
+                    same("director at n+1", i, a.lane(i), *b);
+                }
+                for (a, b) in kin.eps1.iter().zip(kin1.eps1.iter()) {
+                    same("strain at n+1", i, a.lane(i), *b);
+                }
+                for l in 0..2 {
+                    for a in 0..2 {
+                        for c in 0..3 {
+                            same(
+                                "director velocity",
+                                i,
+                                kin.vd1[l][a][c].lane(i),
+                                kin1.vd1[l][a][c],
+                            );
+                        }
+                    }
+                }
+                let mut one = ElementEval::<f64>::zeros();
+                residual_tangent_into(d, st1, &kin1, &s[i], &k, trans, tangent, &mut one);
+                let lane = ev.lane(i);
+                for r in 0..18 {
+                    same("residual", i, lane.r[r], one.r[r]);
+                    same("row scale", i, lane.scale[r], one.scale[r]);
+                    compared += 2;
+                }
+                if tangent {
+                    assert!(lane.k.iter().any(|&x| x != 0.0));
+                    for (x, y) in lane.k.iter().zip(one.k.iter()) {
+                        same("tangent", i, *x, *y);
+                    }
+                    compared += 18 * 18;
+                }
+            }
+        }
+    }
+    // 16 groups × 4 lanes × (36 residual and scale entries twice + 324 tangent entries).
+    assert_eq!(compared, 16 * 4 * (2 * 36 + 324));
+}
+
+#[test]
+fn lane_flags_give_each_end_its_director_dissipation_factor() {
+    let mut rng = Rng::new(3);
+    let sets = [[true, true], [false, true], [true, false], [false, false]];
+    let elems: Vec<_> = sets.iter().map(|&f| element(&mut rng, f, 0.0).0).collect();
+    let data = ElementData::<F64x4>::pack(std::array::from_fn(|i| &elems[i]));
+    let kappa = data.kappa();
+    for (i, e) in elems.iter().enumerate() {
+        assert_eq!([kappa[0].lane(i), kappa[1].lane(i)], e.kappa());
+    }
+    // DESIGN §4: 1 on both free ends, 1.5 on the free end beside a clamp, 0 on a clamp.
+    assert_eq!(elems[1].kappa(), [0.0, 1.5]);
+    assert_eq!(elems[2].kappa(), [1.5, 0.0]);
+    assert_eq!(elems[3].kappa(), [0.0, 0.0]);
+}
