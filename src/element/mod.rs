@@ -797,8 +797,11 @@ fn tangent<T: Lane>(
         StressRule::MidpointStrain => b_mid,
     };
     // Mid-point directors d_{l,i} and the transposed Cayley factors A_lᵀ.
-    let dcol: [[Vector3<T>; 3]; 2] =
-        std::array::from_fn(|l| std::array::from_fn(|i| kin.mid.d[l].column(i).into_owned()));
+    let col = |l: usize, i: usize| -> Vector3<T> { kin.mid.d[l].column(i).into_owned() };
+    let dcol: [[Vector3<T>; 3]; 2] = [
+        [col(0, 0), col(0, 1), col(0, 2)],
+        [col(1, 0), col(1, 1), col(1, 2)],
+    ];
     let amat = kin.amat;
     let at = [amat[0].transpose(), amat[1].transpose()];
 
