@@ -797,7 +797,12 @@ fn tangent<T: Lane>(
         StressRule::MidpointStrain => b_mid,
     };
     // Mid-point directors d_{l,i} and the transposed Cayley factors A_lᵀ.
-    let col = |l: usize, i: usize| -> Vector3<T> { kin.mid.d[l].column(i).into_owned() };
+    // (Entry by entry: nalgebra's `into_owned` of a view goes through an iterator, slow
+    // for lanes.)
+    let col = |l: usize, i: usize| -> Vector3<T> {
+        let m = &kin.mid.d[l];
+        Vector3::new(m[(0, i)], m[(1, i)], m[(2, i)])
+    };
     let dcol: [[Vector3<T>; 3]; 2] = [
         [col(0, 0), col(0, 1), col(0, 2)],
         [col(1, 0), col(1, 1), col(1, 2)],
