@@ -610,7 +610,9 @@ pub fn residual_tangent(
 
 /// [`residual_tangent`] into a caller's buffer (the assembly loop reuses one): `out.r`
 /// and `out.scale` are overwritten, and `out.k` too when `want_tangent` (otherwise it is
-/// left as it was).
+/// left as it was), except, without translational dissipation (`trans_diss` false), its
+/// `g` rows and columns: there are no such unknowns, and they are left as they were (zero
+/// in a buffer from [`ElementEval::zeros`]).
 #[allow(clippy::too_many_arguments)]
 pub fn residual_tangent_into<T: Lane>(
     data: &ElementData<T>,
@@ -738,8 +740,16 @@ pub fn residual_tangent_into<T: Lane>(
         // The (u, θ) block is written whole by the material term (a product with β = 0,
         // which never reads it); only the g rows and columns are cleared here, column by
         // column on the contiguous (column-major) storage: a strided view's `fill` walks
-        // nalgebra's element iterator, ≈ 10 instructions per entry.
-        for (cc, col) in out.k.as_mut_slice().chunks_exact_mut(NDOF).enumerate() {
+        // nalgebra's element iterator, ≈ 10 instructions per entry. Without translational
+        // dissipation there are no g unknowns: the g part is neither cleared nor written.
+        let g_part = if trans_diss { NDOF } else { 0 };
+        for (cc, col) in out
+            .k
+            .as_mut_slice()
+            .chunks_exact_mut(NDOF)
+            .take(g_part)
+            .enumerate()
+        {
             if cc < 12 {
                 col[12..].fill(T::zero());
             } else {
