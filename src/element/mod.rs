@@ -17,6 +17,11 @@
 //! The dissipation enters only through four frozen scalars ([`FrozenScalars`]); the
 //! monolithic strategy re-evaluates them from the iterate and adds their linearization
 //! ([`monolithic_correction`]).
+//!
+//! The kinematics, residual and tangent are written once, generic over the scalar
+//! [`Lane`]: `f64` evaluates one element, [`crate::math::lane::F64x4`] four at a time (one
+//! per lane, bit-identical to four `f64` calls; [`lanes`] packs their inputs). The CPU
+//! assembly uses the four-element form for frozen scalars where the build targets AVX.
 
 pub mod director_factor;
 pub mod dissipation;
