@@ -5,7 +5,9 @@
 //! lanes, and elements of different sections in one group. The CPU assembly relies on
 //! it: a run's outputs do not depend on whether its elements went through the lanes.
 
-use nalgebra::{Matrix2, Vector6};
+mod common;
+
+use nalgebra::Vector6;
 
 use cosserat::element::lanes::pack6;
 use cosserat::element::strain::Config;
@@ -17,7 +19,7 @@ use cosserat::integrator::Scheme;
 use cosserat::math::cay;
 use cosserat::math::lane::{F64x4, LANES};
 use cosserat::math::rng::Rng;
-use cosserat::model::{ElementProps, Mat3, Vec3};
+use cosserat::model::{Mat3, Vec3};
 
 fn v3(rng: &mut Rng, s: f64) -> Vec3 {
     Vec3::new(rng.symmetric(), rng.symmetric(), rng.symmetric()) * s
@@ -32,25 +34,7 @@ fn element(rng: &mut Rng, free: [bool; 2], damping: f64) -> (ElementData, Elemen
     let i12 = 0.2 * i1 * rng.symmetric();
     let e = 1e5 + 1e7 * rng.uniform();
     let rho = 100.0 + 1000.0 * rng.uniform();
-    let props = ElementProps {
-        h,
-        a_rho: rho * a,
-        i_rho: Matrix2::new(rho * i1, rho * i12, rho * i12, rho * 1.3 * i1),
-        c_gamma: Vec3::new(0.4 * e * a, 0.38 * e * a, e * a),
-        c_omega: Mat3::new(
-            e * i1,
-            e * i12,
-            0.0,
-            e * i12,
-            1.3 * e * i1,
-            0.0,
-            0.0,
-            0.0,
-            0.8 * e * i1,
-        ),
-        damping,
-        drag: 0.0,
-    };
+    let props = common::anisotropic_props(h, a, i1, i12, e, rho, damping);
     let tri = cay(&v3(rng, 1.0));
     let r0 = v3(rng, 1.0);
     let r1 = r0 + tri.column(2) * h;

@@ -18,6 +18,39 @@ pub fn props(e: f64, nu: f64, rho: f64, a: f64, i: f64, j: f64, h: f64) -> Eleme
     }
 }
 
+/// An anisotropic section for kernel tests: area `a`, second moments `i1`, `1.3 i1` with
+/// product `i12`, shear areas 0.4 and 0.38 of `a`, torsion 0.8 `i1`; modulus `e`, density
+/// `rho`, length `h`, Kelvin–Voigt time `damping`.
+pub fn anisotropic_props(
+    h: f64,
+    a: f64,
+    i1: f64,
+    i12: f64,
+    e: f64,
+    rho: f64,
+    damping: f64,
+) -> ElementProps {
+    ElementProps {
+        h,
+        a_rho: rho * a,
+        i_rho: Matrix2::new(rho * i1, rho * i12, rho * i12, rho * 1.3 * i1),
+        c_gamma: Vec3::new(0.4 * e * a, 0.38 * e * a, e * a),
+        c_omega: Mat3::new(
+            e * i1,
+            e * i12,
+            0.0,
+            e * i12,
+            1.3 * e * i1,
+            0.0,
+            0.0,
+            0.0,
+            0.8 * e * i1,
+        ),
+        damping,
+        drag: 0.0,
+    }
+}
+
 /// Triad with d3 along `t`, d1 from `d1` projected.
 pub fn triad(t: Vec3, d1: Vec3) -> Mat3 {
     let d3 = t.normalize();
