@@ -4,9 +4,10 @@
 //!
 //! Every lane operation is the same IEEE operation as on `f64`, lane by lane (no fused
 //! multiply-add, no reassociation), so the four lanes of an `F64x4` evaluation equal four
-//! `f64` evaluations bit for bit (`tests/lanes.rs`). Branches on data become lane
-//! selects; a branch that only skips work that would add zero (`dw ≠ 0`) is taken when
-//! any lane needs it.
+//! `f64` evaluations bit for bit for finite inputs (`tests/lanes.rs`). Branches on data
+//! become lane selects; a branch that only skips work that would add an exact zero
+//! (`dw ≠ 0`, β ≠ 0 under the mid-point rule) is taken when any lane needs it, and adds
+//! that zero in the others (a NaN there instead of skipping it, were an input infinite).
 
 use std::fmt::Debug;
 use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -40,7 +41,8 @@ pub trait Lane:
     type Flag: Copy + Debug + PartialEq + Send + Sync;
     /// The same value in every lane.
     fn splat(x: f64) -> Self;
-    /// `f64::max`, lane by lane.
+    /// `f64::max`, lane by lane. (For `F64x4`: the same where the operands are not NaN
+    /// and not zeros of opposite signs; the kernel takes it of magnitudes only.)
     fn max(self, other: Self) -> Self;
     /// `if other > self { other } else { self }`, lane by lane (plain compares: see
     /// [`crate::element::amax3`]).

@@ -270,11 +270,11 @@ impl Simulation {
         }
     }
 
-    /// [`ElementData`] by groups of four elements, one per lane; the last group repeats
-    /// its last element (its extra lanes are never scattered).
+    /// [`ElementData`] by full groups of four consecutive elements, one per lane (the last
+    /// `n mod 4` elements go one by one).
     pub(super) fn lane_groups(data: &[ElementData]) -> Vec<ElementData<F64x4>> {
-        data.chunks(LANES)
-            .map(|c| ElementData::pack(std::array::from_fn(|i| &c[i.min(c.len() - 1)])))
+        data.chunks_exact(LANES)
+            .map(|c| ElementData::pack([&c[0], &c[1], &c[2], &c[3]]))
             .collect()
     }
 

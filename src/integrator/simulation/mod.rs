@@ -90,8 +90,8 @@ pub struct Simulation {
     model: Model,
     params: IntegratorParams,
     data: Vec<ElementData>,
-    /// [`Self::data`] by groups of four elements, one per lane (the last group repeats its
-    /// last element): the CPU assembly's SIMD path.
+    /// [`Self::data`] by full groups of four elements, one per lane: the CPU assembly's
+    /// SIMD path.
     data_lanes: Vec<ElementData<F64x4>>,
     dofs: DofMap,
     solver: SparseSolver,
