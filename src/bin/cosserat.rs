@@ -315,7 +315,30 @@ enum SchemeArg {
     GenAlpha,
 }
 
+/// A build for AVX2 (`.cargo/config.toml`'s `x86-64-v3`) on a CPU without it would stop
+/// at its first AVX instruction with "illegal instruction": say why instead, first thing.
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+fn require_build_target_cpu() -> Option<ExitCode> {
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        return None;
+    }
+    eprintln!(
+        "error: this cosserat binary was built for x86-64-v3 (AVX2) CPUs and this CPU lacks \
+         AVX2; rebuild it for this machine with \
+         RUSTFLAGS=\"-C target-cpu=native\" cargo build --release (docs/benchmarks.md)"
+    );
+    Some(ExitCode::from(2))
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+fn require_build_target_cpu() -> Option<ExitCode> {
+    None
+}
+
 fn main() -> ExitCode {
+    if let Some(code) = require_build_target_cpu() {
+        return code;
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         None => run_command(RunArgs {
