@@ -7,7 +7,7 @@ use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3, Vector6};
 
 use super::strain::Config;
 use super::{ElementData, ElementEval, ElementState, FrozenScalars, Increment, NDOF};
-use crate::math::lane::{pack, pack3, pack33, F64x4, LANES};
+use crate::math::lane::{F64x4, LANES};
 use crate::model::ElementProps;
 
 /// Packs a 6-vector per lane.
@@ -20,22 +20,22 @@ pub fn pack6(v: &[Vector6<f64>; LANES]) -> Vector6<F64x4> {
 impl ElementData<F64x4> {
     /// The constant data of four elements, one per lane.
     pub fn pack(d: [&ElementData; LANES]) -> Self {
-        let p = |i: usize| &d[i].props;
+        let [a, b, c, e] = d.map(|x| &x.props);
+        let s = |f: fn(&ElementProps) -> f64| F64x4::new([f(a), f(b), f(c), f(e)]);
         ElementData {
             props: ElementProps {
-                h: pack(|i| p(i).h),
-                a_rho: pack(|i| p(i).a_rho),
-                i_rho: Matrix2::from_fn(|r, c| pack(|i| p(i).i_rho[(r, c)])),
-                c_gamma: pack3(|i| p(i).c_gamma),
-                c_omega: pack33(|i| p(i).c_omega),
-                damping: pack(|i| p(i).damping),
-                drag: pack(|i| p(i).drag),
+                h: s(|p| p.h),
+                a_rho: s(|p| p.a_rho),
+                i_rho: Matrix2::from_fn(|r, col| {
+                    F64x4::new([a, b, c, e].map(|p| p.i_rho[(r, col)]))
+                }),
+                c_gamma: v3([&a.c_gamma, &b.c_gamma, &c.c_gamma, &e.c_gamma]),
+                c_omega: m3([&a.c_omega, &b.c_omega, &c.c_omega, &e.c_omega]),
+                damping: s(|p| p.damping),
+                drag: s(|p| p.drag),
             },
-            eps0: pack6(&std::array::from_fn(|i| d[i].eps0)),
-            rot_free: [
-                std::array::from_fn(|i| d[i].rot_free[0]),
-                std::array::from_fn(|i| d[i].rot_free[1]),
-            ],
+            eps0: pack6(&d.map(|x| x.eps0)),
+            rot_free: [0, 1].map(|l| d.map(|x| x.rot_free[l])),
         }
     }
 }

@@ -12,7 +12,7 @@
 use std::fmt::Debug;
 use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
-use nalgebra::{Matrix3, Scalar, Vector3};
+use nalgebra::{Matrix3, Scalar};
 use num_traits::{One, Zero};
 
 /// Number of elements an [`F64x4`] evaluation carries.
@@ -55,8 +55,6 @@ pub trait Lane:
     fn select_or_zero(flag: Self::Flag, value: Self) -> Self;
     /// Whether any lane is nonzero.
     fn any_nonzero(self) -> bool;
-    /// Whether `flag` is set in any lane.
-    fn any(flag: Self::Flag) -> bool;
     /// `a` where `flag`, else `b`, lane by lane.
     fn choose(flag: Self::Flag, a: Self, b: Self) -> Self;
 }
@@ -98,10 +96,6 @@ impl Lane for f64 {
     #[inline(always)]
     fn any_nonzero(self) -> bool {
         self != 0.0
-    }
-    #[inline(always)]
-    fn any(flag: bool) -> bool {
-        flag
     }
     #[inline(always)]
     fn choose(flag: bool, a: Self, b: Self) -> Self {
@@ -232,33 +226,9 @@ impl Lane for F64x4 {
         self.0.simd_ne(wide::f64x4::ZERO).any()
     }
     #[inline(always)]
-    fn any(flag: [bool; LANES]) -> bool {
-        flag.iter().any(|&f| f)
-    }
-    #[inline(always)]
     fn choose(flag: [bool; LANES], a: Self, b: Self) -> Self {
         F64x4(Self::flags(flag).select(a.0, b.0))
     }
-}
-
-/// Packs lane values: `f(i)` for lane `i`.
-#[inline(always)]
-pub fn pack(f: impl Fn(usize) -> f64) -> F64x4 {
-    F64x4::new([f(0), f(1), f(2), f(3)])
-}
-
-/// Packs a 3-vector per lane.
-#[inline(always)]
-pub fn pack3(f: impl Fn(usize) -> Vector3<f64>) -> Vector3<F64x4> {
-    let v: [Vector3<f64>; LANES] = std::array::from_fn(f);
-    Vector3::from_fn(|r, _| pack(|i| v[i][r]))
-}
-
-/// Packs a 3×3 matrix per lane.
-#[inline(always)]
-pub fn pack33(f: impl Fn(usize) -> Matrix3<f64>) -> Matrix3<F64x4> {
-    let m: [Matrix3<f64>; LANES] = std::array::from_fn(f);
-    Matrix3::from_fn(|r, c| pack(|i| m[i][(r, c)]))
 }
 
 /// The zero matrix of any fixed size, built as an array of zeros: nalgebra's `zeros()` fills

@@ -15,7 +15,7 @@ use crate::element::{
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
 use crate::integrator::links;
-use crate::math::lane::{F64x4, LANES};
+use crate::math::lane::{F64x4, Lane, LANES};
 
 /// Whether the four-element lanes pay: with AVX an [`F64x4`] is one register and the
 /// kernel runs 2.1–2.35× faster per element; with SSE2 only (two registers per value)
@@ -237,37 +237,10 @@ impl Simulation {
             let kin = kinematics_core(data, &st, &eps_n, &inc, s.c_nu, k.dt);
             residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
             for i in 0..LANES {
-                self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
+                self.scatter_with(e0 + i, &ev, |x| x.lane(i), tangent, r, scale);
             }
         }
         groups * LANES
-    }
-
-    /// [`Self::scatter`] of lane `lane` of a four-element evaluation (element `e`).
-    fn scatter_lane(
-        &mut self,
-        e: usize,
-        ev: &ElementEval<F64x4>,
-        lane: usize,
-        tangent: bool,
-        r: &mut [f64],
-        scale: &mut [f64; 3],
-    ) {
-        let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
-        for &(i, g) in &self.row_map[lo.0..hi.0] {
-            r[g] += ev.r[i].lane(lane);
-            let kind = kind_of_local(i);
-            scale[kind] = scale[kind].max(ev.scale[i].lane(lane));
-        }
-        if tangent {
-            let ks = ev.k.as_slice();
-            let vals = self.solver.values_mut();
-            for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {
-                for (v, k) in vals[dst..dst + len].iter_mut().zip(&ks[src..src + len]) {
-                    *v += k.lane(lane);
-                }
-            }
-        }
     }
 
     /// [`ElementData`] by full groups of four consecutive elements, one per lane (the last
@@ -453,11 +426,25 @@ impl Simulation {
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) {
+        self.scatter_with(e, ev, |x| x, tangent, r, scale);
+    }
+
+    /// [`Self::scatter`] of an evaluation whose entries `value` reads: the `f64` itself,
+    /// or element `e`'s lane of a four-element evaluation.
+    fn scatter_with<T: Lane>(
+        &mut self,
+        e: usize,
+        ev: &ElementEval<T>,
+        value: impl Fn(T) -> f64,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
         let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
         for &(i, g) in &self.row_map[lo.0..hi.0] {
-            r[g] += ev.r[i];
+            r[g] += value(ev.r[i]);
             let kind = kind_of_local(i);
-            scale[kind] = scale[kind].max(ev.scale[i]);
+            scale[kind] = scale[kind].max(value(ev.scale[i]));
         }
         if tangent {
             // Active entries only, as runs contiguous in the element matrix (column-major)
@@ -466,7 +453,7 @@ impl Simulation {
             let vals = self.solver.values_mut();
             for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {
                 for (v, k) in vals[dst..dst + len].iter_mut().zip(&ks[src..src + len]) {
-                    *v += *k;
+                    *v += value(*k);
                 }
             }
         }
