@@ -101,10 +101,102 @@ fn cantilever(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, cantilever);
+/// The element kernel alone on the planar cantilever's 50 elements at a mid-size increment
+/// (EM, frozen scalars): the planar kernel against the 3D kernel on the same elements,
+/// residual only and residual + tangent.
+fn element(c: &mut Criterion) {
+    use cosserat::element::planar::{self, PIncrement};
+    use cosserat::element::{
+        kinematics_core, residual_tangent_into, ElementData, ElementEval, FrozenScalars, Increment,
+        StepConsts,
+    };
+    use cosserat::integrator::Scheme;
+    use cosserat::model::Vec3;
+    let scene = load_scene("cantilever_planar").unwrap();
+    let model = &scene.model;
+    let plane = model.planar.expect("planar scene");
+    let data = ElementData::for_model(model);
+    let state = cosserat::integrator::state::State::initial(model, &data);
+    let n = model.elements.len();
+    let k = StepConsts {
+        dt: 1e-2,
+        scheme: Scheme::Em,
+    };
+    let s = FrozenScalars::default();
+    let st3: Vec<_> = (0..n).map(|e| state.element(model, e)).collect();
+    let pd: Vec<_> = (0..n)
+        .map(|e| {
+            planar::planar_data(
+                &data[e],
+                &state.config(model, e),
+                plane,
+                &model.intrinsic_curvature(e),
+            )
+        })
+        .collect();
+    let pst: Vec<_> = (0..n).map(|e| pd[e].state(&st3[e])).collect();
+    let peps: Vec<_> = (0..n).map(|e| planar::strains3(&pst[e].cfg, pd[e].h)).collect();
+    // A mid-size in-plane increment (millimetres, milliradians), different per element.
+    let pinc: Vec<PIncrement> = (0..n)
+        .map(|e| {
+            let x = e as f64 / n as f64;
+            PIncrement {
+                u: [
+                    planar::V2::new(1e-3 * x, 2e-3),
+                    planar::V2::new(2e-3, -1e-3 * x),
+                ],
+                theta: [1e-3 * x, -2e-3],
+                g: Default::default(),
+            }
+        })
+        .collect();
+    let inc3: Vec<Increment> = (0..n)
+        .map(|e| {
+            let m = pd[e].map;
+            Increment {
+                u: [m.v3(&pinc[e].u[0], 0.0), m.v3(&pinc[e].u[1], 0.0)],
+                theta: [
+                    m.v3(&planar::V2::zeros(), pinc[e].theta[0]),
+                    m.v3(&planar::V2::zeros(), pinc[e].theta[1]),
+                ],
+                g: [Vec3::zeros(); 2],
+            }
+        })
+        .collect();
+    let mut g = c.benchmark_group("planar_element");
+    g.throughput(Throughput::Elements(n as u64));
+    for tangent in [false, true] {
+        let label = if tangent { "tangent" } else { "residual" };
+        g.bench_function(format!("planar/{label}"), |b| {
+            b.iter(|| {
+                for e in 0..n {
+                    let kin = planar::kinematics_core(&pd[e], &pst[e], &peps[e], &pinc[e], 0.0, k.dt);
+                    let ev = planar::residual_tangent(&pd[e], &pst[e], &kin, &s, &k, false, tangent);
+                    std::hint::black_box(&ev);
+                }
+            })
+        });
+        let mut ev = ElementEval::<f64>::zeros();
+        g.bench_function(format!("3d/{label}"), |b| {
+            b.iter(|| {
+                for e in 0..n {
+                    let kin =
+                        kinematics_core(&data[e], &st3[e], &state.eps[e], &inc3[e], 0.0, k.dt);
+                    residual_tangent_into(&data[e], &st3[e], &kin, &s, &k, false, tangent, &mut ev);
+                    std::hint::black_box(&ev);
+                }
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, cantilever, element);
 
 fn main() {
-    side_by_side();
+    if !std::env::args().any(|a| a.contains("element")) {
+        side_by_side();
+    }
     benches();
     Criterion::default().configure_from_args().final_summary();
 }
