@@ -135,7 +135,9 @@ fn element(c: &mut Criterion) {
         })
         .collect();
     let pst: Vec<_> = (0..n).map(|e| pd[e].state(&st3[e])).collect();
-    let peps: Vec<_> = (0..n).map(|e| planar::strains3(&pst[e].cfg, pd[e].h)).collect();
+    let peps: Vec<_> = (0..n)
+        .map(|e| planar::strains3(&pst[e].cfg, pd[e].h))
+        .collect();
     // A mid-size in-plane increment (millimetres, milliradians), different per element.
     let pinc: Vec<PIncrement> = (0..n)
         .map(|e| {
@@ -170,8 +172,10 @@ fn element(c: &mut Criterion) {
         g.bench_function(format!("planar/{label}"), |b| {
             b.iter(|| {
                 for e in 0..n {
-                    let kin = planar::kinematics_core(&pd[e], &pst[e], &peps[e], &pinc[e], 0.0, k.dt);
-                    let ev = planar::residual_tangent(&pd[e], &pst[e], &kin, &s, &k, false, tangent);
+                    let kin =
+                        planar::kinematics_core(&pd[e], &pst[e], &peps[e], &pinc[e], 0.0, k.dt);
+                    let ev =
+                        planar::residual_tangent(&pd[e], &pst[e], &kin, &s, &k, false, tangent);
                     std::hint::black_box(&ev);
                 }
             })

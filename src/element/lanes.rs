@@ -3,8 +3,9 @@
 //! one in [`super`], instantiated for `F64x4`; each lane's result equals the `f64`
 //! evaluation of that element bit for bit (`tests/lanes.rs`).
 
-use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3, Vector6};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3, Vector6};
 
+use super::planar::{pg_idx, pth_idx, pu_idx, PConfig, PElemVec, PIncrement, PState, PlanarData};
 use super::strain::Config;
 use super::{ElementData, ElementEval, ElementState, FrozenScalars, Increment, NDOF};
 use crate::math::lane::{F64x4, LANES};
@@ -119,6 +120,88 @@ impl ElementEval<F64x4> {
             r: SVector::<f64, NDOF>::from_fn(|r, _| self.r[r].lane(i)),
             scale: SVector::<f64, NDOF>::from_fn(|r, _| self.scale[r].lane(i)),
             k: SMatrix::<f64, NDOF, NDOF>::from_fn(|r, c| self.k[(r, c)].lane(i)),
+        }
+    }
+}
+
+/// `[a.x, b.x, c.x, d.x]`, … for four 2-vectors.
+#[inline(always)]
+fn v2(v: [&Vector2<f64>; LANES]) -> Vector2<F64x4> {
+    let l = |r: usize| F64x4::new([v[0][r], v[1][r], v[2][r], v[3][r]]);
+    Vector2::new(l(0), l(1))
+}
+
+/// One number of four elements.
+#[inline(always)]
+fn s4(x: [f64; LANES]) -> F64x4 {
+    F64x4::new(x)
+}
+
+impl PlanarData<F64x4> {
+    /// The planar data of four elements, one per lane (the map is the first one's: the
+    /// kernel reads none).
+    pub fn pack(d: [&PlanarData; LANES]) -> Self {
+        let [a, b, c, e] = d;
+        let s = |f: fn(&PlanarData) -> f64| s4([f(a), f(b), f(c), f(e)]);
+        PlanarData {
+            h: s(|p| p.h),
+            a_rho: s(|p| p.a_rho),
+            i_s: s(|p| p.i_s),
+            i_amax: s(|p| p.i_amax),
+            c: v3([&a.c, &b.c, &c.c, &e.c]),
+            eps0: v3([&a.eps0, &b.eps0, &c.eps0, &e.eps0]),
+            damping: s(|p| p.damping),
+            rot_free: [0, 1].map(|l| d.map(|x| x.rot_free[l])),
+            kappa: [s(|p| p.kappa[0]), s(|p| p.kappa[1])],
+            map: a.map,
+        }
+    }
+}
+
+impl PState<F64x4> {
+    /// The planar states of four elements, one per lane.
+    #[inline]
+    pub fn pack(s: [&PState; LANES]) -> Self {
+        let [a, b, c, d] = s;
+        let r = |l: usize| v2([&a.cfg.r[l], &b.cfg.r[l], &c.cfg.r[l], &d.cfg.r[l]]);
+        let dir = |l: usize, i: usize| {
+            v2([
+                &a.cfg.d[l][i],
+                &b.cfg.d[l][i],
+                &c.cfg.d[l][i],
+                &d.cfg.d[l][i],
+            ])
+        };
+        let v = |l: usize| v2([&a.v[l], &b.v[l], &c.v[l], &d.v[l]]);
+        let vs = |l: usize| v2([&a.vs[l], &b.vs[l], &c.vs[l], &d.vs[l]]);
+        PState {
+            cfg: PConfig {
+                r: [r(0), r(1)],
+                d: [[dir(0, 0), dir(0, 1)], [dir(1, 0), dir(1, 1)]],
+            },
+            v: [v(0), v(1)],
+            vs: [vs(0), vs(1)],
+        }
+    }
+}
+
+/// Packs a 3-vector per lane (the planar strains).
+#[inline]
+pub fn pack3(v: [&Vector3<f64>; LANES]) -> Vector3<F64x4> {
+    v3(v)
+}
+
+impl PIncrement<F64x4> {
+    /// The increments of four elements, one per lane, from their planar element-local
+    /// vectors (as [`PIncrement::from_local`]).
+    #[inline]
+    pub fn from_locals(x: &[PElemVec; LANES]) -> Self {
+        let l = |i: usize| s4([x[0][i], x[1][i], x[2][i], x[3][i]]);
+        let v = |i: usize| Vector2::new(l(i), l(i + 1));
+        PIncrement {
+            u: [v(pu_idx(0)), v(pu_idx(1))],
+            theta: [l(pth_idx(0)), l(pth_idx(1))],
+            g: [v(pg_idx(0)), v(pg_idx(1))],
         }
     }
 }

@@ -30,16 +30,17 @@ use nalgebra::{Matrix2, SMatrix, SVector, Vector2, Vector3};
 use super::dissipation::{local_scalars, LocalInputs, LocalScalars};
 use super::strain::Config;
 use super::{ElementData, ElementState, FrozenScalars, StepConsts, StressRule, M2};
+use crate::math::lane::{zeros, Lane};
 use crate::model::{Plane, Vec3};
 
 /// 2-vector of `f64` (in-plane components along the plane's two axes).
 pub type V2 = Vector2<f64>;
 /// Unknowns of one planar element: per end `u` (2), `θ` (1); then per end `g` (2).
 pub const NDOF_P: usize = 10;
-/// Planar element residual.
-pub type PElemVec = SVector<f64, NDOF_P>;
+/// Planar element residual (one entry per lane for a [`Lane`] type).
+pub type PElemVec<T = f64> = SVector<T, NDOF_P>;
 /// Planar element tangent.
-pub type PElemMat = SMatrix<f64, NDOF_P, NDOF_P>;
+pub type PElemMat<T = f64> = SMatrix<T, NDOF_P, NDOF_P>;
 
 /// Local row/column of planar `u^l` component 0.
 #[inline]
@@ -80,14 +81,14 @@ const fn dfield(l: usize, i: usize) -> usize {
 const NF: usize = 6;
 
 /// `a × b · n` for in-plane `a, b` (the plane's axes are ordered so `e_i × e_j = n`).
-#[inline]
-fn cross2(a: &V2, b: &V2) -> f64 {
+#[inline(always)]
+fn cross2<T: Lane>(a: &Vector2<T>, b: &Vector2<T>) -> T {
     a.x * b.y - a.y * b.x
 }
 /// `n × a`: the in-plane vector `a` turned by +90°.
-#[inline]
-fn perp(a: &V2) -> V2 {
-    V2::new(-a.y, a.x)
+#[inline(always)]
+fn perp<T: Lane>(a: &Vector2<T>) -> Vector2<T> {
+    Vector2::new(-a.y, a.x)
 }
 
 /// How an element's 3D data map to the plane: the plane's axes and the combination
@@ -119,70 +120,79 @@ impl PlanarMap {
     }
 }
 
-/// Constant data of one planar element.
+/// Constant data of one planar element (of four, one per lane, for [`F64x4`]:
+/// [`PlanarData::pack`]).
+///
+/// [`F64x4`]: crate::math::lane::F64x4
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PlanarData {
+pub struct PlanarData<T: Lane = f64> {
     /// Element reference length.
-    pub h: f64,
+    pub h: T,
     /// `Aρ`.
-    pub a_rho: f64,
+    pub a_rho: T,
     /// Director inertia `Iρ` of `s`.
-    pub i_s: f64,
+    pub i_s: T,
     /// Largest entry of the 3D `Iρ` (round-off floor of the θ rows, as in 3D).
-    pub i_amax: f64,
+    pub i_amax: T,
     /// Stiffnesses of `(Γ_s, Γ_t, κ)`: `G A_s, E A, E I_n`.
-    pub c: Vector3<f64>,
+    pub c: Vector3<T>,
     /// Reference strains `(Γ_s°, Γ_t°, κ°)` (with the intrinsic curvature about the
     /// normal in `κ°`).
-    pub eps0: Vector3<f64>,
+    pub eps0: Vector3<T>,
     /// Kelvin–Voigt retardation time `η` ([`crate::model::ElementProps::damping`]).
-    pub damping: f64,
+    pub damping: T,
     /// Whether the rotation of each end node is free.
-    pub rot_free: [bool; 2],
+    pub rot_free: [T::Flag; 2],
     /// Director-dissipation mass factors (as [`ElementData::kappa`]).
-    pub kappa: [f64; 2],
-    /// The map from 3D.
+    pub kappa: [T; 2],
+    /// The map from 3D (of a lane group: its first element's; the kernel reads none).
     pub map: PlanarMap,
 }
 
 /// Configuration of a planar element: end positions and in-plane directors `s`, `t`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PConfig {
+pub struct PConfig<T: Lane = f64> {
     /// Positions.
-    pub r: [V2; 2],
+    pub r: [Vector2<T>; 2],
     /// Directors `[l][0] = s`, `[l][1] = t`.
-    pub d: [[V2; 2]; 2],
+    pub d: [[Vector2<T>; 2]; 2],
 }
 
-impl PConfig {
-    fn mean(&self, o: &PConfig) -> PConfig {
+impl<T: Lane> PConfig<T> {
+    #[inline(always)]
+    fn mean(&self, o: &PConfig<T>) -> PConfig<T> {
+        let half = T::splat(0.5);
+        let m = |a: &Vector2<T>, b: &Vector2<T>| (a + b) * half;
         PConfig {
-            r: [0.5 * (self.r[0] + o.r[0]), 0.5 * (self.r[1] + o.r[1])],
-            d: std::array::from_fn(|l| std::array::from_fn(|i| 0.5 * (self.d[l][i] + o.d[l][i]))),
+            r: [m(&self.r[0], &o.r[0]), m(&self.r[1], &o.r[1])],
+            d: [
+                [m(&self.d[0][0], &o.d[0][0]), m(&self.d[0][1], &o.d[0][1])],
+                [m(&self.d[1][0], &o.d[1][0]), m(&self.d[1][1], &o.d[1][1])],
+            ],
         }
     }
 }
 
 /// State of a planar element at time level `n`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PState {
+pub struct PState<T: Lane = f64> {
     /// Configuration.
-    pub cfg: PConfig,
+    pub cfg: PConfig<T>,
     /// Translational end velocities.
-    pub v: [V2; 2],
+    pub v: [Vector2<T>; 2],
     /// Velocity of director `s` per end.
-    pub vs: [V2; 2],
+    pub vs: [Vector2<T>; 2],
 }
 
 /// Increment of a planar element.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct PIncrement {
+pub struct PIncrement<T: Lane = f64> {
     /// `u^l`.
-    pub u: [V2; 2],
+    pub u: [Vector2<T>; 2],
     /// Cayley increments about the normal.
-    pub theta: [f64; 2],
+    pub theta: [T; 2],
     /// Dissipative velocity corrections.
-    pub g: [V2; 2],
+    pub g: [Vector2<T>; 2],
 }
 
 impl PIncrement {
@@ -293,44 +303,49 @@ impl PlanarData {
 }
 
 /// Planar strains `(Γ_s, Γ_t, κ)` of a configuration (raw, reference not subtracted).
-pub fn strains3(c: &PConfig, h: f64) -> Vector3<f64> {
+#[inline]
+pub fn strains3<T: Lane>(c: &PConfig<T>, h: T) -> Vector3<T> {
+    let half = T::splat(0.5);
     let dr = (c.r[1] - c.r[0]) / h;
     let (a, b) = (&c.d[0], &c.d[1]);
     Vector3::new(
-        0.5 * (a[0] + b[0]).dot(&dr),
-        0.5 * (a[1] + b[1]).dot(&dr),
-        (a[1].dot(&b[0]) - a[0].dot(&b[1])) * (0.5 / h),
+        half * (a[0] + b[0]).dot(&dr),
+        half * (a[1] + b[1]).dot(&dr),
+        (a[1].dot(&b[0]) - a[0].dot(&b[1])) * (half / h),
     )
 }
 
 /// `B = ∂(Γ_s, Γ_t, κ)/∂Φ`: row `k`, field `p` gives a 2-vector.
-type PGrad = [[V2; NF]; 3];
+type PGrad<T> = [[Vector2<T>; NF]; 3];
 
-fn gradient(c: &PConfig, h: f64) -> PGrad {
-    let z = V2::zeros();
+#[inline]
+fn gradient<T: Lane>(c: &PConfig<T>, h: T) -> PGrad<T> {
+    let half = T::splat(0.5);
+    let z = zeros::<T, 2, 1>();
     let mut bm = [[z; NF]; 3];
     let dr = (c.r[1] - c.r[0]) / h;
     let (a, b) = (&c.d[0], &c.d[1]);
     for i in 0..2 {
-        let di = 0.5 * (a[i] + b[i]);
+        let di = (a[i] + b[i]) * half;
         bm[i][R0] = -di / h;
         bm[i][R1] = di / h;
-        bm[i][dfield(0, i)] = 0.5 * dr;
-        bm[i][dfield(1, i)] = 0.5 * dr;
+        bm[i][dfield(0, i)] = dr * half;
+        bm[i][dfield(1, i)] = dr * half;
     }
     // κ = (t_0·s_1 − s_0·t_1)/(2h)
-    let s = 0.5 / h;
-    bm[2][dfield(0, 1)] = s * b[0];
-    bm[2][dfield(1, 0)] = s * a[1];
-    bm[2][dfield(0, 0)] = -s * b[1];
-    bm[2][dfield(1, 1)] = -s * a[0];
+    let s = half / h;
+    bm[2][dfield(0, 1)] = b[0] * s;
+    bm[2][dfield(1, 0)] = a[1] * s;
+    bm[2][dfield(0, 0)] = b[1] * -s;
+    bm[2][dfield(1, 1)] = a[0] * -s;
     bm
 }
 
 /// Hessian of `S·ε` (scalar 6×6, times `I₂`).
-fn hessian(sv: &Vector3<f64>, h: f64) -> SMatrix<f64, NF, NF> {
-    let mut hs = SMatrix::<f64, NF, NF>::zeros();
-    let c = 0.5 / h;
+#[inline]
+fn hessian<T: Lane>(sv: &Vector3<T>, h: T) -> SMatrix<T, NF, NF> {
+    let mut hs = zeros::<T, NF, NF>();
+    let c = T::splat(0.5) / h;
     for i in 0..2 {
         let n = sv[i] * c;
         for p in [dfield(0, i), dfield(1, i)] {
@@ -351,39 +366,41 @@ fn hessian(sv: &Vector3<f64>, h: f64) -> SMatrix<f64, NF, NF> {
 
 /// What the planar kinematic update gives.
 #[derive(Clone, Copy, Debug)]
-pub struct PKinematics {
+pub struct PKinematics<T: Lane = f64> {
     /// Configuration at `n+1`.
-    pub cfg1: PConfig,
+    pub cfg1: PConfig<T>,
     /// Mid-point configuration.
-    pub mid: PConfig,
+    pub mid: PConfig<T>,
     /// `(I − ½θ n̂)⁻¹` restricted to the plane, per end.
-    pub amat: [Matrix2<f64>; 2],
+    pub amat: [Matrix2<T>; 2],
     /// Planar strains at `n`.
-    pub eps_n: Vector3<f64>,
+    pub eps_n: Vector3<T>,
     /// Planar strains at `n+1`.
-    pub eps1: Vector3<f64>,
+    pub eps1: Vector3<T>,
     /// Translational velocities at `n+1`.
-    pub v1: [V2; 2],
+    pub v1: [Vector2<T>; 2],
     /// Velocities of `s` at `n+1`.
-    pub vs1: [V2; 2],
+    pub vs1: [Vector2<T>; 2],
     /// Director dissipative velocity `w` of `s`.
-    pub w: V2,
-    /// Local dissipation inputs.
+    pub w: Vector2<T>,
+    /// Local dissipation inputs ([`kinematics`] only: default for
+    /// [`kinematics_core`] and for lanes).
     pub inputs: LocalInputs,
 }
 
 /// `cay(θ n)` on the plane: `(c, s)` with `c = (1 − θ²/4)/(1 + θ²/4)`, `s = θ/(1 + θ²/4)`.
-#[inline]
-pub fn cay2(theta: f64) -> (f64, f64) {
-    let q = 0.25 * theta * theta;
-    let den = 1.0 / (1.0 + q);
-    ((1.0 - q) * den, theta * den)
+#[inline(always)]
+pub fn cay2<T: Lane>(theta: T) -> (T, T) {
+    let one = T::one();
+    let q = T::splat(0.25) * theta * theta;
+    let den = one / (one + q);
+    ((one - q) * den, theta * den)
 }
 
 /// Rotates an in-plane vector by `(cos φ, sin φ)`.
-#[inline]
-pub fn rotate(cs: (f64, f64), a: &V2) -> V2 {
-    V2::new(cs.0 * a.x - cs.1 * a.y, cs.1 * a.x + cs.0 * a.y)
+#[inline(always)]
+pub fn rotate<T: Lane>(cs: (T, T), a: &Vector2<T>) -> Vector2<T> {
+    Vector2::new(cs.0 * a.x - cs.1 * a.y, cs.1 * a.x + cs.0 * a.y)
 }
 
 /// Planar kinematic update (the restriction of [`super::kinematics`]).
@@ -420,38 +437,51 @@ fn local_inputs(pd: &PlanarData, st: &PState, kin: &PKinematics) -> LocalInputs 
 
 /// [`kinematics`] without the local dissipation inputs (left at their default): what the
 /// frozen-scalar residual and tangent need.
-pub fn kinematics_core(
-    pd: &PlanarData,
-    st: &PState,
-    eps_n: &Vector3<f64>,
-    inc: &PIncrement,
-    c_nu: f64,
+#[inline]
+pub fn kinematics_core<T: Lane>(
+    pd: &PlanarData<T>,
+    st: &PState<T>,
+    eps_n: &Vector3<T>,
+    inc: &PIncrement<T>,
+    c_nu: T,
     dt: f64,
-) -> PKinematics {
-    kinematics_at(pd, st, eps_n, inc, |ksum| c_nu / (1.0 + ksum * c_nu), dt)
+) -> PKinematics<T> {
+    kinematics_at(
+        pd,
+        st,
+        eps_n,
+        inc,
+        |ksum| c_nu / (T::one() + ksum * c_nu),
+        dt,
+    )
 }
 
 /// [`kinematics_core`] with the director factor `φ = c_ν/(1 + K c_ν)` given as a function
 /// of `K` (as the 3D kernel's).
-#[inline]
-fn kinematics_at(
-    pd: &PlanarData,
-    st: &PState,
-    eps_n: &Vector3<f64>,
-    inc: &PIncrement,
-    phi: impl FnOnce(f64) -> f64,
+#[inline(always)]
+fn kinematics_at<T: Lane>(
+    pd: &PlanarData<T>,
+    st: &PState<T>,
+    eps_n: &Vector3<T>,
+    inc: &PIncrement<T>,
+    phi: impl FnOnce(T) -> T,
     dt: f64,
-) -> PKinematics {
+) -> PKinematics<T> {
+    let (two, half, dt) = (T::splat(2.0), T::splat(0.5), T::splat(dt));
     let rot = [cay2(inc.theta[0]), cay2(inc.theta[1])];
+    let d = &st.cfg.d;
     let cfg1 = PConfig {
         r: [st.cfg.r[0] + inc.u[0], st.cfg.r[1] + inc.u[1]],
-        d: std::array::from_fn(|l| std::array::from_fn(|i| rotate(rot[l], &st.cfg.d[l][i]))),
+        d: [
+            [rotate(rot[0], &d[0][0]), rotate(rot[0], &d[0][1])],
+            [rotate(rot[1], &d[1][0]), rotate(rot[1], &d[1][1])],
+        ],
     };
     let mid = st.cfg.mean(&cfg1);
     let eps1 = strains3(&cfg1, pd.h);
     let v1 = [
-        2.0 * inc.u[0] / dt - st.v[0] - 2.0 * inc.g[0],
-        2.0 * inc.u[1] / dt - st.v[1] - 2.0 * inc.g[1],
+        inc.u[0] * two / dt - st.v[0] - inc.g[0] * two,
+        inc.u[1] * two / dt - st.v[1] - inc.g[1] * two,
     ];
     let kappa = pd.kappa;
     let ksum = kappa[0] + kappa[1];
@@ -459,14 +489,15 @@ fn kinematics_at(
     let y = (dd[0] + dd[1]) / dt;
     let w = y * phi(ksum);
     let vs1 = [
-        2.0 * dd[0] / dt - st.vs[0] - 2.0 * kappa[0] * w,
-        2.0 * dd[1] / dt - st.vs[1] - 2.0 * kappa[1] * w,
+        dd[0] * two / dt - st.vs[0] - w * (two * kappa[0]),
+        dd[1] * two / dt - st.vs[1] - w * (two * kappa[1]),
     ];
     // (I − ½θ n̂)⁻¹ on the plane, from the Cayley factors: 1/(1 + θ²/4) = (1 + c)/2.
-    let amat = std::array::from_fn(|l| {
-        let (den, th) = (0.5 * (1.0 + rot[l].0), inc.theta[l]);
-        Matrix2::new(den, -0.5 * th * den, 0.5 * th * den, den)
-    });
+    let am = |l: usize| {
+        let (den, th) = (half * (T::one() + rot[l].0), inc.theta[l]);
+        Matrix2::new(den, -half * th * den, half * th * den, den)
+    };
+    let amat = [am(0), am(1)];
     PKinematics {
         cfg1,
         mid,
@@ -522,15 +553,26 @@ pub fn consistent_scalars(
 /// Gross-force weight (as the 3D kernel's `GROSS_WEIGHT`).
 const GROSS_WEIGHT: f64 = 1e-4;
 
-/// Output of [`residual_tangent`].
+/// Output of [`residual_tangent`] (one entry per lane for a [`Lane`] type).
 #[derive(Clone, Debug)]
-pub struct PElementEval {
+pub struct PElementEval<T: Lane = f64> {
     /// Residual.
-    pub r: PElemVec,
+    pub r: PElemVec<T>,
     /// Row scales (as the 3D kernel's).
-    pub scale: PElemVec,
+    pub scale: PElemVec<T>,
     /// Tangent (zero when not requested).
-    pub k: PElemMat,
+    pub k: PElemMat<T>,
+}
+
+impl<T: Lane> PElementEval<T> {
+    /// All zero.
+    pub fn zeros() -> Self {
+        Self {
+            r: zeros(),
+            scale: zeros(),
+            k: zeros(),
+        }
+    }
 }
 
 /// Planar element residual (and tangent if `want_tangent`) for frozen scalars: the
@@ -544,24 +586,45 @@ pub fn residual_tangent(
     trans_diss: bool,
     want_tangent: bool,
 ) -> PElementEval {
-    let (h, dt) = (pd.h, k.dt);
+    let mut out = PElementEval::zeros();
+    residual_tangent_into(pd, st, kin, s, k, trans_diss, want_tangent, &mut out);
+    out
+}
+
+/// [`residual_tangent`] into a caller's buffer, for one element (`f64`) or four (lanes).
+/// Without translational dissipation the `g` rows and columns of `out` are left as they
+/// were (there are no `g` unknowns); with it the tangent is cleared first.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub fn residual_tangent_into<T: Lane>(
+    pd: &PlanarData<T>,
+    st: &PState<T>,
+    kin: &PKinematics<T>,
+    s: &FrozenScalars<T>,
+    k: &StepConsts,
+    trans_diss: bool,
+    want_tangent: bool,
+    out: &mut PElementEval<T>,
+) {
+    let c = T::splat;
+    let (half, h, dt) = (c(0.5), pd.h, c(k.dt));
     let mean = match k.scheme.stress_rule() {
-        StressRule::MeanOfStrains => 0.5 * (kin.eps_n + kin.eps1),
+        StressRule::MeanOfStrains => (kin.eps_n + kin.eps1) * half,
         StressRule::MidpointStrain => strains3(&kin.mid, h),
     } - pd.eps0;
     let de = kin.eps1 - kin.eps_n;
     let sstar = Vector3::new(
-        pd.c[0] * (mean[0] + 0.5 * s.beta_gamma * de[0]),
-        pd.c[1] * (mean[1] + 0.5 * s.beta_gamma * de[1]),
-        pd.c[2] * (mean[2] + 0.5 * s.beta_omega * de[2]),
+        pd.c[0] * (mean[0] + half * s.beta_gamma * de[0]),
+        pd.c[1] * (mean[1] + half * s.beta_gamma * de[1]),
+        pd.c[2] * (mean[2] + half * s.beta_omega * de[2]),
     );
     let b_mid = gradient(&kin.mid, h);
     // Stress forces h Bᵀ S* and their round-off floor (as `stress_force_floor`), over the
     // nonzero entries of B only.
-    let eps_abs = (0.5 * (kin.eps_n + kin.eps1)).abs() + pd.eps0.abs();
-    let gross = pd.c.component_mul(&eps_abs) * (GROSS_WEIGHT * h);
-    let mut f = [V2::zeros(); NF];
-    let mut f_gross = [0.0f64; NF];
+    let eps_abs = ((kin.eps_n + kin.eps1) * half).map(T::abs) + pd.eps0.map(T::abs);
+    let gross = pd.c.component_mul(&eps_abs) * (c(GROSS_WEIGHT) * h);
+    let mut f = [zeros::<T, 2, 1>(); NF];
+    let mut f_gross = [T::zero(); NF];
     for i in 0..2 {
         let (hs, g) = (h * sstar[i], gross[i]);
         for p in [R0, R1, dfield(0, i), dfield(1, i)] {
@@ -578,18 +641,18 @@ pub fn residual_tangent(
         amax2(&f[R0]).max(f_gross[R0]),
         amax2(&f[R1]).max(f_gross[R1]),
     ];
-    let mut inertia_r = [V2::zeros(); 2];
+    let mut inertia_r = [zeros::<T, 2, 1>(); 2];
     for l in 0..2 {
         for m in 0..2 {
-            inertia_r[l] += (pd.a_rho * h * M2[l][m] / dt) * (kin.v1[m] - st.v[m]);
+            inertia_r[l] += (kin.v1[m] - st.v[m]) * (pd.a_rho * h * c(M2[l][m]) / dt);
         }
     }
-    let mut fd_scale = [0.0f64; 2];
+    let mut fd_scale = [T::zero(); 2];
     for l in 0..2 {
         let fs = dfield(l, 0);
-        let mut fi = V2::zeros();
+        let mut fi = zeros::<T, 2, 1>();
         for m in 0..2 {
-            fi += (h * M2[l][m] * pd.i_s / dt) * (kin.vs1[m] - st.vs[m]);
+            fi += (kin.vs1[m] - st.vs[m]) * (h * c(M2[l][m]) * pd.i_s / dt);
         }
         let rate = h * pd.i_amax * (amax2(&st.vs[l]) + amax2(&kin.vs1[l])) / dt;
         fd_scale[l] = amax2(&fi)
@@ -600,11 +663,11 @@ pub fn residual_tangent(
             .max(f_gross[dfield(l, 1)]);
         f[fs] += fi;
     }
-    let mut r = PElemVec::zeros();
-    let mut scale = PElemVec::zeros();
+    let (r, scale) = (&mut out.r, &mut out.scale);
     for l in 0..2 {
         let fr = f[l] + inertia_r[l];
-        r.fixed_rows_mut::<2>(pu_idx(l)).copy_from(&fr);
+        r[pu_idx(l)] = fr.x;
+        r[pu_idx(l) + 1] = fr.y;
         let dm = &kin.mid.d[l];
         r[pth_idx(l)] = cross2(&dm[0], &f[dfield(l, 0)]) + cross2(&dm[1], &f[dfield(l, 1)]);
         let momentum_rate = pd.a_rho * h * (amax2(&st.v[l]) + amax2(&kin.v1[l])) / dt;
@@ -612,63 +675,55 @@ pub fn residual_tangent(
         // The normal director (norm 1) is among the 3D kernel's mid-point directors.
         // √ of the largest square: the largest norm, bit for bit (√ is monotone).
         let dnorm = dm[0]
-            .norm_squared()
-            .max(dm[1].norm_squared())
-            .max(1.0)
+            .dot(&dm[0])
+            .max(dm[1].dot(&dm[1]))
+            .max(T::one())
             .sqrt();
         scale[pu_idx(l)] = su;
         scale[pu_idx(l) + 1] = su;
         scale[pth_idx(l)] = fd_scale[l] * dnorm;
     }
     if trans_diss {
-        let vsum = 0.5 * (st.v[0] + st.v[1]) + 0.5 * (kin.v1[0] + kin.v1[1]);
-        let b = 0.5 * h * pd.a_rho * s.c_v * vsum;
-        let gm: [V2; 2] = std::array::from_fn(|m| {
-            (kin.cfg1.r[m] - st.cfg.r[m]) / dt - 0.5 * (st.v[m] + kin.v1[m])
-        });
-        let pieces = 0.5
-            * h
-            * pd.a_rho
-            * s.c_v.abs()
-            * (0..2)
-                .map(|m| amax2(&((kin.cfg1.r[m] - st.cfg.r[m]) / dt)) + amax2(&gm[m]))
-                .sum::<f64>();
+        let vsum = (st.v[0] + st.v[1]) * half + (kin.v1[0] + kin.v1[1]) * half;
+        let b = vsum * (half * h * pd.a_rho * s.c_v);
+        let gm = |m: usize| (kin.cfg1.r[m] - st.cfg.r[m]) / dt - (st.v[m] + kin.v1[m]) * half;
+        let gm = [gm(0), gm(1)];
+        let piece = |m: usize| amax2(&((kin.cfg1.r[m] - st.cfg.r[m]) / dt)) + amax2(&gm[m]);
+        let pieces = half * h * pd.a_rho * s.c_v.abs() * (piece(0) + piece(1));
         for l in 0..2 {
-            let mut mg = V2::zeros();
+            let mut mg = zeros::<T, 2, 1>();
             for m in 0..2 {
-                mg += pd.a_rho * h * M2[l][m] * gm[m];
+                mg += gm[m] * (pd.a_rho * h * c(M2[l][m]));
             }
-            r.fixed_rows_mut::<2>(pg_idx(l)).copy_from(&(mg - b));
+            let rg = mg - b;
+            r[pg_idx(l)] = rg.x;
+            r[pg_idx(l) + 1] = rg.y;
             let momentum =
-                (0.5 * pd.a_rho * h * amax2(&st.v[l]).max(amax2(&kin.v1[l]))).max(pieces);
+                (half * pd.a_rho * h * amax2(&st.v[l]).max(amax2(&kin.v1[l]))).max(pieces);
             let sc = amax2(&mg).max(amax2(&b)).max(momentum);
             scale[pg_idx(l)] = sc;
             scale[pg_idx(l) + 1] = sc;
         }
     }
-    let mut kt = PElemMat::zeros();
     if want_tangent {
-        tangent(pd, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut kt);
+        if trans_diss {
+            out.k = zeros();
+        }
+        tangent(pd, kin, s, k, trans_diss, &sstar, &b_mid, &f, &mut out.k);
     }
-    PElementEval { r, scale, k: kt }
 }
 
 /// `max(|x|, |y|)` with a plain compare (as the 3D kernel's `amax3`: a NaN entry makes the
 /// residual NaN, which fails the Newton test whatever the scale).
 #[inline(always)]
-fn amax2(v: &V2) -> f64 {
-    let (x, y) = (v.x.abs(), v.y.abs());
-    if y > x {
-        y
-    } else {
-        x
-    }
+fn amax2<T: Lane>(v: &Vector2<T>) -> T {
+    v.x.abs().max_gt(v.y.abs())
 }
 
 /// Local column of field `p`'s unknown: positions 2 columns at `pu_idx`, directors the
 /// single `θ` column of their end.
-#[inline]
-fn field_end(p: usize) -> usize {
+#[inline(always)]
+const fn field_end(p: usize) -> usize {
     match p {
         R0 => 0,
         R1 => 1,
@@ -676,115 +731,120 @@ fn field_end(p: usize) -> usize {
     }
 }
 
+/// The reduced strain gradient `B̃` (3 rows × the 6 columns u0 u0 θ0 u1 u1 θ1) of a
+/// gradient `b`: position fields as they are, director fields through their `θ` column
+/// along `dir` (`δd = δθ dir`).
+#[inline(always)]
+fn reduced<T: Lane>(b: &PGrad<T>, dir: &[Vector2<T>; NF]) -> SMatrix<T, 3, 6> {
+    let mut bt = zeros::<T, 3, 6>();
+    for kk in 0..3 {
+        for l in 0..2 {
+            bt[(kk, pu_idx(l))] = b[kk][l].x;
+            bt[(kk, pu_idx(l) + 1)] = b[kk][l].y;
+        }
+        for p in 2..NF {
+            bt[(kk, pth_idx(field_end(p)))] += b[kk][p].dot(&dir[p]);
+        }
+    }
+    bt
+}
+
+/// `aᵀ diag(w) b` of two reduced gradients (6 × 6).
+#[inline(always)]
+fn weighted_gram<T: Lane>(
+    a: &SMatrix<T, 3, 6>,
+    w: [T; 3],
+    b: &SMatrix<T, 3, 6>,
+) -> SMatrix<T, 6, 6> {
+    let mut out = zeros::<T, 6, 6>();
+    for kk in 0..3 {
+        for j in 0..6 {
+            let wb = w[kk] * b[(kk, j)];
+            for i in 0..6 {
+                out[(i, j)] += a[(kk, i)] * wb;
+            }
+        }
+    }
+    out
+}
+
 #[allow(clippy::too_many_arguments)]
-fn tangent(
-    pd: &PlanarData,
-    kin: &PKinematics,
-    s: &FrozenScalars,
+#[inline(always)]
+fn tangent<T: Lane>(
+    pd: &PlanarData<T>,
+    kin: &PKinematics<T>,
+    s: &FrozenScalars<T>,
     k: &StepConsts,
     trans_diss: bool,
-    sstar: &Vector3<f64>,
-    b_mid: &PGrad,
-    f: &[V2; NF],
-    kt: &mut PElemMat,
+    sstar: &Vector3<T>,
+    b_mid: &PGrad<T>,
+    f: &[Vector2<T>; NF],
+    kt: &mut PElemMat<T>,
 ) {
-    let (h, dt) = (pd.h, k.dt);
+    let c = T::splat;
+    let (half, two, h, dt) = (c(0.5), c(2.0), pd.h, c(k.dt));
     let b1 = match k.scheme.stress_rule() {
         StressRule::MeanOfStrains => gradient(&kin.cfg1, h),
         StressRule::MidpointStrain => *b_mid,
     };
     // Director fields: test map T = n × d_½ (δd = δθ n × d_½), trial map J = A_l T.
-    let tvec: [V2; NF] = std::array::from_fn(|p| {
-        if p < 2 {
-            V2::zeros()
-        } else {
-            perp(&kin.mid.d[(p - 2) / 2][(p - 2) % 2])
-        }
-    });
-    let jvec: [V2; NF] = std::array::from_fn(|p| {
-        if p < 2 {
-            V2::zeros()
-        } else {
-            kin.amat[(p - 2) / 2] * tvec[p]
-        }
-    });
-    // Reduced gradients: 3 rows × 6 columns (u0 u0 θ0 u1 u1 θ1).
-    let mut bt_mid = SMatrix::<f64, 3, 6>::zeros();
-    let mut bt_1 = SMatrix::<f64, 3, 6>::zeros();
-    for kk in 0..3 {
-        for l in 0..2 {
-            for c in 0..2 {
-                bt_mid[(kk, pu_idx(l) + c)] = b_mid[kk][l][c];
-                bt_1[(kk, pu_idx(l) + c)] = b1[kk][l][c];
-            }
-        }
-        for p in 2..NF {
-            let col = pth_idx(field_end(p));
-            bt_mid[(kk, col)] += b_mid[kk][p].dot(&tvec[p]);
-            bt_1[(kk, col)] += b1[kk][p].dot(&jvec[p]);
-        }
+    let mut tvec = [zeros::<T, 2, 1>(); NF];
+    let mut jvec = [zeros::<T, 2, 1>(); NF];
+    for p in 2..NF {
+        let (l, i) = ((p - 2) / 2, (p - 2) % 2);
+        tvec[p] = perp(&kin.mid.d[l][i]);
+        jvec[p] = kin.amat[l] * tvec[p];
     }
+    let bt_mid = reduced(b_mid, &tvec) * h;
+    let bt_1 = reduced(&b1, &jvec);
     // Material part (as the 3D kernel): ½(1+β) C B̃_1 with the mean of the strains;
     // ½ C B̃_½J + ½ β C B̃_1 with the strain of the mid-point configuration.
     let mean = k.scheme.stress_rule() == StressRule::MeanOfStrains;
     let (bg, bo) = (s.beta_gamma, s.beta_omega);
-    let own = |beta_g: f64, beta_o: f64| {
-        SMatrix::<f64, 3, 3>::from_diagonal(&Vector3::new(
-            0.5 * beta_g * pd.c[0],
-            0.5 * beta_g * pd.c[1],
-            0.5 * beta_o * pd.c[2],
-        ))
+    let own = |beta_g: T, beta_o: T| {
+        [
+            half * beta_g * pd.c[0],
+            half * beta_g * pd.c[1],
+            half * beta_o * pd.c[2],
+        ]
     };
+    let one = T::one();
     let mut km = if mean {
-        h * bt_mid.transpose() * own(1.0 + bg, 1.0 + bo) * bt_1
+        weighted_gram(&bt_mid, own(one + bg, one + bo), &bt_1)
     } else {
-        h * bt_mid.transpose() * own(1.0, 1.0) * bt_1
+        weighted_gram(&bt_mid, own(one, one), &bt_1)
     };
-    if !mean && (bg != 0.0 || bo != 0.0) {
-        let b_end = gradient(&kin.cfg1, h);
-        let mut bt_end = SMatrix::<f64, 3, 6>::zeros();
-        for kk in 0..3 {
-            for l in 0..2 {
-                for c in 0..2 {
-                    bt_end[(kk, pu_idx(l) + c)] = b_end[kk][l][c];
-                }
-            }
-            for p in 2..NF {
-                bt_end[(kk, pth_idx(field_end(p)))] += b_end[kk][p].dot(&jvec[p]);
-            }
-        }
-        km += h * bt_mid.transpose() * own(bg, bo) * bt_end;
+    // (Taken for a lane group where any lane has β ≠ 0: an exact zero in the others.)
+    if !mean && (bg.any_nonzero() || bo.any_nonzero()) {
+        let bt_end = reduced(&gradient(&kin.cfg1, h), &jvec);
+        km += weighted_gram(&bt_mid, own(bg, bo), &bt_end);
     }
     kt.fixed_view_mut::<6, 6>(0, 0).copy_from(&km);
 
-    let mut gs = hessian(sstar, h) * (0.5 * h);
-    let two_dt2 = 2.0 / (dt * dt);
+    let mut gs = hessian(sstar, h) * (half * h);
+    let two_dt2 = two / (dt * dt);
     for l in 0..2 {
         for m in 0..2 {
-            gs[(l, m)] += two_dt2 * pd.a_rho * h * M2[l][m];
+            gs[(l, m)] += two_dt2 * pd.a_rho * h * c(M2[l][m]);
         }
     }
     let kappa = pd.kappa;
     let ksum = kappa[0] + kappa[1];
-    let dw = s.c_nu / (dt * (1.0 + ksum * s.c_nu));
+    let dw = s.c_nu / (dt * (one + ksum * s.c_nu));
     for l in 0..2 {
         for m in 0..2 {
-            let mass = h * M2[l][m] * pd.i_s / dt;
+            let mass = h * c(M2[l][m]) * pd.i_s / dt;
             let (pl, qm) = (dfield(l, 0), dfield(m, 0));
-            gs[(pl, qm)] += mass * 2.0 / dt;
+            gs[(pl, qm)] += mass * two / dt;
             for qq in 0..2 {
-                if pd.rot_free[qq] {
-                    gs[(pl, dfield(qq, 0))] -= mass * 2.0 * kappa[m] * dw;
-                }
+                let x = mass * two * kappa[m] * dw;
+                gs[(pl, dfield(qq, 0))] -= T::select_or_zero(pd.rot_free[qq], x);
             }
         }
     }
     for pf in 0..NF {
         for qf in 0..NF {
             let g = gs[(pf, qf)];
-            if g == 0.0 {
-                continue;
-            }
             let (lp, lq) = (field_end(pf), field_end(qf));
             match (pf < 2, qf < 2) {
                 (true, true) => {
@@ -792,14 +852,12 @@ fn tangent(
                     kt[(pu_idx(lp) + 1, pu_idx(lq) + 1)] += g;
                 }
                 (true, false) => {
-                    for c in 0..2 {
-                        kt[(pu_idx(lp) + c, pth_idx(lq))] += g * jvec[qf][c];
-                    }
+                    kt[(pu_idx(lp), pth_idx(lq))] += g * jvec[qf].x;
+                    kt[(pu_idx(lp) + 1, pth_idx(lq))] += g * jvec[qf].y;
                 }
                 (false, true) => {
-                    for c in 0..2 {
-                        kt[(pth_idx(lp), pu_idx(lq) + c)] += g * tvec[pf][c];
-                    }
+                    kt[(pth_idx(lp), pu_idx(lq))] += g * tvec[pf].x;
+                    kt[(pth_idx(lp), pu_idx(lq) + 1)] += g * tvec[pf].y;
                 }
                 (false, false) => {
                     kt[(pth_idx(lp), pth_idx(lq))] += g * tvec[pf].dot(&jvec[qf]);
@@ -809,21 +867,21 @@ fn tangent(
     }
     // Projection term: d/dθ of Σ_i (d_{i,½} × f_i)·n at fixed f.
     for l in 0..2 {
-        let mut x = 0.0;
+        let mut x = T::zero();
         for i in 0..2 {
-            x += cross2(&(kin.amat[l] * perp(&kin.mid.d[l][i])), &f[dfield(l, i)]);
+            x += cross2(&jvec[dfield(l, i)], &f[dfield(l, i)]);
         }
-        kt[(pth_idx(l), pth_idx(l))] += 0.5 * x;
+        kt[(pth_idx(l), pth_idx(l))] += half * x;
     }
     if trans_diss {
-        let cv = 0.5 * h * pd.a_rho * s.c_v;
+        let cv = half * h * pd.a_rho * s.c_v;
         for l in 0..2 {
             for m in 0..2 {
-                let mm = pd.a_rho * h * M2[l][m];
-                for c in 0..2 {
-                    kt[(pu_idx(l) + c, pg_idx(m) + c)] += -2.0 * mm / dt;
-                    kt[(pg_idx(l) + c, pu_idx(m) + c)] += -cv / dt;
-                    kt[(pg_idx(l) + c, pg_idx(m) + c)] += mm + cv;
+                let mm = pd.a_rho * h * c(M2[l][m]);
+                for cc in 0..2 {
+                    kt[(pu_idx(l) + cc, pg_idx(m) + cc)] += -two * mm / dt;
+                    kt[(pg_idx(l) + cc, pu_idx(m) + cc)] += -cv / dt;
+                    kt[(pg_idx(l) + cc, pg_idx(m) + cc)] += mm + cv;
                 }
             }
         }

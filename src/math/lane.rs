@@ -10,7 +10,7 @@
 //! that zero in the others (a NaN there instead of skipping it, were an input infinite).
 
 use std::fmt::Debug;
-use std::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
+use std::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
 use nalgebra::{Matrix3, Scalar};
 use num_traits::{One, Zero};
@@ -34,6 +34,7 @@ pub trait Lane:
     + AddAssign
     + SubAssign
     + MulAssign
+    + DivAssign
     + Send
     + Sync
 {
@@ -165,6 +166,13 @@ impl Div for F64x4 {
     #[inline(always)]
     fn div(self, o: F64x4) -> F64x4 {
         F64x4(self.0 / o.0)
+    }
+}
+
+impl DivAssign for F64x4 {
+    #[inline(always)]
+    fn div_assign(&mut self, o: F64x4) {
+        self.0 = self.0 / o.0;
     }
 }
 

@@ -21,7 +21,7 @@ use crate::math::lane::{F64x4, Lane, LANES};
 /// kernel runs 2.1–2.35× faster per element; with SSE2 only (two registers per value)
 /// the residual runs slower than one element at a time (docs/benchmarks.md, "Four
 /// elements per kernel call"). Results are the same either way, bit for bit.
-const LANES_PAY: bool = cfg!(target_feature = "avx");
+pub(super) const LANES_PAY: bool = cfg!(target_feature = "avx");
 
 impl Simulation {
     /// Assembles residual `r`, the row scales and (if `tangent`) the matrix values.

@@ -6,15 +6,19 @@
 
 use nalgebra::Vector3;
 
+use super::assemble::LANES_PAY;
 use super::{Mode, Simulation};
 use crate::element::dissipation::LocalScalars;
+use crate::element::lanes::pack3;
 use crate::element::planar::{
-    self, full_index, pkind, planar_data, PElemMat, PIncrement, PState, PlanarData, NDOF_P,
+    self, full_index, pkind, planar_data, PElemVec, PElementEval, PIncrement, PState, PlanarData,
+    NDOF_P,
 };
 use crate::element::strain::Config;
 use crate::element::{strains6, ElementData, FrozenScalars, NDOF};
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::state::State;
+use crate::math::lane::{F64x4, Lane, LANES};
 use crate::model::Mat3;
 use crate::model::Model;
 
@@ -23,12 +27,21 @@ pub(super) struct PlanarKernel {
     /// Whether assembly uses it (on by default for planar models).
     pub(super) enabled: bool,
     data: Vec<PlanarData>,
+    /// [`Self::data`] by full groups of four consecutive elements, one per lane.
+    groups: Vec<PlanarData<F64x4>>,
     /// Per element: global unknown of each planar local unknown ([`NONE`] if removed).
     dofs: Vec<[usize; NDOF_P]>,
-    /// Per element: solver slot of each planar local (i, j) pair.
-    slots: Vec<[usize; NDOF_P * NDOF_P]>,
+    /// The active rows of all elements, element after element: (local row, global row).
+    rows: Vec<(usize, usize)>,
+    /// The active tangent entries, element after element: (index in the column-major
+    /// element matrix, solver slot).
+    entries: Vec<(usize, usize)>,
+    /// Where each element's rows and entries start (one more than the elements).
+    offsets: Vec<(usize, usize)>,
     /// Planar view of the element states at `n` and their strains, for `version`.
     states: Vec<(PState, Vector3<f64>)>,
+    /// The same by groups of four ([`Self::groups`]).
+    lane_states: Vec<(PState<F64x4>, Vector3<F64x4>)>,
     version: Option<u64>,
 }
 
@@ -55,21 +68,40 @@ impl PlanarKernel {
             })
             .collect();
         let mut pdofs = Vec::with_capacity(pdata.len());
-        let mut pslots = Vec::with_capacity(pdata.len());
+        let (mut rows, mut entries, mut offsets) = (Vec::new(), Vec::new(), vec![(0, 0)]);
         for (e, pd) in pdata.iter().enumerate() {
             let full = full_index(&pd.map);
             let m = &dofs.elements[e];
-            pdofs.push(std::array::from_fn(|i| m[full[i]]));
-            pslots.push(std::array::from_fn(|ij| {
-                slots[e][full[ij / NDOF_P] * NDOF + full[ij % NDOF_P]]
-            }));
+            let pd: [usize; NDOF_P] = std::array::from_fn(|i| m[full[i]]);
+            for i in (0..NDOF_P).filter(|&i| pd[i] != NONE) {
+                rows.push((i, pd[i]));
+            }
+            // Column-major, as the element matrix is stored.
+            for j in 0..NDOF_P {
+                for i in 0..NDOF_P {
+                    let slot = slots[e][full[i] * NDOF + full[j]];
+                    if pd[i] != NONE && slot != NONE {
+                        entries.push((i + j * NDOF_P, slot));
+                    }
+                }
+            }
+            offsets.push((rows.len(), entries.len()));
+            pdofs.push(pd);
         }
+        let groups = pdata
+            .chunks_exact(LANES)
+            .map(|c| PlanarData::pack([&c[0], &c[1], &c[2], &c[3]]))
+            .collect();
         Some(Self {
             enabled: true,
             data: pdata,
+            groups,
             dofs: pdofs,
-            slots: pslots,
+            rows,
+            entries,
+            offsets,
             states: Vec::new(),
+            lane_states: Vec::new(),
             version: None,
         })
     }
@@ -106,6 +138,14 @@ impl Simulation {
                 let eps = planar::strains3(&st.cfg, pd.h);
                 pk.states.push((st, eps));
             }
+            pk.lane_states = pk
+                .states
+                .chunks_exact(LANES)
+                .map(|c| {
+                    let st = PState::pack([&c[0].0, &c[1].0, &c[2].0, &c[3].0]);
+                    (st, pack3([&c[0].1, &c[1].1, &c[2].1, &c[3].1]))
+                })
+                .collect();
             pk.version = Some(self.state_version);
         }
     }
@@ -137,27 +177,29 @@ impl Simulation {
                 planar::consistent_scalars(pd, st, eps_n, &inc, &k);
             diss += pd.h * loc.dissipation_density(&kin_c.inputs, pd.a_rho);
             consistent.push(sc);
+            // The frozen kinematics differ from the consistent ones only through c_ν
+            // (equal, e.g. always for EM: nothing to recompute; as the 3D `advance`).
             let (kin, c_nu) = match mode {
-                Mode::Consistent => (kin_c, sc.c_nu),
-                Mode::Frozen => {
+                Mode::Frozen if self.frozen[e].c_nu != sc.c_nu => {
                     let c = self.frozen[e].c_nu;
                     (planar::kinematics(pd, st, eps_n, &inc, c, dt), c)
                 }
+                _ => (kin_c, sc.c_nu),
             };
             let map = &pd.map;
             let nodes = self.model.elements[e].nodes;
             // Triads: each column turned in the plane by cay(θ n); normal parts unchanged.
-            let d_n = self.state.d[e];
-            let d1: [Mat3; 2] = std::array::from_fn(|l| {
-                let cs = planar::cay2(inc.theta[l]);
-                let mut m = d_n[l];
+            let d_n = &self.state.d[e];
+            let [a0, a1] = map.axes;
+            let mut d1: [Mat3; 2] = *d_n;
+            for (l, m) in d1.iter_mut().enumerate() {
+                let (c, s) = planar::cay2(inc.theta[l]);
                 for i in 0..3 {
-                    let col = d_n[l].column(i).into_owned();
-                    let c = map.v3(&planar::rotate(cs, &map.v2(&col)), col[map.normal]);
-                    m.set_column(i, &c);
+                    let (x, y) = (d_n[l][(a0, i)], d_n[l][(a1, i)]);
+                    m[(a0, i)] = c * x - s * y;
+                    m[(a1, i)] = s * x + c * y;
                 }
-                m
-            });
+            }
             let kappa = pd.kappa;
             let ksum = kappa[0] + kappa[1];
             for a in 0..2 {
@@ -188,7 +230,9 @@ impl Simulation {
         Some((next, diss, consistent))
     }
 
-    /// The element loop of [`Simulation::assemble`] with the planar kernel.
+    /// The element loop of [`Simulation::assemble`] with the planar kernel: with frozen
+    /// scalars four elements per kernel call (one per [`F64x4`] lane, bit-identical to
+    /// one at a time), the rest one by one.
     pub(super) fn assemble_planar(
         &mut self,
         q: &[f64],
@@ -205,18 +249,50 @@ impl Simulation {
         };
         // Driven supports: the increments with the prescribed motion, gathered before the
         // matrix values are borrowed (no allocation without drives).
-        let driven: Option<Vec<planar::PElemVec>> = (!self.model.drives.is_empty()).then(|| {
+        let driven: Option<Vec<PElemVec>> = (!self.model.drives.is_empty()).then(|| {
             (0..pk.data.len())
                 .map(|e| self.gather_planar(pk, e, q))
                 .collect()
         });
+        let local = |e: usize| match &driven {
+            Some(x) => x[e],
+            None => gather_free(&pk.dofs[e], q),
+        };
         let vals = self.solver.values_mut();
-        for (e, pd) in pk.data.iter().enumerate() {
-            let map = &pk.dofs[e];
-            let inc = PIncrement::from_local(&match &driven {
-                Some(x) => x[e],
-                None => gather_free(map, q),
-            });
+        let first_single = if mode == Mode::Frozen && LANES_PAY {
+            let mut ev = PElementEval::<F64x4>::zeros();
+            for (g, data) in pk.groups.iter().enumerate() {
+                let e0 = g * LANES;
+                let inc = PIncrement::from_locals(&[
+                    local(e0),
+                    local(e0 + 1),
+                    local(e0 + 2),
+                    local(e0 + 3),
+                ]);
+                let (st, eps_n) = &pk.lane_states[g];
+                let s = FrozenScalars::pack(self.frozen[e0..e0 + LANES].try_into().unwrap());
+                let kin = planar::kinematics_core(data, st, eps_n, &inc, s.c_nu, dt);
+                planar::residual_tangent_into(
+                    data,
+                    st,
+                    &kin,
+                    &s,
+                    &k,
+                    self.trans_diss,
+                    tangent,
+                    &mut ev,
+                );
+                for i in 0..LANES {
+                    pk.scatter(e0 + i, &ev, |x| x.lane(i), tangent, r, scale, vals);
+                }
+            }
+            pk.groups.len() * LANES
+        } else {
+            0
+        };
+        let mut ev = PElementEval::zeros();
+        for (e, pd) in pk.data.iter().enumerate().skip(first_single) {
+            let inc = PIncrement::from_local(&local(e));
             let (st, eps_n) = &pk.states[e];
             let (s, kin) = match mode {
                 Mode::Frozen => {
@@ -228,12 +304,13 @@ impl Simulation {
                     (s, kin)
                 }
             };
-            let mut ev = planar::residual_tangent(pd, st, &kin, &s, &k, self.trans_diss, tangent);
+            planar::residual_tangent_into(pd, st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
             if tangent
                 && mode == Mode::Consistent
                 && k.scheme.is_dissipative()
                 && !self.inexact_tangent
             {
+                let map = &pk.dofs[e];
                 let active: [bool; NDOF_P] = std::array::from_fn(|i| map[i] != NONE);
                 planar::monolithic_correction(
                     pd,
@@ -246,23 +323,37 @@ impl Simulation {
                     &mut ev.k,
                 );
             }
-            let slots = &pk.slots[e];
-            let kmat: &PElemMat = &ev.k;
-            for i in 0..NDOF_P {
-                if map[i] == NONE {
-                    continue;
-                }
-                r[map[i]] += ev.r[i];
-                let kind = pkind(i);
-                scale[kind] = scale[kind].max(ev.scale[i]);
-                if tangent {
-                    for j in 0..NDOF_P {
-                        let s = slots[i * NDOF_P + j];
-                        if s != NONE {
-                            vals[s] += kmat[(i, j)];
-                        }
-                    }
-                }
+            pk.scatter(e, &ev, |x| x, tangent, r, scale, vals);
+        }
+    }
+}
+
+impl PlanarKernel {
+    /// Adds element `e`'s residual, row scales and (if `tangent`) tangent into the global
+    /// system, the entries read through `value` (the `f64` itself, or the element's lane
+    /// of a four-element evaluation): active rows and entries only.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn scatter<T: Lane>(
+        &self,
+        e: usize,
+        ev: &PElementEval<T>,
+        value: impl Fn(T) -> f64,
+        tangent: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+        vals: &mut [f64],
+    ) {
+        let (lo, hi) = (self.offsets[e], self.offsets[e + 1]);
+        for &(i, g) in &self.rows[lo.0..hi.0] {
+            r[g] += value(ev.r[i]);
+            let kind = pkind(i);
+            scale[kind] = scale[kind].max(value(ev.scale[i]));
+        }
+        if tangent {
+            let ks = ev.k.as_slice();
+            for &(src, dst) in &self.entries[lo.1..hi.1] {
+                vals[dst] += value(ks[src]);
             }
         }
     }
@@ -273,11 +364,11 @@ impl Simulation {
     /// they exist, the prescribed increment of a driven support where they were removed
     /// (as [`Simulation::gather`]), zero elsewhere.
     #[inline]
-    fn gather_planar(&self, pk: &PlanarKernel, e: usize, q: &[f64]) -> planar::PElemVec {
+    fn gather_planar(&self, pk: &PlanarKernel, e: usize, q: &[f64]) -> PElemVec {
         if !self.model.drives.is_empty() {
             let full = full_index(&pk.data[e].map);
             let x = self.gather(e, q).to_local();
-            return planar::PElemVec::from_fn(|i, _| x[full[i]]);
+            return PElemVec::from_fn(|i, _| x[full[i]]);
         }
         gather_free(&pk.dofs[e], q)
     }
@@ -285,6 +376,6 @@ impl Simulation {
 
 /// The planar element-local increment vector without drives (zero for removed unknowns).
 #[inline]
-fn gather_free(map: &[usize; NDOF_P], q: &[f64]) -> planar::PElemVec {
-    planar::PElemVec::from_fn(|i, _| if map[i] == NONE { 0.0 } else { q[map[i]] })
+fn gather_free(map: &[usize; NDOF_P], q: &[f64]) -> PElemVec {
+    PElemVec::from_fn(|i, _| if map[i] == NONE { 0.0 } else { q[map[i]] })
 }
