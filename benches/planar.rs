@@ -105,12 +105,14 @@ fn cantilever(c: &mut Criterion) {
 /// (EM, frozen scalars): the planar kernel against the 3D kernel on the same elements,
 /// residual only and residual + tangent.
 fn element(c: &mut Criterion) {
-    use cosserat::element::planar::{self, PIncrement};
+    use cosserat::element::lanes::pack3;
+    use cosserat::element::planar::{self, PElementEval, PIncrement, PState, PlanarData};
     use cosserat::element::{
         kinematics_core, residual_tangent_into, ElementData, ElementEval, FrozenScalars, Increment,
         StepConsts,
     };
     use cosserat::integrator::Scheme;
+    use cosserat::math::lane::F64x4;
     use cosserat::model::Vec3;
     let scene = load_scene("cantilever_planar").unwrap();
     let model = &scene.model;
@@ -177,6 +179,30 @@ fn element(c: &mut Criterion) {
                     let ev =
                         planar::residual_tangent(&pd[e], &pst[e], &kin, &s, &k, false, tangent);
                     std::hint::black_box(&ev);
+                }
+            })
+        });
+        // Four elements per kernel call (the assembly's path with frozen scalars).
+        let groups: Vec<_> = (0..n / 4)
+            .map(|g| {
+                let e = 4 * g;
+                let four = |i: usize| e + i;
+                (
+                    PlanarData::pack([&pd[e], &pd[e + 1], &pd[e + 2], &pd[e + 3]]),
+                    PState::pack([&pst[e], &pst[e + 1], &pst[e + 2], &pst[e + 3]]),
+                    pack3([&peps[e], &peps[e + 1], &peps[e + 2], &peps[e + 3]]),
+                    PIncrement::from_locals(&[0, 1, 2, 3].map(|i| pinc[four(i)].to_local())),
+                )
+            })
+            .collect();
+        let s4 = FrozenScalars::<F64x4>::default();
+        let mut ev4 = PElementEval::<F64x4>::zeros();
+        g.bench_function(format!("planar-f64x4/{label}"), |b| {
+            b.iter(|| {
+                for (d, st, eps, inc) in &groups {
+                    let kin = planar::kinematics_core(d, st, eps, inc, s4.c_nu, k.dt);
+                    planar::residual_tangent_into(d, st, &kin, &s4, &k, false, tangent, &mut ev4);
+                    std::hint::black_box(&ev4);
                 }
             })
         });

@@ -58,10 +58,20 @@ pub trait Lane:
     fn any_nonzero(self) -> bool;
     /// `a` where `flag`, else `b`, lane by lane.
     fn choose(flag: Self::Flag, a: Self, b: Self) -> Self;
+    /// Lanes per value.
+    const WIDTH: usize;
+    /// The lanes of a slice of values as one `f64` slice: value `j`'s lane `i` at
+    /// `j * WIDTH + i` (plain loads where the scatter reads one lane of each value).
+    fn flat(s: &[Self]) -> &[f64];
 }
 
 impl Lane for f64 {
     type Flag = bool;
+    const WIDTH: usize = 1;
+    #[inline(always)]
+    fn flat(s: &[Self]) -> &[f64] {
+        s
+    }
     #[inline(always)]
     fn splat(x: f64) -> Self {
         x
@@ -111,7 +121,7 @@ impl Lane for f64 {
 /// Four `f64` lanes, one element each: a `wide::f64x4` (one AVX register; two SSE2
 /// registers where the build does not target AVX), whose arithmetic is the plain IEEE
 /// operation lane by lane.
-#[derive(Clone, Copy, Default, PartialEq)]
+#[derive(Clone, Copy, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(transparent)]
 pub struct F64x4(pub wide::f64x4);
 
@@ -204,6 +214,11 @@ impl One for F64x4 {
 
 impl Lane for F64x4 {
     type Flag = [bool; LANES];
+    const WIDTH: usize = LANES;
+    #[inline(always)]
+    fn flat(s: &[Self]) -> &[f64] {
+        bytemuck::cast_slice(s)
+    }
     #[inline(always)]
     fn splat(x: f64) -> Self {
         F64x4(wide::f64x4::splat(x))

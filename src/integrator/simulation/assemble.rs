@@ -16,6 +16,7 @@ use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
 use crate::integrator::links;
 use crate::math::lane::{F64x4, Lane, LANES};
+use crate::model::Vec3;
 
 /// Whether the four-element lanes pay: with AVX an [`F64x4`] is one register and the
 /// kernel runs 2.1–2.35× faster per element; with SSE2 only (two registers per value)
@@ -237,7 +238,7 @@ impl Simulation {
             let kin = kinematics_core(data, &st, &eps_n, &inc, s.c_nu, k.dt);
             residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
             for i in 0..LANES {
-                self.scatter_with(e0 + i, &ev, |x| x.lane(i), tangent, r, scale);
+                self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
             }
         }
         groups * LANES
@@ -258,9 +259,14 @@ impl Simulation {
         // Nodal terms: point masses and external loads.
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
             let m = self.model.point_mass[a];
-            let u = gather3(q, &nd.u);
             let g = gather3(q, &nd.g);
-            let inertia = m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt;
+            // (Most nodes carry no point mass: no inertia to evaluate, divisions saved.)
+            let inertia = if m != 0.0 {
+                let u = gather3(q, &nd.u);
+                m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt
+            } else {
+                Vec3::zeros()
+            };
             let s = self.node_slots[a];
             for c in 0..3 {
                 if nd.u[c] != NONE {
@@ -426,34 +432,35 @@ impl Simulation {
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) {
-        self.scatter_with(e, ev, |x| x, tangent, r, scale);
+        self.scatter_lane(e, ev, 0, tangent, r, scale);
     }
 
-    /// [`Self::scatter`] of an evaluation whose entries `value` reads: the `f64` itself,
-    /// or element `e`'s lane of a four-element evaluation.
-    fn scatter_with<T: Lane>(
+    /// [`Self::scatter`] of lane `lane` of an evaluation (of the `f64` itself: lane 0).
+    fn scatter_lane<T: Lane>(
         &mut self,
         e: usize,
         ev: &ElementEval<T>,
-        value: impl Fn(T) -> f64,
+        lane: usize,
         tangent: bool,
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) {
+        let w = T::WIDTH;
         let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
+        let (er, es) = (T::flat(ev.r.as_slice()), T::flat(ev.scale.as_slice()));
         for &(i, g) in &self.row_map[lo.0..hi.0] {
-            r[g] += value(ev.r[i]);
+            r[g] += er[i * w + lane];
             let kind = kind_of_local(i);
-            scale[kind] = scale[kind].max(value(ev.scale[i]));
+            scale[kind] = scale[kind].max(es[i * w + lane]);
         }
         if tangent {
             // Active entries only, as runs contiguous in the element matrix (column-major)
             // and in the solver's values.
-            let ks = ev.k.as_slice();
+            let ks = T::flat(ev.k.as_slice());
             let vals = self.solver.values_mut();
             for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {
-                for (v, k) in vals[dst..dst + len].iter_mut().zip(&ks[src..src + len]) {
-                    *v += value(*k);
+                for (t, v) in vals[dst..dst + len].iter_mut().enumerate() {
+                    *v += ks[(src + t) * w + lane];
                 }
             }
         }

@@ -283,7 +283,7 @@ impl Simulation {
                     &mut ev,
                 );
                 for i in 0..LANES {
-                    pk.scatter(e0 + i, &ev, |x| x.lane(i), tangent, r, scale, vals);
+                    pk.scatter(e0 + i, &ev, i, tangent, r, scale, vals);
                 }
             }
             pk.groups.len() * LANES
@@ -323,37 +323,39 @@ impl Simulation {
                     &mut ev.k,
                 );
             }
-            pk.scatter(e, &ev, |x| x, tangent, r, scale, vals);
+            pk.scatter(e, &ev, 0, tangent, r, scale, vals);
         }
     }
 }
 
 impl PlanarKernel {
     /// Adds element `e`'s residual, row scales and (if `tangent`) tangent into the global
-    /// system, the entries read through `value` (the `f64` itself, or the element's lane
-    /// of a four-element evaluation): active rows and entries only.
+    /// system: lane `lane` of the evaluation (of the `f64` itself: lane 0), active rows
+    /// and entries only.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn scatter<T: Lane>(
         &self,
         e: usize,
         ev: &PElementEval<T>,
-        value: impl Fn(T) -> f64,
+        lane: usize,
         tangent: bool,
         r: &mut [f64],
         scale: &mut [f64; 3],
         vals: &mut [f64],
     ) {
+        let w = T::WIDTH;
         let (lo, hi) = (self.offsets[e], self.offsets[e + 1]);
+        let (er, es) = (T::flat(ev.r.as_slice()), T::flat(ev.scale.as_slice()));
         for &(i, g) in &self.rows[lo.0..hi.0] {
-            r[g] += value(ev.r[i]);
+            r[g] += er[i * w + lane];
             let kind = pkind(i);
-            scale[kind] = scale[kind].max(value(ev.scale[i]));
+            scale[kind] = scale[kind].max(es[i * w + lane]);
         }
         if tangent {
-            let ks = ev.k.as_slice();
+            let ks = T::flat(ev.k.as_slice());
             for &(src, dst) in &self.entries[lo.1..hi.1] {
-                vals[dst] += value(ks[src]);
+                vals[dst] += ks[src * w + lane];
             }
         }
     }
