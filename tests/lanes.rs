@@ -2,14 +2,18 @@
 //! (`f64`) evaluations bit for bit: kinematics, residual, row scales and tangent, for
 //! every scheme family (EM, EDMC-1, EDMC-2 with translational and director dissipation,
 //! the mid-point rule with Kelvin–Voigt damping), clamped and free ends mixed across the
-//! lanes, and elements of different sections in one group. The CPU assembly relies on
-//! it: a run's outputs do not depend on whether its elements went through the lanes.
+//! lanes, and elements of different sections in one group; the same for the planar
+//! element kernel. The CPU assembly relies on it: a run's outputs do not depend on
+//! whether its elements went through the lanes.
 
 mod common;
 
-use nalgebra::Vector6;
+use nalgebra::{Vector3, Vector6};
 
-use cosserat::element::lanes::pack6;
+use cosserat::element::lanes::{pack3, pack6};
+use cosserat::element::planar::{
+    self, PConfig, PElementEval, PIncrement, PState, PlanarData, PlanarMap, V2,
+};
 use cosserat::element::strain::Config;
 use cosserat::element::{
     kinematics_core, residual_tangent_into, strains6, ElementData, ElementEval, ElementState,
@@ -209,4 +213,185 @@ fn lane_flags_give_each_end_its_director_dissipation_factor() {
     assert_eq!(elems[1].kappa(), [0.0, 1.5]);
     assert_eq!(elems[2].kappa(), [1.5, 0.0]);
     assert_eq!(elems[3].kappa(), [0.0, 0.0]);
+}
+
+fn v2(rng: &mut Rng, s: f64) -> V2 {
+    V2::new(rng.symmetric(), rng.symmetric()) * s
+}
+
+/// `a` turned by `phi`.
+fn turn(phi: f64, a: V2) -> V2 {
+    let (s, c) = phi.sin_cos();
+    V2::new(c * a.x - s * a.y, s * a.x + c * a.y)
+}
+
+/// One planar element's inputs; `free` sets which end rotations move.
+fn planar_element(
+    rng: &mut Rng,
+    free: [bool; 2],
+    damping: f64,
+) -> (PlanarData, PState, Vector3<f64>, PIncrement) {
+    let h = 0.05 + rng.uniform();
+    let kappa = match free {
+        [true, true] => [1.0, 1.0],
+        [true, false] => [1.5, 0.0],
+        [false, true] => [0.0, 1.5],
+        [false, false] => [0.0, 0.0],
+    };
+    let phi0 = 3.0 * rng.symmetric();
+    let t_ref = turn(phi0, V2::new(1.0, 0.0));
+    let r0 = v2(rng, 1.0);
+    let r1 = r0 + t_ref * h;
+    let reference = PConfig {
+        r: [r0, r1],
+        d: [[turn(phi0, V2::new(0.0, 1.0)), t_ref]; 2],
+    };
+    let mut data = PlanarData {
+        h,
+        a_rho: 0.5 + rng.uniform(),
+        i_s: 0.01 + 0.1 * rng.uniform(),
+        i_amax: 0.2,
+        c: Vector3::new(
+            1e3 * (1.0 + rng.uniform()),
+            2e3 * (1.0 + rng.uniform()),
+            10.0 * (1.0 + rng.uniform()),
+        ),
+        eps0: Vector3::zeros(),
+        damping,
+        rot_free: free,
+        kappa,
+        map: PlanarMap {
+            axes: [0, 1],
+            normal: 2,
+            coef: [1.0, 0.0],
+        },
+    };
+    data.eps0 = planar::strains3(&reference, h);
+    // Moved, turned, slightly stretched directors.
+    let mut dir = |a: V2| turn(0.3 * rng.symmetric(), a) * (1.0 + 1e-3 * rng.symmetric());
+    let d = [
+        [dir(reference.d[0][0]), dir(reference.d[0][1])],
+        [dir(reference.d[1][0]), dir(reference.d[1][1])],
+    ];
+    let cfg = PConfig {
+        r: [r0 + v2(rng, 0.05), r1 + v2(rng, 0.05)],
+        d,
+    };
+    let vs = [0, 1].map(|l| if free[l] { v2(rng, 0.5) } else { V2::zeros() });
+    let st = PState {
+        cfg,
+        v: [v2(rng, 1.0), v2(rng, 1.0)],
+        vs,
+    };
+    let th = |rng: &mut Rng, f: bool| if f { 0.2 * rng.symmetric() } else { 0.0 };
+    let inc = PIncrement {
+        u: [v2(rng, 0.05), v2(rng, 0.05)],
+        theta: [th(rng, free[0]), th(rng, free[1])],
+        g: [v2(rng, 0.1), v2(rng, 0.1)],
+    };
+    let eps_n = planar::strains3(&st.cfg, h);
+    (data, st, eps_n, inc)
+}
+
+#[test]
+fn planar_lanes_equal_single_evaluations_bit_for_bit() {
+    let mut rng = Rng::new(11);
+    let schemes = [
+        Scheme::Em,
+        Scheme::Midpoint,
+        Scheme::Edmc1 {
+            chi_gamma: 0.3,
+            chi_omega: 0.4,
+            chi_v: 0.5,
+            chi_nu: 0.2,
+        },
+        Scheme::Edmc2 {
+            alpha_gv: 0.5,
+            alpha_gn: 0.3,
+            alpha_ov: 0.2,
+            alpha_on: 0.6,
+        },
+    ];
+    let free_sets = [[true, true], [false, true], [true, false], [false, false]];
+    let mut compared = 0usize;
+    for (n, scheme) in schemes.into_iter().cycle().take(16).enumerate() {
+        let trans = scheme.translational_dissipation();
+        let k = StepConsts {
+            dt: 1e-3 + 0.05 * rng.uniform(),
+            scheme,
+        };
+        let elems: Vec<_> = (0..LANES)
+            .map(|i| {
+                let damping = if n % 2 == 1 && i % 2 == 0 { 1e-3 } else { 0.0 };
+                planar_element(&mut rng, free_sets[(i + n) % 4], damping)
+            })
+            .collect();
+        // β differs per lane (zero in some lanes under the mid-point rule, where the
+        // β ≠ 0 branch then runs for the group); lane 1 without director dissipation.
+        let s: Vec<FrozenScalars> = (0..LANES)
+            .map(|i| {
+                let kv = 2.0 * elems[i].0.damping / k.dt;
+                if scheme.is_dissipative() {
+                    FrozenScalars {
+                        beta_gamma: rng.uniform() + kv,
+                        beta_omega: rng.uniform() + kv,
+                        c_v: 0.3 * rng.uniform(),
+                        c_nu: if scheme.director_dissipation() && i != 1 {
+                            0.3 * rng.uniform()
+                        } else {
+                            0.0
+                        },
+                    }
+                } else {
+                    FrozenScalars {
+                        beta_gamma: kv,
+                        beta_omega: kv,
+                        ..FrozenScalars::default()
+                    }
+                }
+            })
+            .collect();
+        let [a, b, c, d] = [0, 1, 2, 3].map(|i| &elems[i]);
+        let data = PlanarData::pack([&a.0, &b.0, &c.0, &d.0]);
+        let st = PState::pack([&a.1, &b.1, &c.1, &d.1]);
+        let eps_n = pack3([&a.2, &b.2, &c.2, &d.2]);
+        let inc = PIncrement::from_locals(&[a.3, b.3, c.3, d.3].map(|x| x.to_local()));
+        let sl = FrozenScalars::pack(&[s[0], s[1], s[2], s[3]]);
+        for tangent in [false, true] {
+            let kin = planar::kinematics_core(&data, &st, &eps_n, &inc, sl.c_nu, k.dt);
+            let mut ev = PElementEval::<F64x4>::zeros();
+            planar::residual_tangent_into(&data, &st, &kin, &sl, &k, trans, tangent, &mut ev);
+            for (i, (d1, st1, eps1, inc1)) in elems.iter().enumerate() {
+                let kin1 = planar::kinematics_core(d1, st1, eps1, inc1, s[i].c_nu, k.dt);
+                for l in 0..2 {
+                    for c in 0..2 {
+                        same("s at n+1", i, kin.cfg1.d[l][0][c].lane(i), kin1.cfg1.d[l][0][c]);
+                        same("s velocity", i, kin.vs1[l][c].lane(i), kin1.vs1[l][c]);
+                    }
+                }
+                for (x, y) in kin.eps1.iter().zip(kin1.eps1.iter()) {
+                    same("planar strain at n+1", i, x.lane(i), *y);
+                }
+                let one = planar::residual_tangent(d1, st1, &kin1, &s[i], &k, trans, tangent);
+                // Without translational dissipation the g rows are not written.
+                let rows = if trans { 10 } else { 6 };
+                for r in 0..rows {
+                    same("planar residual", i, ev.r[r].lane(i), one.r[r]);
+                    same("planar row scale", i, ev.scale[r].lane(i), one.scale[r]);
+                    compared += 2;
+                }
+                if tangent {
+                    assert!(one.k.iter().any(|&x| x != 0.0));
+                    for cc in 0..rows {
+                        for r in 0..rows {
+                            same("planar tangent", i, ev.k[(r, cc)].lane(i), one.k[(r, cc)]);
+                            compared += 1;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // 16 groups × 4 lanes: 8 of them with g rows (EDMC-1, EDMC-2).
+    assert_eq!(compared, 4 * (8 * (2 * 2 * 10 + 100) + 8 * (2 * 2 * 6 + 36)));
 }
