@@ -448,10 +448,15 @@ impl Simulation {
         let w = T::WIDTH;
         let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
         let (er, es) = (T::flat(ev.r.as_slice()), T::flat(ev.scale.as_slice()));
+        // The element's largest scales first (in registers; max is order-free).
+        let mut own = [0.0f64; 3];
         for &(i, g) in &self.row_map[lo.0..hi.0] {
             r[g] += er[i * w + lane];
             let kind = kind_of_local(i);
-            scale[kind] = scale[kind].max(es[i * w + lane]);
+            own[kind] = own[kind].max(es[i * w + lane]);
+        }
+        for (s, o) in scale.iter_mut().zip(own) {
+            *s = s.max(o);
         }
         if tangent {
             // Active entries only, as runs contiguous in the element matrix (column-major)

@@ -33,9 +33,10 @@ pub(super) struct PlanarKernel {
     dofs: Vec<[usize; NDOF_P]>,
     /// The active rows of all elements, element after element: (local row, global row).
     rows: Vec<(usize, usize)>,
-    /// The active tangent entries, element after element: (index in the column-major
-    /// element matrix, solver slot).
-    entries: Vec<(usize, usize)>,
+    /// The active tangent entries, element after element, as runs contiguous in the
+    /// column-major element matrix and in the solver's values: (first index in the
+    /// element matrix, first solver slot, length).
+    entries: Vec<(usize, usize, usize)>,
     /// Where each element's rows and entries start (one more than the elements).
     offsets: Vec<(usize, usize)>,
     /// Planar view of the element states at `n` and their strains, for `version`.
@@ -77,11 +78,20 @@ impl PlanarKernel {
                 rows.push((i, pd[i]));
             }
             // Column-major, as the element matrix is stored.
+            let first = entries.len();
             for j in 0..NDOF_P {
                 for i in 0..NDOF_P {
-                    let slot = slots[e][full[i] * NDOF + full[j]];
-                    if pd[i] != NONE && slot != NONE {
-                        entries.push((i + j * NDOF_P, slot));
+                    let (src, dst) = (i + j * NDOF_P, slots[e][full[i] * NDOF + full[j]]);
+                    if pd[i] == NONE || dst == NONE {
+                        continue;
+                    }
+                    // Extend the element's last run where both sides continue it.
+                    let own = entries.len() > first;
+                    match entries.last_mut() {
+                        Some((s, d, len)) if own && *s + *len == src && *d + *len == dst => {
+                            *len += 1
+                        }
+                        _ => entries.push((src, dst, 1)),
                     }
                 }
             }
@@ -347,15 +357,22 @@ impl PlanarKernel {
         let w = T::WIDTH;
         let (lo, hi) = (self.offsets[e], self.offsets[e + 1]);
         let (er, es) = (T::flat(ev.r.as_slice()), T::flat(ev.scale.as_slice()));
+        // The element's largest scales first (in registers; max is order-free).
+        let mut own = [0.0f64; 3];
         for &(i, g) in &self.rows[lo.0..hi.0] {
             r[g] += er[i * w + lane];
             let kind = pkind(i);
-            scale[kind] = scale[kind].max(es[i * w + lane]);
+            own[kind] = own[kind].max(es[i * w + lane]);
+        }
+        for (s, o) in scale.iter_mut().zip(own) {
+            *s = s.max(o);
         }
         if tangent {
             let ks = T::flat(ev.k.as_slice());
-            for &(src, dst) in &self.entries[lo.1..hi.1] {
-                vals[dst] += ks[src * w + lane];
+            for &(src, dst, len) in &self.entries[lo.1..hi.1] {
+                for (t, v) in vals[dst..dst + len].iter_mut().enumerate() {
+                    *v += ks[(src + t) * w + lane];
+                }
             }
         }
     }
