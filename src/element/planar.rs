@@ -31,7 +31,7 @@ use super::dissipation::{local_scalars, LocalInputs, LocalScalars};
 use super::strain::Config;
 use super::{ElementData, ElementState, FrozenScalars, StepConsts, StressRule, M2};
 use crate::math::lane::{zeros, Lane};
-use crate::model::{Plane, Vec3};
+use crate::model::{Mat3, Plane, Vec3};
 
 /// 2-vector of `f64` (in-plane components along the plane's two axes).
 pub type V2 = Vector2<f64>;
@@ -282,22 +282,56 @@ pub fn planar_data(
 impl PlanarData {
     /// The planar view of a 3D configuration.
     pub fn config(&self, c: &Config) -> PConfig {
+        self.config_of([&c.r[0], &c.r[1]], &c.d)
+    }
+
+    /// [`Self::config`] of end positions and triads.
+    #[inline]
+    fn config_of(&self, r: [&Vec3; 2], d: &[Mat3; 2]) -> PConfig {
         let m = &self.map;
-        let s3 = |l: usize| m.coef[0] * c.d[l].column(0) + m.coef[1] * c.d[l].column(1);
+        let [i, j] = m.axes;
+        // s = c_1 d_1 + c_2 d_2, in-plane components only.
+        let s = |l: usize| {
+            let k = |a: usize| m.coef[0] * d[l][(a, 0)] + m.coef[1] * d[l][(a, 1)];
+            V2::new(k(i), k(j))
+        };
+        let t = |l: usize| V2::new(d[l][(i, 2)], d[l][(j, 2)]);
         PConfig {
-            r: [m.v2(&c.r[0]), m.v2(&c.r[1])],
-            d: std::array::from_fn(|l| [m.v2(&s3(l)), m.v2(&c.d[l].column(2).into_owned())]),
+            r: [m.v2(r[0]), m.v2(r[1])],
+            d: [[s(0), t(0)], [s(1), t(1)]],
         }
     }
 
     /// The planar view of a 3D element state.
     pub fn state(&self, st: &ElementState) -> PState {
+        self.state_of(
+            [&st.cfg.r[0], &st.cfg.r[1]],
+            &st.cfg.d,
+            [&st.v[0], &st.v[1]],
+            &st.vd,
+        )
+    }
+
+    /// [`Self::state`] of the 3D state's pieces (end positions, triads, end velocities,
+    /// director velocities), read in place.
+    #[inline]
+    pub fn state_of(
+        &self,
+        r: [&Vec3; 2],
+        d: &[Mat3; 2],
+        v: [&Vec3; 2],
+        vd: &[[Vec3; 2]; 2],
+    ) -> PState {
         let m = &self.map;
-        let vs3 = |l: usize| m.coef[0] * st.vd[l][0] + m.coef[1] * st.vd[l][1];
+        let [i, j] = m.axes;
+        let vs = |l: usize| {
+            let k = |a: usize| m.coef[0] * vd[l][0][a] + m.coef[1] * vd[l][1][a];
+            V2::new(k(i), k(j))
+        };
         PState {
-            cfg: self.config(&st.cfg),
-            v: [m.v2(&st.v[0]), m.v2(&st.v[1])],
-            vs: [m.v2(&vs3(0)), m.v2(&vs3(1))],
+            cfg: self.config_of(r, d),
+            v: [m.v2(v[0]), m.v2(v[1])],
+            vs: [vs(0), vs(1)],
         }
     }
 }

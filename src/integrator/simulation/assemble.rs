@@ -190,10 +190,19 @@ impl Simulation {
             self.nodal_terms(q, tangent, r, &mut scale);
         }
         self.constrain_slides(q, tangent && !device, r);
+        // max_i |R_i| / s_kind(i), as the largest |R_i| of each kind over its scale: the
+        // same number (a correctly rounded division by a positive number is monotone),
+        // three divisions instead of one per row.
+        let mut largest = [0.0f64; 3];
+        for (&ri, &kind) in r.iter().zip(&self.row_kinds) {
+            if !ri.is_finite() {
+                return (f64::INFINITY, scale);
+            }
+            largest[kind] = largest[kind].max(ri.abs());
+        }
         let mut worst: f64 = 0.0;
-        for (i, &ri) in r.iter().enumerate() {
-            let s = scale[self.row_kinds[i]].max(1e-300);
-            let rel = ri.abs() / s;
+        for (m, s) in largest.iter().zip(scale) {
+            let rel = m / s.max(1e-300);
             if !rel.is_finite() {
                 return (f64::INFINITY, scale);
             }

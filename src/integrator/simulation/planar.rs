@@ -143,8 +143,15 @@ impl Simulation {
         };
         if pk.version != Some(self.state_version) || pk.states.len() != pk.data.len() {
             pk.states.clear();
+            let sv = &self.state;
             for (e, pd) in pk.data.iter().enumerate() {
-                let st = pd.state(&self.state.element(&self.model, e));
+                let n = self.model.elements[e].nodes;
+                let st = pd.state_of(
+                    [&sv.r[n[0]], &sv.r[n[1]]],
+                    &sv.d[e],
+                    [&sv.v[n[0]], &sv.v[n[1]]],
+                    &sv.vd[e],
+                );
                 let eps = planar::strains3(&st.cfg, pd.h);
                 pk.states.push((st, eps));
             }
