@@ -101,8 +101,10 @@ pub fn acceleration_norms(
         let h = data[e].props.h;
         let n = el.nodes;
         // Each acceleration once (the divisions dominate the cost).
-        let acc = [0, 1].map(|a| (s1.v[n[a]] - s0.v[n[a]]) / dt);
-        let accd = [0, 1].map(|l| [0, 1].map(|a| (s1.vd[e][l][a] - s0.vd[e][l][a]) / dt));
+        let acc = |a: usize| (s1.v[n[a]] - s0.v[n[a]]) / dt;
+        let acc = [acc(0), acc(1)];
+        let accd = |l: usize, a: usize| (s1.vd[e][l][a] - s0.vd[e][l][a]) / dt;
+        let accd = [[accd(0, 0), accd(0, 1)], [accd(1, 0), accd(1, 1)]];
         for l in 0..2 {
             for m in 0..2 {
                 let w = h * M2[l][m];

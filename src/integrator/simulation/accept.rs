@@ -164,11 +164,14 @@ pub const MAX_ELEMENT_TURN: f64 = 2.0;
 /// `Err` naming the first element whose end triads are turned more than
 /// [`MAX_ELEMENT_TURN`] apart in `state`.
 fn check_element_turn(state: &State) -> Result<(), String> {
+    // δ > limit ⇔ cos δ < cos(limit): the arc cosine only for the message.
+    let cos_limit = MAX_ELEMENT_TURN.cos();
     for (e, d) in state.d.iter().enumerate() {
-        // cos δ = (tr(D₀ᵀ D₁) − 1)/2 for the relative rotation D₁ D₀ᵀ.
-        let c = (((d[0].transpose() * d[1]).trace() - 1.0) / 2.0).clamp(-1.0, 1.0);
-        let delta = c.acos();
-        if delta > MAX_ELEMENT_TURN {
+        // cos δ = (tr(D₀ᵀ D₁) − 1)/2 for the relative rotation D₁ D₀ᵀ (the trace of
+        // D₀ᵀ D₁ is the entrywise product sum of D₀ and D₁).
+        let c = ((d[0].dot(&d[1]) - 1.0) / 2.0).clamp(-1.0, 1.0);
+        if c < cos_limit {
+            let delta = c.acos();
             return Err(format!(
                 "element {e}: its end triads are turned {delta:.3} rad apart (limit {MAX_ELEMENT_TURN:.3}): the element's linear director interpolation cannot represent that (use more elements or a smaller Δt, or --cutback)"
             ));
