@@ -265,7 +265,9 @@ impl Simulation {
     /// links' bar forces to `r`, the scales and (if `tangent`) the matrix values.
     fn nodal_terms(&mut self, q: &[f64], tangent: bool, r: &mut [f64], scale: &mut [f64; 3]) {
         let dt = self.consts().dt;
-        // Nodal terms: point masses and external loads.
+        // Nodal terms: point masses and external loads (their scales kept in registers
+        // and merged once: max is order-free).
+        let mut own = [0.0f64; 3];
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
             let m = self.model.point_mass[a];
             let g = gather3(q, &nd.g);
@@ -280,7 +282,7 @@ impl Simulation {
             for c in 0..3 {
                 if nd.u[c] != NONE {
                     r[nd.u[c]] += inertia[c] - self.force[a][c];
-                    scale[0] = scale[0].max(inertia[c].abs()).max(self.force[a][c].abs());
+                    own[0] = own[0].max(inertia[c].abs()).max(self.force[a][c].abs());
                     if tangent && m != 0.0 {
                         let vals = self.solver.values_mut();
                         vals[s[0][c]] += 2.0 * m / (dt * dt);
@@ -292,13 +294,16 @@ impl Simulation {
                 }
                 if nd.g[c] != NONE {
                     r[nd.g[c]] += m * g[c];
-                    scale[2] = scale[2].max((m * g[c]).abs());
+                    own[2] = own[2].max((m * g[c]).abs());
                 }
                 if nd.th[c] != NONE {
                     r[nd.th[c]] -= self.moment[a][c];
-                    scale[1] = scale[1].max(self.moment[a][c].abs());
+                    own[1] = own[1].max(self.moment[a][c].abs());
                 }
             }
+        }
+        for (s, o) in scale.iter_mut().zip(own) {
+            *s = s.max(o);
         }
         self.add_follower_terms(q, tangent, r, scale);
         self.add_drag_terms(q, tangent, r, scale);
