@@ -19,7 +19,7 @@ use crate::element::{strains6, ElementData, FrozenScalars, NDOF};
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::state::State;
 use crate::math::lane::{F64x4, Lane, LANES};
-use crate::model::Mat3;
+use crate::model::{Mat3, Vec3};
 use crate::model::Model;
 
 /// Planar kernel data of a simulation.
@@ -182,8 +182,19 @@ impl Simulation {
         }
         let k = self.consts();
         let dt = k.dt;
-        let mut next = self.state.clone();
-        next.t = self.state.t + dt;
+        // Triads, director velocities and strains are all written below: only the nodal
+        // fields are copied (nodes outside every element keep theirs).
+        let n = pk.data.len();
+        let sv = &self.state;
+        let mut next = State {
+            t: sv.t + dt,
+            r: sv.r.clone(),
+            v: sv.v.clone(),
+            d: Vec::with_capacity(n),
+            vd: Vec::with_capacity(n),
+            eps: Vec::with_capacity(n),
+            lambda: sv.lambda.clone(),
+        };
         let mut diss = 0.0;
         let mut consistent = Vec::with_capacity(pk.data.len());
         let mut node_done = vec![false; self.model.n_nodes()];
@@ -219,18 +230,20 @@ impl Simulation {
             }
             let kappa = pd.kappa;
             let ksum = kappa[0] + kappa[1];
+            let phi = c_nu / (1.0 + ksum * c_nu);
+            let mut vd1 = [[Vec3::zeros(); 2]; 2];
             for a in 0..2 {
                 let dd = [
                     d1[0].column(a) - d_n[0].column(a),
                     d1[1].column(a) - d_n[1].column(a),
                 ];
-                let w = (dd[0] + dd[1]) / dt * (c_nu / (1.0 + ksum * c_nu));
+                let w = (dd[0] + dd[1]) / dt * phi;
                 for l in 0..2 {
-                    next.vd[e][l][a] =
-                        2.0 * dd[l] / dt - self.state.vd[e][l][a] - 2.0 * kappa[l] * w;
+                    vd1[l][a] = 2.0 * dd[l] / dt - sv.vd[e][l][a] - 2.0 * kappa[l] * w;
                 }
             }
-            next.d[e] = d1;
+            next.vd.push(vd1);
+            next.d.push(d1);
             for l in 0..2 {
                 let a = nodes[l];
                 if !node_done[a] {
@@ -241,9 +254,9 @@ impl Simulation {
                 }
             }
         }
-        for e in 0..pk.data.len() {
-            next.eps[e] = strains6(&next.config(&self.model, e), self.data[e].props.h);
-        }
+        next.eps = (0..n)
+            .map(|e| strains6(&next.config(&self.model, e), self.data[e].props.h))
+            .collect();
         Some((next, diss, consistent))
     }
 
