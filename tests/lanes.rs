@@ -365,7 +365,12 @@ fn planar_lanes_equal_single_evaluations_bit_for_bit() {
                 let kin1 = planar::kinematics_core(d1, st1, eps1, inc1, s[i].c_nu, k.dt);
                 for l in 0..2 {
                     for c in 0..2 {
-                        same("s at n+1", i, kin.cfg1.d[l][0][c].lane(i), kin1.cfg1.d[l][0][c]);
+                        same(
+                            "s at n+1",
+                            i,
+                            kin.cfg1.d[l][0][c].lane(i),
+                            kin1.cfg1.d[l][0][c],
+                        );
                         same("s velocity", i, kin.vs1[l][c].lane(i), kin1.vs1[l][c]);
                     }
                 }
@@ -393,5 +398,8 @@ fn planar_lanes_equal_single_evaluations_bit_for_bit() {
         }
     }
     // 16 groups × 4 lanes: 8 of them with g rows (EDMC-1, EDMC-2).
-    assert_eq!(compared, 4 * (8 * (2 * 2 * 10 + 100) + 8 * (2 * 2 * 6 + 36)));
+    assert_eq!(
+        compared,
+        4 * (8 * (2 * 2 * 10 + 100) + 8 * (2 * 2 * 6 + 36))
+    );
 }

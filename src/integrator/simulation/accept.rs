@@ -17,8 +17,18 @@ impl Simulation {
         }
         let k = self.consts();
         let dt = k.dt;
-        let mut next = self.state.clone();
-        next.t = self.state.t + dt;
+        // Triads, director velocities and strains are all written below: only the nodal
+        // fields are copied (nodes outside every element keep theirs).
+        let n = self.model.elements.len();
+        let mut next = State {
+            t: self.state.t + dt,
+            r: self.state.r.clone(),
+            v: self.state.v.clone(),
+            d: Vec::with_capacity(n),
+            vd: Vec::with_capacity(n),
+            eps: Vec::with_capacity(n),
+            lambda: self.state.lambda.clone(),
+        };
         let mut diss = 0.0;
         let mut consistent = Vec::with_capacity(self.model.elements.len());
         let mut node_done = vec![false; self.model.n_nodes()];
@@ -38,9 +48,9 @@ impl Simulation {
                 }
                 _ => kin_c,
             };
-            next.d[e] = kin.cfg1.d;
-            next.vd[e] = kin.vd1;
-            next.eps[e] = kin.eps1;
+            next.d.push(kin.cfg1.d);
+            next.vd.push(kin.vd1);
+            next.eps.push(kin.eps1);
             for l in 0..2 {
                 let a = self.model.elements[e].nodes[l];
                 if !node_done[a] {

@@ -19,8 +19,8 @@ use crate::element::{strains6, ElementData, FrozenScalars, NDOF};
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::state::State;
 use crate::math::lane::{F64x4, Lane, LANES};
-use crate::model::{Mat3, Vec3};
 use crate::model::Model;
+use crate::model::{Mat3, Vec3};
 
 /// Planar kernel data of a simulation.
 pub(super) struct PlanarKernel {
