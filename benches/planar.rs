@@ -105,11 +105,11 @@ fn cantilever(c: &mut Criterion) {
 /// (EM, frozen scalars): the planar kernel against the 3D kernel on the same elements,
 /// residual only and residual + tangent.
 fn element(c: &mut Criterion) {
-    use cosserat::element::lanes::pack3;
+    use cosserat::element::lanes::{pack3, pack6};
     use cosserat::element::planar::{self, PElementEval, PIncrement, PState, PlanarData};
     use cosserat::element::{
-        kinematics_core, residual_tangent_into, ElementData, ElementEval, FrozenScalars, Increment,
-        StepConsts,
+        kinematics_core, residual_tangent_into, ElementData, ElementEval, ElementState,
+        FrozenScalars, Increment, StepConsts,
     };
     use cosserat::integrator::Scheme;
     use cosserat::math::lane::F64x4;
@@ -203,6 +203,37 @@ fn element(c: &mut Criterion) {
                     let kin = planar::kinematics_core(d, st, eps, inc, s4.c_nu, k.dt);
                     planar::residual_tangent_into(d, st, &kin, &s4, &k, false, tangent, &mut ev4);
                     std::hint::black_box(&ev4);
+                }
+            })
+        });
+        let groups3: Vec<_> = (0..n / 4)
+            .map(|g| {
+                let e = 4 * g;
+                (
+                    ElementData::<F64x4>::pack([
+                        &data[e],
+                        &data[e + 1],
+                        &data[e + 2],
+                        &data[e + 3],
+                    ]),
+                    ElementState::pack(&[st3[e], st3[e + 1], st3[e + 2], st3[e + 3]]),
+                    pack6(&[
+                        state.eps[e],
+                        state.eps[e + 1],
+                        state.eps[e + 2],
+                        state.eps[e + 3],
+                    ]),
+                    Increment::pack(&[inc3[e], inc3[e + 1], inc3[e + 2], inc3[e + 3]]),
+                )
+            })
+            .collect();
+        let mut ev34 = ElementEval::<F64x4>::zeros();
+        g.bench_function(format!("3d-f64x4/{label}"), |b| {
+            b.iter(|| {
+                for (d, st, eps, inc) in &groups3 {
+                    let kin = kinematics_core(d, st, eps, inc, s4.c_nu, k.dt);
+                    residual_tangent_into(d, st, &kin, &s4, &k, false, tangent, &mut ev34);
+                    std::hint::black_box(&ev34);
                 }
             })
         });
