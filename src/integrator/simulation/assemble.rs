@@ -478,8 +478,14 @@ impl Simulation {
             let ks = T::flat(ev.k.as_slice());
             let vals = self.solver.values_mut();
             for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {
-                for (t, v) in vals[dst..dst + len].iter_mut().enumerate() {
-                    *v += ks[(src + t) * w + lane];
+                let (out, from) = (&mut vals[dst..dst + len], &ks[src * w..(src + len) * w]);
+                if w == 1 {
+                    // One element: contiguous on both sides.
+                    out.iter_mut().zip(from).for_each(|(v, k)| *v += k);
+                } else {
+                    out.iter_mut()
+                        .zip(from.chunks_exact(w))
+                        .for_each(|(v, k)| *v += k[lane]);
                 }
             }
         }
