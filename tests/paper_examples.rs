@@ -392,9 +392,11 @@ fn planar_equals_full_3d_to_round_off() {
         );
         let size = s2.state().r.iter().fold(0.0f64, |m, x| m.max(x.norm()));
         for (a, b) in s2.state().r.iter().zip(&s3.state().r) {
-            // Measured ≤ 7.4e-14 relative (the arch through its snap-through).
+            // Measured ≤ 2.4e-13 relative (the arch through its snap-through, which
+            // amplifies round-off: 7.4e-14 before the planar tangent's summation order
+            // changed with its four-element form).
             assert!(
-                (a - b).norm() <= 5e-13 * size,
+                (a - b).norm() <= 1.5e-12 * size,
                 "{scene}: positions differ by {}",
                 (a - b).norm()
             );
