@@ -459,36 +459,18 @@ impl Simulation {
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) {
-        let w = T::WIDTH;
         let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
-        let (er, es) = (T::flat(ev.r.as_slice()), T::flat(ev.scale.as_slice()));
-        // The element's largest scales first (in registers; max is order-free).
-        let mut own = [0.0f64; 3];
-        for &(i, g) in &self.row_map[lo.0..hi.0] {
-            r[g] += er[i * w + lane];
-            let kind = kind_of_local(i);
-            own[kind] = own[kind].max(es[i * w + lane]);
-        }
-        for (s, o) in scale.iter_mut().zip(own) {
-            *s = s.max(o);
-        }
-        if tangent {
-            // Active entries only, as runs contiguous in the element matrix (column-major)
-            // and in the solver's values.
-            let ks = T::flat(ev.k.as_slice());
-            let vals = self.solver.values_mut();
-            for &(src, dst, len) in &self.tangent_map[lo.1..hi.1] {
-                let (out, from) = (&mut vals[dst..dst + len], &ks[src * w..(src + len) * w]);
-                if w == 1 {
-                    // One element: contiguous on both sides.
-                    out.iter_mut().zip(from).for_each(|(v, k)| *v += k);
-                } else {
-                    out.iter_mut()
-                        .zip(from.chunks_exact(w))
-                        .for_each(|(v, k)| *v += k[lane]);
-                }
-            }
-        }
+        let runs = &self.tangent_map[lo.1..hi.1];
+        add_element(
+            (ev.r.as_slice(), ev.scale.as_slice(), ev.k.as_slice()),
+            lane,
+            &self.row_map[lo.0..hi.0],
+            kind_of_local,
+            tangent.then_some(runs),
+            r,
+            scale,
+            self.solver.values_mut(),
+        );
     }
 
     /// Adds a backend's assembled system (node blocks, off-diagonal blocks, residual rows
@@ -540,5 +522,51 @@ impl Simulation {
             }
         }
         k
+    }
+}
+
+/// Adds lane `lane` of one element's evaluation `(residual, row scales, tangent)` into the
+/// global system: its active rows `rows` (local row, global row; `kind` gives a local
+/// row's scale kind) and, with `runs`, its active tangent entries as runs contiguous in
+/// the column-major element matrix and in the solver's values `vals` (first local index,
+/// first slot, length). The lanes are read with plain loads ([`Lane::flat`]); the
+/// element's largest scales are kept in registers and merged once (max is order-free).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn add_element<T: Lane>(
+    (er, es, ek): (&[T], &[T], &[T]),
+    lane: usize,
+    rows: &[(usize, usize)],
+    kind: impl Fn(usize) -> usize,
+    runs: Option<&[(usize, usize, usize)]>,
+    r: &mut [f64],
+    scale: &mut [f64; 3],
+    vals: &mut [f64],
+) {
+    let w = T::WIDTH;
+    let (er, es) = (T::flat(er), T::flat(es));
+    let mut own = [0.0f64; 3];
+    for &(i, g) in rows {
+        r[g] += er[i * w + lane];
+        let k = kind(i);
+        own[k] = own[k].max(es[i * w + lane]);
+    }
+    for (s, o) in scale.iter_mut().zip(own) {
+        *s = s.max(o);
+    }
+    let Some(runs) = runs else {
+        return;
+    };
+    let ks = T::flat(ek);
+    for &(src, dst, len) in runs {
+        let (out, from) = (&mut vals[dst..dst + len], &ks[src * w..(src + len) * w]);
+        if w == 1 {
+            // One element: contiguous on both sides.
+            out.iter_mut().zip(from).for_each(|(v, k)| *v += k);
+        } else {
+            out.iter_mut()
+                .zip(from.chunks_exact(w))
+                .for_each(|(v, k)| *v += k[lane]);
+        }
     }
 }

@@ -6,7 +6,7 @@
 
 use nalgebra::Vector3;
 
-use super::assemble::LANES_PAY;
+use super::assemble::{add_element, LANES_PAY};
 use super::{Mode, Simulation};
 use crate::element::dissipation::LocalScalars;
 use crate::element::lanes::pack3;
@@ -374,33 +374,17 @@ impl PlanarKernel {
         scale: &mut [f64; 3],
         vals: &mut [f64],
     ) {
-        let w = T::WIDTH;
         let (lo, hi) = (self.offsets[e], self.offsets[e + 1]);
-        let (er, es) = (T::flat(ev.r.as_slice()), T::flat(ev.scale.as_slice()));
-        // The element's largest scales first (in registers; max is order-free).
-        let mut own = [0.0f64; 3];
-        for &(i, g) in &self.rows[lo.0..hi.0] {
-            r[g] += er[i * w + lane];
-            let kind = pkind(i);
-            own[kind] = own[kind].max(es[i * w + lane]);
-        }
-        for (s, o) in scale.iter_mut().zip(own) {
-            *s = s.max(o);
-        }
-        if tangent {
-            let ks = T::flat(ev.k.as_slice());
-            for &(src, dst, len) in &self.entries[lo.1..hi.1] {
-                let (out, from) = (&mut vals[dst..dst + len], &ks[src * w..(src + len) * w]);
-                if w == 1 {
-                    // One element: contiguous on both sides.
-                    out.iter_mut().zip(from).for_each(|(v, k)| *v += k);
-                } else {
-                    out.iter_mut()
-                        .zip(from.chunks_exact(w))
-                        .for_each(|(v, k)| *v += k[lane]);
-                }
-            }
-        }
+        add_element(
+            (ev.r.as_slice(), ev.scale.as_slice(), ev.k.as_slice()),
+            lane,
+            &self.rows[lo.0..hi.0],
+            pkind,
+            tangent.then_some(&self.entries[lo.1..hi.1]),
+            r,
+            scale,
+            vals,
+        );
     }
 }
 
