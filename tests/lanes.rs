@@ -73,17 +73,9 @@ fn element(rng: &mut Rng, free: [bool; 2], damping: f64) -> (ElementData, Elemen
     (data, st, inc)
 }
 
-fn same(what: &str, lane: usize, a: f64, b: f64) {
-    assert!(
-        a.to_bits() == b.to_bits(),
-        "{what}, lane {lane}: {a:e} (lanes) vs {b:e} (one element)"
-    );
-}
-
-#[test]
-fn four_lanes_equal_four_single_evaluations_bit_for_bit() {
-    let mut rng = Rng::new(7);
-    let schemes = [
+/// The scheme families the lane tests cycle through.
+fn schemes() -> [Scheme; 4] {
+    [
         Scheme::Em,
         Scheme::Midpoint,
         Scheme::Edmc1 {
@@ -98,7 +90,44 @@ fn four_lanes_equal_four_single_evaluations_bit_for_bit() {
             alpha_ov: 0.2,
             alpha_on: 0.6,
         },
-    ];
+    ]
+}
+
+/// Frozen scalars of lane `lane` with Kelvin–Voigt β `kv`: random under a dissipative
+/// scheme, lane 1 without director dissipation (c_ν = 0) beside lanes with it (the
+/// director-dissipation branch runs for the group and must add exact zeros in that lane).
+fn frozen(rng: &mut Rng, scheme: Scheme, kv: f64, lane: usize) -> FrozenScalars {
+    if scheme.is_dissipative() {
+        FrozenScalars {
+            beta_gamma: rng.uniform() + kv,
+            beta_omega: rng.uniform() + kv,
+            c_v: 0.3 * rng.uniform(),
+            c_nu: if scheme.director_dissipation() && lane != 1 {
+                0.3 * rng.uniform()
+            } else {
+                0.0
+            },
+        }
+    } else {
+        FrozenScalars {
+            beta_gamma: kv,
+            beta_omega: kv,
+            ..FrozenScalars::default()
+        }
+    }
+}
+
+fn same(what: &str, lane: usize, a: f64, b: f64) {
+    assert!(
+        a.to_bits() == b.to_bits(),
+        "{what}, lane {lane}: {a:e} (lanes) vs {b:e} (one element)"
+    );
+}
+
+#[test]
+fn four_lanes_equal_four_single_evaluations_bit_for_bit() {
+    let mut rng = Rng::new(7);
+    let schemes = schemes();
     let free_sets = [[true, true], [false, true], [true, false], [false, false]];
     let mut compared = 0usize;
     for (n, scheme) in schemes.into_iter().cycle().take(16).enumerate() {
@@ -116,30 +145,7 @@ fn four_lanes_equal_four_single_evaluations_bit_for_bit() {
             })
             .collect();
         let s: Vec<FrozenScalars> = (0..LANES)
-            .map(|i| {
-                let kv = 2.0 * elems[i].0.props.damping / k.dt;
-                if scheme.is_dissipative() {
-                    FrozenScalars {
-                        beta_gamma: rng.uniform() + kv,
-                        beta_omega: rng.uniform() + kv,
-                        c_v: 0.3 * rng.uniform(),
-                        // Lane 1 without director dissipation (c_ν = 0) beside lanes
-                        // with it: the director-dissipation branch runs for the group
-                        // and must add exact zeros in that lane.
-                        c_nu: if scheme.director_dissipation() && i != 1 {
-                            0.3 * rng.uniform()
-                        } else {
-                            0.0
-                        },
-                    }
-                } else {
-                    FrozenScalars {
-                        beta_gamma: kv,
-                        beta_omega: kv,
-                        ..FrozenScalars::default()
-                    }
-                }
-            })
+            .map(|i| frozen(&mut rng, scheme, 2.0 * elems[i].0.props.damping / k.dt, i))
             .collect();
         let eps_n: Vec<Vector6<f64>> = elems
             .iter()
@@ -296,22 +302,7 @@ fn planar_element(
 #[test]
 fn planar_lanes_equal_single_evaluations_bit_for_bit() {
     let mut rng = Rng::new(11);
-    let schemes = [
-        Scheme::Em,
-        Scheme::Midpoint,
-        Scheme::Edmc1 {
-            chi_gamma: 0.3,
-            chi_omega: 0.4,
-            chi_v: 0.5,
-            chi_nu: 0.2,
-        },
-        Scheme::Edmc2 {
-            alpha_gv: 0.5,
-            alpha_gn: 0.3,
-            alpha_ov: 0.2,
-            alpha_on: 0.6,
-        },
-    ];
+    let schemes = schemes();
     let free_sets = [[true, true], [false, true], [true, false], [false, false]];
     let mut compared = 0usize;
     for (n, scheme) in schemes.into_iter().cycle().take(16).enumerate() {
@@ -329,27 +320,7 @@ fn planar_lanes_equal_single_evaluations_bit_for_bit() {
         // β differs per lane (zero in some lanes under the mid-point rule, where the
         // β ≠ 0 branch then runs for the group); lane 1 without director dissipation.
         let s: Vec<FrozenScalars> = (0..LANES)
-            .map(|i| {
-                let kv = 2.0 * elems[i].0.damping / k.dt;
-                if scheme.is_dissipative() {
-                    FrozenScalars {
-                        beta_gamma: rng.uniform() + kv,
-                        beta_omega: rng.uniform() + kv,
-                        c_v: 0.3 * rng.uniform(),
-                        c_nu: if scheme.director_dissipation() && i != 1 {
-                            0.3 * rng.uniform()
-                        } else {
-                            0.0
-                        },
-                    }
-                } else {
-                    FrozenScalars {
-                        beta_gamma: kv,
-                        beta_omega: kv,
-                        ..FrozenScalars::default()
-                    }
-                }
-            })
+            .map(|i| frozen(&mut rng, scheme, 2.0 * elems[i].0.damping / k.dt, i))
             .collect();
         let [a, b, c, d] = [0, 1, 2, 3].map(|i| &elems[i]);
         let data = PlanarData::pack([&a.0, &b.0, &c.0, &d.0]);
