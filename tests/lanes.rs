@@ -117,6 +117,38 @@ fn frozen(rng: &mut Rng, scheme: Scheme, kv: f64, lane: usize) -> FrozenScalars 
     }
 }
 
+/// The 16 lane groups of a test, cycling through [`schemes`]: per group its step constants,
+/// its four elements from `make(rng, free ends, Kelvin–Voigt time)` and their frozen
+/// scalars. Each lane has its own section and end conditions (rotated per group); under
+/// the mid-point rule and EDMC-2 some lanes only have Kelvin–Voigt damping, so β differs
+/// across the lanes (zero in some, where a β ≠ 0 branch then runs for the group).
+#[allow(clippy::type_complexity)]
+fn lane_groups<E>(
+    rng: &mut Rng,
+    make: impl Fn(&mut Rng, [bool; 2], f64) -> E,
+    damping: impl Fn(&E) -> f64,
+) -> Vec<(StepConsts, Vec<E>, Vec<FrozenScalars>)> {
+    let free_sets = [[true, true], [false, true], [true, false], [false, false]];
+    let mut groups = Vec::new();
+    for (n, scheme) in schemes().into_iter().cycle().take(16).enumerate() {
+        let k = StepConsts {
+            dt: 1e-3 + 0.05 * rng.uniform(),
+            scheme,
+        };
+        let elems: Vec<E> = (0..LANES)
+            .map(|i| {
+                let eta = if n % 2 == 1 && i % 2 == 0 { 1e-3 } else { 0.0 };
+                make(rng, free_sets[(i + n) % 4], eta)
+            })
+            .collect();
+        let s = (0..LANES)
+            .map(|i| frozen(rng, scheme, 2.0 * damping(&elems[i]) / k.dt, i))
+            .collect();
+        groups.push((k, elems, s));
+    }
+    groups
+}
+
 fn same(what: &str, lane: usize, a: f64, b: f64) {
     assert!(
         a.to_bits() == b.to_bits(),
@@ -127,26 +159,9 @@ fn same(what: &str, lane: usize, a: f64, b: f64) {
 #[test]
 fn four_lanes_equal_four_single_evaluations_bit_for_bit() {
     let mut rng = Rng::new(7);
-    let schemes = schemes();
-    let free_sets = [[true, true], [false, true], [true, false], [false, false]];
     let mut compared = 0usize;
-    for (n, scheme) in schemes.into_iter().cycle().take(16).enumerate() {
-        let trans = scheme.translational_dissipation();
-        let k = StepConsts {
-            dt: 1e-3 + 0.05 * rng.uniform(),
-            scheme,
-        };
-        // Lane i: its own section, end conditions (rotated per group) and, under the
-        // mid-point rule, Kelvin–Voigt damping in some lanes only (β differs per lane).
-        let elems: Vec<_> = (0..LANES)
-            .map(|i| {
-                let damping = if n % 2 == 1 && i % 2 == 0 { 1e-3 } else { 0.0 };
-                element(&mut rng, free_sets[(i + n) % 4], damping)
-            })
-            .collect();
-        let s: Vec<FrozenScalars> = (0..LANES)
-            .map(|i| frozen(&mut rng, scheme, 2.0 * elems[i].0.props.damping / k.dt, i))
-            .collect();
+    for (k, elems, s) in lane_groups(&mut rng, element, |e| e.0.props.damping) {
+        let trans = k.scheme.translational_dissipation();
         let eps_n: Vec<Vector6<f64>> = elems
             .iter()
             .map(|(d, st, _)| strains6(&st.cfg, d.props.h))
@@ -302,26 +317,9 @@ fn planar_element(
 #[test]
 fn planar_lanes_equal_single_evaluations_bit_for_bit() {
     let mut rng = Rng::new(11);
-    let schemes = schemes();
-    let free_sets = [[true, true], [false, true], [true, false], [false, false]];
     let mut compared = 0usize;
-    for (n, scheme) in schemes.into_iter().cycle().take(16).enumerate() {
-        let trans = scheme.translational_dissipation();
-        let k = StepConsts {
-            dt: 1e-3 + 0.05 * rng.uniform(),
-            scheme,
-        };
-        let elems: Vec<_> = (0..LANES)
-            .map(|i| {
-                let damping = if n % 2 == 1 && i % 2 == 0 { 1e-3 } else { 0.0 };
-                planar_element(&mut rng, free_sets[(i + n) % 4], damping)
-            })
-            .collect();
-        // β differs per lane (zero in some lanes under the mid-point rule, where the
-        // β ≠ 0 branch then runs for the group); lane 1 without director dissipation.
-        let s: Vec<FrozenScalars> = (0..LANES)
-            .map(|i| frozen(&mut rng, scheme, 2.0 * elems[i].0.damping / k.dt, i))
-            .collect();
+    for (k, elems, s) in lane_groups(&mut rng, planar_element, |e| e.0.damping) {
+        let trans = k.scheme.translational_dissipation();
         let [a, b, c, d] = [0, 1, 2, 3].map(|i| &elems[i]);
         let data = PlanarData::pack([&a.0, &b.0, &c.0, &d.0]);
         let st = PState::pack([&a.1, &b.1, &c.1, &d.1]);
