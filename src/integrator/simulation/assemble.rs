@@ -152,7 +152,7 @@ impl Simulation {
         };
         // Frozen scalars: the elements go through the kernel four at a time, one per
         // lane (bit-identical to one at a time); the rest one by one below.
-        let first_single = if mode == Mode::Frozen && LANES_PAY {
+        let first_single = if mode == Mode::Frozen && self.lanes {
             self.assemble_lanes(q, n_cpu, tangent, r, &mut scale)
         } else {
             0
@@ -209,6 +209,20 @@ impl Simulation {
             worst = worst.max(rel);
         }
         (worst, scale)
+    }
+
+    /// Whether frozen-scalar elements go through the kernel four at a time, one per
+    /// [`F64x4`] lane (both the 3D and the planar kernel).
+    pub fn lanes(&self) -> bool {
+        self.lanes
+    }
+
+    /// Switches the four-element kernel calls on or off. The default is on where the
+    /// build targets AVX (where they pay: docs/benchmarks.md, "Four elements per kernel
+    /// call") and off elsewhere. Either way every result is the same bit for bit
+    /// (`tests/lanes.rs` runs scenes both ways); off serves comparisons and tests.
+    pub fn set_lanes(&mut self, on: bool) {
+        self.lanes = on;
     }
 
     /// The frozen-scalar elements `0..4⌊n/4⌋` through the kernel by groups of four, one

@@ -176,6 +176,9 @@ pub struct Simulation {
     /// Consistent-mode tangents leave out the scalars' linearization (the inexact
     /// strategy's solve; false otherwise).
     inexact_tangent: bool,
+    /// Frozen-scalar elements go through the kernel four at a time (one per `F64x4`
+    /// lane); on by default where the build targets AVX ([`Simulation::set_lanes`]).
+    lanes: bool,
     /// The next Newton solve polishes an inexact solution: its first correction reuses
     /// the kept factorization and its next iterate is expected to be accepted.
     polish: bool,
@@ -274,6 +277,7 @@ impl Simulation {
             last_predictor: true,
             solved_consistent: false,
             inexact_tangent: false,
+            lanes: assemble::LANES_PAY,
             polish: false,
             step_start: false,
             step_r0: 0.0,

@@ -6,7 +6,7 @@
 
 use nalgebra::Vector3;
 
-use super::assemble::{add_element, LANES_PAY};
+use super::assemble::add_element;
 use super::{Mode, Simulation};
 use crate::element::dissipation::LocalScalars;
 use crate::element::lanes::pack3;
@@ -289,7 +289,7 @@ impl Simulation {
             None => gather_free(&pk.dofs[e], q),
         };
         let vals = self.solver.values_mut();
-        let first_single = if mode == Mode::Frozen && LANES_PAY {
+        let first_single = if mode == Mode::Frozen && self.lanes {
             let mut ev = PElementEval::<F64x4>::zeros();
             for (g, data) in pk.groups.iter().enumerate() {
                 let e0 = g * LANES;
