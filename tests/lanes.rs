@@ -414,15 +414,22 @@ fn runs_are_the_same_with_and_without_lanes() {
             })
             .collect();
         let [mut on, mut off] = <[Simulation; 2]>::try_from(sims).ok().unwrap();
-        assert!(scene.model.elements.len() >= LANES, "{name}: no full lane group");
+        assert!(
+            scene.model.elements.len() >= LANES,
+            "{name}: no full lane group"
+        );
         let bits = |s: &Simulation| -> Vec<u64> {
             let st = s.state();
             st.r.iter()
                 .chain(&st.v)
                 .flat_map(|x| x.iter().copied())
-                .chain(st.d.iter().flat_map(|d| d.iter().flat_map(|m| m.iter().copied())))
+                .chain(
+                    st.d.iter()
+                        .flat_map(|d| d.iter().flat_map(|m| m.iter().copied())),
+                )
                 .chain(st.vd.iter().flat_map(|v| {
-                    v.iter().flat_map(|e| e.iter().flat_map(|x| x.iter().copied()))
+                    v.iter()
+                        .flat_map(|e| e.iter().flat_map(|x| x.iter().copied()))
                 }))
                 .chain(st.eps.iter().flat_map(|x| x.iter().copied()))
                 .map(f64::to_bits)
@@ -434,8 +441,15 @@ fn runs_are_the_same_with_and_without_lanes() {
                 a.unwrap_or_else(|f| panic!("{name} step {step}: {}", f.reason)),
                 b.unwrap_or_else(|f| panic!("{name} step {step}: {}", f.reason)),
             );
-            assert_eq!(a.newton_iters, b.newton_iters, "{name} step {step}: iterations");
-            assert_eq!(a.residual.to_bits(), b.residual.to_bits(), "{name} step {step}");
+            assert_eq!(
+                a.newton_iters, b.newton_iters,
+                "{name} step {step}: iterations"
+            );
+            assert_eq!(
+                a.residual.to_bits(),
+                b.residual.to_bits(),
+                "{name} step {step}"
+            );
             assert!(
                 bits(&on) == bits(&off),
                 "{name} step {step}: the states differ with and without lanes"
