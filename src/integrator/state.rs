@@ -26,6 +26,24 @@ pub struct State {
 }
 
 impl State {
+    /// The state `dt` later before its element fields are written: time, nodal positions
+    /// and velocities (nodes outside every element keep theirs) and link multipliers
+    /// copied; triads, director velocities and strains empty, with room for every
+    /// element, for the caller to push in element order (nothing copied only to be
+    /// overwritten).
+    pub fn successor_frame(&self, dt: f64) -> State {
+        let n = self.d.len();
+        State {
+            t: self.t + dt,
+            r: self.r.clone(),
+            v: self.v.clone(),
+            d: Vec::with_capacity(n),
+            vd: Vec::with_capacity(n),
+            eps: Vec::with_capacity(n),
+            lambda: self.lambda.clone(),
+        }
+    }
+
     /// The initial state of a model: its initial configuration (the reference unless the
     /// scene gives another, [`Model::initial_position`], [`Model::initial_triads`]), given
     /// nodal velocities and director velocities `ω × d` from the nodal angular velocities.

@@ -46,7 +46,7 @@ pub trait Lane:
     /// and not zeros of opposite signs; the kernel takes it of magnitudes only.)
     fn max(self, other: Self) -> Self;
     /// `if other > self { other } else { self }`, lane by lane (plain compares: see
-    /// [`crate::element::amax3`]).
+    /// `element::amax3`).
     fn max_gt(self, other: Self) -> Self;
     /// `|x|`, lane by lane.
     fn abs(self) -> Self;

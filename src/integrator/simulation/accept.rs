@@ -17,18 +17,8 @@ impl Simulation {
         }
         let k = self.consts();
         let dt = k.dt;
-        // Triads, director velocities and strains are all written below: only the nodal
-        // fields are copied (nodes outside every element keep theirs).
-        let n = self.model.elements.len();
-        let mut next = State {
-            t: self.state.t + dt,
-            r: self.state.r.clone(),
-            v: self.state.v.clone(),
-            d: Vec::with_capacity(n),
-            vd: Vec::with_capacity(n),
-            eps: Vec::with_capacity(n),
-            lambda: self.state.lambda.clone(),
-        };
+        // Triads, director velocities and strains are pushed below, element by element.
+        let mut next = self.state.successor_frame(dt);
         let mut diss = 0.0;
         let mut consistent = Vec::with_capacity(self.model.elements.len());
         let mut node_done = vec![false; self.model.n_nodes()];

@@ -549,14 +549,7 @@ impl Simulation {
                     if dst == NONE {
                         continue;
                     }
-                    // Extend the element's last run where both sides continue it.
-                    let own = tan.len() > first;
-                    match tan.last_mut() {
-                        Some((s, d, len)) if own && *s + *len == src && *d + *len == dst => {
-                            *len += 1
-                        }
-                        _ => tan.push((src, dst, 1)),
-                    }
+                    extend_runs(&mut tan, first, src, dst);
                 }
             }
         }
@@ -696,6 +689,23 @@ fn kind_of_local(i: usize) -> usize {
         1
     } else {
         0
+    }
+}
+
+/// Appends the tangent entry `src` (index in the column-major element matrix) → `dst`
+/// (solver slot) to the run list `runs` of (first source, first slot, length): it extends
+/// the last run where both sides continue it and that run is the element's own (from
+/// index `first` on), else starts a new one.
+pub(super) fn extend_runs(
+    runs: &mut Vec<(usize, usize, usize)>,
+    first: usize,
+    src: usize,
+    dst: usize,
+) {
+    let own = runs.len() > first;
+    match runs.last_mut() {
+        Some((s, d, len)) if own && *s + *len == src && *d + *len == dst => *len += 1,
+        _ => runs.push((src, dst, 1)),
     }
 }
 

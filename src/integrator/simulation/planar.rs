@@ -7,7 +7,7 @@
 use nalgebra::Vector3;
 
 use super::assemble::add_element;
-use super::{Mode, Simulation};
+use super::{extend_runs, Mode, Simulation};
 use crate::element::dissipation::LocalScalars;
 use crate::element::lanes::pack3;
 use crate::element::planar::{
@@ -73,30 +73,22 @@ impl PlanarKernel {
         for (e, pd) in pdata.iter().enumerate() {
             let full = full_index(&pd.map);
             let m = &dofs.elements[e];
-            let pd: [usize; NDOF_P] = std::array::from_fn(|i| m[full[i]]);
-            for i in (0..NDOF_P).filter(|&i| pd[i] != NONE) {
-                rows.push((i, pd[i]));
+            let global: [usize; NDOF_P] = std::array::from_fn(|i| m[full[i]]);
+            for i in (0..NDOF_P).filter(|&i| global[i] != NONE) {
+                rows.push((i, global[i]));
             }
             // Column-major, as the element matrix is stored.
             let first = entries.len();
             for j in 0..NDOF_P {
                 for i in 0..NDOF_P {
                     let (src, dst) = (i + j * NDOF_P, slots[e][full[i] * NDOF + full[j]]);
-                    if pd[i] == NONE || dst == NONE {
-                        continue;
-                    }
-                    // Extend the element's last run where both sides continue it.
-                    let own = entries.len() > first;
-                    match entries.last_mut() {
-                        Some((s, d, len)) if own && *s + *len == src && *d + *len == dst => {
-                            *len += 1
-                        }
-                        _ => entries.push((src, dst, 1)),
+                    if global[i] != NONE && dst != NONE {
+                        extend_runs(&mut entries, first, src, dst);
                     }
                 }
             }
             offsets.push((rows.len(), entries.len()));
-            pdofs.push(pd);
+            pdofs.push(global);
         }
         let groups = pdata
             .chunks_exact(LANES)
@@ -182,19 +174,9 @@ impl Simulation {
         }
         let k = self.consts();
         let dt = k.dt;
-        // Triads, director velocities and strains are all written below: only the nodal
-        // fields are copied (nodes outside every element keep theirs).
         let n = pk.data.len();
         let sv = &self.state;
-        let mut next = State {
-            t: sv.t + dt,
-            r: sv.r.clone(),
-            v: sv.v.clone(),
-            d: Vec::with_capacity(n),
-            vd: Vec::with_capacity(n),
-            eps: Vec::with_capacity(n),
-            lambda: sv.lambda.clone(),
-        };
+        let mut next = sv.successor_frame(dt);
         let mut diss = 0.0;
         let mut consistent = Vec::with_capacity(pk.data.len());
         let mut node_done = vec![false; self.model.n_nodes()];
