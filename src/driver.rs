@@ -15,6 +15,7 @@ use crate::output::{
     write_summary, CosseratBenchResult, HistoryWriter, OutputError, OutputTimes, ProbeWriter,
     Progress, Snapshot, TrajectoryRecorder, VtkSeries,
 };
+use crate::scene::limits::Footprint;
 use crate::scene::Scene;
 
 /// What to write besides `history.csv`, `summary.json`, `energy.png`, `momenta.png` and
@@ -56,6 +57,37 @@ impl Default for RunOptions {
     }
 }
 
+impl RunOptions {
+    /// What a run of `model` over `n_steps` steps with these options holds in memory: the
+    /// model's elements and contact spheres, and the frames kept for `trajectory.npz`,
+    /// `snapshots.png` and `animation.gif` until the run ends (`history.csv`, VTK frames
+    /// and probes are streamed; chart records are capped).
+    pub fn footprint(&self, model: &crate::model::Model, n_steps: usize) -> Footprint {
+        let n = n_steps as u64;
+        let every = |k: Option<usize>| k.map_or(0, |k| n / (k.max(1) as u64) + 2);
+        Footprint {
+            trajectory_frames: match &self.trajectory {
+                None => 0,
+                Some(OutputTimes::Every(k)) => every(Some(*k)),
+                Some(OutputTimes::Steps(v)) => v.len() as u64 + 2,
+            },
+            snapshot_frames: every(self.snapshot_every).saturating_add(every(self.animate_every)),
+            records: every(Some(self.every)).min(MAX_CHART_RECORDS as u64 + 1),
+            ..Footprint::of_model(model)
+        }
+    }
+
+    /// Refuses a run whose [`Self::footprint`] exceeds the memory limit in force
+    /// (`docs/guarantees.md`), before anything is written.
+    pub fn check_memory(
+        &self,
+        model: &crate::model::Model,
+        n_steps: usize,
+    ) -> Result<(), crate::scene::limits::LimitError> {
+        crate::scene::limits::check_batch("this run", 1, &self.footprint(model, n_steps))
+    }
+}
+
 /// Errors that stop a run before it could finish writing (not a failed step).
 #[derive(Debug, thiserror::Error)]
 pub enum DriverError {
@@ -68,6 +100,9 @@ pub enum DriverError {
     /// An output name would leave the output folder.
     #[error(transparent)]
     Path(#[from] crate::paths::PathEscape),
+    /// The run would need more memory than the limit in force.
+    #[error(transparent)]
+    Limit(#[from] crate::scene::limits::LimitError),
     /// The output folder could not be created.
     #[error("cannot create output directory {}: {error}", path.display())]
     Dir {
@@ -110,6 +145,7 @@ pub fn run_sim_to_dir(
     out: &Path,
     opts: &RunOptions,
 ) -> Result<RunResult, DriverError> {
+    opts.check_memory(sim.model(), sim.params().n_steps())?;
     std::fs::create_dir_all(out).map_err(|error| DriverError::Dir {
         path: out.to_path_buf(),
         error,

@@ -591,6 +591,28 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         },
         cosseratbench: a.cosseratbench.then(|| a.scenario_digest.clone()),
     };
+    // The frames kept for the outputs, sized before anything is set up or written.
+    if let Err(e) = opts.check_memory(&scene.model, params.n_steps()) {
+        let fp = opts.footprint(&scene.model, params.n_steps());
+        let by_frames = (fp.trajectory_frames * cosserat::scene::limits::BYTES_PER_TRAJECTORY_NODE)
+            .max(fp.snapshot_frames * cosserat::scene::limits::BYTES_PER_SNAPSHOT_NODE)
+            .saturating_mul(fp.nodes)
+            > fp.elements * cosserat::scene::limits::BYTES_PER_ELEMENT;
+        let what = if !by_frames {
+            scene.source.clone()
+        } else if fp
+            .trajectory_frames
+            .saturating_mul(cosserat::scene::limits::BYTES_PER_TRAJECTORY_NODE)
+            >= fp
+                .snapshot_frames
+                .saturating_mul(cosserat::scene::limits::BYTES_PER_SNAPSHOT_NODE)
+        {
+            "--trajectory/--output-dt/--times".to_string()
+        } else {
+            "--snapshots/--animate-every".to_string()
+        };
+        bail!("{what}: {e}");
+    }
     let mut sim =
         Simulation::new(scene.model.clone(), params).with_context(|| {
             format!(

@@ -227,3 +227,15 @@ pub struct LastAccepted {
     /// level; the failing step is not in any output).
     pub note: String,
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_step_record_fits_the_memory_estimates_share() {
+        let size = std::mem::size_of::<super::StepRecord>() as u64;
+        assert!(
+            size <= crate::scene::limits::BYTES_PER_RECORD,
+            "StepRecord is {size} B: raise limits::BYTES_PER_RECORD"
+        );
+    }
+}

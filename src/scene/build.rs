@@ -1929,6 +1929,7 @@ fn rod_contact(
     materials: &BTreeMap<String, Material>,
     sections: &BTreeMap<String, Section>,
     start: &[Vec3],
+    spheres_so_far: &mut f64,
 ) -> Result<crate::rod_contact::RodContact> {
     use crate::rod_contact::{RodContact, SamplePoint};
     let rp = path.key("rods");
@@ -1982,14 +1983,39 @@ fn rod_contact(
         .contact_radius
         .map(|r| cx.positive(&path.key("contact_radius"), r))
         .transpose()?;
-    let mut points = Vec::new();
+    // Count the spheres (in f64: a tiny radius overflows nothing) and their density along
+    // the rods before allocating any of them.
+    let radius_of = |ri: usize| {
+        radius_override
+            .unwrap_or_else(|| (sections[&plans[ri].props_key.1].a / std::f64::consts::PI).sqrt())
+    };
+    let mut count = 0.0f64;
+    let mut per_diameter = 0.0f64;
+    for &ri in &which {
+        let rho = radius_of(ri);
+        for el in &elements[rods[ri].elements.clone()] {
+            let m = (el.props.h / rho).ceil().max(1.0);
+            count += m;
+            per_diameter = per_diameter.max(2.0 * rho * m / el.props.h);
+        }
+        count += 1.0;
+    }
+    *spheres_so_far += count;
+    super::limits::check_contact_spheres(*spheres_so_far, per_diameter).map_err(|e| {
+        let why = if radius_override.is_some() {
+            String::new()
+        } else {
+            " (no `contact_radius` given: the default is each section's √(A/π))".to_string()
+        };
+        cx.err(&path.key("contact_radius"), format!("{e}{why}"))
+    })?;
+    let mut points = Vec::with_capacity(count as usize);
     let mut split = 0;
     let mut e_max: f64 = 0.0;
     for (k, &ri) in which.iter().enumerate() {
         let plan = &plans[ri];
         e_max = e_max.max(materials[&plan.props_key.0].e);
-        let rho = radius_override
-            .unwrap_or_else(|| (sections[&plan.props_key.1].a / std::f64::consts::PI).sqrt());
+        let rho = radius_of(ri);
         let els = &elements[rods[ri].elements.clone()];
         let mut arc = 0.0;
         for (n, el) in els.iter().enumerate() {
@@ -2245,6 +2271,15 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         }
     }
 
+    // Its memory, before meshing: a run holds its elements' solver data (check, run and
+    // the members of a sweep alike).
+    super::limits::check_batch(
+        "this scene",
+        1,
+        &super::limits::Footprint::elements(total as u64),
+    )
+    .map_err(|e| cx.err(&root.key("rod"), e.to_string()))?;
+
     // Model size and merge tolerance from the bounding box of all rod points.
     let mut lo = Vec3::repeat(f64::INFINITY);
     let mut hi = Vec3::repeat(f64::NEG_INFINITY);
@@ -2392,6 +2427,7 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
             Ok(ob)
         })
         .collect::<Result<Vec<_>>>()?;
+    let mut spheres = 0.0;
     let rod_contacts = raw
         .contact
         .iter()
@@ -2399,10 +2435,27 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         .map(|(i, c)| {
             let path = root.key("contact").idx(i);
             rod_contact(
-                &cx, &path, c, &plans, &rods, &elements, &materials, &sections, start,
+                &cx,
+                &path,
+                c,
+                &plans,
+                &rods,
+                &elements,
+                &materials,
+                &sections,
+                start,
+                &mut spheres,
             )
         })
         .collect::<Result<Vec<_>>>()?;
+    if !rod_contacts.is_empty() {
+        let footprint = super::limits::Footprint {
+            contact_spheres: rod_contacts.iter().map(|c| c.points.len() as u64).sum(),
+            ..super::limits::Footprint::elements(elements.len() as u64)
+        };
+        super::limits::check_batch("this scene", 1, &footprint)
+            .map_err(|e| cx.err(&root.key("contact"), e.to_string()))?;
+    }
     // Friction's stick–slip transitions are hard on Newton's method: a scene with friction
     // cuts a failed step back (up to 64 sub-steps) unless it says otherwise.
     let friction =

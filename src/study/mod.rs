@@ -43,6 +43,7 @@ use crate::integrator::run::run;
 use crate::integrator::{IntegratorParams, Scheme, Simulation};
 use crate::model::Vec3;
 use crate::observe::record::{RunStatus, StepRecord};
+use crate::scene::limits::Footprint;
 use crate::scene::Scene;
 
 /// Errors of the study drivers.
@@ -541,6 +542,17 @@ pub fn work_precision(
             cfg.t_end
         )));
     }
+    // Every member keeps its samples (nodal positions every `sample_dt`) to the end.
+    let count = (cfg.schemes.len() as u64)
+        .saturating_mul(cfg.dts.len() as u64)
+        .saturating_add(1);
+    let samples = (cfg.t_end / sample_dt).min(u64::MAX as f64) as u64 + 2;
+    let member = Footprint {
+        kept_bytes: samples.saturating_mul(24 * scene.model.nodes.len() as u64),
+        ..Footprint::of_model(&scene.model)
+    };
+    crate::scene::limits::check_batch("this study", count, &member)
+        .map_err(|e| StudyError::Invalid(e.to_string()))?;
     let mut members: Vec<(SchemeKind, f64, f64)> = vec![(SchemeKind::Em, 0.0, cfg.reference_dt)];
     for s in &cfg.schemes {
         for &dt in &cfg.dts {
@@ -660,6 +672,29 @@ pub fn stability_on(
     if cfg.kinds.is_empty() {
         return Err(StudyError::Invalid("schemes: empty list".into()));
     }
+    // The grid's size before it is built; on the GPU every member keeps its history.
+    let count = cfg
+        .kinds
+        .iter()
+        .map(|&k| cfg.params_of(k).len() as u64)
+        .sum::<u64>()
+        .saturating_mul(cfg.dts.len() as u64);
+    let steps = cfg
+        .dts
+        .iter()
+        .map(|dt| (cfg.t_end / dt).min(u64::MAX as f64) as u64 + 1)
+        .max()
+        .unwrap_or(0);
+    let member = Footprint {
+        kept_bytes: if matches!(exec, Executor::Gpu(_)) {
+            steps.saturating_mul(crate::scene::limits::BYTES_PER_RECORD)
+        } else {
+            0
+        },
+        ..Footprint::of_model(&scene.model)
+    };
+    crate::scene::limits::check_batch("this study", count, &member)
+        .map_err(|e| StudyError::Invalid(e.to_string()))?;
     let mut members = Vec::new();
     for &k in &cfg.kinds {
         let ps = cfg.params_of(k);
