@@ -254,3 +254,207 @@ proptest! {
         }
     }
 }
+
+/// A scene of two rods (`a` clamped at its start, `b` crossing above it) with the blocks
+/// the generators give: contact, an obstacle, a support, a probe.
+fn featured_scene(contact: &str, obstacle: &str, support: &str, probe: &str) -> String {
+    format!(
+        "name = \"featured\"\n\n[material.m]\nE = 1e6\nnu = 0.3\ndensity = 1000\n\n[section.s]\nA = 1e-4\nI11 = 1e-8\nI22 = 1e-8\nJ = 2e-8\n\n[[rod]]\nname = \"a\"\nmaterial = \"m\"\nsection = \"s\"\npoints = [[0, 0, 0], [1, 0, 0]]\nelements = 4\nd1 = [0, 1, 0]\n\n[[rod]]\nname = \"b\"\nmaterial = \"m\"\nsection = \"s\"\npoints = [[0.5, -0.5, 0.2], [0.5, 0.5, 0.2]]\nelements = 4\nd1 = [1, 0, 0]\n\n[[clamp]]\nat = [0, 0, 0]\n\n[[initial_velocity]]\nat = [1, 0, 0]\nv = [0, 0.3, -0.2]\n\n{contact}\n{obstacle}\n{support}\n{probe}\n[integrator]\nscheme = \"em\"\ndt = 0.01\nt_end = 0.03\n"
+    )
+}
+
+const CONTACTS: &[&str] = &[
+    "",
+    "[[contact]]\nrods = [\"a\", \"b\"]\n",
+    "[[contact]]\nrods = [\"a\"]\ncontact_radius = 0.005\nfriction = 0.3\n",
+    "[[contact]]\nrods = [\"a\", \"b\"]\ncontact_radius = 1e-9\n",
+    "[[contact]]\nrods = [\"a\"]\ncontact_radius = 5e-324\n",
+    "[[contact]]\nrods = [\"a\"]\ncontact_radius = 1e3\n",
+    "[[contact]]\nrods = [\"a\", \"b\"]\ncontact_radius = 0.5\n",
+    "[[contact]]\nrods = [\"a\", \"a\"]\n",
+    "[[contact]]\nrods = [\"a\"]\nfriction = nan\n",
+    "[[contact]]\nrods = [\"a\"]\nslip = 1e-3\n",
+    "[[contact]]\nrods = []\n",
+    "[[contact]]\nrods = [\"zz\"]\nstiffness = -1\n",
+];
+const OBSTACLES: &[&str] = &[
+    "",
+    "[[obstacle]]\nkind = \"plane\"\npoint = [0, 0, -0.1]\nnormal = [0, 0, 1]\nfriction = 0.5\n",
+    "[[obstacle]]\nkind = \"plane\"\npoint = [0, 0, 0.1]\nnormal = [0, 0, 1]\n",
+    "[[obstacle]]\nkind = \"plane\"\npoint = [0, 0, -0.1]\nnormal = [0, 0, 0]\n",
+    "[[obstacle]]\nkind = \"sphere\"\ncenter = [0.5, 0, -1]\nradius = 0.9\ncontact_radius = 1e-300\n",
+    "[[obstacle]]\nkind = \"cylinder\"\npoint = [0, 0, -0.2]\naxis = [0, 1, 0]\nradius = 1e300\n",
+    "[[obstacle]]\nkind = \"cone\"\n",
+    "[[obstacle]]\nkind = \"plane\"\npoint = [0, 0, -0.1]\nnormal = [0, 0, 1]\ndisplacement = [0, 0, 0.05]\ntime = [0, 0.02]\nfactor = [0, 1]\n",
+    "[[obstacle]]\nkind = \"plane\"\npoint = [0, 0, -0.1]\nnormal = [0, 0, 1]\ndisplacement = [0, 0, 1e300]\ntime = [0, 0.02]\nfactor = [0, inf]\n",
+];
+const SUPPORTS: &[&str] = &[
+    "",
+    "[[pin]]\nat = [1, 0, 0]\n",
+    "[[clamp]]\nat = [1, 0, 0]\nslide = [0, 0, 1]\nspin = true\n",
+    "[[clamp]]\nat = [1, 0, 0]\nslide = [0, 0, 0]\n",
+    "[[clamp]]\nat = [1, 0, 0]\nslide = [0, 1, 1]\n",
+    "[[clamp]]\nat = [1, 0, 0]\nrotation = [0.5, 0, 0]\ntime = [0, 0.03]\nfactor = [0, 1]\nramp = \"smooth\"\n",
+    "[[pin]]\nat = [1, 0, 0]\ndisplacement = [0, 1e200, 0]\ntime = [0, 0.01]\nfactor = [0, 1]\n",
+    "[[pin]]\nat = [9, 9, 9]\n",
+    "[[clamp]]\nat = [1, 0, 0]\nslide = [0, 0, 1]\nrotation = [1, 0, 0]\ntime = [0, 1]\nfactor = [0, 1]\n",
+    "[[pin]]\nat = [1, 0, 0]\ntime = [1, 0]\nfactor = [0, 1]\ndisplacement = [0, 0.1, 0]\n",
+];
+const PROBES: &[&str] = &[
+    "",
+    "[[probe]]\nname = \"tip\"\nrod = \"a\"\nnode = -1\n",
+    "[[probe]]\nname = \"a\\rb\"\nat = [1, 0, 0]\n",
+    "[[probe]]\nname = \"x,y\\n\\\"q\\\"\"\nat = [1, 0, 0]\n",
+    "[[probe]]\nname = \"\"\nat = [1, 0, 0]\n",
+    "[[probe]]\nrod = \"b\"\ns = 0.33\n",
+    "[[probe]]\nrod = \"b\"\nnode = 99\n",
+    "[[probe]]\nname = \"t\"\nat = [1, 0, 0]\n\n[[probe]]\nname = \"t\"\nat = [0, 0, 0]\n",
+];
+/// Output options: trajectories and their times, good and bad.
+const TRAJECTORY: &[&[&str]] = &[
+    &[],
+    &["--trajectory"],
+    &["--trajectory", "--output-dt", "0.02"],
+    &["--output-dt", "0.01"],
+    &["--output-dt", "-0.1"],
+    &["--output-dt", "5e-324"],
+    &["--times", "0,0.01,0.03"],
+    &["--times", "-1"],
+    &["--times", "0.015"],
+    &["--trajectory", "--cosseratbench"],
+    &["--vtk", "--every", "2"],
+];
+/// `--set` edits of the new keys, good and bad.
+const SETS: &[&[&str]] = &[
+    &[],
+    &["--set", "integrator.dt=0.005"],
+    &["--set", "rod[0].elements=0"],
+    &["--set", "nope=1"],
+    &["--set", "contact[0].contact_radius=1e-9"],
+    &["--set", "obstacle[0].radius=0.5"],
+    &["--set", "material.m.E=nan"],
+    &["--set", "integrator.max_iter=9223372036854775807"],
+    &["--set", "probe[0].node=1"],
+    &["--set", "clamp[1].slide=[0,0,1]"],
+];
+
+/// `run` on generated scenes with contact, obstacles, supports and probes, with output and
+/// `--set` options: completed, failed with a named reason, or rejected with one line
+/// naming the file and key (or the option); never a panic, abort, hang, non-finite number
+/// in a data file, or a file outside `--out`.
+fn check_featured(
+    contact: &str,
+    obstacle: &str,
+    support: &str,
+    probe: &str,
+    traj: &[&str],
+    set: &[&str],
+) -> Result<(), TestCaseError> {
+    let dir = tempfile::tempdir().unwrap();
+    let text = featured_scene(contact, obstacle, support, probe);
+    std::fs::write(dir.path().join("scene.toml"), &text).unwrap();
+    let out = dir.path().join("o");
+    let mut c = Command::new(env!("CARGO_BIN_EXE_cosserat"));
+    c.arg("run")
+        .arg(dir.path().join("scene.toml"))
+        .args(traj)
+        .args(set)
+        .arg("--out")
+        .arg(&out);
+    let o = run_limited(c);
+    let err = String::from_utf8_lossy(&o.stderr);
+    let case = format!("{traj:?} {set:?}\n{text}");
+    prop_assert!(!err.contains("panicked"), "panic for {case}\n{err}");
+    if std::env::var_os("PROPTEST_SHOW").is_some() {
+        eprintln!(
+            "exit {:?}: {}",
+            o.status.code(),
+            err.lines().next().unwrap_or("(ran)")
+        );
+    }
+    match o.status.code() {
+        Some(2) => {
+            prop_assert_eq!(err.lines().count(), 1, "one line for {}\n{}", case, err);
+            prop_assert!(
+                names_file_and_key(&err, "scene.toml") || err.starts_with("error: --"),
+                "no file/key or option in `{}` for {}",
+                err,
+                case
+            );
+            prop_assert!(!out.exists(), "a rejected run made its folder: {}", case);
+        }
+        Some(0) => {
+            check_run_outputs(&out);
+            if out.join("probes.csv").exists() {
+                let probes = std::fs::read_to_string(out.join("probes.csv")).unwrap();
+                let mut rows = csv_records(&probes).into_iter();
+                let head = rows.next().unwrap();
+                for r in rows {
+                    prop_assert_eq!(r.len(), head.len(), "probes.csv row width: {}", case);
+                    prop_assert!(
+                        r[1..].iter().all(|x| x.parse::<f64>().is_ok_and(f64::is_finite)),
+                        "probes.csv {:?}",
+                        r
+                    );
+                }
+            }
+        }
+        other => prop_assert!(false, "exit {other:?} for {case}\n{err}"),
+    }
+    for f in files_below(dir.path()) {
+        prop_assert!(
+            f == "scene.toml" || f.starts_with("o/"),
+            "{f} written outside --out"
+        );
+    }
+    Ok(())
+}
+
+/// Splits CSV text into records (RFC 4180: quoted cells may hold commas, quotes and line
+/// breaks).
+fn csv_records(text: &str) -> Vec<Vec<String>> {
+    let mut rows = Vec::new();
+    let mut row = Vec::new();
+    let mut cell = String::new();
+    let mut quoted = false;
+    let mut chars = text.chars().peekable();
+    while let Some(ch) = chars.next() {
+        match (quoted, ch) {
+            (true, '"') if chars.peek() == Some(&'"') => {
+                chars.next();
+                cell.push('"');
+            }
+            (true, '"') => quoted = false,
+            (true, c) => cell.push(c),
+            (false, '"') => quoted = true,
+            (false, ',') => row.push(std::mem::take(&mut cell)),
+            (false, '\n') => {
+                row.push(std::mem::take(&mut cell));
+                rows.push(std::mem::take(&mut row));
+            }
+            (false, '\r') => {}
+            (false, c) => cell.push(c),
+        }
+    }
+    if !cell.is_empty() || !row.is_empty() {
+        row.push(cell);
+        rows.push(row);
+    }
+    rows
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn featured_scenes_complete_fail_with_a_reason_or_are_rejected_in_one_line(
+        contact in prop_oneof![2 => Just(""), 3 => pick(CONTACTS)],
+        obstacle in prop_oneof![2 => Just(""), 3 => pick(OBSTACLES)],
+        support in prop_oneof![2 => Just(""), 3 => pick(SUPPORTS)],
+        probe in prop_oneof![2 => Just(""), 3 => pick(PROBES)],
+        traj in proptest::sample::select(TRAJECTORY),
+        set in proptest::sample::select(SETS),
+    ) {
+        check_featured(contact, obstacle, support, probe, traj, set)?;
+    }
+}
