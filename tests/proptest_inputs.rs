@@ -392,7 +392,9 @@ fn check_featured(
                 for r in rows {
                     prop_assert_eq!(r.len(), head.len(), "probes.csv row width: {}", case);
                     prop_assert!(
-                        r[1..].iter().all(|x| x.parse::<f64>().is_ok_and(f64::is_finite)),
+                        r[1..]
+                            .iter()
+                            .all(|x| x.parse::<f64>().is_ok_and(f64::is_finite)),
                         "probes.csv {:?}",
                         r
                     );
