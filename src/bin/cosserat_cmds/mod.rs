@@ -20,6 +20,16 @@ use cosserat::sweep::{
     check_shard_folder, load_sweep, merge_shards_from, run_sweep, MemberStatus, Shard, SweepOptions,
 };
 
+/// Prints a status line on stdout. A stdout that cannot be written (redirected to a full
+/// disk) does not stop a sweep or a merge: their results are their files, whose write
+/// errors are errors.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
 /// Where the element kernel runs.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq, Default)]
 pub enum BackendArg {
@@ -406,7 +416,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         None => format!("{} members", spec.len()),
     };
     let solve = check_solve(a.member.solve, &exec)?;
-    println!(
+    say!(
         "sweep {}: {scope} over {} ({}), backend {}",
         spec.source,
         spec.params
@@ -458,7 +468,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
             summary.stale_histories
         );
     }
-    println!(
+    say!(
         "{} members: {} completed, {} failed, {} rejected, {} skipped (already recorded) in {:.2} s. Results in {}",
         summary.members,
         summary.completed,
@@ -469,7 +479,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         csv.display()
     );
     if a.shard.is_some() {
-        println!(
+        say!(
             "when every shard has run: cosserat sweep merge {}",
             out.display()
         );
@@ -480,7 +490,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
 /// `cosserat sweep merge DIR`.
 fn merge_command(dir: &std::path::Path, sweep: Option<&std::path::Path>) -> Result<ExitCode> {
     let m = merge_shards_from(dir, sweep)?;
-    println!(
+    say!(
         "merged {} shards of {}: {} members ({} completed, {} failed, {} rejected), backend {}. Results in {}",
         m.shards,
         m.sweep,
