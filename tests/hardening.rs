@@ -670,7 +670,7 @@ fn a_write_error_is_one_clean_error_line_and_leaves_no_temporary_file() {
             .arg(format!("trap '' XFSZ; ulimit -f {kib}; exec \"$0\" \"$@\""))
             .arg(env!("CARGO_BIN_EXE_cosserat"))
             .arg("sweep")
-            .arg(&sp)
+            .arg(sp)
             .arg("--out")
             .arg(&out);
         if histories {

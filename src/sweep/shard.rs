@@ -6,16 +6,18 @@
 //! shards). Each shard writes only its own files, so shards never write the same file:
 //!
 //! ```text
-//! DIR/shards/I-of-N.csv    its rows (members.csv's columns), appended as members finish
+//! DIR/shards/I-of-N.csv    its identity line (`# cosserat sweep ID shard I/N`), then
+//!                          members.csv's header and rows, appended as members finish
 //! DIR/shards/I-of-N.id     its identity: the sweep's (`sweep.id`) plus `shard I/N`
 //! DIR/shards/I-of-N.json   what its last invocation did (backend, counts, wall time)
 //! DIR/shards/I-of-N.lock   held while it runs
 //! DIR/member_<i>/          its members' histories (`--histories`), as unsharded
 //! ```
 //!
-//! [`merge_shards`] checks that every shard is present, of this sweep, not torn and
-//! complete, and that no member is missing or twice, then writes `DIR/members.csv` (rows
-//! in member order), `DIR/sweep.id` and `DIR/sweep.json`.
+//! N is at most the number of members. [`merge_shards`] checks that every shard is
+//! present, of this sweep (every file's identity and I/N, every row's values against the
+//! sweep file), not torn and complete, and that no member is missing or twice, then
+//! writes `DIR/members.csv` (rows in member order), `DIR/sweep.id` and `DIR/sweep.json`.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
