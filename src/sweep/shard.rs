@@ -301,6 +301,9 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
     merge_shards_from(out, None)
 }
 
+/// Tries, 10 ms apart, to take the folder's lock before merge says a shard still runs.
+const LOCK_GRACE_TRIES: usize = 30;
+
 /// At most this many shards are named in a message (then a count).
 const NAMED: usize = 5;
 
@@ -339,7 +342,18 @@ pub fn merge_shards_from(out: &Path, sweep: Option<&Path>) -> Result<MergeSummar
             ),
         });
     }
-    let _lock = match try_lock_file(&out.join(LOCK_FILE), true)? {
+    // A shard that has just ended can hold its locks a moment longer (a process forked
+    // at that moment holds a copy of the descriptor until it starts its program): a
+    // short grace before "still running".
+    let mut held = try_lock_file(&out.join(LOCK_FILE), true)?;
+    for _ in 0..LOCK_GRACE_TRIES {
+        if held.is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+        held = try_lock_file(&out.join(LOCK_FILE), true)?;
+    }
+    let _lock = match held {
         Some(f) => f,
         None => {
             let running = running_shards(out);
