@@ -651,3 +651,44 @@ fn a_reused_folder_holds_only_the_new_run() {
     assert!(!out.join("summary.json").exists());
     assert!(!out.join("vtk/frame_000002.vtu").exists());
 }
+
+/// A write error (a full disk, simulated by a file-size limit of 0 or 1 KiB: every write
+/// past it fails with "File too large", stdout's file included): the sweep exits 2 with
+/// one `error: …` line that names the file and gives the reason once, and leaves no
+/// temporary file behind.
+#[test]
+fn a_write_error_is_one_clean_error_line_and_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = write(dir.path(), "s.toml", SWEEP);
+    // Members of 2 s: their histories are larger than 1 KiB, sweep.id and members.csv not.
+    let long = write(dir.path(), "l.toml", &SWEEP.replace("[0.4]", "[2.0]"));
+    for (kib, histories, names) in [(0, false, "sweep.id"), (1, true, "history.csv")] {
+        let sp = if histories { &long } else { &short };
+        let out = dir.path().join(format!("o{kib}"));
+        let mut c = Command::new("bash");
+        c.arg("-c")
+            .arg(format!("trap '' XFSZ; ulimit -f {kib}; exec \"$0\" \"$@\""))
+            .arg(env!("CARGO_BIN_EXE_cosserat"))
+            .arg("sweep")
+            .arg(sp)
+            .arg("--out")
+            .arg(&out);
+        if histories {
+            c.arg("--histories");
+        }
+        // Its stdout on the "full disk" too: the status lines cannot be written either.
+        c.stdout(std::fs::File::create(dir.path().join(format!("stdout{kib}"))).unwrap());
+        let o = c.output().unwrap();
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{kib} KiB: {e}");
+        assert!(e.starts_with("error: cannot write "), "{kib} KiB: {e}");
+        assert_eq!(e.lines().count(), 1, "{kib} KiB: {e}");
+        assert!(e.contains(names), "{kib} KiB: {e}");
+        assert_eq!(e.matches("File too large").count(), 1, "{kib} KiB: {e}");
+        let left: Vec<PathBuf> = files_below(&out)
+            .into_iter()
+            .filter(|f| f.to_string_lossy().ends_with(".tmp"))
+            .collect();
+        assert!(left.is_empty(), "{kib} KiB: left {left:?}");
+    }
+}

@@ -114,12 +114,13 @@ fn array(file: &Path, out: &Path, n: usize) -> (f64, String) {
     (wall, text(&o))
 }
 
-/// Rows recorded so far in each shard's file (complete lines after the header).
+/// Rows recorded so far in each shard's file (complete lines after the identity line and
+/// the header).
 fn recorded(out: &Path, n: usize) -> Vec<usize> {
     (0..n)
         .map(|i| {
             std::fs::read_to_string(out.join(format!("shards/{i}-of-{n}.csv")))
-                .map(|t| t.matches('\n').count().saturating_sub(1))
+                .map(|t| t.matches('\n').count().saturating_sub(2))
                 .unwrap_or(0)
         })
         .collect()

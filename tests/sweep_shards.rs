@@ -4,7 +4,9 @@
 //! incomplete, foreign, duplicated, mixed-split or running shard naming it, and writes
 //! nothing then; a shard's `--resume` checks its identity and repairs a torn row; the job
 //! script of `sweep slurm` runs every shard when executed by hand (no Slurm needed); bad
-//! options exit 2 naming the option; a shard runs on the backend it is given.
+//! options exit 2 naming the option; a shard runs on the backend it is given; N is at most
+//! the member count, and merge stays small whatever N the file names claim; merge checks
+//! every shard file's identity and every row's values against the sweep.
 
 mod common;
 
@@ -60,11 +62,13 @@ fn shard(i: usize, n: usize) -> Option<Shard> {
     Some(Shard::new(i, n).unwrap())
 }
 
-/// members.csv rows without the wall time (column 7), in file order.
+/// members.csv rows without the wall time (column 7), in file order (a shard's file: after
+/// its identity line).
 fn rows(csv: &Path) -> Vec<String> {
     std::fs::read_to_string(csv)
         .unwrap()
         .lines()
+        .filter(|l| !l.starts_with("# "))
         .skip(1)
         .map(|l| {
             let mut f: Vec<&str> = l.split(',').collect();
@@ -204,7 +208,7 @@ fn merge_refuses_bad_shards_naming_them_and_writes_nothing() {
         std::fs::write(s.join("1-of-3.csv"), format!("{t}{last}\n")).unwrap();
     });
     assert!(
-        e.contains("shard 1-of-3: line 4: member") && e.contains("recorded twice"),
+        e.contains("shard 1-of-3: line 5: member") && e.contains("recorded twice"),
         "{e}"
     );
 
@@ -215,7 +219,7 @@ fn merge_refuses_bad_shards_naming_them_and_writes_nothing() {
     });
     assert!(
         e.contains("shard 2-of-3: line ")
-            && e.contains("member 3 is not one of this shard's (members ≡ 2 mod 3)"),
+            && e.contains("member 3 is not one of shard 2/3's (members ≡ 2 mod 3)"),
         "{e}"
     );
 
@@ -592,4 +596,182 @@ fn a_shard_runs_on_the_backend_it_is_given() {
         }
     }
     println!("GPU shard vs CPU: final energy {worst:.1e}");
+}
+
+/// `--shard I/N` takes at most one shard per member: a larger N is refused (exit 2, naming
+/// `--shard` and the member count) before anything is written; `sweep merge` of shard
+/// files whose names claim a huge N refuses at once with a short message, and names the
+/// missing shards of a real split compactly (the first few and a count).
+#[test]
+fn shard_counts_are_bounded_by_the_members_and_merge_stays_small() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = write(dir.path(), "s.toml", SWEEP);
+    for n in ["18446744073709551615", "1000000000", "8"] {
+        let out = dir.path().join(format!("cli-{n}"));
+        let o = cosserat()
+            .arg("sweep")
+            .arg(&file)
+            .arg("--out")
+            .arg(&out)
+            .args(["--shard", &format!("0/{n}")])
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{n}: {t}");
+        assert!(
+            t.contains(&format!("s.toml: --shard: 0/{n}: {n} shards for 7 members")),
+            "{n}: {t}"
+        );
+        assert!(
+            !out.exists(),
+            "{n}: the refused shard wrote {}",
+            out.display()
+        );
+    }
+    // The library refuses it too.
+    let e = run_err(
+        &file,
+        &dir.path().join("lib"),
+        SweepOptions {
+            shard: shard(3, 8),
+            ..Default::default()
+        },
+    );
+    assert!(e.contains("--shard: 3/8: 8 shards for 7 members"), "{e}");
+
+    // Shard files named with a huge N (one real shard's files, renamed).
+    let good = dir.path().join("good");
+    run(&file, &good, shard(0, 3), false);
+    for n in ["18446744073709551615", "10000000"] {
+        let d = dir.path().join(format!("forged-{n}"));
+        std::fs::create_dir_all(d.join("shards")).unwrap();
+        for ext in ["csv", "id"] {
+            std::fs::copy(
+                good.join(format!("shards/0-of-3.{ext}")),
+                d.join(format!("shards/0-of-{n}.{ext}")),
+            )
+            .unwrap();
+        }
+        let o = cosserat()
+            .args(["sweep", "merge"])
+            .arg(&d)
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(
+            o.status.code(),
+            Some(2),
+            "{n}: {}",
+            t.chars().take(2000).collect::<String>()
+        );
+        assert!(t.len() < 2000, "{n}: a {} byte message", t.len());
+        assert!(
+            t.contains(&format!(
+                "split the sweep into {n} shards, but it has 7 members"
+            )),
+            "{n}: {t}"
+        );
+        assert!(!d.join("members.csv").exists());
+    }
+
+    // A real split with most shards missing: the first few are named, the rest counted.
+    let many = "base = \"frame\"\n\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [0.0, 0.5]\n\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2, 2.4, 2.6, 2.8, 3.0, 3.2, 3.4, 3.6, 3.8, 4.0]\n";
+    let many = write(dir.path(), "many.toml", many);
+    let d = dir.path().join("sparse");
+    run(&many, &d, shard(0, 40), false);
+    let e = merge_err(&d);
+    assert!(
+        e.contains("1-of-40.id: shard 1-of-40: missing")
+            && e.contains(
+                "39 of 40 shards are missing: 1-of-40, 2-of-40, 3-of-40, 4-of-40, 5-of-40, …;"
+            ),
+        "{e}"
+    );
+    assert!(!e.contains("6-of-40"), "{e}");
+}
+
+/// Every shard file carries the sweep's identity and its own shard: merge refuses (naming
+/// the file, writing nothing) a rows file of another sweep under this sweep's identity
+/// file, a row whose values are not that member's, an identity file of another shard, and
+/// a record of another sweep; a folder merged from its shards resumes as the one-process
+/// sweep's.
+#[test]
+fn merge_checks_every_shard_file_and_row_against_the_sweep() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = write(dir.path(), "s.toml", SWEEP);
+    let other = write(dir.path(), "o.toml", OTHER);
+    let good = dir.path().join("good");
+    for i in 0..3 {
+        run(&file, &good, shard(i, 3), false);
+    }
+    let first = std::fs::read_to_string(good.join("shards/1-of-3.csv")).unwrap();
+    let id = std::fs::read_to_string(good.join("shards/1-of-3.id")).unwrap();
+    let id = id.lines().next().unwrap().strip_prefix("id ").unwrap();
+    assert!(
+        first.starts_with(&format!("# cosserat sweep {id} shard 1/3\nmember,status,")),
+        "{first}"
+    );
+    let foreign = dir.path().join("foreign");
+    run(&other, &foreign, shard(1, 3), false);
+    let case = |name: &str, edit: &dyn Fn(&Path)| -> String {
+        let d = dir.path().join(name);
+        copy_dir(&good, &d);
+        edit(&d.join("shards"));
+        merge_err(&d)
+    };
+
+    // Another sweep's rows under this sweep's identity file.
+    let e = case("foreign-rows", &|s| {
+        std::fs::copy(foreign.join("shards/1-of-3.csv"), s.join("1-of-3.csv")).unwrap();
+    });
+    assert!(
+        e.contains("1-of-3.csv: shard 1-of-3: foreign: its first line"),
+        "{e}"
+    );
+    // The same rows with this sweep's identity line: the values give them away.
+    let e = case("foreign-values", &|s| {
+        let theirs = std::fs::read_to_string(foreign.join("shards/1-of-3.csv")).unwrap();
+        let ours = std::fs::read_to_string(s.join("1-of-3.csv")).unwrap();
+        let tag = ours.lines().next().unwrap();
+        let rest: Vec<&str> = theirs.lines().skip(1).collect();
+        std::fs::write(
+            s.join("1-of-3.csv"),
+            format!("{tag}\n{}\n", rest.join("\n")),
+        )
+        .unwrap();
+    });
+    assert!(
+        e.contains("1-of-3.csv: shard 1-of-3: line 3: member ")
+            && e.contains("has integrator.alpha = ")
+            && e.contains("in this sweep: the row is another sweep's result"),
+        "{e}"
+    );
+    // Another shard's files under this shard's name.
+    let e = case("renamed", &|s| {
+        std::fs::copy(s.join("0-of-3.id"), s.join("1-of-3.id")).unwrap();
+    });
+    assert!(
+        e.contains("1-of-3.id: shard 1-of-3: foreign: it records shard `0/3`, not 1/3"),
+        "{e}"
+    );
+    let e = case("renamed-rows", &|s| {
+        std::fs::copy(s.join("0-of-3.csv"), s.join("2-of-3.csv")).unwrap();
+    });
+    assert!(
+        e.contains("2-of-3.csv: shard 2-of-3: foreign: its first line"),
+        "{e}"
+    );
+    let e = case("foreign-record", &|s| {
+        std::fs::copy(foreign.join("shards/1-of-3.json"), s.join("1-of-3.json")).unwrap();
+    });
+    assert!(
+        e.contains("1-of-3.json: shard 1-of-3: foreign: it records sweep id"),
+        "{e}"
+    );
+
+    // The merged folder resumes cleanly, and merge writes what the one-process sweep has.
+    let m = merge_shards(&good).unwrap();
+    assert_eq!(m.members, 7);
+    let s = run(&file, &good, None, true);
+    assert_eq!((s.skipped, s.completed + s.failed + s.rejected), (7, 0));
 }

@@ -234,6 +234,21 @@ pub fn load_scene(spec: &str) -> Result<Scene, SceneError> {
 /// Parses and validates scene text. `source` names it in errors and in [`Scene::source`]
 /// (a path, or `builtin:NAME`); its file stem is the default scene name.
 pub fn parse_scene(text: &str, source: &str) -> Result<Scene, SceneError> {
+    let (raw, doc) = parse_raw(text, source)?;
+    build::build(raw, &doc, source)
+}
+
+/// The first stage of [`parse_scene`] alone: TOML syntax, known keys and value types,
+/// without the checks of the values themselves (ranges, references, geometry). What a
+/// sweep checks to tell a key the scene format does not have from a value it rejects.
+pub fn check_scene_keys(text: &str, source: &str) -> Result<(), SceneError> {
+    parse_raw(text, source).map(drop)
+}
+
+fn parse_raw<'t>(
+    text: &'t str,
+    source: &str,
+) -> Result<(raw::RawScene, span::Doc<'t>), SceneError> {
     let root = toml::de::DeTable::parse(text).map_err(|e| SceneError::Syntax {
         file: source.to_string(),
         location: e.span().map(|s| span::line_col(text, s.start)),
@@ -253,7 +268,7 @@ pub fn parse_scene(text: &str, source: &str) -> Result<Scene, SceneError> {
                 reason: e.message().trim().to_string(),
             }
         })?;
-    build::build(raw, &doc, source)
+    Ok((raw, doc))
 }
 
 pub(crate) fn key_name(path: &span::KeyPath) -> String {

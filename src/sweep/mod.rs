@@ -38,9 +38,10 @@ use toml::Spanned;
 use crate::math::rng::Rng;
 use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
 pub use run::{
-    run_sweep, MemberRow, SweepOptions, SweepSummary, CSV_COLUMNS, IDENTITY_FILE, LOCK_FILE,
+    run_sweep, MemberRow, MemberStatus, SweepOptions, SweepSummary, CSV_COLUMNS, IDENTITY_FILE,
+    LOCK_FILE,
 };
-pub use shard::{check_shard_folder, merge_shards, MergeSummary, Shard};
+pub use shard::{check_shard_folder, merge_shards, merge_shards_from, MergeSummary, Shard};
 
 /// Everything that can go wrong reading a sweep file (or its output directory).
 #[derive(Debug, thiserror::Error)]
@@ -50,8 +51,8 @@ pub enum SweepError {
     Io {
         /// Path as given.
         path: String,
-        /// The underlying error.
-        #[source]
+        /// The underlying error (shown in the message, so not also a `source`: an error
+        /// chain printed whole says the reason once).
         error: std::io::Error,
     },
     /// TOML syntax error.
@@ -81,8 +82,7 @@ pub enum SweepError {
     Output {
         /// What was being written.
         context: String,
-        /// The underlying error.
-        #[source]
+        /// The underlying error (shown in the message, so not also a `source`).
         error: std::io::Error,
     },
     /// Another sweep holds the folder's lock.
@@ -202,8 +202,9 @@ fn parse_key(key: &str) -> Option<Vec<Step>> {
 
 /// Writes `x` at `key` into a scene document. The parent must exist; the leaf may be new
 /// (a table key) or must be a number (an array entry). Integers stay integers when `x` is
-/// integral.
-fn set_in(root: &mut toml::Value, key: &str, x: f64) -> Result<(), String> {
+/// integral. `Ok(true)`: the leaf existed (its value was replaced); `Ok(false)`: it was
+/// added. The errors do not depend on `x`.
+fn set_in(root: &mut toml::Value, key: &str, x: f64) -> Result<bool, String> {
     let steps = parse_key(key).ok_or_else(|| {
         format!("`{key}` is not a key path (expected e.g. `integrator.alpha` or `rod[0].elements`)")
     })?;
@@ -251,9 +252,10 @@ fn set_in(root: &mut toml::Value, key: &str, x: f64) -> Result<(), String> {
                     .as_table_mut()
                     .ok_or_else(|| format!("`{k}` is not inside a table in the base scene"))?;
                 if last {
+                    let existed = t.contains_key(k);
                     let v = new(t.get(k))?;
                     t.insert(k.clone(), v);
-                    return Ok(());
+                    return Ok(existed);
                 }
                 cur = t
                     .get_mut(k)
@@ -269,13 +271,13 @@ fn set_in(root: &mut toml::Value, key: &str, x: f64) -> Result<(), String> {
                     .ok_or_else(|| format!("index {j} out of range (the array has {n} entries)"))?;
                 if last {
                     *v = new(Some(v))?;
-                    return Ok(());
+                    return Ok(true);
                 }
                 cur = v;
             }
         }
     }
-    Ok(())
+    Ok(true)
 }
 
 /// The key path of the value at a byte offset: `KEY` at top level, `vary[i].KEY` inside
@@ -391,7 +393,7 @@ impl Fnv1a {
 }
 
 /// [`set_in`] on a table (keeps the table in place).
-fn set_value_table(doc: &mut toml::Table, key: &str, x: f64) -> Result<(), String> {
+fn set_value_table(doc: &mut toml::Table, key: &str, x: f64) -> Result<bool, String> {
     let mut root = toml::Value::Table(std::mem::take(doc));
     let r = set_in(&mut root, key, x);
     if let toml::Value::Table(t) = root {
@@ -424,8 +426,9 @@ pub fn scene_with_overrides(spec: &str, sets: &[(String, f64)]) -> Result<Scene,
     parse_scene(&text, &source).map_err(|e| e.to_string())
 }
 
-/// Reads and validates a sweep file: syntax, keys, modes, ranges, and that the base scene
-/// accepts every varied key (checked on the first member).
+/// Reads and validates a sweep file: syntax, keys, modes, ranges, that the base scene is
+/// valid and that it accepts every varied key. The members' values are not checked here:
+/// a member whose scene rejects its values is a `rejected` row of [`run_sweep`].
 pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|error| SweepError::Io {
@@ -702,19 +705,24 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
         values,
         base_elements,
     };
-    // Every key must be accepted by the base scene: try each parameter alone on the first
-    // member, so the error names the parameter.
-    let first = spec.values[0].clone();
+    // Every key must be one the base scene has room for: the path must lead into the
+    // base scene (checked by writing the first member's value; the path errors do not
+    // depend on the value), and a key the base scene does not have yet must be one the
+    // scene format knows. Whether a member's *values* are valid is that member's result
+    // (a `rejected` row), the first member's as any other's.
     for (i, p) in spec.params.iter().enumerate() {
         let span = Some(raw.vary[i].get_ref().key.span());
         let mut doc: toml::Table = spec
             .base_text
             .parse()
             .map_err(|e| invalid(None, "base", format!("base scene: {e}")))?;
-        set_value_table(&mut doc, &p.key, first[i])
+        let existed = set_value_table(&mut doc, &p.key, spec.values[0][i])
             .map_err(|r| invalid(span.clone(), &format!("vary[{i}].key"), r))?;
+        if existed {
+            continue;
+        }
         let t = toml::to_string(&doc).map_err(|e| invalid(None, "base", e.to_string()))?;
-        parse_scene(&t, &spec.base_source).map_err(|e| {
+        crate::scene::check_scene_keys(&t, &spec.base_source).map_err(|e| {
             invalid(
                 span.clone(),
                 &format!("vary[{i}].key"),

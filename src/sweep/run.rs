@@ -50,13 +50,55 @@ pub struct SweepOptions {
     pub solve: crate::batch::SolveMode,
 }
 
+/// How a member ended: the `status` column of `members.csv`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MemberStatus {
+    /// It ran to its end time.
+    Completed,
+    /// A step failed (the reason says which and why).
+    Failed,
+    /// Its scene (the base scene with its values written in) is invalid, so it never ran.
+    Rejected,
+}
+
+impl MemberStatus {
+    /// The word in `members.csv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            MemberStatus::Completed => "completed",
+            MemberStatus::Failed => "failed",
+            MemberStatus::Rejected => "rejected",
+        }
+    }
+
+    /// The status named `s` in `members.csv`.
+    pub fn parse(s: &str) -> Option<MemberStatus> {
+        [
+            MemberStatus::Completed,
+            MemberStatus::Failed,
+            MemberStatus::Rejected,
+        ]
+        .into_iter()
+        .find(|m| m.name() == s)
+    }
+}
+
+impl From<RunStatus> for MemberStatus {
+    fn from(s: RunStatus) -> Self {
+        match s {
+            RunStatus::Completed => MemberStatus::Completed,
+            RunStatus::Failed => MemberStatus::Failed,
+        }
+    }
+}
+
 /// One row of `members.csv`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MemberRow {
     /// Member index in the sweep.
     pub member: usize,
-    /// `completed` or `failed`.
-    pub status: RunStatus,
+    /// `completed`, `failed` or `rejected`.
+    pub status: MemberStatus,
     /// Time of the last accepted step.
     pub t_reached: f64,
     /// Total energy at `t_reached`.
@@ -71,7 +113,7 @@ pub struct MemberRow {
     pub wall_s: f64,
     /// The member's values of the varied parameters.
     pub values: Vec<f64>,
-    /// Why it failed (scene rejected its values, or the step that failed).
+    /// Why it failed (the step that failed) or was rejected (what its scene rejects).
     pub reason: Option<String>,
 }
 
@@ -86,6 +128,8 @@ pub struct SweepSummary {
     pub completed: usize,
     /// Members failed in this invocation.
     pub failed: usize,
+    /// Members rejected in this invocation (their scene is invalid).
+    pub rejected: usize,
     /// Bytes of a torn last row cut from `members.csv` on `--resume` (0: none).
     pub repaired_bytes: usize,
     /// `member_<i>/history.csv` files of a previous sweep removed by a fresh start.
@@ -96,10 +140,14 @@ pub struct SweepSummary {
     pub gpu: KernelTimers,
 }
 
-/// Shortest round-trip text of a number, in exponent form outside [1e-3, 1e6).
+/// Shortest round-trip text of a number, in exponent form outside [1e-3, 1e6); a
+/// non-finite number (a quantity a member never reached) is an empty cell, so no data file
+/// holds `NaN` or `inf`.
 fn num(x: f64) -> String {
     let a = x.abs();
-    if x == 0.0 || !x.is_finite() || (1e-3..1e6).contains(&a) {
+    if !x.is_finite() {
+        String::new()
+    } else if x == 0.0 || (1e-3..1e6).contains(&a) {
         format!("{x}")
     } else {
         format!("{x:e}")
@@ -111,19 +159,35 @@ pub(super) fn csv_escape(s: &str) -> String {
 }
 
 impl MemberRow {
+    /// A member whose scene was rejected: it never ran, so its result cells are empty.
+    fn rejected(member: usize, values: Vec<f64>, reason: String) -> MemberRow {
+        MemberRow {
+            member,
+            status: MemberStatus::Rejected,
+            t_reached: f64::NAN,
+            final_total: f64::NAN,
+            max_rel_dl: f64::NAN,
+            max_rel_dj: f64::NAN,
+            newton_iters_total: 0,
+            wall_s: f64::NAN,
+            values,
+            reason: Some(reason),
+        }
+    }
+
     fn csv(&self) -> String {
-        let status = match self.status {
-            RunStatus::Completed => "completed",
-            RunStatus::Failed => "failed",
+        let iters = match self.status {
+            MemberStatus::Rejected => String::new(),
+            _ => self.newton_iters_total.to_string(),
         };
         let mut s = format!(
-            "{},{status},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{iters},{}",
             self.member,
+            self.status.name(),
             num(self.t_reached),
             num(self.final_total),
             num(self.max_rel_dl),
             num(self.max_rel_dj),
-            self.newton_iters_total,
             num(self.wall_s)
         );
         for v in &self.values {
@@ -177,10 +241,63 @@ pub(super) fn split_csv(line: &str) -> Vec<String> {
     out
 }
 
-/// Reads `members.csv` for `--resume`: the header must be this sweep's, every complete
-/// row must name a member of this sweep with this sweep's values, and a torn last row
-/// (a kill between the start of a row and its newline) is cut off the file so that its
-/// member runs again.
+/// Checks one row of `members.csv` (or of a shard's file) against `spec`: its field count,
+/// that it names a member of the sweep (of `shard`, when given) and that its values are
+/// that member's, bit for bit. Returns the member and its status.
+pub(super) fn check_row(
+    fields: &[String],
+    spec: &SweepSpec,
+    shard: Option<Shard>,
+) -> Result<(usize, MemberStatus), String> {
+    let want = CSV_COLUMNS.len() + spec.params.len() + 1;
+    if fields.len() != want {
+        return Err(format!(
+            "{} fields, expected {want} (the file was edited or is not this sweep's)",
+            fields.len()
+        ));
+    }
+    let i: usize = fields[0]
+        .parse()
+        .ok()
+        .filter(|&i| i < spec.len())
+        .ok_or_else(|| {
+            format!(
+                "member `{}` is not one of this sweep's 0..{}",
+                fields[0],
+                spec.len()
+            )
+        })?;
+    if let Some(sh) = shard.filter(|sh| !sh.contains(i)) {
+        return Err(format!(
+            "member {i} is not one of shard {sh}'s (members ≡ {} mod {}): the file was edited or copied from another shard",
+            sh.index, sh.count
+        ));
+    }
+    let status = MemberStatus::parse(&fields[1]).ok_or_else(|| {
+        format!(
+            "member {i}: status `{}` is not completed, failed or rejected",
+            fields[1]
+        )
+    })?;
+    for (j, p) in spec.params.iter().enumerate() {
+        let got: Option<f64> = fields[CSV_COLUMNS.len() + j].parse().ok();
+        let want = spec.values[i][j];
+        if got.map(f64::to_bits) != Some(want.to_bits()) {
+            return Err(format!(
+                "member {i} has {} = {} here but {} in this sweep: the row is another sweep's result",
+                p.key,
+                fields[CSV_COLUMNS.len() + j],
+                num(want)
+            ));
+        }
+    }
+    Ok((i, status))
+}
+
+/// Reads `members.csv` for `--resume`: the file must begin with `head` (the header; a
+/// shard's file has its identity line first), every complete row must name a member of
+/// this sweep with this sweep's values, and a torn last row (a kill between the start of
+/// a row and its newline) is cut off the file so that its member runs again.
 fn recorded(
     path: &Path,
     head: &str,
@@ -198,81 +315,44 @@ fn recorded(
         torn_bytes: bytes.len() - complete,
         ..Default::default()
     };
-    let text = String::from_utf8_lossy(&bytes[..complete]);
-    let mut lines = text.lines();
-    match lines.next() {
-        Some(h) if h == head => {}
-        Some(h) => {
-            return Err(SweepError::Invalid {
-                file,
-                location: Some((1, 1)),
-                key: "(header)".into(),
-                reason: format!("--resume: columns `{h}` are not this sweep's `{head}`"),
-            })
-        }
-        None => {
-            // Zero bytes, or a header cut short by a kill: nothing recorded yet.
-            let torn = String::from_utf8_lossy(&bytes);
-            if !head.starts_with(torn.as_ref()) {
-                return Err(SweepError::Invalid {
-                    file,
-                    location: Some((1, 1)),
-                    key: "(header)".into(),
-                    reason: format!(
-                        "--resume: `{torn}` is not the start of this sweep's header `{head}`"
-                    ),
-                });
-            }
+    let head_nl = format!("{head}\n");
+    let head_lines = head.lines().count();
+    if !bytes.starts_with(head_nl.as_bytes()) {
+        // Zero bytes, or a head cut short by a kill: nothing recorded yet.
+        if head_nl.as_bytes().starts_with(&bytes) {
             rec.torn_bytes = 0;
             rec.needs_header = true;
+            return Ok(rec);
         }
+        let text = String::from_utf8_lossy(&bytes);
+        let (k, (got, want)) = text
+            .lines()
+            .zip(head.lines())
+            .enumerate()
+            .find(|(_, (g, w))| g != w)
+            .unwrap_or((0, (text.lines().next().unwrap_or(""), head)));
+        let what = if want.starts_with('#') {
+            "the identity line"
+        } else {
+            "the columns"
+        };
+        return Err(SweepError::Invalid {
+            file,
+            location: Some((k + 1, 1)),
+            key: "(header)".into(),
+            reason: format!("--resume: {what} `{got}` are not this sweep's `{want}`"),
+        });
     }
-    let n_params = spec.params.len();
-    for (k, l) in lines.enumerate() {
-        let line_no = k + 2;
+    let text = String::from_utf8_lossy(&bytes[head_nl.len()..complete.max(head_nl.len())]);
+    for (k, l) in text.lines().enumerate() {
+        let line_no = k + 1 + head_lines;
         let bad = |reason: String| SweepError::Invalid {
             file: file.clone(),
             location: Some((line_no, 1)),
             key: "(row)".into(),
             reason: format!("--resume: {reason}"),
         };
-        let f = split_csv(l);
-        if f.len() != CSV_COLUMNS.len() + n_params + 1 {
-            return Err(bad(format!(
-                "{} fields, expected {} (the file was edited or is not this sweep's)",
-                f.len(),
-                CSV_COLUMNS.len() + n_params + 1
-            )));
-        }
-        let i: usize = f[0]
-            .parse()
-            .ok()
-            .filter(|&i| i < spec.len())
-            .ok_or_else(|| {
-                bad(format!(
-                    "member `{}` is not one of this sweep's 0..{}",
-                    f[0],
-                    spec.len()
-                ))
-            })?;
-        if let Some(sh) = shard.filter(|sh| !sh.contains(i)) {
-            return Err(bad(format!(
-                "member {i} is not one of shard {sh}'s (members ≡ {} mod {}): the file was edited or copied from another shard",
-                sh.index, sh.count
-            )));
-        }
-        for (j, p) in spec.params.iter().enumerate() {
-            let got: Option<f64> = f[CSV_COLUMNS.len() + j].parse().ok();
-            let want = spec.values[i][j];
-            if got.map(f64::to_bits) != Some(want.to_bits()) {
-                return Err(bad(format!(
-                    "member {i} has {} = {} here but {} in this sweep: the folder holds another sweep's results",
-                    p.key,
-                    f[CSV_COLUMNS.len() + j],
-                    num(want)
-                )));
-            }
-        }
+        let (i, _) = check_row(&split_csv(l), spec, shard).map_err(bad)?;
         if !rec.done.insert(i) {
             return Err(bad(format!("member {i} is recorded twice")));
         }
@@ -345,14 +425,34 @@ fn lock(out: &Path, shard: Option<Shard>) -> Result<Vec<std::fs::File>, SweepErr
 
 /// Writes `text` to `path` through a temporary file renamed over it, synced, so the file
 /// is either the old one or the whole new one.
+/// On an error (a full disk) the temporary file is removed and `path` is left as it was.
 pub(super) fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
-    let tmp = path.with_extension("tmp");
-    {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        f.sync_all()?;
+    let tmp = tmp_path(path);
+    let r = std::fs::File::create(&tmp)
+        .and_then(|mut f| {
+            f.write_all(text.as_bytes())?;
+            f.sync_all()
+        })
+        .and_then(|_| std::fs::rename(&tmp, path));
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
     }
-    std::fs::rename(&tmp, path)
+    r
+}
+
+/// The temporary name of `path` while it is written: `NAME.tmp` beside it.
+fn tmp_path(path: &Path) -> std::path::PathBuf {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".tmp");
+    path.with_file_name(name)
+}
+
+/// Removes `path`; a file that does not exist is not an error.
+fn remove_if_present(path: &Path) -> std::io::Result<()> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    }
 }
 
 /// The identity of a sweep run: the sweep's own ([`SweepSpec::identity`]) and the
@@ -474,32 +574,46 @@ fn remove_stale_histories(out: &Path, shard: Option<Shard>) -> std::io::Result<u
 fn write_history(dir: &Path, history: &[crate::observe::record::StepRecord]) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
     let tmp = dir.join("history.csv.tmp");
-    {
-        let mut h = HistoryWriter::create(&tmp).map_err(|e| e.to_string())?;
-        history
-            .iter()
-            .try_for_each(|rec| h.push(rec))
-            .map_err(|e| e.to_string())?;
-    }
-    std::fs::File::open(&tmp)
-        .and_then(|f| f.sync_all())
-        .and_then(|_| std::fs::rename(&tmp, dir.join("history.csv")))
+    let r = HistoryWriter::create(&tmp)
         .map_err(|e| e.to_string())
+        .and_then(|mut h| {
+            history
+                .iter()
+                .try_for_each(|rec| h.push(rec))
+                .map_err(|e| e.to_string())
+        })
+        .and_then(|_| {
+            std::fs::File::open(&tmp)
+                .and_then(|f| f.sync_all())
+                .and_then(|_| std::fs::rename(&tmp, dir.join("history.csv")))
+                .map_err(|e| e.to_string())
+        });
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    r
 }
 
 /// Runs every member of `spec` not yet recorded, appending one row per finished member
 /// to `out/members.csv`, then writes `out/sweep.json` (counts of this invocation, backend
 /// and adapter). `on_row` sees each row (progress display).
 ///
+/// A member whose scene rejects its values (the base scene with them written in) is a
+/// `rejected` row with the reason, whichever member it is; its result cells are empty.
+///
 /// What survives a kill (`docs/guarantees.md`): the folder is locked exclusively while a
-/// sweep runs (a second one is refused); each row is one `write` of a whole line, synced
+/// sweep runs (a second one is refused); nothing in it changes before every check has
+/// passed and the batch has started (a refused backend leaves an earlier sweep's files as
+/// they were); a fresh start removes the previous `sweep.json` and writes `sweep.id`
+/// before its `members.csv` appears; each row is one `write` of a whole line, synced
 /// before the next member is recorded; a member's history file (`--histories`) is
 /// complete before its row is written; `--resume` checks the folder's identity
 /// (`sweep.id`) and every recorded row's values against this sweep and cuts a torn last
-/// row, whose member then runs again.
+/// row, whose member then runs again. A write error leaves no temporary file.
 ///
-/// With [`SweepOptions::shard`] only that shard's members run, into
-/// `out/shards/I-of-N.{csv,id,json}` (member histories still in `out/member_<i>/`); the
+/// With [`SweepOptions::shard`] (at most one shard per member) only that shard's members
+/// run, into `out/shards/I-of-N.{csv,id,json}` (member histories still in
+/// `out/member_<i>/`; the rows file begins with the shard's identity line); the
 /// shard holds the folder lock shared and its own lock exclusively, refuses a folder whose
 /// other shards belong to another sweep or another split, and `--resume` checks its own
 /// identity file and that every recorded row is one of its members.
@@ -519,6 +633,9 @@ pub fn run_sweep(
         }
     };
     let shard = opts.shard;
+    if let Some(sh) = shard {
+        shard::check_count(spec, sh)?;
+    }
     let (csv_path, id_path, json_path) = match shard {
         None => (
             out.join("members.csv"),
@@ -539,7 +656,7 @@ pub fn run_sweep(
     }
     let in_scope = |i: &usize| shard.is_none_or(|sh| sh.contains(*i));
     let scope = shard.map_or(spec.len(), |sh| sh.len_of(spec.len()));
-    let head = header(spec);
+    let head = file_head(spec, opts);
     let resuming = opts.resume && csv_path.exists();
     let rec = if resuming {
         check_identity(&id_path, spec, opts)?;
@@ -550,53 +667,7 @@ pub fn run_sweep(
             ..Default::default()
         }
     };
-    if !resuming {
-        // A fresh start: the identity first, then a members.csv holding only the header
-        // (renamed into place: a kill leaves either no file or a whole header).
-        write_atomic(&id_path, &identity_text(spec, opts))
-            .map_err(ctx(format!("cannot write {}", id_path.display())))?;
-        write_atomic(&csv_path, &format!("{head}\n"))
-            .map_err(ctx(format!("cannot write {}", csv_path.display())))?;
-    }
-    let stale_histories = if resuming {
-        0
-    } else {
-        remove_stale_histories(out, shard)
-            .map_err(ctx(format!("cannot clean {}", out.display())))?
-    };
-    let mut csv = OpenOptions::new()
-        .append(true)
-        .open(&csv_path)
-        .map_err(ctx(format!("cannot open {}", csv_path.display())))?;
-    if resuming && rec.torn_bytes > 0 {
-        let keep = csv
-            .metadata()
-            .map_err(ctx(format!("cannot read {}", csv_path.display())))?
-            .len()
-            - rec.torn_bytes as u64;
-        csv.set_len(keep)
-            .and_then(|_| csv.sync_all())
-            .map_err(ctx(format!("cannot repair {}", csv_path.display())))?;
-    }
-    // One row = one write of a whole line, synced before the next member is recorded.
-    let wr = |csv: &mut std::fs::File, line: &str| {
-        csv.write_all(format!("{line}\n").as_bytes())
-            .and_then(|_| csv.sync_data())
-            .map_err(ctx(format!("cannot write {}", csv_path.display())))
-    };
-    if resuming && rec.needs_header {
-        csv.set_len(0)
-            .map_err(ctx(format!("cannot repair {}", csv_path.display())))?;
-        wr(&mut csv, &head)?;
-    }
-    let done = rec.done;
-    let mut summary = SweepSummary {
-        members: scope,
-        skipped: done.len(),
-        repaired_bytes: rec.torn_bytes,
-        stale_histories,
-        ..Default::default()
-    };
+    let done = &rec.done;
     // Memory of the members this invocation will hold at once, before building them.
     let todo = (scope - done.len()) as u64;
     if todo > 0 {
@@ -610,9 +681,10 @@ pub fn run_sweep(
             }
         })?;
     }
-    // Build the members; a member whose values the scene rejects is a failed row.
+    // Build the members; a member whose scene rejects its values is a `rejected` row.
     let mut members = Vec::new();
     let mut ids = Vec::new();
+    let mut rejected = Vec::new();
     let mut elements_total = 0u64;
     for i in (0..spec.len()).filter(|i| in_scope(i) && !done.contains(i)) {
         match spec.member_scene(i) {
@@ -634,25 +706,35 @@ pub fn run_sweep(
                 });
                 ids.push(i);
             }
-            Err(e) => {
-                let row = MemberRow {
-                    member: i,
-                    status: RunStatus::Failed,
-                    t_reached: 0.0,
-                    final_total: f64::NAN,
-                    max_rel_dl: f64::NAN,
-                    max_rel_dj: f64::NAN,
-                    newton_iters_total: 0,
-                    wall_s: 0.0,
-                    values: spec.values[i].clone(),
-                    reason: Some(format!("scene rejected the member's values: {e}")),
-                };
-                wr(&mut csv, &row.csv())?;
-                summary.failed += 1;
-                on_row(&row);
-            }
+            Err(e) => rejected.push(MemberRow::rejected(
+                i,
+                spec.values[i].clone(),
+                format!("scene rejects the member's values: {e}"),
+            )),
         }
     }
+    // Nothing in the folder has changed so far. It changes when the batch has started (a
+    // GPU backend that refuses the batch refuses it before its first result) or has ended
+    // without running anything.
+    let mut rows = Rows {
+        csv_path: &csv_path,
+        id_path: &id_path,
+        json_path: &json_path,
+        out,
+        shard,
+        resuming,
+        rec: &rec,
+        head: &head,
+        identity: identity_text(spec, opts),
+        csv: None,
+        pending: rejected,
+        summary: SweepSummary {
+            members: scope,
+            skipped: done.len(),
+            repaired_bytes: rec.torn_bytes,
+            ..Default::default()
+        },
+    };
     let mut write_err: Option<SweepError> = None;
     let stats = run_members(
         &members,
@@ -670,11 +752,15 @@ pub fn run_sweep(
             if write_err.is_some() {
                 return;
             }
+            if let Err(e) = rows.begin(&mut on_row) {
+                write_err = Some(e);
+                return;
+            }
             let id = ids[r.index];
             let o = &r.outcome;
             let row = MemberRow {
                 member: id,
-                status: o.status,
+                status: o.status.into(),
                 t_reached: o.t_reached,
                 final_total: o.energy_final,
                 max_rel_dl: o.max_rel_dl,
@@ -698,26 +784,22 @@ pub fn run_sweep(
                 };
                 if let Err(e) = write_history(&dir, &r.history) {
                     write_err = Some(SweepError::Output {
-                        context: format!("cannot write {}", dir.display()),
+                        context: format!("cannot write {}", dir.join("history.csv").display()),
                         error: std::io::Error::other(e),
                     });
                     return;
                 }
             }
-            if let Err(e) = wr(&mut csv, &row.csv()) {
+            if let Err(e) = rows.write(&row, &mut on_row) {
                 write_err = Some(e);
-                return;
             }
-            match o.status {
-                RunStatus::Completed => summary.completed += 1,
-                RunStatus::Failed => summary.failed += 1,
-            }
-            on_row(&row);
         },
     )?;
     if let Some(e) = write_err {
         return Err(e);
     }
+    rows.begin(&mut on_row)?;
+    let mut summary = rows.summary;
     summary.gpu = stats.gpu;
     summary.wall_s = start.elapsed().as_secs_f64();
     let info = serde_json::json!({
@@ -733,6 +815,7 @@ pub fn run_sweep(
         "members": summary.members,
         "completed": summary.completed,
         "failed": summary.failed,
+        "rejected": summary.rejected,
         "skipped": summary.skipped,
         "repaired_bytes": summary.repaired_bytes,
         "backend": exec.describe(),
@@ -746,6 +829,113 @@ pub fn run_sweep(
     write_atomic(&json_path, &format!("{info:#}\n"))
         .map_err(ctx(format!("cannot write {}", json_path.display())))?;
     Ok(summary)
+}
+
+/// What a sweep's rows file begins with: the header, after the identity line
+/// ([`shard::tag`]) in a shard's file.
+fn file_head(spec: &SweepSpec, opts: &SweepOptions) -> String {
+    match opts.shard {
+        None => header(spec),
+        Some(sh) => format!(
+            "{}\n{}",
+            shard::tag(&run_identity(spec, opts), sh),
+            header(spec)
+        ),
+    }
+}
+
+/// The rows file of a running sweep, opened by [`Rows::begin`] when the folder may change.
+struct Rows<'a> {
+    csv_path: &'a Path,
+    id_path: &'a Path,
+    json_path: &'a Path,
+    out: &'a Path,
+    shard: Option<Shard>,
+    resuming: bool,
+    rec: &'a Recorded,
+    head: &'a str,
+    identity: String,
+    /// Open for appending once begun.
+    csv: Option<std::fs::File>,
+    /// Rows to write when begun (the rejected members).
+    pending: Vec<MemberRow>,
+    summary: SweepSummary,
+}
+
+impl Rows<'_> {
+    /// The first change to the folder (once; later calls do nothing). A fresh start
+    /// removes the previous sweep's `sweep.json`, writes the identity, then a rows file
+    /// holding its head only (renamed into place: a kill leaves the old file or a whole
+    /// head, never two sweeps' files beside each other with the new rows), and removes the
+    /// previous sweep's member histories. `--resume` cuts a torn last row (or rewrites a
+    /// torn head). Then the rejected members' rows.
+    fn begin(&mut self, on_row: &mut impl FnMut(&MemberRow)) -> Result<(), SweepError> {
+        if self.csv.is_some() {
+            return Ok(());
+        }
+        let ctx = |what: &str, path: &Path| {
+            let context = format!("cannot {what} {}", path.display());
+            move |error| SweepError::Output { context, error }
+        };
+        if !self.resuming {
+            remove_if_present(self.json_path).map_err(ctx("remove", self.json_path))?;
+            write_atomic(self.id_path, &self.identity).map_err(ctx("write", self.id_path))?;
+            write_atomic(self.csv_path, &format!("{}\n", self.head))
+                .map_err(ctx("write", self.csv_path))?;
+            self.summary.stale_histories =
+                remove_stale_histories(self.out, self.shard).map_err(ctx("clean", self.out))?;
+        }
+        let mut csv = OpenOptions::new()
+            .append(true)
+            .open(self.csv_path)
+            .map_err(ctx("open", self.csv_path))?;
+        if self.resuming && self.rec.needs_header {
+            csv.set_len(0).map_err(ctx("repair", self.csv_path))?;
+            write_line(&mut csv, self.head).map_err(ctx("write", self.csv_path))?;
+        } else if self.resuming && self.rec.torn_bytes > 0 {
+            let keep = csv
+                .metadata()
+                .map_err(ctx("read", self.csv_path))?
+                .len()
+                .saturating_sub(self.rec.torn_bytes as u64);
+            csv.set_len(keep)
+                .and_then(|_| csv.sync_all())
+                .map_err(ctx("repair", self.csv_path))?;
+        }
+        self.csv = Some(csv);
+        for row in std::mem::take(&mut self.pending) {
+            self.write(&row, on_row)?;
+        }
+        Ok(())
+    }
+
+    /// Appends one row (one write of a whole line, synced before the next member is
+    /// recorded) and counts it.
+    fn write(
+        &mut self,
+        row: &MemberRow,
+        on_row: &mut impl FnMut(&MemberRow),
+    ) -> Result<(), SweepError> {
+        self.begin(on_row)?;
+        let csv = self.csv.as_mut().unwrap_or_else(|| unreachable!("begun"));
+        write_line(csv, &row.csv()).map_err(|error| SweepError::Output {
+            context: format!("cannot write {}", self.csv_path.display()),
+            error,
+        })?;
+        match row.status {
+            MemberStatus::Completed => self.summary.completed += 1,
+            MemberStatus::Failed => self.summary.failed += 1,
+            MemberStatus::Rejected => self.summary.rejected += 1,
+        }
+        on_row(row);
+        Ok(())
+    }
+}
+
+/// One row: one `write` of the whole line, then synced.
+fn write_line(csv: &mut std::fs::File, line: &str) -> std::io::Result<()> {
+    csv.write_all(format!("{line}\n").as_bytes())
+        .and_then(|_| csv.sync_data())
 }
 
 /// The dissipation strategy `m` runs with on `exec`: its parameters' choice with `auto`

@@ -6,22 +6,26 @@
 //! shards). Each shard writes only its own files, so shards never write the same file:
 //!
 //! ```text
-//! DIR/shards/I-of-N.csv    its rows (members.csv's columns), appended as members finish
+//! DIR/shards/I-of-N.csv    its identity line (`# cosserat sweep ID shard I/N`), then
+//!                          members.csv's header and rows, appended as members finish
 //! DIR/shards/I-of-N.id     its identity: the sweep's (`sweep.id`) plus `shard I/N`
 //! DIR/shards/I-of-N.json   what its last invocation did (backend, counts, wall time)
 //! DIR/shards/I-of-N.lock   held while it runs
 //! DIR/member_<i>/          its members' histories (`--histories`), as unsharded
 //! ```
 //!
-//! [`merge_shards`] checks that every shard is present, of this sweep, not torn and
-//! complete, and that no member is missing or twice, then writes `DIR/members.csv` (rows
-//! in member order), `DIR/sweep.id` and `DIR/sweep.json`.
+//! N is at most the number of members. [`merge_shards`] checks that every shard is
+//! present, of this sweep (every file's identity and I/N, every row's values against the
+//! sweep file), not torn and complete, and that no member is missing or twice, then
+//! writes `DIR/members.csv` (rows in member order), `DIR/sweep.id` and `DIR/sweep.json`.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use super::run::{header_of, run_identity, split_csv, try_lock_file, write_atomic};
-use super::{SweepError, SweepOptions, SweepSpec, CSV_COLUMNS, IDENTITY_FILE, LOCK_FILE};
+use super::run::{
+    check_row, header_of, run_identity, split_csv, try_lock_file, write_atomic, MemberStatus,
+};
+use super::{load_sweep, SweepError, SweepOptions, SweepSpec, IDENTITY_FILE, LOCK_FILE};
 
 /// Folder (inside the sweep's `--out`) that holds the shards' files.
 pub const SHARDS_DIR: &str = "shards";
@@ -94,6 +98,32 @@ impl std::fmt::Display for Shard {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}/{}", self.index, self.count)
     }
+}
+
+/// The identity line a shard's rows file (`I-of-N.csv`) begins with, before the header:
+/// the sweep's identity (as in `sweep.id`) and the shard, so that merge and `--resume`
+/// recognize another sweep's or another shard's file.
+pub(super) fn tag(id: &str, sh: Shard) -> String {
+    format!("# cosserat sweep {id} shard {sh}")
+}
+
+/// A sweep is split into at most one shard per member: `--shard I/N` with N above the
+/// number of members is refused (naming the sweep file, `--shard` and the member count).
+pub fn check_count(spec: &SweepSpec, sh: Shard) -> Result<(), SweepError> {
+    if sh.count <= spec.len() {
+        return Ok(());
+    }
+    Err(SweepError::Invalid {
+        file: spec.source.clone(),
+        location: None,
+        key: "--shard".into(),
+        reason: format!(
+            "{sh}: {} shards for {} members: at most one shard per member (N ≤ {})",
+            sh.count,
+            spec.len(),
+            spec.len()
+        ),
+    })
 }
 
 /// `out/shards/I-of-N.EXT`.
@@ -213,6 +243,8 @@ pub struct MergeSummary {
     pub completed: usize,
     /// Rows with status `failed`.
     pub failed: usize,
+    /// Rows with status `rejected`.
+    pub rejected: usize,
     /// Number of shards merged.
     pub shards: usize,
     /// The sweep file the shards were run from (as they recorded it).
@@ -263,15 +295,40 @@ fn running_shards(out: &Path) -> Vec<(Shard, PathBuf)> {
 
 /// Merges the shards in `out/shards` into `out/members.csv`, `out/sweep.id` and
 /// `out/sweep.json`, as a one-machine run of the sweep writes them (rows in member order,
-/// each row as its shard recorded it).
+/// each row as its shard recorded it). The sweep file is the one the shards recorded
+/// (`sweep` in their identity files); [`merge_shards_from`] names another path to it.
+pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
+    merge_shards_from(out, None)
+}
+
+/// Tries, 10 ms apart, to take the folder's lock before merge says a shard still runs.
+const LOCK_GRACE_TRIES: usize = 30;
+
+/// At most this many shards are named in a message (then a count).
+const NAMED: usize = 5;
+
+/// `a, b, c, …` of at most [`NAMED`] names, `…` when `total` is more.
+fn some_names(names: impl Iterator<Item = String>, total: usize) -> String {
+    let names: Vec<String> = names.take(NAMED).collect();
+    let more = if total > names.len() { ", …" } else { "" };
+    format!("{}{more}", names.join(", "))
+}
+
+/// [`merge_shards`], reading the sweep from `sweep` when given (the file moved since the
+/// shards ran).
 ///
 /// Refuses, naming the shard and what to do: a shard still running, shards of two splits,
-/// a missing shard (no `.id` or `.csv`), a foreign one (another sweep's identity, or
-/// another header), a torn last row, a row that is not one of the shard's members or is
-/// recorded twice, and an incomplete shard (members missing). Also refuses when
-/// `out/sweep.id` holds another sweep's results. Nothing is written unless every check
-/// passes; each file is replaced whole (written to a temporary file, then renamed).
-pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
+/// more shards than members, a missing shard (no `.id` or `.csv`; the first few are named
+/// and the rest counted), a foreign one (another sweep's identity, or another shard's, in
+/// its `.id`, `.csv` or `.json`), a torn last row, a row that is not one of the shard's
+/// members, is recorded twice or whose values are not that member's in this sweep, and an
+/// incomplete shard (members missing). Also refuses when the sweep file is not the one
+/// the shards ran (another identity), and when `out/sweep.id` holds another sweep's
+/// results. Nothing is written unless every check passes; each file is replaced whole
+/// (written to a temporary file, then renamed). Nothing is allocated or iterated in
+/// proportion to a shard count read from file names beyond the files that exist, or the
+/// sweep's member count.
+pub fn merge_shards_from(out: &Path, sweep: Option<&Path>) -> Result<MergeSummary, SweepError> {
     let start = std::time::Instant::now();
     let dir = out.join(SHARDS_DIR);
     if !dir.is_dir() {
@@ -285,7 +342,18 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
             ),
         });
     }
-    let _lock = match try_lock_file(&out.join(LOCK_FILE), true)? {
+    // A shard that has just ended can hold its locks a moment longer (a process forked
+    // at that moment holds a copy of the descriptor until it starts its program): a
+    // short grace before "still running".
+    let mut held = try_lock_file(&out.join(LOCK_FILE), true)?;
+    for _ in 0..LOCK_GRACE_TRIES {
+        if held.is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+        held = try_lock_file(&out.join(LOCK_FILE), true)?;
+    }
+    let _lock = match held {
         Some(f) => f,
         None => {
             let running = running_shards(out);
@@ -296,7 +364,7 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
                     reason: format!(
                         "still running ({} of this folder's shards are: {}); merge once they have finished (`squeue` on Slurm)",
                         running.len(),
-                        running.iter().map(|(s, _)| s.name()).collect::<Vec<_>>().join(", ")
+                        some_names(running.iter().map(|(s, _)| s.name()), running.len())
                     ),
                 },
                 None => SweepError::Locked {
@@ -305,16 +373,24 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
             });
         }
     };
-    // Which split: every shard file must name the same N.
-    let mut splits: BTreeMap<usize, BTreeSet<Shard>> = BTreeMap::new();
+    // Which split: every shard file must name the same N. Per shard, which of its `.id`
+    // and `.csv` exist.
+    let mut splits: BTreeMap<usize, BTreeMap<Shard, (bool, bool)>> = BTreeMap::new();
     let entries = std::fs::read_dir(&dir).map_err(|error| SweepError::Output {
         context: format!("cannot read {}", dir.display()),
         error,
     })?;
     for e in entries.flatten() {
         let name = e.file_name();
-        if let Some((sh, "csv" | "id")) = Shard::from_file_name(&name.to_string_lossy()) {
-            splits.entry(sh.count).or_default().insert(sh);
+        if let Some((sh, ext @ ("csv" | "id"))) = Shard::from_file_name(&name.to_string_lossy()) {
+            if !e.path().is_file() {
+                continue;
+            }
+            let has = splits.entry(sh.count).or_default().entry(sh).or_default();
+            match ext {
+                "id" => has.0 = true,
+                _ => has.1 = true,
+            }
         }
     }
     let Some((&count, _)) = splits.iter().max_by_key(|(_, s)| s.len()) else {
@@ -326,7 +402,7 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         });
     };
     if let Some((_, other)) = splits.iter().find(|(&n, _)| n != count) {
-        let sh = *other.iter().next().unwrap_or_else(|| unreachable!());
+        let sh = *other.keys().next().unwrap_or_else(|| unreachable!());
         return Err(SweepError::Shard {
             file: dir.display().to_string(),
             shard: sh.name(),
@@ -338,20 +414,16 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
             ),
         });
     }
-    let shards: Vec<Shard> = (0..count).map(|i| Shard { index: i, count }).collect();
-    // Present: identity and rows of every shard.
-    let missing: Vec<Shard> = shards
+    let found = &splits[&count];
+    // The identity files that exist (no more than the files in the folder).
+    let ids: BTreeMap<Shard, IdFile> = found
         .iter()
-        .copied()
-        .filter(|&sh| !file(out, sh, "id").is_file() || !file(out, sh, "csv").is_file())
-        .collect();
-    let ids: Vec<Option<IdFile>> = shards
-        .iter()
-        .map(|&sh| IdFile::read(&file(out, sh, "id")))
+        .filter(|(_, has)| has.0)
+        .filter_map(|(&sh, _)| IdFile::read(&file(out, sh, "id")).map(|f| (sh, f)))
         .collect();
     // The sweep: the identity most shards record.
     let mut votes: BTreeMap<&str, usize> = BTreeMap::new();
-    for f in ids.iter().flatten() {
+    for f in ids.values() {
         *votes.entry(f.get("id")).or_default() += 1;
     }
     let sweep_id = votes
@@ -359,74 +431,112 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         .max_by_key(|(_, &n)| n)
         .map(|(id, _)| id.to_string())
         .unwrap_or_default();
-    let reference = ids
-        .iter()
-        .flatten()
-        .find(|f| f.get("id") == sweep_id)
-        .ok_or_else(|| SweepError::Shard {
+    let Some((&ref_shard, reference)) = ids.iter().find(|(_, f)| f.get("id") == sweep_id) else {
+        let sh = *found.keys().next().unwrap_or_else(|| unreachable!());
+        return Err(SweepError::Shard {
             file: dir.display().to_string(),
-            shard: shards[0].name(),
+            shard: sh.name(),
             reason: "no shard identity file can be read".into(),
-        })?;
-    let sweep_file = reference.get("sweep").to_string();
-    if let Some(&sh) = missing.first() {
-        let what = if file(out, sh, "id").is_file() {
+        });
+    };
+    let ref_file = file(out, ref_shard, "id").display().to_string();
+    let sweep_file = match sweep {
+        Some(p) => p.display().to_string(),
+        None => reference.get("sweep").to_string(),
+    };
+    // The sweep itself: its members' values check every row.
+    let spec = load_sweep(Path::new(&sweep_file)).map_err(|e| SweepError::Shard {
+        file: ref_file.clone(),
+        shard: ref_shard.name(),
+        reason: format!(
+            "cannot load the sweep file the shards were run from ({e}); if it moved, name it: `cosserat sweep merge {} --sweep FILE`",
+            out.display()
+        ),
+    })?;
+    let own = spec.identity();
+    if sweep_id != own && !sweep_id.starts_with(&format!("{own}+")) {
+        return Err(SweepError::Shard {
+            file: ref_file.clone(),
+            shard: ref_shard.name(),
+            reason: format!(
+                "the shards are sweep id {sweep_id}, but {sweep_file} is now id {own}: the sweep file or its base scene changed since the shards ran; merge with the sweep file they ran (--sweep FILE)"
+            ),
+        });
+    }
+    let members = spec.len();
+    if count > members {
+        let sh = *found.keys().next().unwrap_or_else(|| unreachable!());
+        return Err(SweepError::Shard {
+            file: dir.display().to_string(),
+            shard: sh.name(),
+            reason: format!(
+                "the shard files split the sweep into {count} shards, but it has {members} members (at most one shard per member): they were not written by this sweep's shards; delete them"
+            ),
+        });
+    }
+    // Present: identity and rows of every shard. Missing ones are found without walking
+    // all N: the present ones are known.
+    let present = found.values().filter(|h| h.0 && h.1).count();
+    if present < count {
+        let missing = (0..count)
+            .map(|index| Shard { index, count })
+            .filter(|sh| found.get(sh).is_none_or(|h| !(h.0 && h.1)));
+        let first = missing.clone().next().unwrap_or_else(|| unreachable!());
+        let what = if found.get(&first).is_some_and(|h| h.0) {
             "csv"
         } else {
             "id"
         };
+        let n = count - present;
         return Err(SweepError::Shard {
-            file: file(out, sh, what).display().to_string(),
-            shard: sh.name(),
+            file: file(out, first, what).display().to_string(),
+            shard: first.name(),
             reason: format!(
                 "missing: the file does not exist (the shard never ran here, or was stopped before it began){}; {}",
-                if missing.len() > 1 {
+                if n > 1 {
                     format!(
-                        " — {} shards are missing: {}",
-                        missing.len(),
-                        missing.iter().map(|s| s.name()).collect::<Vec<_>>().join(", ")
+                        " — {n} of {count} shards are missing: {}",
+                        some_names(missing.map(|s| s.name()), n)
                     )
                 } else {
                     String::new()
                 },
-                resume_hint(out, &sweep_file, sh)
+                resume_hint(out, &sweep_file, first)
             ),
         });
     }
-    for (sh, f) in shards.iter().zip(&ids) {
-        let f = f
-            .as_ref()
-            .unwrap_or_else(|| unreachable!("checked present"));
+    let shards: Vec<Shard> = (0..count).map(|index| Shard { index, count }).collect();
+    for sh in &shards {
+        let path = file(out, *sh, "id");
+        let fail = |reason: String| SweepError::Shard {
+            file: path.display().to_string(),
+            shard: sh.name(),
+            reason,
+        };
+        let Some(f) = ids.get(sh) else {
+            return Err(fail("cannot be read".into()));
+        };
         if f.get("id") != sweep_id {
-            return Err(SweepError::Shard {
-                file: file(out, *sh, "id").display().to_string(),
-                shard: sh.name(),
-                reason: format!(
-                    "foreign: it belongs to another sweep (id {}, from {}) than the other shards (id {sweep_id}, from {sweep_file}); delete it and run this sweep's shard {sh} instead",
-                    f.get("id"),
-                    f.get("sweep")
-                ),
-            });
+            return Err(fail(format!(
+                "foreign: it belongs to another sweep (id {}, from {}) than the other shards (id {sweep_id}, from {sweep_file}); delete it and run this sweep's shard {sh} instead",
+                f.get("id"),
+                f.get("sweep")
+            )));
+        }
+        if f.get("shard") != sh.to_string() {
+            return Err(fail(format!(
+                "foreign: it records shard `{}`, not {sh}: the file was renamed or copied from another shard; delete it and run shard {sh} instead",
+                f.get("shard")
+            )));
         }
     }
-    // The sweep's size and columns, from its identity.
-    let members: usize = reference
-        .get("members")
-        .parse()
-        .map_err(|_| SweepError::Shard {
-            file: file(out, shards[0], "id").display().to_string(),
-            shard: shards[0].name(),
-            reason: format!("`members {}` is not a count", reference.get("members")),
-        })?;
-    let params: Vec<&str> = match reference.get("parameters") {
-        "" => vec![],
-        p => p.split(',').collect(),
-    };
-    let head = header_of(params.iter().copied());
-    let n_fields = CSV_COLUMNS.len() + params.len() + 1;
+    let head = format!(
+        "{}\n",
+        header_of(spec.params.iter().map(|p| p.key.as_str()))
+    );
     // Rows, shard by shard.
-    let mut rows: Vec<(usize, String)> = Vec::with_capacity(members);
-    let (mut completed, mut failed) = (0usize, 0usize);
+    let mut rows: Vec<(usize, String)> = Vec::new();
+    let (mut completed, mut failed, mut rejected) = (0usize, 0usize, 0usize);
     let mut shard_info = Vec::new();
     let mut backends: Vec<String> = Vec::new();
     let mut strategies: Vec<String> = Vec::new();
@@ -454,11 +564,13 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         }
         let text = String::from_utf8_lossy(&bytes);
         let mut lines = text.lines();
+        let want_tag = tag(&sweep_id, sh);
         match lines.next() {
-            Some(h) if h == head => {}
-            Some(h) => {
+            Some(t) if t == want_tag => {}
+            Some(t) => {
                 return Err(fail(format!(
-                    "foreign: its columns `{h}` are not the sweep's `{head}`"
+                    "foreign: its first line `{}` is not this shard's identity `{want_tag}`: the file is another sweep's or another shard's (or was written by an older cosserat); delete it and run shard {sh} instead",
+                    t.chars().take(200).collect::<String>()
                 )))
             }
             None => {
@@ -468,49 +580,41 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
                 )))
             }
         }
+        match lines.next() {
+            Some(h) if format!("{h}\n") == head => {}
+            Some(h) => {
+                return Err(fail(format!(
+                    "foreign: its columns `{}` are not the sweep's `{}`",
+                    h.chars().take(500).collect::<String>(),
+                    head.trim_end()
+                )))
+            }
+            None => {
+                return Err(fail(format!(
+                    "torn: the file has no header; {}",
+                    resume_hint(out, &sweep_file, sh)
+                )))
+            }
+        }
         let mut seen = BTreeSet::new();
-        let (mut c, mut f) = (0usize, 0usize);
+        let (mut c, mut f, mut r) = (0usize, 0usize, 0usize);
         for (k, l) in lines.enumerate() {
-            let at = format!("line {}", k + 2);
-            let fields = split_csv(l);
-            if fields.len() != n_fields {
-                return Err(fail(format!(
-                    "{at}: {} fields, expected {n_fields} (the file was edited)",
-                    fields.len()
-                )));
-            }
-            let i: usize = fields[0]
-                .parse()
-                .ok()
-                .filter(|&i| i < members)
-                .ok_or_else(|| {
-                    fail(format!(
-                        "{at}: member `{}` is not one of the sweep's 0..{members}",
-                        fields[0]
-                    ))
-                })?;
-            if !sh.contains(i) {
-                return Err(fail(format!(
-                    "{at}: member {i} is not one of this shard's (members ≡ {} mod {count}): the file was edited or copied",
-                    sh.index
-                )));
-            }
+            let at = format!("line {}", k + 3);
+            let (i, status) = check_row(&split_csv(l), &spec, Some(sh))
+                .map_err(|e| fail(format!("{at}: {e}")))?;
             if !seen.insert(i) {
                 return Err(fail(format!("{at}: member {i} is recorded twice")));
             }
-            match fields[1].as_str() {
-                "completed" => c += 1,
-                "failed" => f += 1,
-                other => {
-                    return Err(fail(format!(
-                        "{at}: status `{other}` is not completed or failed"
-                    )))
-                }
+            match status {
+                MemberStatus::Completed => c += 1,
+                MemberStatus::Failed => f += 1,
+                MemberStatus::Rejected => r += 1,
             }
             rows.push((i, l.to_string()));
         }
         let want = sh.len_of(members);
         if seen.len() != want {
+            // At most `seen.len() + 8` candidates are looked at.
             let absent: Vec<String> = (sh.index..members)
                 .step_by(count)
                 .filter(|i| !seen.contains(i))
@@ -528,10 +632,26 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         }
         completed += c;
         failed += f;
-        // The shard's last invocation, when it recorded one.
-        let info: Option<serde_json::Value> = std::fs::read_to_string(file(out, sh, "json"))
+        rejected += r;
+        // The shard's last invocation, when it recorded one: of this sweep and shard.
+        let json_path = file(out, sh, "json");
+        let info: Option<serde_json::Value> = std::fs::read_to_string(&json_path)
             .ok()
             .and_then(|t| serde_json::from_str(&t).ok());
+        if let Some(v) = &info {
+            let (id, its) = (v["id"].as_str(), v["shard"].as_str());
+            if id != Some(sweep_id.as_str()) || its != Some(sh.to_string().as_str()) {
+                return Err(SweepError::Shard {
+                    file: json_path.display().to_string(),
+                    shard: sh.name(),
+                    reason: format!(
+                        "foreign: it records sweep id {} shard {}, not id {sweep_id} shard {sh}; delete it and run shard {sh} with --resume",
+                        id.unwrap_or("?"),
+                        its.unwrap_or("?")
+                    ),
+                });
+            }
+        }
         // A text field of the shard's record, also collected (once each) into `seen`.
         let field = |key: &str, seen: &mut Vec<String>| {
             let v = info
@@ -555,6 +675,7 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
             "members": want,
             "completed": c,
             "failed": f,
+            "rejected": r,
             "backend": backend,
             "strategy": strategy,
             "wall_s": wall,
@@ -580,29 +701,28 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         }
     }
     let csv: String = std::iter::once(head)
-        .chain(rows.into_iter().map(|(_, l)| l))
-        .map(|l| l + "\n")
+        .chain(rows.into_iter().map(|(_, l)| l + "\n"))
         .collect();
     let out_err = |path: &Path| {
         let context = format!("cannot write {}", path.display());
         move |error| SweepError::Output { context, error }
     };
     let csv_path = out.join("members.csv");
-    write_atomic(&id_path, &reference.sweep_text()).map_err(out_err(&id_path))?;
-    write_atomic(&csv_path, &csv).map_err(out_err(&csv_path))?;
+    let json_path = out.join("sweep.json");
     let t = template.unwrap_or(serde_json::Value::Null);
     let info = serde_json::json!({
-        "sweep": sweep_file,
+        "sweep": reference.get("sweep"),
         "id": sweep_id,
         "newton": t["newton"],
         "fallback": t["fallback"],
         "cutback": t["cutback"],
         "base": t["base"],
         "mode": t["mode"],
-        "parameters": params,
+        "parameters": spec.params.iter().map(|p| p.key.clone()).collect::<Vec<_>>(),
         "members": members,
         "completed": completed,
         "failed": failed,
+        "rejected": rejected,
         "skipped": 0,
         "repaired_bytes": 0,
         "backend": backends.join(" + "),
@@ -612,14 +732,26 @@ pub fn merge_shards(out: &Path) -> Result<MergeSummary, SweepError> {
         "merge_wall_s": start.elapsed().as_secs_f64(),
         "shards": shard_info,
     });
-    let json_path = out.join("sweep.json");
+    // As a fresh sweep: no earlier sweep.json beside the new members.csv.
+    match std::fs::remove_file(&json_path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            return Err(SweepError::Output {
+                context: format!("cannot remove {}", json_path.display()),
+                error: e,
+            })
+        }
+        _ => {}
+    }
+    write_atomic(&id_path, &reference.sweep_text()).map_err(out_err(&id_path))?;
+    write_atomic(&csv_path, &csv).map_err(out_err(&csv_path))?;
     write_atomic(&json_path, &format!("{info:#}\n")).map_err(out_err(&json_path))?;
     Ok(MergeSummary {
         members,
         completed,
         failed,
+        rejected,
         shards: count,
-        sweep: sweep_file,
+        sweep: reference.get("sweep").to_string(),
         backends,
     })
 }

@@ -17,8 +17,18 @@ use cosserat::integrator::{NewtonVariant, Simulation, SolveTimers, Strategy};
 use cosserat::observe::record::RunStatus;
 use cosserat::sweep::slurm::{self, JobSpec};
 use cosserat::sweep::{
-    check_shard_folder, load_sweep, merge_shards, run_sweep, Shard, SweepOptions,
+    check_shard_folder, load_sweep, merge_shards_from, run_sweep, MemberStatus, Shard, SweepOptions,
 };
+
+/// Prints a status line on stdout. A stdout that cannot be written (redirected to a full
+/// disk) does not stop a sweep or a merge: their results are their files, whose write
+/// errors are errors.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
 
 /// Where the element kernel runs.
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq, Default)]
@@ -141,11 +151,30 @@ pub fn check_solve(solve: SolveArg, exec: &Executor) -> Result<SolveMode> {
 
 /// Resolves `--backend`/`--adapter`, printing the note of an `auto` fallback.
 pub fn executor(backend: BackendArg, adapter: Option<&str>) -> Result<Executor> {
-    let (exec, note) = Executor::resolve(backend.choice(), adapter)?;
+    let (exec, note) = Executor::resolve(backend.choice(), adapter).map_err(adapter_error)?;
     if let Some(n) = note {
         eprintln!("{n}");
     }
     Ok(exec)
+}
+
+/// A GPU that cannot be had, as an error naming the option: `--adapter NAME` that matches
+/// no adapter (listing those that exist, or saying there is none).
+pub fn adapter_error(e: cosserat::gpu::GpuError) -> anyhow::Error {
+    match e {
+        cosserat::gpu::GpuError::NoAdapter {
+            filter: Some(f),
+            available,
+        } => anyhow::anyhow!(
+            "--adapter: no GPU adapter's name contains `{f}`; {}",
+            if available.is_empty() {
+                "this machine has no GPU adapter".to_string()
+            } else {
+                format!("the adapters here: {}", available.join("; "))
+            }
+        ),
+        e => e.into(),
+    }
 }
 
 /// `run --backend gpu|auto`: attaches a one-slot GPU batch to `sim` (kept alive by the
@@ -305,6 +334,10 @@ pub enum SweepAction {
     Merge {
         /// The sweep's output directory (the --out of its shards).
         dir: PathBuf,
+        /// The sweep file, when it is no longer where the shards recorded it (every row is
+        /// checked against its members' values).
+        #[arg(long, value_name = "FILE")]
+        sweep: Option<PathBuf>,
     },
     /// Write DIR/sweep.sbatch, a Slurm job array with one task per shard, and print the
     /// commands to submit and merge it (`--submit`, `--wait`: do them).
@@ -362,7 +395,7 @@ pub struct SlurmArgs {
 /// `cosserat sweep` (and its `merge` and `slurm` subcommands).
 pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
     match a.action {
-        Some(SweepAction::Merge { dir }) => return merge_command(&dir),
+        Some(SweepAction::Merge { dir, sweep }) => return merge_command(&dir, sweep.as_deref()),
         Some(SweepAction::Slurm(s)) => return slurm_command(*s),
         None => {}
     }
@@ -370,6 +403,9 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         bail!("sweep: a sweep file and --out DIR are required");
     };
     let spec = load_sweep(file)?;
+    if let Some(sh) = a.shard {
+        cosserat::sweep::shard::check_count(&spec, sh)?;
+    }
     let exec = executor(a.member.backend, a.member.adapter.as_deref())?;
     let scope = match a.shard {
         Some(sh) => format!(
@@ -380,7 +416,7 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         None => format!("{} members", spec.len()),
     };
     let solve = check_solve(a.member.solve, &exec)?;
-    println!(
+    say!(
         "sweep {}: {scope} over {} ({}), backend {}",
         spec.source,
         spec.params
@@ -399,17 +435,21 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let (mut done, mut failed) = (0usize, 0usize);
+    let (mut done, mut failed, mut rejected) = (0usize, 0usize, 0usize);
     let opts = a.member.sweep_options(a.resume, a.shard, solve);
     let summary = run_sweep(&spec, &exec, out, &opts, |row| {
         done += 1;
-        if row.status == RunStatus::Failed {
-            failed += 1;
+        match row.status {
+            MemberStatus::Completed => {}
+            MemberStatus::Failed => failed += 1,
+            MemberStatus::Rejected => rejected += 1,
         }
         bar.inc(1);
-        bar.set_message(format!("done {done}, failed {failed}"));
-    })?;
+        bar.set_message(format!("done {done}, failed {failed}, rejected {rejected}"));
+    });
+    // Cleared on an error too: the error line stands alone.
     bar.finish_and_clear();
+    let summary = summary?;
     let csv = match a.shard {
         Some(sh) => cosserat::sweep::shard::file(out, sh, "csv"),
         None => out.join("members.csv"),
@@ -428,17 +468,18 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
             summary.stale_histories
         );
     }
-    println!(
-        "{} members: {} completed, {} failed, {} skipped (already recorded) in {:.2} s. Results in {}",
+    say!(
+        "{} members: {} completed, {} failed, {} rejected, {} skipped (already recorded) in {:.2} s. Results in {}",
         summary.members,
         summary.completed,
         summary.failed,
+        summary.rejected,
         summary.skipped,
         summary.wall_s,
         csv.display()
     );
     if a.shard.is_some() {
-        println!(
+        say!(
             "when every shard has run: cosserat sweep merge {}",
             out.display()
         );
@@ -447,15 +488,16 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
 }
 
 /// `cosserat sweep merge DIR`.
-fn merge_command(dir: &std::path::Path) -> Result<ExitCode> {
-    let m = merge_shards(dir)?;
-    println!(
-        "merged {} shards of {}: {} members ({} completed, {} failed), backend {}. Results in {}",
+fn merge_command(dir: &std::path::Path, sweep: Option<&std::path::Path>) -> Result<ExitCode> {
+    let m = merge_shards_from(dir, sweep)?;
+    say!(
+        "merged {} shards of {}: {} members ({} completed, {} failed, {} rejected), backend {}. Results in {}",
         m.shards,
         m.sweep,
         m.members,
         m.completed,
         m.failed,
+        m.rejected,
         if m.backends.is_empty() {
             "unknown".to_string()
         } else {
@@ -570,7 +612,7 @@ fn slurm_command(a: SlurmArgs) -> Result<ExitCode> {
             format!("; {}", bad.join(", "))
         }
     );
-    merge_command(&job.out).with_context(|| {
+    merge_command(&job.out, None).with_context(|| {
         format!(
             "job {id} ended but its shards do not merge{}; logs in {}",
             if bad.is_empty() {
@@ -814,6 +856,18 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         a.newton
     }
     .variant();
+    // The GPU first: `--gpu-only`, or an `--adapter` named, that finds no GPU runs nothing
+    // (exit 2, before the CPU path's time is spent).
+    let gpu_exec = if a.cpu_only {
+        Ok((Executor::Cpu, None))
+    } else {
+        Executor::resolve(BackendChoice::Gpu, a.adapter.as_deref())
+    };
+    let gpu_exec = match gpu_exec {
+        Err(e) if a.adapter.is_some() => return Err(adapter_error(e)),
+        Err(e) if a.gpu_only => bail!("--gpu-only: no GPU to time: {e}"),
+        other => other,
+    };
     let rss0 = peak_rss_bytes();
     let cpu = if a.gpu_only {
         None
@@ -828,11 +882,6 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         )?)
     };
     let cpu_rate = cpu.as_ref().map(|c| work / c.stats.wall_s);
-    let gpu_exec = if a.cpu_only {
-        Ok((Executor::Cpu, None))
-    } else {
-        Executor::resolve(BackendChoice::Gpu, a.adapter.as_deref())
-    };
     let (host_solve, device_solve) = match a.solve {
         BenchSolveArg::Host => (true, false),
         BenchSolveArg::Device => (false, true),
