@@ -146,8 +146,8 @@ pub struct SweepSpec {
     pub params: Vec<VaryParam>,
     /// Per member, one value per parameter.
     pub values: Vec<Vec<f64>>,
-    /// Elements of the base scene (for the memory estimate).
-    base_elements: usize,
+    /// What a member of the base scene holds (for the memory estimate).
+    base_footprint: crate::scene::limits::Footprint,
 }
 
 #[derive(Deserialize)]
@@ -323,7 +323,12 @@ impl SweepSpec {
 
     /// Elements of the base scene.
     pub fn base_elements(&self) -> usize {
-        self.base_elements
+        self.base_footprint.elements as usize
+    }
+
+    /// What a member of the base scene holds (elements, nodes, contact spheres).
+    pub fn base_footprint(&self) -> crate::scene::limits::Footprint {
+        self.base_footprint
     }
 
     /// The sweep's identity: a hash of what determines its results — the base scene
@@ -622,9 +627,9 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
     }
     let base_scene = parse_scene(&base_text, &base_source)
         .map_err(|e| invalid(Some(raw.base.span()), "base", format!("base scene: {e}")))?;
-    let base_elements = base_scene.model.elements.len();
+    let base_footprint = crate::scene::limits::Footprint::of_model(&base_scene.model);
     drop(base_scene);
-    crate::scene::limits::check_memory("this sweep", count, base_elements as u64)
+    crate::scene::limits::check_batch("this sweep", count, &base_footprint)
         .map_err(|e| invalid(count_span, count_key, e.to_string()))?;
     let values: Vec<Vec<f64>> = match mode {
         SweepMode::Grid => {
@@ -703,7 +708,7 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
         mode,
         params,
         values,
-        base_elements,
+        base_footprint,
     };
     // Every key must be one the base scene has room for: the path must lead into the
     // base scene (checked by writing the first member's value; the path errors do not

@@ -671,28 +671,36 @@ pub fn run_sweep(
     // Memory of the members this invocation will hold at once, before building them.
     let todo = (scope - done.len()) as u64;
     if todo > 0 {
-        let elements = spec.base_elements() as u64;
-        crate::scene::limits::check_memory("this sweep", todo, elements).map_err(|e| {
-            SweepError::Invalid {
+        crate::scene::limits::check_batch("this sweep", todo, &spec.base_footprint()).map_err(
+            |e| SweepError::Invalid {
                 file: spec.source.clone(),
                 location: None,
                 key: "(members)".into(),
                 reason: e.to_string(),
-            }
-        })?;
+            },
+        )?;
     }
     // Build the members; a member whose scene rejects its values is a `rejected` row.
     let mut members = Vec::new();
     let mut ids = Vec::new();
     let mut rejected = Vec::new();
-    let mut elements_total = 0u64;
+    let mut total = crate::scene::limits::Footprint::default();
     for i in (0..spec.len()).filter(|i| in_scope(i) && !done.contains(i)) {
         match spec.member_scene(i) {
             Ok(scene) => {
                 // Members may differ in size (a varied element count): count what is built.
-                elements_total += scene.model.elements.len() as u64;
-                let per = elements_total / (members.len() as u64 + 1);
-                crate::scene::limits::check_memory("this sweep", todo, per).map_err(|e| {
+                let fp = crate::scene::limits::Footprint::of_model(&scene.model);
+                total.elements += fp.elements;
+                total.nodes += fp.nodes;
+                total.contact_spheres += fp.contact_spheres;
+                let n = members.len() as u64 + 1;
+                let per = crate::scene::limits::Footprint {
+                    elements: total.elements / n,
+                    nodes: total.nodes / n,
+                    contact_spheres: total.contact_spheres / n,
+                    ..Default::default()
+                };
+                crate::scene::limits::check_batch("this sweep", todo, &per).map_err(|e| {
                     SweepError::Invalid {
                         file: spec.source.clone(),
                         location: None,
