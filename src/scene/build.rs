@@ -179,7 +179,14 @@ impl Ctx<'_, '_> {
             ));
         }
         if let Some(c) = name.chars().find(|c| forbidden.contains(c)) {
-            return Err(self.err(path, format!("must not contain {c:?}")));
+            let list: Vec<String> = forbidden.iter().map(|f| format!("{f:?}")).collect();
+            return Err(self.err(
+                path,
+                format!(
+                    "must be a non-empty name without {} or control characters (got {c:?})",
+                    list.join(", ")
+                ),
+            ));
         }
         Ok(())
     }

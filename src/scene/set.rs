@@ -68,7 +68,8 @@ fn parsed<'i>(text: &'i str, span: &Range<usize>) -> Result<Spanned<DeValue<'i>>
 
 /// Writes the number `x` (spelled in `num`) at `key` into the document `root`, with the
 /// byte span `span`. The parent must exist; the leaf may be new (a table key) or must be a
-/// number (an array entry). Integers stay integers when `x` is integral. Tables in an
+/// number (an array entry). Integers stay integers, and new keys are integers, when `x` is
+/// integral. Tables in an
 /// array of tables can be named by their `name` key (`rod.beam.elements`).
 pub(crate) fn set_in<'i>(
     root: &mut DeTable<'i>,
@@ -84,7 +85,9 @@ pub(crate) fn set_in<'i>(
     })?;
     let new = |old: Option<&DeValue<'i>>| -> Result<Spanned<DeValue<'i>>, String> {
         match (old, &num.int) {
-            (Some(DeValue::Integer(_)), Some(i)) => parsed(i, &span),
+            // An integer stays an integer, and a new key gets one when `x` is integral
+            // (counts are integers; a float key reads an integer as well).
+            (Some(DeValue::Integer(_)) | None, Some(i)) => parsed(i, &span),
             (Some(DeValue::Integer(_)) | Some(DeValue::Float(_)) | None, _) => {
                 parsed(&num.float, &span)
             }
@@ -107,7 +110,7 @@ pub(crate) fn set_in<'i>(
                 // An array of tables by name: `rod.beam.elements` is the rod named `beam`.
                 let names: Vec<String> = a
                     .iter()
-                    .filter_map(|v| name_of(v.get_ref()).map(super::echo))
+                    .filter_map(|v| name_of(v.get_ref()).map(|n| super::echo(n).into_owned()))
                     .collect();
                 a.iter_mut()
                     .find(|v| name_of(v.get_ref()) == Some(k.as_str()))
@@ -138,7 +141,7 @@ pub(crate) fn set_in<'i>(
         };
         match next.get_mut() {
             DeValue::Table(t) => table = Some(t),
-            DeValue::Array(a) => array = Some(&mut a[..]),
+            DeValue::Array(a) => array = Some(a.as_mut()),
             _ => {}
         }
     }

@@ -110,6 +110,7 @@ fn non_empty(r: Range<usize>) -> Option<Range<usize>> {
 
 impl<'i> Doc<'i> {
     /// Wraps a parsed document.
+    #[cfg(test)]
     pub(crate) fn new(text: &'i str, root: Spanned<DeTable<'i>>) -> Self {
         Self::with_sets(text, root, Vec::new())
     }
@@ -212,11 +213,6 @@ impl<'i> Doc<'i> {
         });
         best.map(|(_, _, p)| p).unwrap_or_default()
     }
-
-    /// 1-based `(line, column)` of a byte offset (column in characters).
-    pub(crate) fn line_col(&self, offset: usize) -> (usize, usize) {
-        line_col(self.text, offset)
-    }
 }
 
 fn visit_table(t: &DeTable<'_>, path: &KeyPath, f: &mut dyn FnMut(&KeyPath, Range<usize>)) {
@@ -289,6 +285,6 @@ mod tests {
             doc.path_at(span.start + 1).to_string(),
             "rod[1].points[1][0]"
         );
-        assert_eq!(doc.line_col(span.start), (5, 19));
+        assert_eq!(line_col(text, span.start), (5, 19));
     }
 }
