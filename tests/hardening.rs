@@ -692,3 +692,103 @@ fn a_write_error_is_one_clean_error_line_and_leaves_no_temporary_file() {
         assert!(left.is_empty(), "{kib} KiB: left {left:?}");
     }
 }
+
+// ---- Scene files: size, kind, names, --set locations ------------------------------
+
+#[test]
+fn scene_files_are_read_with_a_size_cap_and_only_when_regular() {
+    // A device would be read forever: refused before reading.
+    if Path::new("/dev/zero").exists() {
+        let o = cosserat().args(["check", "/dev/zero"]).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(
+            stderr(&o).contains("/dev/zero: not a regular file"),
+            "{}",
+            stderr(&o)
+        );
+    }
+    // A (sparse) file over 64 MiB: refused by size, for `check` and for `run --set`.
+    let dir = tempfile::tempdir().unwrap();
+    let big = dir.path().join("big.toml");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len((64 << 20) + 1)
+        .unwrap();
+    for args in [&["check"][..], &["run", "--set", "integrator.dt=0.1"][..]] {
+        let o = cosserat().args(args).arg(&big).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(
+            stderr(&o).contains("big.toml: scene file larger than 64 MiB"),
+            "{}",
+            stderr(&o)
+        );
+    }
+}
+
+#[test]
+fn a_scene_name_over_256_bytes_is_refused_by_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let long = "n".repeat(100_000);
+    let scene = write(
+        dir.path(),
+        "s.toml",
+        &frame_with("name = \"frame\"", &format!("name = \"{long}\"")),
+    );
+    let o = cosserat()
+        .arg("run")
+        .arg(&scene)
+        .arg("--out")
+        .arg(dir.path().join("o"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(
+        e.contains("name: must be at most 256 bytes long (got 100000 bytes)"),
+        "{e}"
+    );
+    assert!(e.len() < 500, "{e}");
+    assert!(!dir.path().join("o").exists());
+}
+
+#[test]
+fn run_set_errors_point_into_the_file_or_name_the_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = frame_with("E = 5e5", "E = -5e5");
+    let scene = write(dir.path(), "s.toml", &text);
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("E = -5e5"))
+        .unwrap()
+        + 1;
+    let o = cosserat()
+        .arg("run")
+        .arg(&scene)
+        .args(["--set", "integrator.dt=0.1", "--out"])
+        .arg(dir.path().join("o"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!(
+            "s.toml:{line}:5: material.frame.E: must be > 0 (got -500000)"
+        )),
+        "{}",
+        stderr(&o)
+    );
+    let scene = write(dir.path(), "t.toml", &frame_with("E = 5e5", "E = 5e5"));
+    let o = cosserat()
+        .arg("run")
+        .arg(&scene)
+        .args(["--set", "integrator.dt=-1", "--out"])
+        .arg(dir.path().join("o"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--set integrator.dt=-1 (on ")
+            && stderr(&o).contains("t.toml): integrator.dt: must be > 0 (got -1)"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -1,7 +1,7 @@
 //! Contract: every malformed scene is rejected with an error whose text names the file, the
 //! key path, the reason and (where the key exists in the file) its `line:column`.
 
-use cosserat::scene::{builtin_scenes, load_scene, parse_scene, SceneError};
+use cosserat::scene::{builtin_scenes, load_scene, parse_scene, parse_scene_with_sets, SceneError};
 
 /// A valid scene; each test breaks one thing in it.
 const GOOD: &str = r#"name = "t"
@@ -544,4 +544,228 @@ fn baseline_schemes_parse() {
         parse_scene(&t, FILE).unwrap().params.scheme,
         cosserat::integrator::Scheme::GenAlpha { rho_inf: 0.25 }
     );
+}
+
+// ---- Names, ranges, key attribution, echo caps, iteration bounds -----------------------
+
+#[test]
+fn empty_rod_name_is_refused() {
+    let t = edit("name = \"a\"", "name = \"\"");
+    fails_at(&t, "rod[0].name", "must not be empty", "name = ^\"\"");
+}
+
+#[test]
+fn names_with_control_characters_are_refused() {
+    let t = edit("name = \"b\"", "name = \"b\\tc\"");
+    fails_at(
+        &t,
+        "rod[1].name",
+        "must not contain control characters (got \\u{9})",
+        "\"b\\tc\"",
+    );
+    let probe = "[[probe]]\nname = \"tip\\u001b[2J\"\nat = [10, 10, 0]\n\n[integrator]";
+    let t = edit("[integrator]", probe);
+    fails_at(
+        &t,
+        "probe[0].name",
+        "must not contain control characters (got \\u{1b})",
+        "\"tip",
+    );
+}
+
+#[test]
+fn names_longer_than_256_bytes_are_refused() {
+    let long = "n".repeat(257);
+    let t = edit("name = \"t\"", &format!("name = \"{long}\""));
+    let msg = fails(&t, "name", "must be at most 256 bytes long (got 257 bytes)");
+    assert!(msg.len() < 300, "the name is echoed whole: {msg}");
+    let t = edit("name = \"a\"", &format!("name = \"{long}\""));
+    fails(
+        &t,
+        "rod[0].name",
+        "must be at most 256 bytes long (got 257 bytes)",
+    );
+    // 256 bytes are fine.
+    let t = edit("name = \"t\"", &format!("name = \"{}\"", &long[..256]));
+    assert_eq!(parse_scene(&t, FILE).unwrap().name.len(), 256);
+}
+
+#[test]
+fn a_coordinate_out_of_range_is_blamed_on_itself() {
+    let t = edit("[[0, 0, 0], [10, 0, 0]]", "[[0, 0, 0], [10, 1e200, 0]]");
+    let msg = fails_at(
+        &t,
+        "rod[0].points[1][1]",
+        "coordinate out of range: |1e200| > 1e100",
+        "1e200",
+    );
+    assert!(!msg.contains("zero-length"), "{msg}");
+    assert!(msg.len() < 300, "{msg}");
+    // Up to the limit, the rod is fine.
+    let t = edit("[[0, 0, 0], [10, 0, 0]]", "[[0, 0, 0], [1e100, 0, 0]]");
+    let t = t.replace(
+        "[[10, 0, 0], [10, 10, 0]]",
+        "[[1e100, 0, 0], [1e100, 1e99, 0]]",
+    );
+    let t = t.replace("at = [10, 10, 0]", "at = [1e100, 1e99, 0]");
+    parse_scene(&t, FILE).unwrap();
+}
+
+#[test]
+fn an_underflowing_moment_of_area_is_blamed_on_itself() {
+    let t = edit("I11 = 2e-5", "I11 = 5e-324");
+    fails_at(
+        &t,
+        "section.thin.I11",
+        "too small: I11*I22 = 0 underflows double precision",
+        "5e-324",
+    );
+    let t = edit("I22 = 2e-5", "I22 = 1e-305");
+    fails_at(&t, "section.thin.I22", "too small", "1e-305");
+    // A product I12 makes non-positive is still I12's.
+    let t = edit("J = 4e-5", "I12 = 3e-5\nJ = 4e-5");
+    fails_at(
+        &t,
+        "section.thin.I12",
+        "I11*I22 - I12^2 must be > 0",
+        "3e-5",
+    );
+}
+
+/// Every kind of rejection that echoes what the file says echoes at most a bounded part.
+#[test]
+fn long_values_are_echoed_cut() {
+    let big = "x".repeat(100_000);
+    let cases = [
+        (
+            edit("scheme = \"edmc2\"", &format!("scheme = \"{big}\"")),
+            "integrator.scheme",
+        ),
+        (
+            edit("material = \"soft\"", &format!("material = \"{big}\"")),
+            "rod[0].material",
+        ),
+        (edit("gravity = ", &format!("{big} = ")), ""),
+        (
+            edit("E = 5e5", &format!("E = \"{big}\"")),
+            "material.soft.E",
+        ),
+        (
+            edit("[material.soft]", &format!("[material.{big}]")),
+            "rod[0].material",
+        ),
+        (
+            edit(
+                "at = [0, 0, 0]",
+                &format!("at = [{}0]", "0.5, ".repeat(20_000)),
+            ),
+            "clamp[0].at",
+        ),
+        (
+            edit("dt = 0.2", &format!("dt = -1{}", "0".repeat(300))),
+            "integrator.dt",
+        ),
+    ];
+    for (text, key) in cases {
+        let err = parse_scene(&text, FILE).expect_err("rejected");
+        let msg = err.to_string();
+        assert!(
+            msg.len() < 600,
+            "{} bytes: {}",
+            msg.len(),
+            msg.chars().take(600).collect::<String>()
+        );
+        if !key.is_empty() {
+            assert_eq!(err.key(), Some(key), "{msg}");
+        }
+    }
+    let msg = fails(
+        &edit("scheme = \"edmc2\"", &format!("scheme = \"{big}\"")),
+        "integrator.scheme",
+        "unknown scheme `xxxx",
+    );
+    assert!(msg.contains("… (100000 bytes)`"), "{msg}");
+}
+
+#[test]
+fn iteration_caps_and_tolerances_are_bounded() {
+    let with = |line: &str| edit("t_end = 10.0", &format!("t_end = 10.0\n{line}"));
+    fails_at(
+        &with("max_iter = 9223372036854775807"),
+        "integrator.max_iter",
+        "must be <= 1000 (got 9223372036854775807)",
+        "9223372036854775807",
+    );
+    fails(
+        &with("max_outer = 1001"),
+        "integrator.max_outer",
+        "must be <= 1000",
+    );
+    fails(
+        &with("max_link_rounds = 5000"),
+        "integrator.max_link_rounds",
+        "must be <= 1000",
+    );
+    for key in ["newton_tol", "outer_tol", "energy_tol"] {
+        fails_at(
+            &with(&format!("{key} = 1e-300")),
+            &format!("integrator.{key}"),
+            "must be >= 1e-15 (got 1e-300)",
+            "1e-300",
+        );
+    }
+    let s = parse_scene(&with("max_iter = 1000\nnewton_tol = 1e-15"), FILE).unwrap();
+    assert_eq!((s.params.max_iter, s.params.newton_tol), (1000, 1e-15));
+}
+
+/// `--set` values are written into the file's own document: errors about the file's
+/// values keep their `line:column`, errors about a `--set` value name the `--set`.
+#[test]
+fn set_overrides_keep_the_files_locations() {
+    // A file value below the overridden one.
+    let t = edit("J = 4e-5", "J = -4e-5");
+    let err =
+        parse_scene_with_sets(&t, FILE, &[("integrator.dt".into(), 0.1)]).expect_err("rejected");
+    let (l, c) = loc(&t, "-4e-5");
+    assert_eq!(
+        err.to_string(),
+        format!("{FILE}:{l}:{c}: section.thin.J: must be > 0 (got -4e-5)")
+    );
+    // A new key inserted by --set before the file's bad value.
+    let t = edit("dt = 0.2", "dt = -0.2");
+    let err = parse_scene_with_sets(&t, FILE, &[("integrator.max_iter".into(), 3.0)])
+        .expect_err("rejected");
+    assert_eq!(err.location(), Some(loc(&t, "-0.2")), "{err}");
+    // The --set value itself.
+    let err =
+        parse_scene_with_sets(GOOD, FILE, &[("integrator.dt".into(), -1.0)]).expect_err("rejected");
+    assert!(matches!(err, SceneError::Set { .. }), "{err:?}");
+    assert_eq!(
+        err.to_string(),
+        format!("--set integrator.dt=-1 (on {FILE}): integrator.dt: must be > 0 (got -1)")
+    );
+    // A rod named by its name resolves to its index; a type error is the --set's.
+    let err =
+        parse_scene_with_sets(GOOD, FILE, &[("rod.b.elements".into(), 0.0)]).expect_err("rejected");
+    assert_eq!(err.key(), Some("rod[1].elements"), "{err}");
+    assert!(
+        err.to_string().starts_with("--set rod.b.elements=0 "),
+        "{err}"
+    );
+    let err = parse_scene_with_sets(GOOD, FILE, &[("integrator.cutback".into(), 0.5)])
+        .expect_err("rejected");
+    assert!(
+        err.to_string().starts_with(
+            "--set integrator.cutback=0.5 (on scenes/bad.toml): integrator.cutback: invalid type"
+        ),
+        "{err}"
+    );
+    let err = parse_scene_with_sets(GOOD, FILE, &[("name".into(), 1.0)]).expect_err("rejected");
+    assert_eq!(
+        err.to_string(),
+        "--set name=1 (on scenes/bad.toml): name: the scene's value there is a string, not a number"
+    );
+    // Accepted overrides take effect.
+    let s = parse_scene_with_sets(GOOD, FILE, &[("rod[0].elements".into(), 7.0)]).unwrap();
+    assert_eq!(s.model.elements.len(), 7 + 4);
 }

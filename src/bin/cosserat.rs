@@ -557,8 +557,7 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
     let scene = if a.sets.is_empty() {
         load_scene(&a.scene)?
     } else {
-        cosserat::sweep::scene_with_overrides(&a.scene, &a.sets)
-            .map_err(|e| anyhow!("--set: {e}"))?
+        cosserat::sweep::scene_with_overrides(&a.scene, &a.sets).map_err(|e| anyhow!("{e}"))?
     };
     let params = resolve_params(&scene, &a)?;
     let out = match a.out.clone() {

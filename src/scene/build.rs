@@ -36,17 +36,33 @@ struct Ctx<'a, 'i> {
 }
 
 fn fmt_v(v: &Vec3) -> String {
-    format!("({}, {}, {})", v.x, v.y, v.z)
+    format!("({}, {}, {})", fmt_num(v.x), fmt_num(v.y), fmt_num(v.z))
 }
+
+/// Longest rod, probe or scene name, in bytes.
+pub(crate) const MAX_NAME_BYTES: usize = 256;
+
+/// Largest magnitude of a rod point's coordinate: differences of coordinates, and the sums
+/// of their squares that give lengths, stay far from overflow.
+pub(crate) const MAX_COORDINATE: f64 = 1e100;
+
+/// Most Newton iterations per solve, staggered outer rounds and link rounds per step
+/// (`max_iter`, `max_outer`, `max_link_rounds`).
+pub(crate) const MAX_ITERATION_CAP: i64 = 1000;
+
+/// Smallest relative tolerance (`newton_tol`, `outer_tol`, `energy_tol`): tolerances are
+/// relative to a force or energy scale, and a few ulps (f64's ε ≈ 2.2e-16) is the round-off
+/// floor no solve can be asked to beat.
+pub(crate) const MIN_TOLERANCE: f64 = 1e-15;
 
 impl Ctx<'_, '_> {
     fn err(&self, path: &KeyPath, reason: impl Display) -> SceneError {
-        SceneError::Invalid {
-            file: self.file.to_string(),
-            location: self.doc.span_of(path).map(|s| self.doc.line_col(s.start)),
-            key: key_name(path),
-            reason: reason.to_string(),
-        }
+        self.doc.error(
+            self.file,
+            self.doc.span_of(path).map(|s| s.start),
+            key_name(path),
+            super::cap_echoes(&reason.to_string()),
+        )
     }
 
     fn required<T>(&self, path: &KeyPath, v: Option<T>) -> Result<T> {
@@ -57,7 +73,7 @@ impl Ctx<'_, '_> {
         if x.is_finite() {
             Ok(x)
         } else {
-            Err(self.err(path, format!("must be finite (got {x})")))
+            Err(self.err(path, format!("must be finite (got {})", fmt_num(x))))
         }
     }
 
@@ -66,7 +82,7 @@ impl Ctx<'_, '_> {
         if x > 0.0 {
             Ok(x)
         } else {
-            Err(self.err(path, format!("must be > 0 (got {x})")))
+            Err(self.err(path, format!("must be > 0 (got {})", fmt_num(x))))
         }
     }
 
@@ -75,7 +91,7 @@ impl Ctx<'_, '_> {
         if x >= 0.0 {
             Ok(x)
         } else {
-            Err(self.err(path, format!("must be >= 0 (got {x})")))
+            Err(self.err(path, format!("must be >= 0 (got {})", fmt_num(x))))
         }
     }
 
@@ -111,6 +127,68 @@ impl Ctx<'_, '_> {
             Some(n) if n >= 1 => usize::try_from(n).map_err(|_| self.err(path, "too large")),
             Some(n) => Err(self.err(path, format!("must be >= 1 (got {n})"))),
         }
+    }
+
+    /// A count bounded by [`MAX_ITERATION_CAP`].
+    fn iteration_cap(&self, path: &KeyPath, v: Option<i64>, default: usize) -> Result<usize> {
+        match v {
+            Some(n) if n > MAX_ITERATION_CAP => {
+                Err(self.err(path, format!("must be <= {MAX_ITERATION_CAP} (got {n})")))
+            }
+            _ => self.count(path, v, default),
+        }
+    }
+
+    /// A relative tolerance: finite, and at least [`MIN_TOLERANCE`].
+    fn tolerance(&self, path: &KeyPath, x: f64) -> Result<f64> {
+        let x = self.positive(path, x)?;
+        if x < MIN_TOLERANCE {
+            return Err(self.err(
+                path,
+                format!(
+                    "must be >= {MIN_TOLERANCE:e} (got {}): the tolerance is relative, and double precision cannot resolve less",
+                    fmt_num(x)
+                ),
+            ));
+        }
+        Ok(x)
+    }
+
+    /// A name (of a rod, a probe, the scene): not blank, at most [`MAX_NAME_BYTES`]
+    /// bytes, no control characters, none of `forbidden`.
+    fn name(&self, path: &KeyPath, name: &str, forbidden: &[char]) -> Result<()> {
+        if name.trim().is_empty() {
+            return Err(self.err(path, "must not be empty"));
+        }
+        if name.len() > MAX_NAME_BYTES {
+            return Err(self.err(
+                path,
+                format!(
+                    "must be at most {MAX_NAME_BYTES} bytes long (got {} bytes)",
+                    name.len()
+                ),
+            ));
+        }
+        if let Some(c) = name.chars().find(|c| c.is_control()) {
+            return Err(self.err(
+                path,
+                format!(
+                    "must not contain control characters (got {})",
+                    c.escape_unicode()
+                ),
+            ));
+        }
+        if let Some(c) = name.chars().find(|c| forbidden.contains(c)) {
+            let list: Vec<String> = forbidden.iter().map(|f| format!("{f:?}")).collect();
+            return Err(self.err(
+                path,
+                format!(
+                    "must be a non-empty name without {} or control characters (got {c:?})",
+                    list.join(", ")
+                ),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -174,6 +252,23 @@ fn section(cx: &Ctx, path: &KeyPath, s: &RawSection) -> Result<Section> {
         Some(x) => cx.finite(&path.key("I12"), x)?,
         None => 0.0,
     };
+    if !(i11 * i22).is_normal() {
+        // The product underflows: the smaller moment is the one out of range.
+        let (k, x) = if i11 <= i22 {
+            ("I11", i11)
+        } else {
+            ("I22", i22)
+        };
+        return Err(cx.err(
+            &path.key(k),
+            format!(
+                "too small: I11*I22 = {} underflows double precision (got {k} = {}); give moments of area with I11*I22 >= {:e}",
+                fmt_num(i11 * i22),
+                fmt_num(x),
+                f64::MIN_POSITIVE
+            ),
+        ));
+    }
     if i11 * i22 - i12 * i12 <= 0.0 {
         return Err(cx.err(
             &path.key("I12"),
@@ -306,6 +401,9 @@ fn plan_rod(
     materials: &BTreeMap<String, Material>,
     sections: &BTreeMap<String, Section>,
 ) -> Result<RodPlan> {
+    if let Some(n) = &r.name {
+        cx.name(&path.key("name"), n, &[])?;
+    }
     let name = r.name.clone().unwrap_or_else(|| format!("rod{index}"));
     let known = |names: Vec<&String>| {
         if names.is_empty() {
@@ -349,7 +447,19 @@ fn plan_rod(
     let points = raw_points
         .iter()
         .enumerate()
-        .map(|(i, p)| cx.vec3(&pp.idx(i), p))
+        .map(|(i, p)| {
+            let v = cx.vec3(&pp.idx(i), p)?;
+            if let Some(k) = (0..3).find(|&k| v[k].abs() > MAX_COORDINATE) {
+                return Err(cx.err(
+                    &pp.idx(i).idx(k),
+                    format!(
+                        "coordinate out of range: |{}| > {MAX_COORDINATE:e} (coordinates must be at most {MAX_COORDINATE:e} in magnitude, so that distances between points stay representable)",
+                        fmt_num(v[k])
+                    ),
+                ));
+            }
+            Ok(v)
+        })
         .collect::<Result<Vec<_>>>()?;
     let ep = path.key("elements");
     let counts = elements_list(
@@ -873,17 +983,18 @@ fn integrator(cx: &Ctx, ip: &KeyPath, r: &RawIntegrator) -> Result<(IntegratorPa
         };
     }
     if let Some(x) = r.newton_tol {
-        p.newton_tol = cx.positive(&k("newton_tol"), x)?;
+        p.newton_tol = cx.tolerance(&k("newton_tol"), x)?;
     }
     if let Some(x) = r.outer_tol {
-        p.outer_tol = cx.positive(&k("outer_tol"), x)?;
+        p.outer_tol = cx.tolerance(&k("outer_tol"), x)?;
     }
     if let Some(x) = r.energy_tol {
-        p.energy_tol = cx.positive(&k("energy_tol"), x)?;
+        p.energy_tol = cx.tolerance(&k("energy_tol"), x)?;
     }
-    p.max_iter = cx.count(&k("max_iter"), r.max_iter, p.max_iter)?;
-    p.max_outer = cx.count(&k("max_outer"), r.max_outer, p.max_outer)?;
-    p.max_link_rounds = cx.count(&k("max_link_rounds"), r.max_link_rounds, p.max_link_rounds)?;
+    p.max_iter = cx.iteration_cap(&k("max_iter"), r.max_iter, p.max_iter)?;
+    p.max_outer = cx.iteration_cap(&k("max_outer"), r.max_outer, p.max_outer)?;
+    p.max_link_rounds =
+        cx.iteration_cap(&k("max_link_rounds"), r.max_link_rounds, p.max_link_rounds)?;
     let output_every = cx.count(&k("output_every"), r.output_every, 1)?;
     Ok((p, output_every))
 }
@@ -2208,6 +2319,15 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         Some(n) if n.trim().is_empty() => {
             return Err(cx.err(&root.key("name"), "must not be empty"))
         }
+        Some(n) if n.len() > MAX_NAME_BYTES => {
+            return Err(cx.err(
+                &root.key("name"),
+                format!(
+                    "must be at most {MAX_NAME_BYTES} bytes long (got {} bytes)",
+                    n.len()
+                ),
+            ))
+        }
         Some(n) => n.clone(),
         None => {
             let stem = file.strip_prefix("builtin:").unwrap_or(file);
@@ -2546,13 +2666,10 @@ fn probe(
     p: &RawProbe,
 ) -> Result<Probe> {
     let name = match &p.name {
-        Some(n) if n.trim().is_empty() || n.contains([',', '"', '\n']) => {
-            return Err(cx.err(
-                &path.key("name"),
-                "must be a non-empty name without commas, quotes or line breaks",
-            ))
+        Some(n) => {
+            cx.name(&path.key("name"), n, &[',', '"'])?;
+            n.clone()
         }
-        Some(n) => n.clone(),
         None => format!("probe{i}"),
     };
     let node = match (&p.at, &p.rod) {

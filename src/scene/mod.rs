@@ -18,9 +18,12 @@
 mod build;
 pub mod limits;
 mod raw;
+mod set;
 mod span;
 
+use std::borrow::Cow;
 use std::fmt::Write as _;
+use std::io::Read as _;
 use std::path::Path;
 
 use serde::Deserialize;
@@ -136,8 +139,8 @@ pub enum SceneError {
     },
     /// The spec is neither an existing file nor a built-in scene name.
     #[error(
-        "unknown scene `{name}`: no such file and no built-in scene of that name (built-in scenes: {})",
-        .available.join(", ")
+        "unknown scene `{}`: no such file and no built-in scene of that name (built-in scenes: {})",
+        echo(.name), .available.join(", ")
     )]
     UnknownBuiltin {
         /// The spec as given.
@@ -167,6 +170,115 @@ pub enum SceneError {
         /// What is wrong.
         reason: String,
     },
+    /// A value given on the command line (`--set KEY=VALUE`) is invalid, or cannot be
+    /// written into the scene.
+    #[error("--set {set} (on {file}): {key}: {reason}")]
+    Set {
+        /// Path of the scene file (or `builtin:NAME`) the override applies to.
+        file: String,
+        /// The override as `KEY=VALUE`.
+        set: String,
+        /// Key path of the value, e.g. `integrator.dt` (for a value the override wrote,
+        /// the key as resolved in the scene, e.g. `rod[0].elements` for `rod.beam.elements`).
+        key: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The scene file is larger than [`MAX_SCENE_BYTES`].
+    #[error("{path}: scene file larger than {} MiB", MAX_SCENE_BYTES >> 20)]
+    TooLarge {
+        /// The path as given.
+        path: String,
+    },
+}
+
+/// Largest scene file read, in bytes (64 MiB): a larger file (or an endless one) is
+/// refused after reading one byte more than this.
+pub const MAX_SCENE_BYTES: u64 = 64 << 20;
+
+/// Longest value (in characters) an error message echoes whole; longer ones are cut by
+/// [`echo`].
+pub(crate) const MAX_ECHO: usize = 60;
+
+/// `s` as an error message echoes it: whole when at most [`MAX_ECHO`] characters long,
+/// else its first characters and `… (N bytes)`.
+pub(crate) fn echo(s: &str) -> Cow<'_, str> {
+    match s.char_indices().nth(MAX_ECHO) {
+        None => Cow::Borrowed(s),
+        Some(_) => {
+            let cut = s
+                .char_indices()
+                .nth(MAX_ECHO - 12)
+                .map_or(s.len(), |(i, _)| i);
+            Cow::Owned(format!("{}… ({} bytes)", &s[..cut], s.len()))
+        }
+    }
+}
+
+/// An error reason with everything it echoes cut by [`echo`]: each quoted part (between
+/// backticks or double quotes) and each other word longer than [`MAX_ECHO`] characters, so
+/// that a long key, string or number is never echoed whole.
+pub(crate) fn cap_echoes(msg: &str) -> String {
+    let words = |s: &str| -> String { s.split(' ').map(|w| echo(w)).collect::<Vec<_>>().join(" ") };
+    let mut out = String::with_capacity(msg.len().min(8 * MAX_ECHO));
+    let mut rest = msg;
+    while let Some(open) = rest.find(['`', '"']) {
+        let q = if rest[open..].starts_with('`') {
+            '`'
+        } else {
+            '"'
+        };
+        out.push_str(&words(&rest[..open]));
+        out.push(q);
+        rest = &rest[open + 1..];
+        match rest.find(q) {
+            Some(close) => {
+                out.push_str(&echo(&rest[..close]));
+                out.push(q);
+                rest = &rest[close + 1..];
+            }
+            None => {
+                out.push_str(&echo(rest));
+                return out;
+            }
+        }
+    }
+    out.push_str(&words(rest));
+    out
+}
+
+/// Reads a scene file: a regular file of at most [`MAX_SCENE_BYTES`] bytes of UTF-8
+/// (a device, pipe or directory is refused before reading, so nothing endless is read).
+pub fn read_scene_file(path: &Path) -> Result<String, SceneError> {
+    let shown = path.display().to_string();
+    let io = |error| SceneError::Io {
+        path: shown.clone(),
+        error,
+    };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(io(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file",
+        )));
+    }
+    if meta.len() > MAX_SCENE_BYTES {
+        return Err(SceneError::TooLarge { path: shown });
+    }
+    let file = std::fs::File::open(path).map_err(io)?;
+    let mut bytes = Vec::new();
+    file.take(MAX_SCENE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 > MAX_SCENE_BYTES {
+        return Err(SceneError::TooLarge { path: shown });
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text ({e})"),
+        ))
+    })
 }
 
 fn located(file: &str, location: Option<(usize, usize)>) -> String {
@@ -180,7 +292,7 @@ impl SceneError {
     /// The key path the error is about, when it is about one.
     pub fn key(&self) -> Option<&str> {
         match self {
-            SceneError::Invalid { key, .. } => Some(key),
+            SceneError::Invalid { key, .. } | SceneError::Set { key, .. } => Some(key),
             _ => None,
         }
     }
@@ -204,10 +316,7 @@ pub fn builtin_scenes() -> &'static [BuiltinScene] {
 pub fn load_scene(spec: &str) -> Result<Scene, SceneError> {
     let path = Path::new(spec);
     if path.exists() {
-        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
-            path: spec.to_string(),
-            error,
-        })?;
+        let text = read_scene_file(path)?;
         return parse_scene(&text, spec);
     }
     if let Some(b) = BUILTINS.iter().find(|b| b.name == spec) {
@@ -234,39 +343,70 @@ pub fn load_scene(spec: &str) -> Result<Scene, SceneError> {
 /// Parses and validates scene text. `source` names it in errors and in [`Scene::source`]
 /// (a path, or `builtin:NAME`); its file stem is the default scene name.
 pub fn parse_scene(text: &str, source: &str) -> Result<Scene, SceneError> {
-    let (raw, doc) = parse_raw(text, source)?;
-    build::build(raw, &doc, source)
+    parse_scene_with_sets(text, source, &[])
 }
 
 /// The first stage of [`parse_scene`] alone: TOML syntax, known keys and value types,
 /// without the checks of the values themselves (ranges, references, geometry). What a
 /// sweep checks to tell a key the scene format does not have from a value it rejects.
 pub fn check_scene_keys(text: &str, source: &str) -> Result<(), SceneError> {
-    parse_raw(text, source).map(drop)
+    parse_raw(text, source, &[], &[]).map(drop)
+}
+
+/// [`parse_scene`] with numbers written at scene key paths first (`--set KEY=VALUE`:
+/// `integrator.dt`, `rod[0].elements`, or `rod.beam.elements` for the rod named `beam`).
+/// The overrides are written into the parsed document of `text` itself, so an error about
+/// a value of the file gives its `FILE:LINE:COL` in `text`, and an error about a value an
+/// override wrote (or an override that cannot be written) is a [`SceneError::Set`] naming
+/// that override.
+pub fn parse_scene_with_sets(
+    text: &str,
+    source: &str,
+    sets: &[(String, f64)],
+) -> Result<Scene, SceneError> {
+    let numbers: Vec<set::NumberText> =
+        sets.iter().map(|(_, x)| set::NumberText::new(*x)).collect();
+    let (raw, doc) = parse_raw(text, source, sets, &numbers)?;
+    build::build(raw, &doc, source)
 }
 
 fn parse_raw<'t>(
     text: &'t str,
     source: &str,
+    sets: &[(String, f64)],
+    numbers: &'t [set::NumberText],
 ) -> Result<(raw::RawScene, span::Doc<'t>), SceneError> {
-    let root = toml::de::DeTable::parse(text).map_err(|e| SceneError::Syntax {
+    let labels: Vec<String> = sets
+        .iter()
+        .map(|(k, x)| format!("{}={x}", echo(k)))
+        .collect();
+    let mut root = toml::de::DeTable::parse(text).map_err(|e| SceneError::Syntax {
         file: source.to_string(),
         location: e.span().map(|s| span::line_col(text, s.start)),
-        reason: e.message().trim().to_string(),
+        reason: cap_echoes(e.message().trim()),
     })?;
-    let doc = span::Doc::new(text, root);
+    for (k, ((key, _), num)) in sets.iter().zip(numbers).enumerate() {
+        set::set_in(root.get_mut(), key, num, span::Doc::set_span(text.len(), k)).map_err(
+            |reason| SceneError::Set {
+                file: source.to_string(),
+                set: labels[k].clone(),
+                key: echo(key).into_owned(),
+                reason,
+            },
+        )?;
+    }
+    let doc = span::Doc::with_sets(text, root, labels);
     let raw = raw::RawScene::deserialize(toml::de::Deserializer::from(doc.root().clone()))
         .map_err(|e| {
-            let (key, location) = match e.span() {
-                Some(s) => (doc.path_at(s.start), Some(doc.line_col(s.start))),
-                None => (span::KeyPath::root(), None),
-            };
-            SceneError::Invalid {
-                file: source.to_string(),
-                location,
-                key: key_name(&key),
-                reason: e.message().trim().to_string(),
-            }
+            let key = e
+                .span()
+                .map_or_else(span::KeyPath::root, |s| doc.path_at(s.start));
+            doc.error(
+                source,
+                e.span().map(|s| s.start),
+                key_name(&key),
+                cap_echoes(e.message().trim()),
+            )
         })?;
     Ok((raw, doc))
 }

@@ -64,8 +64,10 @@ impl fmt::Display for KeyPath {
                     if i > 0 {
                         f.write_str(".")?;
                     }
-                    if is_bare_key(k) {
-                        f.write_str(k)?;
+                    // A key is echoed at most `super::MAX_ECHO` characters long.
+                    let k = super::echo(k);
+                    if is_bare_key(&k) {
+                        f.write_str(&k)?;
                     } else {
                         write!(f, "{k:?}")?;
                     }
@@ -81,6 +83,18 @@ impl fmt::Display for KeyPath {
 pub(crate) struct Doc<'i> {
     text: &'i str,
     root: Spanned<DeTable<'i>>,
+    /// `KEY=VALUE` of each command-line override written into `root`; the k-th one's
+    /// value has the span [`Doc::set_span`]`(text.len(), k)`, past the end of the text.
+    sets: Vec<String>,
+}
+
+/// Where a byte offset of a [`Doc`] came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Origin {
+    /// 1-based line and column in the scene text.
+    File(usize, usize),
+    /// The k-th command-line override.
+    Set(usize),
 }
 
 fn table_get<'a, 'i>(t: &'a DeTable<'i>, key: &str) -> Option<&'a Spanned<DeValue<'i>>> {
@@ -96,8 +110,63 @@ fn non_empty(r: Range<usize>) -> Option<Range<usize>> {
 
 impl<'i> Doc<'i> {
     /// Wraps a parsed document.
+    #[cfg(test)]
     pub(crate) fn new(text: &'i str, root: Spanned<DeTable<'i>>) -> Self {
-        Self { text, root }
+        Self::with_sets(text, root, Vec::new())
+    }
+
+    /// Wraps a parsed document into which the overrides `sets` (`KEY=VALUE`, in order)
+    /// were written with the spans [`Doc::set_span`].
+    pub(crate) fn with_sets(text: &'i str, root: Spanned<DeTable<'i>>, sets: Vec<String>) -> Self {
+        Self { text, root, sets }
+    }
+
+    /// The span given to the value of the k-th override of a text of `text_len` bytes:
+    /// one byte, past the end of the text (and past the end-of-file offset).
+    pub(crate) fn set_span(text_len: usize, k: usize) -> Range<usize> {
+        text_len + 1 + k..text_len + 2 + k
+    }
+
+    /// Where byte `offset` came from: the text (line and column) or an override.
+    pub(crate) fn origin(&self, offset: usize) -> Origin {
+        if offset > self.text.len() && offset - self.text.len() - 1 < self.sets.len() {
+            Origin::Set(offset - self.text.len() - 1)
+        } else {
+            let (l, c) = line_col(self.text, offset);
+            Origin::File(l, c)
+        }
+    }
+
+    /// The error about `key`, located at byte `offset`: in the file (`FILE:LINE:COL`, or
+    /// `FILE` without an offset) or, for a value that came from an override, on that
+    /// override (`--set KEY=VALUE`).
+    pub(crate) fn error(
+        &self,
+        file: &str,
+        offset: Option<usize>,
+        key: String,
+        reason: String,
+    ) -> super::SceneError {
+        match offset.map(|o| self.origin(o)) {
+            Some(Origin::Set(k)) => super::SceneError::Set {
+                file: file.to_string(),
+                set: self.sets.get(k).cloned().unwrap_or_default(),
+                key,
+                reason,
+            },
+            Some(Origin::File(l, c)) => super::SceneError::Invalid {
+                file: file.to_string(),
+                location: Some((l, c)),
+                key,
+                reason,
+            },
+            None => super::SceneError::Invalid {
+                file: file.to_string(),
+                location: None,
+                key,
+                reason,
+            },
+        }
     }
 
     /// The spanned document tree.
@@ -143,11 +212,6 @@ impl<'i> Doc<'i> {
             }
         });
         best.map(|(_, _, p)| p).unwrap_or_default()
-    }
-
-    /// 1-based `(line, column)` of a byte offset (column in characters).
-    pub(crate) fn line_col(&self, offset: usize) -> (usize, usize) {
-        line_col(self.text, offset)
     }
 }
 
@@ -221,6 +285,6 @@ mod tests {
             doc.path_at(span.start + 1).to_string(),
             "rod[1].points[1][0]"
         );
-        assert_eq!(doc.line_col(span.start), (5, 19));
+        assert_eq!(line_col(text, span.start), (5, 19));
     }
 }

@@ -411,24 +411,22 @@ fn set_value_table(doc: &mut toml::Table, key: &str, x: f64) -> Result<bool, Str
 /// [`load_scene`](crate::scene::load_scene)) with numbers written at scene key paths
 /// (`integrator.dt`, `rod[0].elements`, `rod.beam.elements` for the rod named `beam`),
 /// exactly as a sweep file's `[[vary]]` keys are written into its base scene, then
-/// validated by the scene parser. Errors name the key (`KEY: reason`) or are the scene
-/// parser's (file, key and reason).
+/// validated by the scene parser ([`crate::scene::parse_scene_with_sets`]): an error about
+/// a value of the file gives its `FILE:LINE:COL` in the file as written, one about a value
+/// from `sets` (or a key that cannot be set) names `--set KEY=VALUE`.
 pub fn scene_with_overrides(spec: &str, sets: &[(String, f64)]) -> Result<Scene, String> {
     let path = Path::new(spec);
     let (text, source) = if path.exists() {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{spec}: {e}"))?;
-        (text, spec.to_string())
+        (
+            crate::scene::read_scene_file(path).map_err(|e| e.to_string())?,
+            spec.to_string(),
+        )
     } else if let Some(b) = builtin_scenes().iter().find(|b| b.name == spec) {
         (b.toml.to_string(), format!("builtin:{}", b.name))
     } else {
         return crate::scene::load_scene(spec).map_err(|e| e.to_string());
     };
-    let mut doc: toml::Table = text.parse().map_err(|e| format!("{source}: {e}"))?;
-    for (key, x) in sets {
-        set_value_table(&mut doc, key, *x).map_err(|e| format!("{key}: {e}"))?;
-    }
-    let text = toml::to_string(&doc).map_err(|e| e.to_string())?;
-    parse_scene(&text, &source).map_err(|e| e.to_string())
+    crate::scene::parse_scene_with_sets(&text, &source, sets).map_err(|e| e.to_string())
 }
 
 /// Reads and validates a sweep file: syntax, keys, modes, ranges, that the base scene is
