@@ -381,12 +381,12 @@ fn oversized_inputs_are_refused_before_allocating() {
         (
             vec!["sweep".into(), grid.display().to_string()],
             vec![("COSSERAT_MAX_MEMORY", "4G")],
-            "g.toml: vary: this sweep would need about 8.0 GiB of memory (1000000 member(s) × 15 element(s)), above the limit of 4.0 GiB",
+            "g.toml: vary: this sweep would need about 8.0 GiB of memory (1000000 member(s); per member: 15 element(s)",
         ),
         (
             vec!["sweep".into(), mid.display().to_string()],
             vec![("COSSERAT_MAX_MEMORY", "10M")],
-            "m.toml:3:11: samples: this sweep would need about 369.1 MiB of memory (1000 member(s) × 15 element(s)), above the limit of 10.0 MiB (set COSSERAT_MAX_MEMORY",
+            "m.toml:3:11: samples: this sweep would need about 369.1 MiB of memory (1000 member(s); per member: 15 element(s) ≈ 175.8 KiB), above the limit of 10.0 MiB (COSSERAT_MAX_MEMORY=10M; set COSSERAT_MAX_MEMORY",
         ),
         (
             vec!["sweep".into(), mid.display().to_string()],
@@ -406,7 +406,7 @@ fn oversized_inputs_are_refused_before_allocating() {
         (
             vec!["bench".into(), "--rods".into(), "2000000".into()],
             vec![],
-            "bench would need about 26.4 GiB of memory (2000000 member(s) × 30 element(s))",
+            "bench would need about 26.4 GiB of memory (2000000 member(s); per member: 30 element(s)",
         ),
     ];
     for (args, env, want) in cases {
