@@ -571,3 +571,28 @@ fn scenes_lists_names_in_one_aligned_column() {
     }
     assert!(names.contains(&"mechanism_hexagon") && names.contains(&"cantilever_planar"));
 }
+
+#[test]
+fn gpu_runs_print_no_mesa_device_select_lines() {
+    // Mesa's device-select layer (lavapipe and other Mesa Vulkan drivers) prints
+    // `XDG_RUNTIME_DIR is invalid or not set` per adapter enumeration when the variable is
+    // unset; without a Mesa Vulkan driver there is nothing to print.
+    let o = cosserat()
+        .args([
+            "bench",
+            "--rods",
+            "1",
+            "--elements",
+            "2",
+            "--steps",
+            "1",
+            "--gpu-only",
+        ])
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{e}");
+    assert!(!e.contains("XDG_RUNTIME_DIR"), "{e}");
+}
