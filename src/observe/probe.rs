@@ -87,7 +87,7 @@ pub fn rotation_vector(r: &Mat3) -> Vec3 {
         .unwrap_or(0);
     let col = b.column(k).into_owned();
     let norm = col.norm();
-    if !(norm > 0.0) {
+    if norm.is_nan() || norm <= 0.0 {
         return Vec3::zeros();
     }
     let n = col / norm;
@@ -109,7 +109,18 @@ mod tests {
         ];
         for n in axes {
             for theta in [
-                1e-300, 1e-12, 1e-8, 1e-7, 1e-4, 0.1, 1.0, 1.5, 2.0, 3.0, 3.14, 3.1415926,
+                1e-300,
+                1e-12,
+                1e-8,
+                1e-7,
+                1e-4,
+                0.1,
+                1.0,
+                1.5,
+                2.0,
+                3.0,
+                3.1,
+                std::f64::consts::PI - 1e-7,
             ] {
                 let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(n), theta);
                 let v = rotation_vector(r.matrix());
