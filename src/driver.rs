@@ -471,7 +471,7 @@ pub const RUN_FILES: &[&str] = &[
 ];
 
 /// Removes a previous run's files from `out` (only the names a run writes, and only
-/// `.vtu`/`.pvd` files in `out/vtk`), so that a reused folder never mixes two runs.
+/// `.vtu`/`.pvd` files and `.pvd.tmp` leftovers in `out/vtk`), so that a reused folder never mixes two runs.
 /// Returns what it removed, for the message.
 pub fn remove_previous_outputs(out: &Path) -> Result<Vec<String>, OutputError> {
     let mut removed = Vec::new();
@@ -498,7 +498,9 @@ pub fn remove_previous_outputs(out: &Path) -> Result<Vec<String>, OutputError> {
         for entry in entries.flatten() {
             let p = entry.path();
             let ext = p.extension().and_then(|e| e.to_str());
-            if matches!(ext, Some("vtu" | "pvd")) && rm(&p)? {
+            // `NAME.pvd.tmp`: a collection being rewritten when a run was killed.
+            let pvd_tmp = p.to_string_lossy().ends_with(".pvd.tmp");
+            if (matches!(ext, Some("vtu" | "pvd")) || pvd_tmp) && rm(&p)? {
                 n += 1;
             }
         }

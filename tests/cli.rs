@@ -404,3 +404,195 @@ fn bench_counts_chord_corrections() {
     );
     assert_eq!(full["cpu_failed"], 0);
 }
+
+/// `cosserat ARGS` with its stdout a pipe whose reader is gone before it writes.
+fn with_closed_stdout(args: &[&str], cwd: &Path) -> std::process::Output {
+    let mut child = cosserat()
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn a_closed_stdout_pipe_is_a_quiet_normal_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let sweep = dir.path().join("s.toml");
+    std::fs::write(
+        &sweep,
+        "base = \"frame\"\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [0.2, 0.4]\n",
+    )
+    .unwrap();
+    let s = sweep.to_str().unwrap();
+    for args in [
+        &["check", "frame"][..],
+        &["scenes"],
+        &["run", "frame", "--t-end", "0.4", "--out", "o"],
+        &["sweep", s, "--out", "sw"],
+    ] {
+        let o = with_closed_stdout(args, dir.path());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+        assert!(
+            !err.contains("panicked") && !err.contains("error"),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+#[test]
+fn every_numeric_option_takes_negative_values_and_gives_its_own_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let o = out.to_str().unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["run", "frame", "--output-dt", "-0.1"],
+            "--output-dt: must be a positive number (got -0.1)",
+        ),
+        (
+            &["run", "frame", "--times", "-1"],
+            "--times: time -1 must be a finite number ≥ 0",
+        ),
+        (
+            &["run", "frame", "--cutback", "-1"],
+            "'--cutback <N>': -1 is not in 0..=20",
+        ),
+        (
+            &["run", "frame", "--dt", "-inf"],
+            "--dt: must be a finite number > 0 (got -inf)",
+        ),
+        (
+            &["run", "frame", "--dt", "-0.1"],
+            "--dt: must be a finite number > 0 (got -0.1)",
+        ),
+        (
+            &["run", "frame", "--t-end", "-1e-400"],
+            "--t-end: must be a finite number > 0",
+        ),
+        (
+            &["run", "frame", "--every", "-2"],
+            "'--every <EVERY>': must be an integer ≥ 1 (got -2)",
+        ),
+        (
+            &["run", "frame", "--animate-every", "-1"],
+            "'--animate-every <N>': must be an integer ≥ 1",
+        ),
+        (
+            &["run", "frame", "--animate-every", "0"],
+            "'--animate-every <N>': must be an integer ≥ 1",
+        ),
+        (
+            &["bench", "--slots", "-1"],
+            "'--slots <SLOTS>': must be an integer ≥ 0 (got -1)",
+        ),
+        (
+            &["study", "damping", "--jobs", "-2"],
+            "'--jobs <JOBS>': must be an integer ≥ 1 (got -2)",
+        ),
+        (
+            &["study", "stability", "frame", "--dts", "-0.1"],
+            "--dts: every value must be a finite number > 0 (got -0.1)",
+        ),
+        (
+            &["study", "work-precision", "frame", "--reference-dt", "-inf"],
+            "--reference-dt: every value must be a finite number > 0 (got -inf)",
+        ),
+        (
+            &["study", "work-precision", "frame", "--t-end", "0"],
+            "--t-end: must be a finite number > 0 (got 0)",
+        ),
+        (
+            &["study", "stability", "frame", "--newton-tol", "-1"],
+            "--newton-tol: must be a finite number > 0 (got -1)",
+        ),
+        // Echoed numbers stay short: shortest round-trip text, scientific when tiny.
+        (
+            &["run", "frame", "--output-dt", "5e-324"],
+            "--output-dt: 5e-324 is not a whole multiple of Δt = 0.2",
+        ),
+        (
+            &["run", "frame", "--times", "1e300"],
+            "--times: time 1e300 ",
+        ),
+    ];
+    for (args, want) in cases {
+        let mut cmd = cosserat();
+        cmd.args(*args);
+        if args[0] != "bench" {
+            cmd.args(["--out", o]);
+        }
+        let o = cmd.output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(want), "{args:?}\nwant {want}\ngot  {e}");
+        assert!(!e.contains("unexpected argument"), "{args:?}: {e}");
+        assert!(e.lines().next().unwrap().len() < 200, "{args:?}: {e}");
+        // Nothing was created: every option is checked first.
+        assert!(!out.exists(), "{args:?} created {}", out.display());
+    }
+}
+
+#[test]
+fn alpha_and_rho_inf_are_named_as_conflicting() {
+    let o = cosserat()
+        .args(["run", "frame", "--alpha", "0.5", "--rho-inf", "0.5"])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("--alpha") && e.contains("--rho-inf") && e.contains("cannot be used with"),
+        "{e}"
+    );
+}
+
+#[test]
+fn scenes_lists_names_in_one_aligned_column() {
+    let o = cosserat().arg("scenes").output().unwrap();
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    let names: Vec<&str> = cosserat::scene::builtin_scenes()
+        .iter()
+        .map(|s| s.name)
+        .collect();
+    let width = names.iter().map(|n| n.chars().count()).max().unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), names.len());
+    for (l, n) in lines.iter().zip(&names) {
+        // The description starts in the same column on every line, after a gap.
+        let (head, desc) = l.split_at(width + 2);
+        assert_eq!(head.trim_end(), *n, "{l}");
+        assert!(!desc.starts_with(' ') && !desc.is_empty(), "{l}");
+    }
+    assert!(names.contains(&"mechanism_hexagon") && names.contains(&"cantilever_planar"));
+}
+
+#[test]
+fn gpu_runs_print_no_mesa_device_select_lines() {
+    // Mesa's device-select layer (lavapipe and other Mesa Vulkan drivers) prints
+    // `XDG_RUNTIME_DIR is invalid or not set` per adapter enumeration when the variable is
+    // unset; without a Mesa Vulkan driver there is nothing to print.
+    let o = cosserat()
+        .args([
+            "bench",
+            "--rods",
+            "1",
+            "--elements",
+            "2",
+            "--steps",
+            "1",
+            "--gpu-only",
+        ])
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{e}");
+    assert!(!e.contains("XDG_RUNTIME_DIR"), "{e}");
+}

@@ -792,3 +792,95 @@ fn run_set_errors_point_into_the_file_or_name_the_set() {
         stderr(&o)
     );
 }
+
+#[test]
+fn long_multibyte_scene_names_fit_every_output_file_name() {
+    let dir = tempfile::tempdir().unwrap();
+    // 100 characters of 3 bytes: within the character limit, 300 bytes of file name.
+    let name = "名".repeat(100);
+    let scene = write(
+        dir.path(),
+        "cjk.toml",
+        &frame_with("name = \"frame\"", &format!("name = \"{name}\"")),
+    );
+    let o = cosserat().arg("check").arg(&scene).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    // The default folder out/<stem> and the VTK files vtk/<stem>_STEP.vtu, <stem>.pvd.
+    let o = cosserat()
+        .arg("run")
+        .arg(&scene)
+        .args(["--t-end", "0.4", "--vtk"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let files = files_below(&dir.path().join("out"));
+    let ext = |e: &str| {
+        files
+            .iter()
+            .filter(|f| f.extension().is_some_and(|x| x == e))
+            .count()
+    };
+    assert!(ext("vtu") >= 2 && ext("pvd") == 1, "{files:?}");
+    for f in &files {
+        for c in f.iter() {
+            assert!(c.len() <= cosserat::paths::MAX_FILE_NAME_BYTES, "{f:?}");
+        }
+    }
+}
+
+#[test]
+fn summary_json_writes_no_null_for_a_non_finite_number() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write(
+        dir.path(),
+        "v.toml",
+        &frame_with("v = [0, 0, -1]", "v = [0, 0, -1e200]"),
+    );
+    let out = dir.path().join("o");
+    let o = cosserat()
+        .arg("run")
+        .arg(&scene)
+        .args(["--t-end", "0.4", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["status"], "failed");
+    assert!(s["reason"].as_str().unwrap().contains("non-finite"), "{s}");
+    // The non-finite energy is named, not hidden as null.
+    assert_eq!(s["energy_initial"], "inf", "{s}");
+    assert_eq!(s["energy_final"], "inf", "{s}");
+    // null only where docs/outputs.md documents it: an absent value.
+    fn nulls(v: &serde_json::Value, path: String, out: &mut Vec<String>) {
+        match v {
+            serde_json::Value::Null => out.push(path),
+            serde_json::Value::Array(a) => {
+                for (i, x) in a.iter().enumerate() {
+                    nulls(x, format!("{path}[{i}]"), out);
+                }
+            }
+            serde_json::Value::Object(m) => {
+                for (k, x) in m {
+                    let p = if path.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{path}.{k}")
+                    };
+                    nulls(x, p, out);
+                }
+            }
+            _ => {}
+        }
+    }
+    let mut found = Vec::new();
+    nulls(&s, String::new(), &mut found);
+    for p in &found {
+        assert!(
+            ["reason", "smallest_substep", "strategy"].contains(&p.as_str()),
+            "null at {p}"
+        );
+    }
+}

@@ -590,3 +590,112 @@ fn animation_gif_has_one_moving_frame_per_sample() {
         assert!(changed > 500, "frame {k} equals frame {}", k - 1);
     }
 }
+
+/// The cells of one CSV record per RFC 4180 (quoted cells may hold `,`, `""`, CR, LF),
+/// and the rest of the text after it.
+fn csv_record(text: &str) -> (Vec<String>, &str) {
+    let (mut cells, mut cell, mut quoted, mut chars) = (
+        Vec::new(),
+        String::new(),
+        false,
+        text.char_indices().peekable(),
+    );
+    while let Some((i, c)) = chars.next() {
+        match (quoted, c) {
+            (true, '"') if chars.peek().map(|p| p.1) == Some('"') => {
+                chars.next();
+                cell.push('"');
+            }
+            (true, '"') => quoted = false,
+            (true, c) => cell.push(c),
+            (false, '"') if cell.is_empty() => quoted = true,
+            (false, ',') => cells.push(std::mem::take(&mut cell)),
+            // A line break ends the record: LF, CRLF or a bare CR (as Python's csv reads).
+            (false, '\n' | '\r') => {
+                cells.push(cell);
+                let skip = if c == '\r' && text[i + 1..].starts_with('\n') {
+                    2
+                } else {
+                    1
+                };
+                return (cells, &text[i + skip..]);
+            }
+            (false, c) => cell.push(c),
+        }
+    }
+    cells.push(cell);
+    (cells, "")
+}
+
+#[test]
+fn probe_names_with_control_characters_stay_one_csv_cell() {
+    let scene = with_probes("[[probe]]\nname = \"a\\rb\"\nat = [10, 10, 0]").unwrap();
+    assert_eq!(scene.probes[0].name, "a\rb");
+    let dir = tempfile::tempdir().unwrap();
+    run(&scene, dir.path(), &RunOptions::default());
+    let text = std::fs::read_to_string(dir.path().join("probes.csv")).unwrap();
+    let (header, mut rest) = csv_record(&text);
+    assert_eq!(header.len(), 2 + 12, "{header:?}");
+    assert_eq!(&header[..3], &["step", "t", "a\rb_x"]);
+    assert_eq!(header[13], "a\rb_vz");
+    let mut rows = 0;
+    while !rest.is_empty() {
+        let (row, r) = csv_record(rest);
+        assert_eq!(row.len(), header.len());
+        assert_eq!(row[0].parse::<usize>().unwrap(), rows);
+        (rest, rows) = (r, rows + 1);
+    }
+    assert_eq!(rows, scene.params.n_steps() + 1);
+}
+
+#[test]
+fn probe_rotation_vectors_are_accurate_from_tiny_to_large_angles() {
+    use cosserat::observe::probe::{node_director_ends, probe_values};
+    let scene = parse_scene(builtin("cantilever"), "c.toml").unwrap();
+    let sim = Simulation::new(scene.model.clone(), scene.params).unwrap();
+    let model = sim.model();
+    let (ends, _) = node_director_ends(model);
+    let tip = model.n_nodes() - 1;
+    let (e, l) = ends[tip];
+    let n = nalgebra::Vector3::new(0.3, -0.5, 0.81).normalize();
+    for theta in [1e-12, 1e-10, 1e-8, 1e-7, 1e-5, 1e-3, 0.1, 1.0, 2.0, 3.0] {
+        let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(n), theta);
+        let mut st = sim.state().clone();
+        st.d[e][l] = rot.matrix() * model.elements[e].ref_triad[l];
+        let v = probe_values(model, &st, tip, ends[tip]).rotation;
+        let err = (v - n * theta).norm() / theta;
+        assert!(err < 1e-12, "θ = {theta:e}: relative error {err:e}");
+    }
+}
+
+#[test]
+fn pvd_is_replaced_whole_never_rewritten_in_place() {
+    use cosserat::output::VtkSeries;
+    let scene = parse_scene(builtin("cantilever"), "c.toml").unwrap();
+    let sim = Simulation::new(scene.model.clone(), scene.params).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut vtk = VtkSeries::new(dir.path(), "c").unwrap();
+    let frames = 64; // the collection is rewritten every 64 frames
+    for k in 0..frames {
+        vtk.write_frame(&sim, k, k as f64).unwrap();
+    }
+    // A reader holding the collection written after `frames` frames (a hard link to it)
+    // keeps that whole file when the collection is rewritten.
+    let held = dir.path().join("held.pvd");
+    std::fs::hard_link(vtk.pvd_path(), &held).unwrap();
+    vtk.write_frame(&sim, frames, frames as f64).unwrap();
+    vtk.finish().unwrap();
+    let count = |p: &Path| {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .matches("<DataSet ")
+            .count()
+    };
+    assert_eq!(
+        count(&held),
+        frames,
+        "the old collection was rewritten in place"
+    );
+    assert_eq!(count(&vtk.pvd_path()), frames + 1);
+    assert!(!dir.path().join("c.pvd.tmp").exists());
+}

@@ -15,8 +15,49 @@ use cosserat::reproduce::reproduce;
 use cosserat::scene::{builtin_scenes, load_scene, printable, Scene};
 use cosserat::study;
 
+/// `println!` for this program: a stdout whose reader has gone (`cosserat check frame |
+/// head -1`) ends the program quietly with exit code 0 ([`stdout_write`]), instead of
+/// std's panic.
+macro_rules! println {
+    () => {
+        $crate::stdout_write(format_args!("\n"))
+    };
+    ($($arg:tt)*) => {
+        $crate::stdout_write(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` for this program (see [`println!`]).
+macro_rules! print {
+    ($($arg:tt)*) => {
+        $crate::stdout_write(format_args!($($arg)*))
+    };
+}
+
 #[path = "cosserat_cmds/mod.rs"]
 mod cmds;
+
+/// Writes `args` to stdout (flushing it). A closed pipe (EPIPE: the reader, e.g. `head`,
+/// has read what it wanted) is a normal end: exit code 0, no message. Any other write
+/// error ends the program with a message and exit code 2.
+fn stdout_write(args: std::fmt::Arguments) {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_fmt(args).and_then(|()| out.flush()) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => {
+            eprintln!("error: cannot write to stdout: {e}");
+            std::process::exit(2)
+        }
+    }
+}
+
+/// A number as error messages echo it: shortest round-trip text, scientific notation
+/// outside `[1e-5, 1e16)`, never hundreds of digits.
+fn num(x: f64) -> String {
+    cosserat::output::num(x)
+}
 
 /// Nonlinear dynamics of geometrically exact (Cosserat) rods with energy-momentum and
 /// energy-dissipative momentum-conserving time stepping. With no arguments: runs the
@@ -85,24 +126,19 @@ struct DampingArgs {
     #[arg(long)]
     out: PathBuf,
     /// Values of each dissipation parameter (χ or α).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "0.01,0.1,0.5,1",
-        allow_negative_numbers = true
-    )]
+    #[arg(long, value_delimiter = ',', default_value = "0.01,0.1,0.5,1")]
     values: Vec<f64>,
     /// Periods of the mode each run covers.
-    #[arg(long, default_value_t = 4.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 4.0)]
     periods: f64,
     /// Time steps per period of the mode (ωΔt = 2π / this).
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 16, value_parser = cmds::at_least_one)]
     steps_per_period: usize,
     /// Tip displacement amplitude of the mode relative to the rod length.
-    #[arg(long, default_value_t = 0.01, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.01)]
     amplitude: f64,
     /// Parallel runs (default: the number of cores).
-    #[arg(long)]
+    #[arg(long, value_parser = cmds::at_least_one)]
     jobs: Option<usize>,
 }
 
@@ -115,13 +151,13 @@ struct StudyCommon {
     #[arg(long)]
     out: PathBuf,
     /// End time (default: the scene's).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long)]
     t_end: Option<f64>,
     /// Relative Newton tolerance of every run (default: the scene's).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long)]
     newton_tol: Option<f64>,
     /// Parallel runs (default: the number of cores).
-    #[arg(long)]
+    #[arg(long, value_parser = cmds::at_least_one)]
     jobs: Option<usize>,
     /// Newton variant of every run (default: the scene's, else full).
     #[arg(long, value_enum)]
@@ -154,10 +190,10 @@ struct WorkPrecisionArgs {
     )]
     schemes: Vec<String>,
     /// Time steps (default: the scene's Δt times 1, ½, ¼, ⅛).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    #[arg(long, value_delimiter = ',')]
     dts: Option<Vec<f64>>,
     /// Δt of the EM reference run (default: the smallest Δt / 8).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long)]
     reference_dt: Option<f64>,
 }
 
@@ -173,23 +209,13 @@ struct StabilityArgs {
     )]
     schemes: Vec<String>,
     /// Dissipation parameters of edmc1 (χ_Γ = χ_Ω) and edmc2 (α_Γv).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "0,0.5,1,2",
-        allow_negative_numbers = true
-    )]
+    #[arg(long, value_delimiter = ',', default_value = "0,0.5,1,2")]
     params: Vec<f64>,
     /// ρ∞ values of gen-alpha.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "0,0.5,0.8,1",
-        allow_negative_numbers = true
-    )]
+    #[arg(long, value_delimiter = ',', default_value = "0,0.5,0.8,1")]
     rho_inf: Vec<f64>,
     /// Time steps (default: the scene's Δt times ¼, ½, 1, 2, 4).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    #[arg(long, value_delimiter = ',')]
     dts: Option<Vec<f64>>,
     /// Where the grid runs: `gpu`/`auto` run it as one batch whose EM/EDMC members share
     /// each GPU element dispatch (baselines use the CPU kernel inside the batch).
@@ -208,18 +234,19 @@ struct RunArgs {
     #[arg(long, value_enum)]
     scheme: Option<SchemeArg>,
     /// EDMC-2 dissipation α_Γv (the paper's single parameter); implies `--scheme edmc2`
-    /// when the scene's scheme is not EDMC-2 and no `--scheme` is given.
-    #[arg(long, allow_negative_numbers = true)]
+    /// when the scene's scheme is not EDMC-2 and no `--scheme` is given. Conflicts with
+    /// `--rho-inf` (another scheme's parameter).
+    #[arg(long, conflicts_with = "rho_inf")]
     alpha: Option<f64>,
     /// Time step Δt (default: the scene's).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long)]
     dt: Option<f64>,
     /// End time (default: the scene's).
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long)]
     t_end: Option<f64>,
     /// Generalized-α spectral radius ρ∞ ∈ [0, 1]; implies `--scheme gen-alpha` when no
     /// `--scheme` is given.
-    #[arg(long, allow_negative_numbers = true)]
+    #[arg(long)]
     rho_inf: Option<f64>,
     /// Dissipation strategy (default: the scene's, else auto: monolithic on the CPU
     /// kernel, staggered with a GPU evaluator).
@@ -242,20 +269,20 @@ struct RunArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Write every N-th step to history.csv (default: the scene's `output_every`).
-    #[arg(long, value_parser = cmds::at_least_one, allow_negative_numbers = true)]
+    #[arg(long, value_parser = cmds::at_least_one)]
     every: Option<usize>,
     /// Also write ParaView files: `vtk/NAME_STEP.vtu` at every saved step and `vtk/NAME.pvd`.
     #[arg(long)]
     vtk: bool,
     /// Draw `snapshots.png` with the deformed rods every N steps.
-    #[arg(long, value_name = "N", value_parser = cmds::at_least_one, allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = cmds::at_least_one)]
     snapshots: Option<usize>,
     /// Write `animation.gif`: the deformed rods at ≈ 100 times over the run (or every N
     /// steps with `--animate-every N`).
     #[arg(long)]
     animate: bool,
     /// Animation frame every N steps (implies `--animate`).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = cmds::at_least_one)]
     animate_every: Option<usize>,
     /// Write `trajectory.npz`: node positions, directors and velocities at the output times
     /// (default: every `--every`-th step; always the last accepted step).
@@ -293,13 +320,20 @@ struct RunArgs {
 fn parse_set(s: &str) -> Result<(String, f64), String> {
     let (k, v) = s
         .split_once('=')
-        .ok_or_else(|| format!("`{s}` is not KEY=VALUE"))?;
-    let x: f64 = v
-        .trim()
-        .parse()
-        .map_err(|_| format!("{}: `{}` is not a number", k.trim(), v.trim()))?;
+        .ok_or_else(|| format!("`{}` is not KEY=VALUE", cmds::echo(s)))?;
+    let x: f64 = v.trim().parse().map_err(|_| {
+        format!(
+            "{}: `{}` is not a number",
+            cmds::echo(k.trim()),
+            cmds::echo(v.trim())
+        )
+    })?;
     if !x.is_finite() {
-        return Err(format!("{}: must be finite (got {x})", k.trim()));
+        return Err(format!(
+            "{}: must be finite (got {})",
+            cmds::echo(k.trim()),
+            num(x)
+        ));
     }
     Ok((k.trim().to_string(), x))
 }
@@ -335,11 +369,65 @@ fn require_build_target_cpu() -> Option<ExitCode> {
     None
 }
 
+/// Whether `a` takes numbers (its value parser yields an integer or a float).
+fn is_numeric(a: &clap::Arg) -> bool {
+    use std::any::TypeId;
+    let t = a.get_value_parser().type_id();
+    [
+        TypeId::of::<f64>(),
+        TypeId::of::<f32>(),
+        TypeId::of::<usize>(),
+        TypeId::of::<u64>(),
+        TypeId::of::<u32>(),
+        TypeId::of::<u8>(),
+        TypeId::of::<i64>(),
+    ]
+    .iter()
+    .any(|id| t == *id)
+}
+
+/// The command line, with one setting for every option that takes a number: a value
+/// starting with `-` (`--output-dt -0.1`, `--times -1`, `--cutback -1`, `--dt -inf`) is
+/// its value, which then gets the option's own range error (exit code 2) instead of
+/// clap's "unexpected argument". Other options accept negative numbers as values too.
+fn cli_command() -> clap::Command {
+    fn hyphens(cmd: clap::Command) -> clap::Command {
+        cmd.mut_args(|a| {
+            if !a.get_action().takes_values() {
+                a
+            } else if is_numeric(&a) {
+                a.allow_hyphen_values(true)
+            } else {
+                a.allow_negative_numbers(true)
+            }
+        })
+        .mut_subcommands(hyphens)
+    }
+    hyphens(<Cli as clap::CommandFactory>::command())
+}
+
+fn parse_cli() -> Cli {
+    use clap::FromArgMatches as _;
+    Cli::from_arg_matches(&cli_command().get_matches()).unwrap_or_else(|e| e.exit())
+}
+
+/// Mesa's Vulkan device-select layer prints two `XDG_RUNTIME_DIR` lines on every adapter
+/// enumeration when that variable is unset (containers, CI); the layer only orders the
+/// adapters, which `--adapter` does here, so it is switched off (`NODEVICE_SELECT=1`)
+/// unless the environment sets the variable itself. Called first thing, before any
+/// thread or adapter exists.
+fn quiet_mesa_device_select() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
+}
+
 fn main() -> ExitCode {
     if let Some(code) = require_build_target_cpu() {
         return code;
     }
-    let cli = Cli::parse();
+    quiet_mesa_device_select();
+    let cli = parse_cli();
     let result = match cli.command {
         None => run_command(RunArgs {
             scene: "frame".into(),
@@ -377,8 +465,14 @@ fn main() -> ExitCode {
         Some(Command::Sweep(a)) => cmds::sweep_command(a),
         Some(Command::Bench(a)) => cmds::bench_command(a),
         Some(Command::Scenes) => {
-            for s in builtin_scenes() {
-                println!("{:<12} {}", s.name, s.description);
+            let scenes = builtin_scenes();
+            let width = scenes
+                .iter()
+                .map(|s| s.name.chars().count())
+                .max()
+                .unwrap_or(0);
+            for s in scenes {
+                println!("{:<width$}  {}", s.name, s.description);
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -484,7 +578,7 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     }
     if let Some(alpha) = a.alpha {
         if !(alpha.is_finite() && alpha >= 0.0) {
-            bail!("--alpha: must be a finite number ≥ 0 (got {alpha})");
+            bail!("--alpha: must be a finite number ≥ 0 (got {})", num(alpha));
         }
         match &mut p.scheme {
             Scheme::Edmc2 { alpha_gv, .. } => *alpha_gv = alpha,
@@ -496,7 +590,7 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     }
     if let Some(rho) = a.rho_inf {
         if !(0.0..=1.0).contains(&rho) {
-            bail!("--rho-inf: must be in [0, 1] (got {rho})");
+            bail!("--rho-inf: must be in [0, 1] (got {})", num(rho));
         }
         match &mut p.scheme {
             Scheme::GenAlpha { rho_inf } => *rho_inf = rho,
@@ -508,21 +602,21 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     }
     if let Some(dt) = a.dt {
         if !(dt.is_finite() && dt > 0.0) {
-            bail!("--dt: must be a finite number > 0 (got {dt})");
+            bail!("--dt: must be a finite number > 0 (got {})", num(dt));
         }
         p.dt = dt;
     }
     if let Some(t) = a.t_end {
         if !(t.is_finite() && t > 0.0) {
-            bail!("--t-end: must be a finite number > 0 (got {t})");
+            bail!("--t-end: must be a finite number > 0 (got {})", num(t));
         }
         p.t_end = t;
     }
     if p.dt > p.t_end {
         bail!(
             "--dt: Δt = {} exceeds t_end = {}: the run would take no step",
-            p.dt,
-            p.t_end
+            num(p.dt),
+            num(p.t_end)
         );
     }
     if p.t_end / p.dt > cosserat::scene::limits::MAX_STEPS {
@@ -583,7 +677,6 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
         length_unit: "m".into(),
         trajectory,
         animate_every: match (a.animate_every, a.animate) {
-            (Some(0), _) => bail!("--animate-every: must be ≥ 1"),
             (Some(n), _) => Some(n),
             (None, true) => Some(params.n_steps().div_ceil(100).max(1)),
             (None, false) => None,
@@ -687,17 +780,22 @@ fn default_jobs(jobs: Option<usize>) -> usize {
         .max(1)
 }
 
-/// Loads a study's scene, with `--newton-tol` applied to its integrator parameters,
-/// creates the output directory and records the solver settings every run of the study
-/// shares in its `summary.json` (`study`, `scene`, `params`: the integrator parameters
-/// with `newton`, `newton_tol`, `strategy`, `fallback`, `cutback`; `strategy`: the one the
-/// dissipative runs use, `auto` resolved for the GPU path when `gpu`, else the CPU path).
-fn study_scene(c: &StudyCommon, study: &str, gpu: bool) -> Result<Scene> {
+/// Loads a study's scene and applies the options every study takes (`--newton-tol`,
+/// `--newton`, `--strategy`, `--no-fallback`, `--cutback`), after checking `--t-end` and
+/// `--newton-tol`. Creates nothing: see [`write_study_summary`].
+fn study_scene(c: &StudyCommon) -> Result<Scene> {
     let mut scene = load_scene(&c.scene)?;
-    create_out(&c.out)?;
+    if let Some(t) = c.t_end {
+        if !(t.is_finite() && t > 0.0) {
+            bail!("--t-end: must be a finite number > 0 (got {})", num(t));
+        }
+    }
     if let Some(tol) = c.newton_tol {
         if !(tol.is_finite() && tol > 0.0) {
-            bail!("--newton-tol: must be a finite number > 0 (got {tol})");
+            bail!(
+                "--newton-tol: must be a finite number > 0 (got {})",
+                num(tol)
+            );
         }
         scene.params.newton_tol = tol;
     }
@@ -713,17 +811,47 @@ fn study_scene(c: &StudyCommon, study: &str, gpu: bool) -> Result<Scene> {
     if let Some(n) = c.cutback {
         scene.params.cutback = n.into();
     }
+    Ok(scene)
+}
+
+/// `OPTION: every value must be a finite number > 0` for a list option given on the
+/// command line (`--dts`), or for a single value (`--reference-dt`).
+fn check_positive(option: &str, values: &[f64]) -> Result<()> {
+    if values.is_empty() {
+        bail!("{option}: empty list");
+    }
+    if let Some(x) = values.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+        bail!(
+            "{option}: every value must be a finite number > 0 (got {})",
+            num(*x)
+        );
+    }
+    Ok(())
+}
+
+/// Creates a study's output directory (once every option has been checked) and records
+/// the solver settings every run of the study shares in its `summary.json` (`study`,
+/// `scene`, `params`: the integrator parameters with `newton`, `newton_tol`, `strategy`,
+/// `fallback`, `cutback`; `strategy`: the one the dissipative runs use, `auto` resolved
+/// for the GPU path when `gpu`, else the CPU path).
+fn write_study_summary(
+    c: &StudyCommon,
+    study: &str,
+    scene: &Scene,
+    t_end: f64,
+    gpu: bool,
+) -> Result<()> {
+    create_out(&c.out)?;
     let summary = serde_json::json!({
         "study": study,
         "scene": scene.name,
-        "t_end": c.t_end.unwrap_or(scene.params.t_end),
+        "t_end": t_end,
         "params": scene.params,
         "strategy": scene.params.strategy.resolve(gpu).name(),
     });
     let path = c.out.join("summary.json");
     std::fs::write(&path, format!("{summary:#}\n"))
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(scene)
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 
 fn create_out(out: &Path) -> Result<()> {
@@ -732,12 +860,20 @@ fn create_out(out: &Path) -> Result<()> {
 }
 
 fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
-    let scene = study_scene(&a.common, "work-precision", false)?;
+    // Every option is checked before the output directory is created.
+    let scene = study_scene(&a.common)?;
     let schemes = a
         .schemes
         .iter()
         .map(|s| study::SchemeSpec::parse(s))
-        .collect::<Result<Vec<_>, _>>()?;
+        .collect::<Result<Vec<_>, _>>()
+        .context("--schemes")?;
+    if let Some(dts) = &a.dts {
+        check_positive("--dts", dts)?;
+    }
+    if let Some(r) = a.reference_dt {
+        check_positive("--reference-dt", &[r])?;
+    }
     let dt0 = scene.params.dt;
     let dts = a
         .dts
@@ -751,6 +887,8 @@ fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
         dts,
         jobs: default_jobs(a.common.jobs),
     };
+    cfg.check()?;
+    write_study_summary(&a.common, "work-precision", &scene, cfg.t_end, false)?;
     let wp = study::work_precision(&scene, &cfg)?;
     study::write_work_precision_csv(&a.common.out.join("work_precision.csv"), &wp)?;
     study::plot_work_precision(&a.common.out.join("work_precision.png"), &wp)?;
@@ -834,12 +972,8 @@ fn damping_command(a: &DampingArgs) -> Result<ExitCode> {
 }
 
 fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
-    let exec = cmds::executor(a.backend, a.adapter.as_deref())?;
-    let scene = study_scene(
-        &a.common,
-        "stability",
-        matches!(exec, cosserat::batch::Executor::Gpu(_)),
-    )?;
+    // Every option is checked before the output directory is created.
+    let scene = study_scene(&a.common)?;
     let kinds = a
         .schemes
         .iter()
@@ -849,6 +983,9 @@ fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    if let Some(dts) = &a.dts {
+        check_positive("--dts", dts)?;
+    }
     let dt0 = scene.params.dt;
     let cfg = study::StabilityConfig {
         kinds,
@@ -861,6 +998,15 @@ fn stability_command(a: &StabilityArgs) -> Result<ExitCode> {
         t_end: a.common.t_end.unwrap_or(scene.params.t_end),
         jobs: default_jobs(a.common.jobs),
     };
+    cfg.check()?;
+    let exec = cmds::executor(a.backend, a.adapter.as_deref())?;
+    write_study_summary(
+        &a.common,
+        "stability",
+        &scene,
+        cfg.t_end,
+        matches!(exec, cosserat::batch::Executor::Gpu(_)),
+    )?;
     if a.backend != cmds::BackendArg::Cpu {
         println!("backend: {}", exec.describe());
     }

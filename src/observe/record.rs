@@ -1,6 +1,6 @@
 //! The records observers produce and outputs consume.
 
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 
 use crate::integrator::params::IntegratorParams;
 use crate::model::Vec3;
@@ -56,6 +56,48 @@ pub struct StepRecord {
     pub substeps: usize,
 }
 
+/// JSON writing of the numbers of [`RunSummary`]: serde_json writes a non-finite `f64` as
+/// `null`, indistinguishable from "not applicable". These write it as the string `"NaN"`,
+/// `"inf"` or `"-inf"` instead (finite numbers as numbers), so `null` in `summary.json`
+/// only ever means an absent value (`reason`, `smallest_substep`, `strategy`).
+mod json_num {
+    use super::{Serialize, Serializer};
+
+    /// One number, finite or not.
+    struct Num(f64);
+
+    impl Serialize for Num {
+        fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+            let x = self.0;
+            if x.is_finite() {
+                s.serialize_f64(x)
+            } else if x.is_nan() {
+                s.serialize_str("NaN")
+            } else if x > 0.0 {
+                s.serialize_str("inf")
+            } else {
+                s.serialize_str("-inf")
+            }
+        }
+    }
+
+    pub fn one<S: Serializer>(x: &f64, s: S) -> Result<S::Ok, S::Error> {
+        Num(*x).serialize(s)
+    }
+
+    pub fn opt<S: Serializer>(x: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+        x.map(Num).serialize(s)
+    }
+
+    pub fn seq<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|&x| Num(x)))
+    }
+
+    pub fn three<S: Serializer>(v: &[f64; 3], s: S) -> Result<S::Ok, S::Error> {
+        seq(v, s)
+    }
+}
+
 /// How a run ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -66,7 +108,9 @@ pub enum RunStatus {
     Failed,
 }
 
-/// Everything `summary.json` reports about a run.
+/// Everything `summary.json` reports about a run. Its numbers are written as JSON
+/// numbers when finite and as the strings `"NaN"`, `"inf"`, `"-inf"` otherwise (a failed
+/// run's non-finite initial state or residual), never as `null`.
 #[derive(Clone, Debug, Serialize)]
 pub struct RunSummary {
     /// Scene name or path.
@@ -74,14 +118,19 @@ pub struct RunSummary {
     /// How the run ended.
     pub status: RunStatus,
     /// Time of the last accepted step.
+    #[serde(serialize_with = "json_num::one")]
     pub t_reached: f64,
     /// Number of accepted steps.
     pub steps: usize,
     /// Why the run failed (`None` when completed).
     pub reason: Option<String>,
-    /// Residual norms of the Newton iterations of the failing step (empty when completed).
+    /// Residual norms of the Newton iterations of the failing step (empty when completed;
+    /// a non-finite one is written as `"NaN"`, `"inf"` or `"-inf"`, as every number of
+    /// `summary.json`).
+    #[serde(serialize_with = "json_num::seq")]
     pub failed_step_residuals: Vec<f64>,
     /// Wall-clock time of the time loop in seconds.
+    #[serde(serialize_with = "json_num::one")]
     pub wall_s: f64,
     /// Scheme name (`em`, `edmc1`, `edmc2`).
     pub scheme: String,
@@ -112,10 +161,13 @@ pub struct RunSummary {
     /// The files this run wrote into its output folder (relative paths).
     pub outputs: Vec<String>,
     /// H at the start and at the last accepted step.
+    #[serde(serialize_with = "json_num::one")]
     pub energy_initial: f64,
     /// H at the last accepted step.
+    #[serde(serialize_with = "json_num::one")]
     pub energy_final: f64,
     /// Largest rigid-link strain `|g|` over the accepted steps (0 without links).
+    #[serde(serialize_with = "json_num::one")]
     pub max_link_g: f64,
     /// Steps the run's strategy could not solve and the fallback strategy did (0 when the
     /// fallback is off or never needed).
@@ -126,6 +178,7 @@ pub struct RunSummary {
     /// Steps redone as sub-steps (`IntegratorParams::cutback`; 0 when off or never needed).
     pub cutback_steps: usize,
     /// The smallest sub-step Δt taken (`null` when no step was cut back).
+    #[serde(serialize_with = "json_num::opt")]
     pub smallest_substep: Option<f64>,
     /// Where the element kernel ran (`cpu` or `gpu: ADAPTER, f64`).
     pub backend: String,
@@ -148,20 +201,27 @@ pub struct RunSummary {
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct EnergyBalance {
     /// `H_0`.
+    #[serde(serialize_with = "json_num::one")]
     pub energy_initial: f64,
     /// `H` at the last accepted step.
+    #[serde(serialize_with = "json_num::one")]
     pub energy_final: f64,
     /// External work over the run, `W`.
+    #[serde(serialize_with = "json_num::one")]
     pub work_total: f64,
     /// Dissipation over the run, `D` (0 for EM; not reported by the baselines).
+    #[serde(serialize_with = "json_num::one")]
     pub dissipation_total: f64,
     /// `H_n − H_0 − W + D` at the last accepted step.
+    #[serde(serialize_with = "json_num::one")]
     pub residual: f64,
     /// Largest `|H_k − H_0 − W_k + D_k|` over the accepted steps.
+    #[serde(serialize_with = "json_num::one")]
     pub max_abs_residual: f64,
     /// Step where it was reached.
     pub max_abs_residual_step: usize,
     /// Largest residual relative to `max(|H_0|, |H_k|, |W_k|, |D_k|)`.
+    #[serde(serialize_with = "json_num::one")]
     pub max_rel_residual: f64,
 }
 
@@ -176,28 +236,38 @@ pub struct ImpulseBalance {
     /// Accepted steps summed.
     pub steps: usize,
     /// `L_n − L_0`.
+    #[serde(serialize_with = "json_num::three")]
     pub change_l: [f64; 3],
     /// `J_n − J_0` (about the origin).
+    #[serde(serialize_with = "json_num::three")]
     pub change_j: [f64; 3],
     /// Impulse of the loads, `Σ Δt F(t_{n+½})`.
+    #[serde(serialize_with = "json_num::three")]
     pub applied_impulse_l: [f64; 3],
     /// Angular impulse of the loads, `Σ Δt (r_{n+½} × F + M)`.
+    #[serde(serialize_with = "json_num::three")]
     pub applied_impulse_j: [f64; 3],
     /// `L_n − L_0 − I_L` at the last accepted step.
+    #[serde(serialize_with = "json_num::three")]
     pub residual_l: [f64; 3],
     /// `J_n − J_0 − I_J` at the last accepted step.
+    #[serde(serialize_with = "json_num::three")]
     pub residual_j: [f64; 3],
     /// Largest `|L_k − L_0 − I_L,k|` over the steps.
+    #[serde(serialize_with = "json_num::one")]
     pub max_residual_l: f64,
     /// Step where it was reached.
     pub max_residual_l_step: usize,
     /// Largest `|J_k − J_0 − I_J,k|`.
+    #[serde(serialize_with = "json_num::one")]
     pub max_residual_j: f64,
     /// Step where it was reached.
     pub max_residual_j_step: usize,
     /// `max_residual_l` relative to the largest `|L|` or `|I_L|` of the run.
+    #[serde(serialize_with = "json_num::one")]
     pub max_rel_residual_l: f64,
     /// `max_residual_j` relative to the largest `|J|` or `|I_J|` of the run.
+    #[serde(serialize_with = "json_num::one")]
     pub max_rel_residual_j: f64,
 }
 
@@ -208,11 +278,14 @@ pub struct AcceptedExtremes {
     /// Largest `H_{n+1} − H_n − W` of an accepted step (≤ 0 means energy never grew
     /// beyond the external work; for a dissipative scheme it is at most `−D` plus the
     /// tolerances).
+    #[serde(serialize_with = "json_num::one")]
     pub max_energy_growth: f64,
     /// The same growth relative to `max(|H_n|, |H_{n+1}|, |W|)` of its step (the largest
     /// such ratio of the run).
+    #[serde(serialize_with = "json_num::one")]
     pub max_rel_energy_growth: f64,
     /// Largest final relative Newton residual of an accepted step.
+    #[serde(serialize_with = "json_num::one")]
     pub max_residual: f64,
 }
 
@@ -222,6 +295,7 @@ pub struct LastAccepted {
     /// Step index of the last accepted level (the run's end when completed).
     pub step: usize,
     /// Its time `t_0 + step·Δt`.
+    #[serde(serialize_with = "json_num::one")]
     pub t: f64,
     /// What the outputs hold, in words (e.g. for a failed run: every file ends at this
     /// level; the failing step is not in any output).

@@ -25,6 +25,42 @@ pub use summary::write_summary;
 pub use trajectory::{CosseratBenchResult, OutputTimes, TrajectoryRecorder};
 pub use vtk::VtkSeries;
 
+/// `v` as the shortest text that reads back as the identical `f64`, in plain notation for
+/// magnitudes in `[1e-5, 1e16)` and in scientific notation otherwise (as `history.csv`
+/// writes numbers): at most 24 characters, so every number an error message echoes stays
+/// short (`5e-324`, not 324 digits).
+///
+/// ```
+/// use cosserat::output::num;
+/// assert_eq!(num(0.1), "0.1");
+/// assert_eq!(num(5e-324), "5e-324");
+/// assert_eq!(num(-1e300), "-1e300");
+/// assert_eq!(num(f64::NEG_INFINITY), "-inf");
+/// ```
+pub fn num(v: f64) -> String {
+    let mut s = String::new();
+    history::fmt_f64(v, &mut s);
+    s
+}
+
+/// `text` as one CSV cell (RFC 4180): as is when it holds no `,`, `"`, CR or LF, else in
+/// double quotes with every `"` doubled. Every text cell of a CSV file the outputs write
+/// goes through here, so a name can never add a column or a row.
+///
+/// ```
+/// use cosserat::output::csv_cell;
+/// assert_eq!(csv_cell("tip_x"), "tip_x");
+/// assert_eq!(csv_cell("a,b"), "\"a,b\"");
+/// assert_eq!(csv_cell("say \"hi\"\r\n"), "\"say \"\"hi\"\"\r\n\"");
+/// ```
+pub fn csv_cell(text: &str) -> std::borrow::Cow<'_, str> {
+    if text.contains([',', '"', '\r', '\n']) {
+        format!("\"{}\"", text.replace('"', "\"\"")).into()
+    } else {
+        text.into()
+    }
+}
+
 /// Errors of the output writers. Every variant names the file it concerns.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {

@@ -34,7 +34,8 @@ impl ProbeWriter {
         for p in probes {
             for q in ["", "u", "r", "v"] {
                 for c in ["x", "y", "z"] {
-                    line.push_str(&format!(",{}_{q}{c}", p.name));
+                    line.push(',');
+                    line.push_str(&super::csv_cell(&format!("{}_{q}{c}", p.name)));
                 }
             }
         }

@@ -6,7 +6,7 @@ use super::OutputError;
 use crate::observe::record::RunSummary;
 
 /// Writes `s` as pretty-printed JSON (with a trailing newline). Non-finite numbers are
-/// written as `null`.
+/// written as the strings `"NaN"`, `"inf"`, `"-inf"` ([`RunSummary`]), never as `null`.
 pub fn write_summary(path: &Path, s: &RunSummary) -> Result<(), OutputError> {
     let mut text = serde_json::to_string_pretty(s).map_err(|error| OutputError::Json {
         path: path.to_path_buf(),
@@ -94,7 +94,12 @@ mod tests {
         assert_eq!(v["status"], "failed");
         assert_eq!(v["reason"], "Newton did not converge");
         assert_eq!(v["steps"], 125);
-        assert!(v["energy_final"].is_null());
+        assert_eq!(v["energy_final"], "NaN");
+        assert_eq!(v["energy_initial"], 9.166666666666666);
+        assert_eq!(
+            v["failed_step_residuals"],
+            serde_json::json!([1.0, 0.5, "NaN"])
+        );
         assert_eq!(v["params"]["dt"], 0.01);
         assert_eq!(v["params"]["scheme"]["name"], "edmc1");
     }

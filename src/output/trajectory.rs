@@ -23,7 +23,7 @@ use std::path::Path;
 use ndarray::{Array1, Array3, Array4};
 use ndarray_npy::NpzWriter;
 
-use super::OutputError;
+use super::{num, OutputError};
 use crate::integrator::state::State;
 use crate::model::Model;
 use crate::observe::probe::node_director_ends;
@@ -43,13 +43,18 @@ impl OutputTimes {
     /// relative): otherwise an error that says which steps are near.
     pub fn from_dt(output_dt: f64, dt: f64) -> Result<Self, String> {
         if !(output_dt.is_finite() && output_dt > 0.0) {
-            return Err(format!("must be a positive number (got {output_dt})"));
+            return Err(format!(
+                "must be a positive number (got {})",
+                num(output_dt)
+            ));
         }
         let k = (output_dt / dt).round();
         if k < 1.0 || (k * dt - output_dt).abs() > 1e-9 * output_dt {
             let q = output_dt / dt;
             return Err(format!(
-                "{output_dt} is not a whole multiple of Δt = {dt} (nearest: {} and {})",
+                "{} is not a whole multiple of Δt = {} (nearest: {} and {})",
+                num(output_dt),
+                num(dt),
                 short(q.floor().max(1.0) * dt),
                 short(q.ceil().max(1.0) * dt)
             ));
@@ -63,19 +68,22 @@ impl OutputTimes {
         let mut steps = Vec::with_capacity(times.len());
         for &t in times {
             if !t.is_finite() || t < 0.0 {
-                return Err(format!("time {t} must be a finite number ≥ 0"));
+                return Err(format!("time {} must be a finite number ≥ 0", num(t)));
             }
             let n = (t / dt).round();
             if (n * dt - t).abs() > 1e-9 * dt {
                 return Err(format!(
-                    "time {t} does not land on a step of Δt = {dt} (nearest: {} and {})",
+                    "time {} does not land on a step of Δt = {} (nearest: {} and {})",
+                    num(t),
+                    num(dt),
                     short((t / dt).floor() * dt),
                     short((t / dt).ceil() * dt)
                 ));
             }
             if n as usize > n_steps {
                 return Err(format!(
-                    "time {t} is after the end time {}",
+                    "time {} is after the end time {}",
+                    num(t),
                     short(n_steps as f64 * dt)
                 ));
             }
@@ -95,10 +103,10 @@ impl OutputTimes {
     }
 }
 
-/// `x` with 12 significant decimals at most (no `0.6000000000000001` in messages).
+/// `x` rounded to 12 significant digits (no `0.6000000000000001` in messages), as
+/// [`num`] writes it.
 fn short(x: f64) -> String {
-    let s = format!("{x:.12}");
-    s.trim_end_matches('0').trim_end_matches('.').to_string()
+    num(format!("{x:.11e}").parse().unwrap_or(x))
 }
 
 /// The rods of a model as node chains: per rod its node ids in order and its elements.

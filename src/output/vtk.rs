@@ -73,7 +73,8 @@ impl VtkSeries {
         Ok(())
     }
 
-    /// Writes the `.pvd` collection of all frames written.
+    /// Writes the `.pvd` collection of all frames written (through a temporary file
+    /// renamed over it: the collection on disk is always whole).
     pub fn finish(&self) -> Result<(), OutputError> {
         self.write_pvd()
     }
@@ -105,8 +106,10 @@ impl VtkSeries {
             );
         }
         s.push_str("  </Collection>\n</VTKFile>\n");
+        // Replaced whole (temporary file, then rename): a kill while it is rewritten
+        // leaves the previous collection, never an empty or torn one.
         let path = self.pvd_path();
-        std::fs::write(&path, s).map_err(|e| OutputError::io(&path, e))
+        crate::paths::write_atomic(&path, s.as_bytes()).map_err(|e| OutputError::io(&path, e))
     }
 }
 

@@ -43,6 +43,7 @@ use crate::integrator::run::run;
 use crate::integrator::{IntegratorParams, Scheme, Simulation};
 use crate::model::Vec3;
 use crate::observe::record::{RunStatus, StepRecord};
+use crate::output::num;
 use crate::scene::limits::Footprint;
 use crate::scene::Scene;
 
@@ -61,7 +62,7 @@ pub enum StudyError {
     #[error("{0}")]
     Invalid(String),
     /// The reference run of a work–precision study did not reach the end time.
-    #[error("reference run (EM, Δt = {dt}) failed: {reason}")]
+    #[error("reference run (EM, Δt = {}) failed: {reason}", num(*dt))]
     Reference {
         /// Its Δt.
         dt: f64,
@@ -171,10 +172,11 @@ impl SchemeKind {
         if ok {
             Ok(())
         } else if self == SchemeKind::GenAlpha {
-            Err(format!("ρ∞ must be in [0, 1] (got {param})"))
+            Err(format!("ρ∞ must be in [0, 1] (got {})", num(param)))
         } else {
             Err(format!(
-                "parameter must be a finite number ≥ 0 (got {param})"
+                "parameter must be a finite number ≥ 0 (got {})",
+                num(param)
             ))
         }
     }
@@ -429,6 +431,29 @@ pub struct WorkPrecisionConfig {
     pub jobs: usize,
 }
 
+impl WorkPrecisionConfig {
+    /// Checks the settings without running anything: the end time, the time steps and the
+    /// reference Δt finite and > 0 (each error names its setting), at least one scheme, and
+    /// no Δt above the end time.
+    pub fn check(&self) -> Result<(), StudyError> {
+        check_list("t_end", &[self.t_end], true)?;
+        check_list("dt", &self.dts, true)?;
+        check_list("reference dt", &[self.reference_dt], true)?;
+        if self.schemes.is_empty() {
+            return Err(StudyError::Invalid("schemes: empty list".into()));
+        }
+        let sample_dt = self.dts.iter().copied().fold(0.0, f64::max);
+        if sample_dt > self.t_end {
+            return Err(StudyError::Invalid(format!(
+                "the largest Δt ({}) exceeds the end time ({})",
+                num(sample_dt),
+                num(self.t_end)
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// One row of `work_precision.csv`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WorkPrecisionRow {
@@ -518,8 +543,9 @@ fn check_list(name: &str, v: &[f64], positive: bool) -> Result<(), StudyError> {
         .find(|x| !x.is_finite() || (positive && **x <= 0.0))
     {
         return Err(StudyError::Invalid(format!(
-            "{name}: every value must be a finite number{} (got {x})",
-            if positive { " > 0" } else { "" }
+            "{name}: every value must be a finite number{} (got {})",
+            if positive { " > 0" } else { "" },
+            num(*x)
         )));
     }
     Ok(())
@@ -530,18 +556,8 @@ pub fn work_precision(
     scene: &Scene,
     cfg: &WorkPrecisionConfig,
 ) -> Result<WorkPrecision, StudyError> {
-    check_list("dt", &cfg.dts, true)?;
-    check_list("reference dt", &[cfg.reference_dt, cfg.t_end], true)?;
-    if cfg.schemes.is_empty() {
-        return Err(StudyError::Invalid("schemes: empty list".into()));
-    }
+    cfg.check()?;
     let sample_dt = cfg.dts.iter().copied().fold(0.0, f64::max);
-    if sample_dt > cfg.t_end {
-        return Err(StudyError::Invalid(format!(
-            "the largest Δt ({sample_dt}) exceeds the end time ({})",
-            cfg.t_end
-        )));
-    }
     // Every member keeps its samples (nodal positions every `sample_dt`) to the end.
     let count = (cfg.schemes.len() as u64)
         .saturating_mul(cfg.dts.len() as u64)
@@ -631,6 +647,33 @@ pub struct StabilityConfig {
 }
 
 impl StabilityConfig {
+    /// Checks the settings without running anything: the end time and the time steps
+    /// finite and > 0, at least one scheme, and every family's parameter values present
+    /// and in its range.
+    pub fn check(&self) -> Result<(), StudyError> {
+        check_list("t_end", &[self.t_end], true)?;
+        check_list("dt", &self.dts, true)?;
+        if self.kinds.is_empty() {
+            return Err(StudyError::Invalid("schemes: empty list".into()));
+        }
+        for &k in &self.kinds {
+            let ps = self.params_of(k);
+            if ps.is_empty() {
+                return Err(StudyError::Invalid(format!(
+                    "no parameter values for {}",
+                    k.name()
+                )));
+            }
+            for p in ps {
+                k.check_param(p).map_err(|reason| StudyError::SchemeSpec {
+                    spec: format!("{}:{}", k.name(), num(p)),
+                    reason,
+                })?;
+            }
+        }
+        Ok(())
+    }
+
     /// The parameter axis of a family (a single 0 for EM and mid-point).
     pub fn params_of(&self, kind: SchemeKind) -> Vec<f64> {
         match kind {
@@ -667,11 +710,7 @@ pub fn stability_on(
     cfg: &StabilityConfig,
     exec: &Executor,
 ) -> Result<Stability, StudyError> {
-    check_list("dt", &cfg.dts, true)?;
-    check_list("t_end", &[cfg.t_end], true)?;
-    if cfg.kinds.is_empty() {
-        return Err(StudyError::Invalid("schemes: empty list".into()));
-    }
+    cfg.check()?;
     // The grid's size before it is built; on the GPU every member keeps its history.
     let count = cfg
         .kinds
@@ -697,18 +736,7 @@ pub fn stability_on(
         .map_err(|e| StudyError::Invalid(e.to_string()))?;
     let mut members = Vec::new();
     for &k in &cfg.kinds {
-        let ps = cfg.params_of(k);
-        if ps.is_empty() {
-            return Err(StudyError::Invalid(format!(
-                "no parameter values for {}",
-                k.name()
-            )));
-        }
-        for p in ps {
-            k.check_param(p).map_err(|reason| StudyError::SchemeSpec {
-                spec: format!("{}:{p}", k.name()),
-                reason,
-            })?;
+        for p in cfg.params_of(k) {
             for &dt in &cfg.dts {
                 members.push((k, p, dt));
             }

@@ -223,12 +223,32 @@ pub fn attach(
     }
 }
 
-/// A count that must be ≥ 1 (`--every`, `--snapshots`, `--rods`, …).
+/// A count that must be ≥ 1 (`--every`, `--snapshots`, `--rods`, `--jobs`, …).
 pub fn at_least_one(s: &str) -> Result<usize, String> {
     match s.trim().parse::<i128>() {
         Ok(n) if n >= 1 && n <= usize::MAX as i128 => Ok(n as usize),
         Ok(n) => Err(format!("must be an integer ≥ 1 (got {n})")),
-        Err(_) => Err(format!("must be an integer ≥ 1 (got `{s}`)")),
+        Err(_) => Err(format!("must be an integer ≥ 1 (got `{}`)", echo(s))),
+    }
+}
+
+/// A count that may be 0 (`--slots`).
+pub fn at_least_zero(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<i128>() {
+        Ok(n) if n >= 0 && n <= usize::MAX as i128 => Ok(n as usize),
+        Ok(n) => Err(format!("must be an integer ≥ 0 (got {n})")),
+        Err(_) => Err(format!("must be an integer ≥ 0 (got `{}`)", echo(s))),
+    }
+}
+
+/// Longest text an error message echoes from the command line (in characters).
+pub const MAX_ECHO_CHARS: usize = 60;
+
+/// `s` as an error message echoes it: cut to [`MAX_ECHO_CHARS`] characters (with `…`).
+pub fn echo(s: &str) -> String {
+    match s.char_indices().nth(MAX_ECHO_CHARS) {
+        Some((i, _)) => format!("{}…", &s[..i]),
+        None => s.to_string(),
     }
 }
 
@@ -629,13 +649,13 @@ fn slurm_command(a: SlurmArgs) -> Result<ExitCode> {
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     /// Rods (batch members).
-    #[arg(long, default_value_t = 64, value_parser = at_least_one, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 64, value_parser = at_least_one)]
     pub rods: usize,
     /// Elements per rod (at most 1 000 000).
-    #[arg(long, default_value_t = 30, value_parser = at_least_one, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 30, value_parser = at_least_one)]
     pub elements: usize,
     /// Time steps.
-    #[arg(long, default_value_t = 20, value_parser = at_least_one, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 20, value_parser = at_least_one)]
     pub steps: usize,
     /// GPU adapter: first adapter whose name contains this.
     #[arg(long)]
@@ -661,8 +681,9 @@ pub struct BenchArgs {
     /// evaluates its elements on the CPU kernel, also in a GPU batch.
     #[arg(long, value_enum, default_value_t = StrategyArg::Auto)]
     pub strategy: StrategyArg,
-    /// GPU path: members in flight at once (default: as many as fit, at most 4096).
-    #[arg(long, default_value_t = 0)]
+    /// GPU path: members in flight at once (0, the default: as many as fit, at most
+    /// 4096).
+    #[arg(long, default_value_t = 0, value_parser = at_least_zero)]
     pub slots: usize,
     /// GPU path: where the Newton systems are solved; `both` times the host-solve and the
     /// device-solve GPU batches side by side (JSON: `gpu_*` and the `device` object).
