@@ -796,8 +796,9 @@ fn run_set_errors_point_into_the_file_or_name_the_set() {
 #[test]
 fn long_multibyte_scene_names_fit_every_output_file_name() {
     let dir = tempfile::tempdir().unwrap();
-    // 100 characters of 3 bytes: within the character limit, 300 bytes of file name.
-    let name = "名".repeat(100);
+    // 85 characters of 3 bytes: within the name limit (256 bytes), 255 bytes of file name
+    // before the suffixes.
+    let name = "名".repeat(85);
     let scene = write(
         dir.path(),
         "cjk.toml",

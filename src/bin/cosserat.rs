@@ -406,9 +406,53 @@ fn cli_command() -> clap::Command {
     hyphens(<Cli as clap::CommandFactory>::command())
 }
 
+/// Parses the command line. `--help` and `--version` print as clap prints them; every
+/// other error is one line, as the program's own errors are (`error: … tip: …`), exit 2.
 fn parse_cli() -> Cli {
+    use clap::error::ErrorKind;
     use clap::FromArgMatches as _;
-    Cli::from_arg_matches(&cli_command().get_matches()).unwrap_or_else(|e| e.exit())
+    let parsed = cli_command()
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m));
+    match parsed {
+        Ok(cli) => cli,
+        Err(e)
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) =>
+        {
+            e.exit()
+        }
+        Err(e) => {
+            eprintln!("{}", one_line(&e.render().to_string()));
+            std::process::exit(2)
+        }
+    }
+}
+
+/// A clap error as one line: its message and tips, without the usage block and the
+/// pointer to `--help`.
+fn one_line(rendered: &str) -> String {
+    let mut parts: Vec<&str> = Vec::new();
+    for l in rendered.lines().map(str::trim) {
+        if l.starts_with("Usage:") || l.starts_with("For more information") {
+            break;
+        }
+        if !l.is_empty() {
+            parts.push(l);
+        }
+    }
+    let mut out = String::new();
+    for p in parts {
+        if !out.is_empty() {
+            out.push_str(if out.ends_with(':') { " " } else { "; " });
+        }
+        out.push_str(p);
+    }
+    printable(&out)
 }
 
 /// Mesa's Vulkan device-select layer prints two `XDG_RUNTIME_DIR` lines on every adapter
