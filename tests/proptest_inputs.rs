@@ -461,3 +461,185 @@ proptest! {
         check_featured(contact, obstacle, support, probe, traj, set)?;
     }
 }
+
+/// Keys of the featured scene a sweep may vary, with values good and bad.
+const SWEEP_KEYS: &[&str] = &[
+    "contact[0].contact_radius",
+    "contact[0].stiffness",
+    "obstacle[0].radius",
+    "obstacle[0].friction",
+    "probe[0].node",
+    "integrator.dt",
+    "rod[1].elements",
+    "contact[3].stiffness",
+];
+const SWEEP_VALUES: &[&str] = &[
+    "[0.004, 0.005, 0.006]",
+    "[1e-9, 0.005]",
+    "[0.5, 5e-324, -1]",
+    "[2, 3, 4, 1]",
+    "[1e6, 1e300]",
+    "[0.01, 0.005, 0.02]",
+];
+/// How a shard run is damaged before `merge`.
+#[derive(Clone, Copy, Debug)]
+enum Tamper {
+    None,
+    /// Delete the last shard's results.
+    Missing,
+    /// Replace the last shard's results with the same shard of another sweep.
+    Foreign,
+    /// Change a value in a row of the first shard.
+    EditedValue,
+    /// Cut the first shard's results in the middle of a row.
+    Torn,
+}
+
+/// Runs `cosserat` in `dir`: (exit code, stderr).
+fn cosserat_in(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_cosserat"));
+    c.current_dir(dir).args(args);
+    let o = run_limited(c);
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// A command's outcome: exit 0, or exit 2 with one line; never a panic or abort.
+fn one_line_or_ok(code: Option<i32>, err: &str, what: &str) -> Result<bool, TestCaseError> {
+    prop_assert!(!err.contains("panicked"), "panic: {} {}", what, err);
+    match code {
+        Some(0) => Ok(true),
+        Some(2) => {
+            prop_assert_eq!(err.trim_end().lines().count(), 1, "{}: {}", what, err);
+            prop_assert!(err.starts_with("error: "), "{}: {}", what, err);
+            Ok(false)
+        }
+        other => Err(TestCaseError::fail(format!(
+            "{what}: exit {other:?}: {err}"
+        ))),
+    }
+}
+
+fn shard_sweep(dir: &Path, name: &str, key: &str, values: &str) {
+    let base = featured_scene(
+        CONTACTS[1],
+        OBSTACLES[1],
+        "",
+        PROBES[5].replace("s = 0.33", "node = 2").as_str(),
+    );
+    std::fs::write(dir.join("base.toml"), base).unwrap();
+    std::fs::write(
+        dir.join(name),
+        format!("base = \"base.toml\"\nmode = \"list\"\n\n[[vary]]\nkey = \"{key}\"\nvalues = {values}\n"),
+    )
+    .unwrap();
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 16, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Sharded sweeps over the new keys, run shard by shard, optionally damaged, then
+    /// merged: every command completes or exits 2 in one line naming what it refuses;
+    /// a merge that succeeds holds each member exactly once with this sweep's values and no
+    /// NaN; a damaged set of shards never merges; nothing is written outside `--out`.
+    #[test]
+    fn shards_and_merges_never_mix_or_lie(
+        key in pick(SWEEP_KEYS),
+        values in pick(SWEEP_VALUES),
+        n in pick(&["1", "2", "3", "5", "0", "18446744073709551615", "-1", "x"]),
+        tamper in proptest::sample::select(vec![Tamper::None, Tamper::None, Tamper::Missing, Tamper::Foreign, Tamper::EditedValue, Tamper::Torn]),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        shard_sweep(d, "s.toml", key, values);
+        let count: usize = n.parse().unwrap_or(0).min(8);
+        let mut all_ran = true;
+        for i in 0..count.max(1) {
+            let shard = format!("{i}/{n}");
+            let (code, err) = cosserat_in(d, &["sweep", "s.toml", "--out", "o", "--shard", &shard]);
+            let ran = one_line_or_ok(code, &err, &format!("shard {shard}"))?;
+            all_ran &= ran;
+            if std::env::var_os("PROPTEST_SHOW").is_some() {
+                eprintln!("shard {shard} of {key}={values}: exit {code:?} {}", err.lines().next().unwrap_or(""));
+            }
+            if !ran {
+                break;
+            }
+        }
+        if all_ran && count > 0 {
+            let last = count - 1;
+            let shards = d.join("o/shards");
+            match tamper {
+                Tamper::None => {}
+                Tamper::Missing => std::fs::remove_file(shards.join(format!("{last}-of-{n}.csv"))).unwrap(),
+                Tamper::Foreign => {
+                    // The same key with other values, as shard `last` of its own sweep.
+                    let other = d.join("other");
+                    std::fs::create_dir(&other).unwrap();
+                    shard_sweep(&other, "s.toml", key, "[0.0041, 0.0051, 0.0061, 3]");
+                    let shard = format!("{last}/{n}");
+                    let (code, err) = cosserat_in(&other, &["sweep", "s.toml", "--out", "o", "--shard", &shard]);
+                    if one_line_or_ok(code, &err, "foreign shard")? {
+                        for ext in ["csv", "id", "json"] {
+                            let f = format!("{last}-of-{n}.{ext}");
+                            std::fs::copy(other.join("o/shards").join(&f), shards.join(&f)).unwrap();
+                        }
+                    }
+                }
+                Tamper::EditedValue | Tamper::Torn => {
+                    let f = shards.join(format!("0-of-{n}.csv"));
+                    let text = std::fs::read_to_string(&f).unwrap();
+                    let damaged = match tamper {
+                        Tamper::Torn => text[..text.len() - 7.min(text.len())].to_string(),
+                        // The varied value is the column before `reason`.
+                        _ => text
+                            .lines()
+                            .map(|l| match l.rsplit_once(',') {
+                                Some((head, reason)) if l.starts_with(|c: char| c.is_ascii_digit()) => {
+                                    let (pre, _) = head.rsplit_once(',').unwrap();
+                                    format!("{pre},0.123456,{reason}")
+                                }
+                                _ => l.to_string(),
+                            })
+                            .collect::<Vec<_>>()
+                            .join("\n") + "\n",
+                    };
+                    std::fs::write(&f, damaged).unwrap();
+                }
+            }
+            let (code, err) = cosserat_in(d, &["sweep", "merge", "o"]);
+            let merged = one_line_or_ok(code, &err, "merge")?;
+            if std::env::var_os("PROPTEST_SHOW").is_some() {
+                eprintln!("merge after {tamper:?}: exit {code:?} {}", err.lines().next().unwrap_or(""));
+            }
+            let damaged = !matches!(tamper, Tamper::None);
+            let rows_damaged = matches!(tamper, Tamper::EditedValue)
+                && std::fs::read_to_string(d.join(format!("o/shards/0-of-{n}.csv"))).unwrap().lines().filter(|l| l.starts_with(|c: char| c.is_ascii_digit())).count() > 0;
+            let torn_matters = matches!(tamper, Tamper::Torn);
+            prop_assert!(
+                !(merged && (matches!(tamper, Tamper::Missing | Tamper::Foreign) || rows_damaged || torn_matters)) || !damaged,
+                "{:?} shards merged: {}",
+                tamper,
+                err
+            );
+            if merged {
+                let csv = std::fs::read_to_string(d.join("o/members.csv")).unwrap();
+                let members = values.matches(',').count() + 1;
+                let mut ids: Vec<usize> = csv.lines().skip(1).map(|l| l.split(',').next().unwrap().parse().unwrap()).collect();
+                ids.sort();
+                prop_assert_eq!(ids, (0..members).collect::<Vec<_>>(), "{}", csv);
+                prop_assert!(!csv.to_ascii_lowercase().contains("nan"), "{}", csv);
+            } else {
+                prop_assert!(!d.join("o/members.csv").exists(), "a refused merge wrote members.csv");
+            }
+        }
+        for f in files_below(d) {
+            prop_assert!(
+                f == "s.toml" || f == "base.toml" || f.starts_with("o/") || f.starts_with("other/"),
+                "{f} written outside --out"
+            );
+        }
+    }
+}
