@@ -179,7 +179,7 @@ impl Footprint {
             ("results kept".into(), self.kept_bytes),
         ];
         v.retain(|(_, b)| *b > 0);
-        v.sort_by(|a, b| b.1.cmp(&a.1));
+        v.sort_by_key(|p| std::cmp::Reverse(p.1));
         v
     }
 }
@@ -294,6 +294,8 @@ pub fn system_memory_bound() -> Option<(u64, String)> {
             };
             // SAFETY: getrlimit only writes the struct it is given.
             if unsafe { libc::getrlimit(res, &mut r) } == 0 && r.rlim_cur != libc::RLIM_INFINITY {
+                // rlim_t is u64 on Linux, not on every Unix.
+                #[allow(clippy::unnecessary_cast)]
                 let cur = r.rlim_cur as u64;
                 take(cur / 2, format!("half of {name} {}", human(cur)));
             }
@@ -392,13 +394,13 @@ pub fn check_batch(what: &str, members: u64, member: &Footprint) -> Result<(), L
 /// allocating, so an overflow is `inf`) or with `per_diameter` spheres within one contact
 /// diameter along a rod. `key` names what sets the count.
 pub fn check_contact_spheres(spheres: f64, per_diameter: f64) -> Result<(), LimitError> {
-    if !(spheres <= MAX_CONTACT_SPHERES as f64) {
+    if spheres.is_nan() || spheres > MAX_CONTACT_SPHERES as f64 {
         return Err(LimitError::Contact(format!(
             "the contact chains would have {} spheres (one per contact radius along the rods), above the limit of {MAX_CONTACT_SPHERES}: give a larger contact radius",
             short_count(spheres)
         )));
     }
-    if !(per_diameter <= MAX_SPHERES_PER_DIAMETER) {
+    if per_diameter.is_nan() || per_diameter > MAX_SPHERES_PER_DIAMETER {
         return Err(LimitError::Contact(format!(
             "{} contact spheres lie within one contact diameter along a rod (the contact radius is {} element lengths), above the limit of {MAX_SPHERES_PER_DIAMETER}: give a smaller contact radius or longer elements",
             short_count(per_diameter),
