@@ -723,6 +723,26 @@ fn scene_files_are_read_with_a_size_cap_and_only_when_regular() {
             stderr(&o)
         );
     }
+    // The same for a sweep file and a sweep's base scene.
+    std::fs::write(dir.path().join("s.toml"), "base = \"big.toml\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [0.1]\n").unwrap();
+    for (file, want) in [
+        (dir.path().join("s.toml"), "big.toml: scene file larger than 64 MiB"),
+        (big.clone(), "big.toml: scene file larger than 64 MiB"),
+        (PathBuf::from("/dev/zero"), "/dev/zero: not a regular file"),
+    ] {
+        if !file.exists() {
+            continue;
+        }
+        let o = cosserat()
+            .arg("sweep")
+            .arg(&file)
+            .arg("--out")
+            .arg(dir.path().join("o"))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    }
 }
 
 #[test]

@@ -429,15 +429,27 @@ pub fn scene_with_overrides(spec: &str, sets: &[(String, f64)]) -> Result<Scene,
     crate::scene::parse_scene_with_sets(&text, &source, sets).map_err(|e| e.to_string())
 }
 
+/// Reads a sweep file or its base scene as the scene loader does: a regular file of at
+/// most [`crate::scene::MAX_SCENE_BYTES`] bytes (a device or pipe is refused unread).
+fn read_capped(path: &Path) -> Result<String, SweepError> {
+    crate::scene::read_scene_file(path).map_err(|e| match e {
+        SceneError::Io { path, error } => SweepError::Io { path, error },
+        other => SweepError::Io {
+            path: path.display().to_string(),
+            error: std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                other.to_string().rsplit(": ").next().unwrap_or_default().to_string(),
+            ),
+        },
+    })
+}
+
 /// Reads and validates a sweep file: syntax, keys, modes, ranges, that the base scene is
 /// valid and that it accepts every varied key. The members' values are not checked here:
 /// a member whose scene rejects its values is a `rejected` row of [`run_sweep`].
 pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|error| SweepError::Io {
-        path: file.clone(),
-        error,
-    })?;
+    let text = read_capped(path)?;
     let at = |off: usize| Some(line_col(&text, off));
     let invalid =
         |span: Option<std::ops::Range<usize>>, key: &str, reason: String| SweepError::Invalid {
@@ -479,10 +491,7 @@ pub fn load_sweep(path: &Path) -> Result<SweepSpec, SweepError> {
     let base = raw.base.get_ref().clone();
     let rel: PathBuf = path.parent().unwrap_or(Path::new(".")).join(&base);
     let (base_text, base_source) = if rel.is_file() {
-        let t = std::fs::read_to_string(&rel).map_err(|error| SweepError::Io {
-            path: rel.display().to_string(),
-            error,
-        })?;
+        let t = read_capped(&rel)?;
         (t, rel.display().to_string())
     } else if let Some(b) = builtin_scenes().iter().find(|b| b.name == base) {
         (b.toml.to_string(), format!("builtin:{}", b.name))
