@@ -6,7 +6,8 @@
 //! its inline modules; comments, doc comments and string literals ignored) are mapped to
 //! the deepest existing module file. Then, for every module that has child modules (the
 //! crate root included), the graph between its children — each file counted as the child
-//! it lies under — must have no cycle.
+//! it lies under — must have no cycle. Unit tests (`#[cfg(test)]` items and files) are
+//! left out: they may build their fixtures from any module.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -61,6 +62,9 @@ enum Tok {
     Star,
     LParen,
     RParen,
+    LBrack,
+    RBrack,
+    Hash,
     Other,
 }
 
@@ -163,6 +167,9 @@ fn tokenize(src: &str) -> Vec<Tok> {
                 '*' => Tok::Star,
                 '(' => Tok::LParen,
                 ')' => Tok::RParen,
+                '[' => Tok::LBrack,
+                ']' => Tok::RBrack,
+                '#' => Tok::Hash,
                 _ => Tok::Other,
             });
         }
@@ -193,6 +200,59 @@ fn raw_string_start(c: &[char], i: usize) -> Option<(usize, usize)> {
         j += 1;
     }
     (j < c.len() && c[j] == '"').then_some((hashes, j + 1))
+}
+
+/// Drops every `#[cfg(test)]` item (unit tests are no part of the data flow); returns
+/// the rest and the names of `#[cfg(test)] mod name;` files declared here.
+fn strip_cfg_test(toks: &[Tok]) -> (Vec<Tok>, Vec<String>) {
+    let id = |s: &str| Tok::Ident(s.to_string());
+    let attr = [
+        Tok::Hash,
+        Tok::LBrack,
+        id("cfg"),
+        Tok::LParen,
+        id("test"),
+        Tok::RParen,
+        Tok::RBrack,
+    ];
+    let mut out = Vec::new();
+    let mut test_files = Vec::new();
+    let mut i = 0;
+    while i < toks.len() {
+        if !toks[i..].starts_with(&attr) {
+            out.push(toks[i].clone());
+            i += 1;
+            continue;
+        }
+        i += attr.len();
+        // The item: up to a `;` outside any bracket, or the end of its first `{}` block.
+        let start = i;
+        let mut depth = 0usize;
+        while i < toks.len() {
+            let t = &toks[i];
+            i += 1;
+            match t {
+                Tok::Open | Tok::LParen | Tok::LBrack => depth += 1,
+                Tok::RParen | Tok::RBrack => depth = depth.saturating_sub(1),
+                Tok::Close => {
+                    depth = depth.saturating_sub(1);
+                    if depth == 0 {
+                        break;
+                    }
+                }
+                Tok::Semi if depth == 0 => {
+                    if let [Tok::Ident(m), Tok::Ident(name), Tok::Semi] = &toks[start..i] {
+                        if m == "mod" {
+                            test_files.push(name.clone());
+                        }
+                    }
+                    break;
+                }
+                _ => {}
+            }
+        }
+    }
+    (out, test_files)
 }
 
 fn ident(t: Option<&Tok>) -> Option<&str> {
@@ -371,10 +431,28 @@ fn crate_graph() -> BTreeMap<ModPath, BTreeSet<ModPath>> {
         })
         .collect();
     let files: BTreeSet<ModPath> = sources.iter().map(|(m, _)| m.clone()).collect();
+    let stripped: Vec<(ModPath, Vec<Tok>)> = sources
+        .iter()
+        .map(|(m, text)| (m.clone(), tokenize(text)))
+        .collect();
+    let mut test_only: BTreeSet<ModPath> = BTreeSet::new();
+    let mut code = Vec::new();
+    for (m, toks) in stripped {
+        let (toks, tests) = strip_cfg_test(&toks);
+        test_only.extend(tests.into_iter().map(|t| {
+            let mut p = m.clone();
+            p.push(t);
+            p
+        }));
+        code.push((m, toks));
+    }
     let mut graph = BTreeMap::new();
-    for (m, text) in &sources {
+    for (m, toks) in &code {
+        if test_only.iter().any(|t| m.starts_with(t)) {
+            continue;
+        }
         let edges: &mut BTreeSet<ModPath> = graph.entry(m.clone()).or_default();
-        for (from, path) in references(&tokenize(text), m) {
+        for (from, path) in references(toks, m) {
             if let Some(to) = resolve(&from, &path, &files) {
                 if &to != m {
                     edges.insert(to);
@@ -580,8 +658,10 @@ fn the_checker_sees_use_groups_super_and_code_paths_but_not_comments() {
         "// use crate::b;\n/// [`crate::b::T`]\n/* crate::b::U */\nlet s = \"crate::b::V\";\n\
                use super::{y::{Y1, Y2 as Z}, self as me};\n\
                mod tests { use super::super::y; }\n\
-               fn f() { crate::a::y::g(); let c = 'x'; }\n";
-    let refs: BTreeSet<ModPath> = references(&tokenize(src), &x)
+               fn f() { crate::a::y::g(); let c = 'x'; }\n\
+               #[cfg(test)]\nmod t { use crate::b; }\n#[cfg(test)]\nfn h() -> [u8; 1] { crate::b::f() }\n";
+    let (toks, _) = strip_cfg_test(&tokenize(src));
+    let refs: BTreeSet<ModPath> = references(&toks, &x)
         .into_iter()
         .filter_map(|(from, p)| resolve(&from, &p, &files))
         .collect();
