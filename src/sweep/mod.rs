@@ -29,6 +29,7 @@
 mod run;
 pub mod shard;
 pub mod slurm;
+mod split;
 
 use std::path::{Path, PathBuf};
 
