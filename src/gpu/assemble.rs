@@ -8,20 +8,17 @@
 //! element pass copies each element's two node increments into the element kernel's
 //! increment fields.
 
-use super::context::{GpuContext, Precision};
+use super::context::{compute_pipeline, make_bind_group, GpuContext, Precision};
 use super::kernel::{
-    index_runs, shader_precision, take_runs, take_runs_gap, ElementKernel, KernelMode,
-    KernelTimers, Readback, TangentSlots, SCATTER_GAP,
+    index_runs, take_runs, take_runs_gap, ElementKernel, KernelMode, KernelTimers, Readback,
+    TangentSlots, SCATTER_GAP,
 };
 use super::layout::{AsmLayout, A_NODE};
 use super::upload::Block;
 use super::GpuError;
 use crate::integrator::evaluate::AssembledSystem;
 
-/// The WGSL source of the assembly pass (f64 version).
-pub const ASSEMBLE_WGSL: &str = include_str!("../../shaders/assemble.wgsl");
-/// The WGSL source of the increment gather pass (f64 version).
-pub const GATHER_WGSL: &str = include_str!("../../shaders/gather.wgsl");
+pub use super::shaders::{ASSEMBLE_WGSL, GATHER_WGSL};
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -626,46 +623,4 @@ fn increment_rows(rows: &mut [f64], dirty: &mut [bool], nodes: &[[f64; A_NODE]],
         }
         *d |= forced || changed;
     }
-}
-
-/// A compute pipeline of `src` (entry point `main`, layout from the shader) in the
-/// context's precision, through the pipeline cache.
-pub(crate) fn compute_pipeline(ctx: &GpuContext, label: &str, src: &str) -> wgpu::ComputePipeline {
-    let module = ctx
-        .device
-        .create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(shader_precision(src, ctx.precision).into()),
-        });
-    ctx.device
-        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(label),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: ctx.pipeline_cache(),
-        })
-}
-
-/// A bind group of `pipeline`'s group 0 with `buffers` at bindings 0, 1, ….
-pub(crate) fn make_bind_group(
-    device: &wgpu::Device,
-    pipeline: &wgpu::ComputePipeline,
-    label: &str,
-    buffers: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> = buffers
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: b.as_entire_binding(),
-        })
-        .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &entries,
-    })
 }

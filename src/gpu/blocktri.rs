@@ -12,8 +12,7 @@ use super::kernel::index_runs;
 use super::GpuError;
 use crate::linsolve::batched::BatchLayout;
 
-/// The WGSL source (f64 only).
-pub const BLOCKTRI_WGSL: &str = include_str!("../../shaders/blocktri.wgsl");
+pub use super::shaders::BLOCKTRI_WGSL;
 
 /// Nodes per dispatch: an invocation runs ≈ 2 200 loop iterations per node of a
 /// factorization, and lavapipe ends an invocation after 65 535 (shaders/blocktri.wgsl,

@@ -4,7 +4,8 @@
 //! buffer, so the read-back is one copy command of exactly the bytes asked for (a copy
 //! per run of members cost a command, a barrier and driver bookkeeping each).
 
-use super::assemble::{compute_pipeline, make_bind_group};
+use super::context::{compute_pipeline, make_bind_group};
+use super::shaders::COMPACT_WGSL;
 
 /// The compaction pass over a solver's report, iterate and residual-work buffers.
 pub(crate) struct Compact {
@@ -30,7 +31,7 @@ impl Compact {
         rwork: &wgpu::Buffer,
     ) -> Self {
         let device = ctx.device.clone();
-        let pipeline = compute_pipeline(ctx, "compact", include_str!("../../shaders/compact.wgsl"));
+        let pipeline = compute_pipeline(ctx, "compact", COMPACT_WGSL);
         ctx.save_pipeline_cache();
         let storage = |label: &str, bytes: usize, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {

@@ -4,16 +4,10 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+use super::shaders::{shader_precision, CACHE_KEYED};
 use super::GpuError;
 
-/// Floating-point precision the kernels run in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Precision {
-    /// `SHADER_F64`: the CPU kernel's arithmetic to round-off.
-    F64,
-    /// Fallback on adapters without f64 (measured error: docs/gpu.md, "Kernels").
-    F32,
-}
+pub use super::shaders::Precision;
 
 /// A headless device and queue on one adapter.
 pub struct GpuContext {
@@ -60,13 +54,7 @@ pub fn pipeline_cache_dir() -> Option<PathBuf> {
 /// FNV-1a of the crate's shader sources and version: a cache file per shader revision.
 fn shader_hash() -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for src in [
-        super::kernel::ELEMENT_WGSL,
-        super::assemble::ASSEMBLE_WGSL,
-        super::assemble::GATHER_WGSL,
-        super::blocktri::BLOCKTRI_WGSL,
-        env!("CARGO_PKG_VERSION"),
-    ] {
+    for src in CACHE_KEYED.into_iter().chain([env!("CARGO_PKG_VERSION")]) {
         for b in src.bytes() {
             h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
         }
@@ -269,4 +257,46 @@ impl GpuContext {
         };
         format!("{}, {p}", adapter_line(&self.info))
     }
+}
+
+/// A compute pipeline of `src` (entry point `main`, layout from the shader) in the
+/// context's precision, through the pipeline cache.
+pub(crate) fn compute_pipeline(ctx: &GpuContext, label: &str, src: &str) -> wgpu::ComputePipeline {
+    let module = ctx
+        .device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(shader_precision(src, ctx.precision).into()),
+        });
+    ctx.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: ctx.pipeline_cache(),
+        })
+}
+
+/// A bind group of `pipeline`'s group 0 with `buffers` at bindings 0, 1, ….
+pub(crate) fn make_bind_group(
+    device: &wgpu::Device,
+    pipeline: &wgpu::ComputePipeline,
+    label: &str,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
 }

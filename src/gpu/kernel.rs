@@ -19,28 +19,13 @@ use crate::element::{
 };
 use crate::integrator::params::Scheme;
 
-/// The WGSL source (f64 version).
-pub const ELEMENT_WGSL: &str = include_str!("../../shaders/element.wgsl");
+pub use super::shaders::ELEMENT_WGSL;
+use super::shaders::{real_width, shader_precision};
 
 /// The shader text for a precision: the f32 variant rewrites `Real` and the two constants
 /// that do not fit an f32.
 pub fn shader_source(p: Precision) -> String {
     shader_precision(ELEMENT_WGSL, p)
-}
-
-/// `src` for precision `p` (the f32 variant rewrites `Real` and, where present, the two
-/// element-kernel constants that do not fit an f32).
-pub(crate) fn shader_precision(src: &str, p: Precision) -> String {
-    match p {
-        Precision::F64 => src.to_string(),
-        Precision::F32 => src
-            .replace("alias Real = f64;", "alias Real = f32;")
-            .replace("const TINY: Real = 1e-300;", "const TINY: Real = 1e-30;")
-            .replace(
-                "const CNU_TOL: Real = 1e-15;",
-                "const CNU_TOL: Real = 1e-7;",
-            ),
-    }
 }
 
 /// How the kernel obtains the dissipation scalars.
@@ -141,10 +126,7 @@ pub struct ElementKernel {
 impl ElementKernel {
     /// Bytes per scalar.
     pub(crate) fn width(p: Precision) -> usize {
-        match p {
-            Precision::F64 => 8,
-            Precision::F32 => 4,
-        }
+        real_width(p)
     }
 
     /// The largest number of element slots one kernel may hold on this device: the

@@ -1,6 +1,8 @@
 //! Headless GPU evaluation of the element kernel (wgpu compute, WGSL twin of
 //! [`crate::element`]).
 //!
+//! * [`shaders`]: the WGSL sources of every pass and their f32 rewriting; below all
+//!   other modules here.
 //! * [`context`]: adapter choice (`--adapter` substring, `WGPU_BACKEND`), device with the
 //!   adapter's own limits, `SHADER_F64` detection, a one-line adapter description, whether
 //!   the adapter is a software rasterizer, the per-user compiled-pipeline cache.
@@ -29,6 +31,7 @@ pub mod context;
 pub mod kernel;
 pub mod layout;
 pub mod planar;
+pub mod shaders;
 pub(crate) mod upload;
 
 pub use assemble::Assembler;

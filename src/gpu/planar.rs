@@ -12,8 +12,7 @@ use crate::element::planar::{
 use crate::element::{FrozenScalars, StepConsts, StressRule};
 use nalgebra::Vector3;
 
-/// The WGSL source.
-pub const PLANAR_WGSL: &str = include_str!("../../shaders/planar.wgsl");
+pub use super::shaders::PLANAR_WGSL;
 /// f64 inputs per element (layout: the `I_*` constants of the shader).
 const NIN: usize = 56;
 /// f64 outputs per element: residual, scales, tangent (row-major).

@@ -12,7 +12,7 @@
 //! 518 copies per dispatch before, 2 now (docs/gpu.md).
 
 use super::context::{GpuContext, Precision};
-use super::kernel::{shader_precision, ElementKernel};
+use super::shaders::{real_width, shader_precision, SCATTER_WGSL};
 use rayon::prelude::*;
 
 /// Scalars per run at most (one workgroup of 64 invocations copies a run; longer runs
@@ -104,9 +104,7 @@ impl Scatter {
         let device = ctx.device.clone();
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("scatter.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(
-                shader_precision(include_str!("../../shaders/scatter.wgsl"), ctx.precision).into(),
-            ),
+            source: wgpu::ShaderSource::Wgsl(shader_precision(SCATTER_WGSL, ctx.precision).into()),
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("scatter"),
@@ -195,7 +193,7 @@ impl Scatter {
             return (0, 0);
         }
         self.runs[0].dst = n as u32;
-        let w = ElementKernel::width(self.precision);
+        let w = real_width(self.precision);
         let run_bytes = (std::mem::size_of::<Run>() * self.runs.len()) as u64;
         let val_bytes = (w * at) as u64;
         if run_bytes > self.run_buf.size() {
@@ -298,7 +296,7 @@ pub(crate) mod tests {
 
     /// Reads `buf` (`n` scalars of `precision`) back to the host as f64.
     pub(crate) fn read(ctx: &GpuContext, buf: &wgpu::Buffer, n: usize) -> Vec<f64> {
-        let w = ElementKernel::width(ctx.precision);
+        let w = real_width(ctx.precision);
         let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: None,
             size: (w * n) as u64,
@@ -347,7 +345,7 @@ pub(crate) mod tests {
         // the others queued blocks.
         let shapes = [(6, 500), (10, 500), (7, 400), (9, 300)];
         let sizes: Vec<usize> = shapes.iter().map(|&(f, c)| f * c).collect();
-        let w = ElementKernel::width(ctx.precision) as u64;
+        let w = real_width(ctx.precision) as u64;
         let targets: [wgpu::Buffer; TARGETS] = std::array::from_fn(|t| {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: None,

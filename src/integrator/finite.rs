@@ -5,8 +5,8 @@
 
 use super::report::{StepFailure, StepReport};
 use super::state::State;
-use crate::observe::record::StepRecord;
-use crate::observe::Invariants;
+use crate::integrator::invariants::Invariants;
+use crate::integrator::record::StepRecord;
 
 /// The first non-finite value of a step's result, named, or `None`.
 pub fn first_non_finite(state: &State, inv: &Invariants, rep: &StepReport) -> Option<String> {

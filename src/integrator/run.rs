@@ -5,9 +5,9 @@
 use std::time::Instant;
 
 use crate::integrator::evaluate::now;
+use crate::integrator::invariants::Invariants;
+use crate::integrator::record::{RunStatus, StepRecord};
 use crate::integrator::Simulation;
-use crate::observe::record::{RunStatus, StepRecord};
-use crate::observe::Invariants;
 
 /// How a run ended and what it measured along the way.
 #[derive(Clone, Debug, PartialEq)]
@@ -45,7 +45,7 @@ pub struct RunOutcome {
     /// Smallest sub-step Δt of a cut-back step.
     pub smallest_substep: Option<f64>,
     /// Largest energy growth and residual the acceptance checks let through.
-    pub accepted: crate::observe::record::AcceptedExtremes,
+    pub accepted: crate::integrator::record::AcceptedExtremes,
 }
 
 /// The record of the current level of `sim` (its `t` is the state's; the running totals are

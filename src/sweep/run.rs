@@ -6,7 +6,7 @@ use std::fs::OpenOptions;
 use std::io::Write;
 use std::path::Path;
 
-use super::shard::{self, Shard};
+use super::split::{self, Shard};
 use super::{SweepError, SweepSpec};
 use crate::batch::{run_members, BatchOptions, Executor, Member, MemberResult};
 use crate::gpu::kernel::KernelTimers;
@@ -408,7 +408,7 @@ fn lock(out: &Path, shard: Option<Shard>) -> Result<Vec<std::fs::File>, SweepErr
     };
     let mut held = vec![folder];
     if let Some(sh) = shard {
-        let path = shard::file(out, sh, "lock");
+        let path = split::file(out, sh, "lock");
         match try_lock_file(&path, true)? {
             Some(f) => held.push(f),
             None => {
@@ -634,7 +634,7 @@ pub fn run_sweep(
     };
     let shard = opts.shard;
     if let Some(sh) = shard {
-        shard::check_count(spec, sh)?;
+        split::check_count(spec, sh)?;
     }
     let (csv_path, id_path, json_path) = match shard {
         None => (
@@ -643,16 +643,16 @@ pub fn run_sweep(
             out.join("sweep.json"),
         ),
         Some(sh) => (
-            shard::file(out, sh, "csv"),
-            shard::file(out, sh, "id"),
-            shard::file(out, sh, "json"),
+            split::file(out, sh, "csv"),
+            split::file(out, sh, "id"),
+            split::file(out, sh, "json"),
         ),
     };
     let dir = csv_path.parent().unwrap_or(out);
     std::fs::create_dir_all(dir).map_err(ctx(format!("cannot create {}", dir.display())))?;
     let _lock = lock(out, shard)?;
     if let Some(sh) = shard {
-        shard::check_siblings(out, &run_identity(spec, opts), sh)?;
+        split::check_siblings(out, &run_identity(spec, opts), sh)?;
     }
     let in_scope = |i: &usize| shard.is_none_or(|sh| sh.contains(*i));
     let scope = shard.map_or(spec.len(), |sh| sh.len_of(spec.len()));
@@ -840,13 +840,13 @@ pub fn run_sweep(
 }
 
 /// What a sweep's rows file begins with: the header, after the identity line
-/// ([`shard::tag`]) in a shard's file.
+/// ([`split::tag`]) in a shard's file.
 fn file_head(spec: &SweepSpec, opts: &SweepOptions) -> String {
     match opts.shard {
         None => header(spec),
         Some(sh) => format!(
             "{}\n{}",
-            shard::tag(&run_identity(spec, opts), sh),
+            split::tag(&run_identity(spec, opts), sh),
             header(spec)
         ),
     }

@@ -4,8 +4,8 @@
 
 use super::{Mode, Simulation};
 use crate::element::{consistent_scalars, kinematics, FrozenScalars};
+use crate::integrator::invariants::{invariants, Invariants};
 use crate::integrator::state::State;
-use crate::observe::{invariants, Invariants};
 
 impl Simulation {
     /// The state an increment produces (with the frozen scalars of `mode`), the
@@ -267,7 +267,7 @@ mod tests {
             }
         }
         let next = sim.advance(&q, super::Mode::Frozen).0;
-        let h1 = crate::observe::invariants(&sim.model, &sim.data, &next).total();
+        let h1 = crate::integrator::invariants::invariants(&sim.model, &sim.data, &next).total();
         assert!(
             h1 < 1e-3 * sim.inv.total(),
             "the crafted step keeps H = {h1:e}"
@@ -332,7 +332,8 @@ mod tests {
         let rel_growth = |eps: f64| {
             let q = shifted(&q0, &delta, eps);
             let next = sim.advance(&q, super::Mode::Frozen).0;
-            let h1 = crate::observe::invariants(&sim.model, &sim.data, &next).total();
+            let h1 =
+                crate::integrator::invariants::invariants(&sim.model, &sim.data, &next).total();
             let h0 = sim.inv.total();
             let w = sim.external_work(&q, super::Mode::Frozen);
             (h1 - h0 - w) / h0.abs().max(h1.abs()).max(w.abs())
@@ -369,7 +370,8 @@ mod tests {
         let rel_miss = |eps: f64| {
             let q = shifted(&q0, &delta, eps);
             let (next, diss, _) = sim.advance(&q, mode);
-            let h1 = crate::observe::invariants(&sim.model, &sim.data, &next).total();
+            let h1 =
+                crate::integrator::invariants::invariants(&sim.model, &sim.data, &next).total();
             let h0 = sim.inv.total();
             let w = sim.external_work(&q, mode);
             (h0 - h1 + w - diss) / h0.abs().max(h1.abs()).max(w.abs())

@@ -40,13 +40,13 @@ use crate::element::{
 use crate::integrator::dofs::{DofMap, NodeDofs, NONE};
 use crate::integrator::evaluate::{ElementBackend, EvalPort};
 use crate::integrator::gen_alpha::GenAlpha;
+use crate::integrator::invariants::{invariants, Invariants};
 use crate::integrator::params::{IntegratorParams, Scheme, Strategy};
 use crate::integrator::report::SolveTimers;
 use crate::integrator::state::State;
 use crate::linsolve::{SlotLookup, SolverKind, SparseSolver};
 use crate::math::lane::F64x4;
 use crate::model::{Model, Vec3};
-use crate::observe::{invariants, Invariants};
 
 /// The pattern-dependent structures of a simulation's linear system
 /// ([`Simulation::system_parts`]).

@@ -5,10 +5,10 @@
 
 use super::{Backend, Mode, Simulation};
 use crate::integrator::evaluate::now;
+use crate::integrator::invariants::{acceleration_norms, invariants};
 use crate::integrator::report::{StepFailure, StepReport};
 use crate::integrator::{finite, links};
 use crate::model::Vec3;
-use crate::observe::{acceleration_norms, invariants};
 
 impl Simulation {
     /// Advances one step of Δt. On failure the state is left at the last accepted step.

@@ -10,10 +10,10 @@
 
 use super::{Mode, Simulation};
 use crate::element::FrozenScalars;
+use crate::integrator::invariants::Invariants;
 use crate::integrator::params::Strategy;
 use crate::integrator::report::StepFailure;
 use crate::integrator::state::State;
-use crate::observe::Invariants;
 
 impl Simulation {
     /// One checked solve of the step with the link multipliers held fixed.

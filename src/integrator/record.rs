@@ -1,4 +1,5 @@
-//! The records observers produce and outputs consume.
+//! The records a run produces (per step, per run) and outputs consume: the integrator
+//! fills them, observers add balances; also reachable as `observe::record`.
 
 use serde::{Serialize, Serializer};
 
