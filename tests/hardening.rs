@@ -724,9 +724,16 @@ fn scene_files_are_read_with_a_size_cap_and_only_when_regular() {
         );
     }
     // The same for a sweep file and a sweep's base scene.
-    std::fs::write(dir.path().join("s.toml"), "base = \"big.toml\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [0.1]\n").unwrap();
+    std::fs::write(
+        dir.path().join("s.toml"),
+        "base = \"big.toml\"\n[[vary]]\nkey = \"integrator.dt\"\nvalues = [0.1]\n",
+    )
+    .unwrap();
     for (file, want) in [
-        (dir.path().join("s.toml"), "big.toml: scene file larger than 64 MiB"),
+        (
+            dir.path().join("s.toml"),
+            "big.toml: scene file larger than 64 MiB",
+        ),
         (big.clone(), "big.toml: scene file larger than 64 MiB"),
         (PathBuf::from("/dev/zero"), "/dev/zero: not a regular file"),
     ] {

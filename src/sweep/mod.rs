@@ -438,7 +438,12 @@ fn read_capped(path: &Path) -> Result<String, SweepError> {
             path: path.display().to_string(),
             error: std::io::Error::new(
                 std::io::ErrorKind::InvalidData,
-                other.to_string().rsplit(": ").next().unwrap_or_default().to_string(),
+                other
+                    .to_string()
+                    .rsplit(": ")
+                    .next()
+                    .unwrap_or_default()
+                    .to_string(),
             ),
         },
     })
