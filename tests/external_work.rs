@@ -199,5 +199,6 @@ t_end = 3.0
 }
 
 /// Generalized-α (ρ∞ = 0.8) closes the cumulative balance only up to its numerical
-/// dissipation: measured PLACEHOLDER.
-const GEN_ALPHA_BALANCE_RTOL: f64 = 0.5;
+/// dissipation: measured 1.6e-3 of W over the 300 steps (a reported work of 0 or 1 per
+/// step misses by 1 or by 10⁵).
+const GEN_ALPHA_BALANCE_RTOL: f64 = 5e-3;
