@@ -110,3 +110,97 @@ fn cli_cutback_reports_cut_steps() {
         .unwrap();
     assert_eq!(bad.status.code(), Some(2));
 }
+
+/// Runs the CLI on the frame with `args` (every step in `history.csv`) and returns
+/// `summary.json` and the history's rows as column name → values.
+fn cli_frame(
+    args: &[&str],
+) -> (
+    serde_json::Value,
+    Vec<std::collections::HashMap<String, f64>>,
+) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("c");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["run", "frame", "--every", "1"])
+        .args(args)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let csv = std::fs::read_to_string(out.join("history.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines
+        .map(|l| {
+            header
+                .iter()
+                .cloned()
+                .zip(l.split(',').map(|v| v.parse::<f64>().unwrap()))
+                .collect()
+        })
+        .collect();
+    (s, rows)
+}
+
+/// `summary.json`'s step statistics are what its `history.csv` (every step) gives:
+/// `accepted.max_energy_growth` and `max_rel_energy_growth` are the largest
+/// `H_n − H_{n−1} − W_n` and the same over `max(|H_{n−1}|, |H_n|, |W_n|)` (a one-step run
+/// and a long one), and `smallest_substep` is Δt over the largest `substeps`, a power of
+/// two.
+#[test]
+fn cli_summary_statistics_equal_the_history() {
+    for args in [
+        &["--scheme", "edmc2", "--dt", "0.5", "--t-end", "0.5"][..],
+        &["--scheme", "edmc2", "--dt", "0.5", "--cutback", "3"][..],
+        &["--scheme", "em", "--dt", "0.5", "--cutback", "3"][..],
+    ] {
+        let (s, rows) = cli_frame(args);
+        assert_eq!(s["status"], "completed", "{args:?}: {s}");
+        assert!(rows.len() >= 2, "{args:?}");
+        let (mut g, mut rel) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+        for w in rows.windows(2) {
+            let (h0, h1, work) = (w[0]["total"], w[1]["total"], w[1]["external_work"]);
+            let growth = h1 - h0 - work;
+            let href = h0.abs().max(h1.abs()).max(work.abs());
+            g = g.max(growth);
+            rel = rel.max(growth / href.max(1e-300));
+        }
+        let acc = &s["accepted"];
+        let (sg, srel) = (
+            acc["max_energy_growth"].as_f64().unwrap(),
+            acc["max_rel_energy_growth"].as_f64().unwrap(),
+        );
+        eprintln!(
+            "{args:?}: H0 = {:e}, growth {sg:e} (history {g:e}), rel {srel:e} (history {rel:e})",
+            rows[0]["total"]
+        );
+        // JSON and CSV both print shortest round-trip decimals: equal to a few ulps.
+        assert!(
+            (sg - g).abs() <= 1e-12 * g.abs(),
+            "{args:?}: {sg:e} vs {g:e}"
+        );
+        assert!(
+            (srel - rel).abs() <= 1e-12 * rel.abs(),
+            "{args:?}: {srel:e} vs {rel:e}"
+        );
+        let most = rows.iter().map(|r| r["substeps"]).fold(0.0, f64::max);
+        match s["smallest_substep"].as_f64() {
+            None => assert!(most <= 1.0, "{args:?}: cut steps but no smallest_substep"),
+            Some(h) => {
+                assert!(
+                    most >= 2.0 && most.log2().fract() == 0.0,
+                    "{args:?}: {most}"
+                );
+                assert_eq!(h, 0.5 / most, "{args:?}");
+            }
+        }
+    }
+}

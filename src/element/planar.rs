@@ -1098,3 +1098,80 @@ pub fn full_index(map: &PlanarMap) -> [usize; NDOF_P] {
         }
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scheme::Scheme;
+
+    /// `∂σ/∂x` where the mean end speed at `n+1` is exactly zero while it was not at `n`
+    /// (translational velocity dissipation on): `|v^h_{n+1}|` has a kink there and the
+    /// gradient takes its zero subgradient — every entry finite and the `g` rows (which
+    /// see the scalars only through `v_{n+1}`) exactly zero. Just off the kink the same
+    /// rows are nonzero, so the speed's gradient is live at this state.
+    #[test]
+    fn scalar_gradient_at_zero_mean_speed_takes_the_zero_subgradient() {
+        let pd = PlanarData {
+            h: 0.5,
+            a_rho: 2.0,
+            i_s: 0.01,
+            i_amax: 0.01,
+            c: Vector3::new(10.0, 10.0, 1.0),
+            eps0: Vector3::zeros(),
+            damping: 0.0,
+            rot_free: [false, false],
+            kappa: [0.0, 0.0],
+            map: PlanarMap {
+                axes: [0, 1],
+                normal: 2,
+                coef: [1.0, 0.0],
+            },
+        };
+        let d = [V2::new(0.0, 1.0), V2::new(1.0, 0.0)];
+        let st = PState {
+            cfg: PConfig {
+                r: [V2::new(0.0, 0.0), V2::new(0.5, 0.0)],
+                d: [d, d],
+            },
+            v: [V2::new(1.0, 0.25), V2::new(1.0, 0.25)],
+            vs: [V2::zeros(), V2::zeros()],
+        };
+        let k = StepConsts {
+            dt: 0.1,
+            scheme: Scheme::Edmc1 {
+                chi_gamma: 0.0,
+                chi_omega: 0.0,
+                chi_v: 0.5,
+                chi_nu: 0.0,
+            },
+        };
+        let eps_n = strains3(&st.cfg, pd.h);
+        let gradient_at = |gy: f64| {
+            // v_{n+1} = 2u/Δt − v_n − 2g = 0 at u = 0, g = −v_n/2 (exactly, in binary).
+            let g = V2::new(-0.5, -0.125 + gy);
+            let inc = PIncrement {
+                u: [V2::zeros(); 2],
+                theta: [0.0; 2],
+                g: [g, g],
+            };
+            let (s, _, kin) = consistent_scalars(&pd, &st, &eps_n, &inc, &k);
+            (kin.inputs.v_n1, scalar_gradient(&pd, &st, &kin, &s, &k))
+        };
+        let g_rows = |grad: &[[f64; 4]; NDOF_P]| {
+            (0..2)
+                .flat_map(|l| (0..2).map(move |c| pg_idx(l) + c))
+                .map(|j| grad[j].iter().fold(0.0f64, |m, v| m.max(v.abs())))
+                .fold(0.0f64, f64::max)
+        };
+        let (v1, grad) = gradient_at(0.0);
+        assert_eq!(v1, 0.0, "the state must sit on the kink");
+        assert!(
+            grad.iter().flatten().all(|v| v.is_finite()),
+            "non-finite gradient at v = 0: {grad:?}"
+        );
+        assert_eq!(g_rows(&grad), 0.0, "{grad:?}");
+        let (v1, near) = gradient_at(1e-3);
+        assert!(v1 > 0.0);
+        assert!(g_rows(&near) > 0.1, "{near:?}");
+    }
+}
