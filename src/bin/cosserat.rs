@@ -730,22 +730,12 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
     // The frames kept for the outputs, sized before anything is set up or written.
     if let Err(e) = opts.check_memory(&scene.model, params.n_steps()) {
         let fp = opts.footprint(&scene.model, params.n_steps());
-        let by_frames = (fp.trajectory_frames * cosserat::scene::limits::BYTES_PER_TRAJECTORY_NODE)
-            .max(fp.snapshot_frames * cosserat::scene::limits::BYTES_PER_SNAPSHOT_NODE)
-            .saturating_mul(fp.nodes)
-            > fp.elements * cosserat::scene::limits::BYTES_PER_ELEMENT;
-        let what = if !by_frames {
-            scene.source.clone()
-        } else if fp
-            .trajectory_frames
-            .saturating_mul(cosserat::scene::limits::BYTES_PER_TRAJECTORY_NODE)
-            >= fp
-                .snapshot_frames
-                .saturating_mul(cosserat::scene::limits::BYTES_PER_SNAPSHOT_NODE)
-        {
-            "--trajectory/--output-dt/--times".to_string()
-        } else {
-            "--snapshots/--animate-every".to_string()
+        // Blame the options behind the largest part of the estimate, else the scene.
+        let largest = fp.parts().into_iter().next().map(|(w, _)| w);
+        let what = match largest.as_deref() {
+            Some(w) if w.contains("trajectory frame") => "--trajectory/--output-dt/--times",
+            Some(w) if w.contains("snapshot frame") => "--snapshots/--animate-every",
+            _ => scene.source.as_str(),
         };
         bail!("{what}: {e}");
     }

@@ -18,7 +18,7 @@
 mod build;
 pub mod limits;
 mod raw;
-mod set;
+pub(crate) mod set;
 mod span;
 
 use std::borrow::Cow;

@@ -12,15 +12,15 @@ use std::ops::Range;
 use toml::de::{DeTable, DeValue};
 use toml::Spanned;
 
-/// A path step of a `--set` key.
-enum Step {
+/// A path step of a scene key (`--set` and a sweep's `[[vary]] key`).
+pub(crate) enum Step {
     Key(String),
     Index(usize),
 }
 
 /// `integrator.dt`, `rod[0].elements`, `rod.beam.elements` as steps; `None` when it is
 /// not a key path.
-fn parse_key(key: &str) -> Option<Vec<Step>> {
+pub(crate) fn parse_key(key: &str) -> Option<Vec<Step>> {
     let mut out = Vec::new();
     for part in key.split('.') {
         let (name, mut rest) = match part.find('[') {

@@ -37,6 +37,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::math::rng::Rng;
+use crate::scene::set::{parse_key, Step};
 use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
 pub use run::{
     run_sweep, MemberRow, MemberStatus, SweepOptions, SweepSummary, CSV_COLUMNS, IDENTITY_FILE,
@@ -170,35 +171,6 @@ struct RawVary {
     range: Option<Spanned<Vec<f64>>>,
     #[serde(default)]
     log: bool,
-}
-
-/// A path step of a scene key.
-enum Step {
-    Key(String),
-    Index(usize),
-}
-
-fn parse_key(key: &str) -> Option<Vec<Step>> {
-    let mut out = Vec::new();
-    for part in key.split('.') {
-        let (name, mut rest) = match part.find('[') {
-            Some(i) => (&part[..i], &part[i..]),
-            None => (part, ""),
-        };
-        if name.is_empty() {
-            return None;
-        }
-        out.push(Step::Key(name.to_string()));
-        while !rest.is_empty() {
-            let close = rest.find(']')?;
-            if !rest.starts_with('[') {
-                return None;
-            }
-            out.push(Step::Index(rest[1..close].trim().parse().ok()?));
-            rest = &rest[close + 1..];
-        }
-    }
-    Some(out)
 }
 
 /// Writes `x` at `key` into a scene document. The parent must exist; the leaf may be new
