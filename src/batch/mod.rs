@@ -1,7 +1,7 @@
 //! Batches of independent simulations ("members"): the same [`Simulation`] step
 //! (Newton, staggered/monolithic strategy, acceptance checks) per member, run either on
 //! the CPU (members in parallel with rayon) or with the element kernel of all members
-//! evaluated together on the GPU ([`lockstep`]).
+//! evaluated together on the GPU (`lockstep`).
 //!
 //! Every member has its own Newton convergence: a member that converged stops iterating
 //! while others continue, a member whose step fails is recorded as failed and the batch

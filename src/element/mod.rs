@@ -1019,7 +1019,7 @@ fn field_of(l: usize, a: usize) -> usize {
 
 /// Monolithic strategy: the change of the element residual caused by the dependence of
 /// the dissipation scalars on the increment, `(∂R/∂s)(∂s/∂q)`, added to a frozen-scalar
-/// tangent ([`scalar_correction`], both factors in closed form:
+/// tangent (`scalar_correction`, both factors in closed form:
 /// [`scalar_gradient::scalar_gradient`] and [`scalar_gradient::residual_scalar_derivatives`]).
 /// `s` and `kin` are the consistent scalars at the iterate and their kinematics, as
 /// [`consistent_scalars`] returns them; `active` marks the element-local unknowns that

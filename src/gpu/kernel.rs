@@ -56,7 +56,7 @@ pub struct KernelTimers {
     /// Bytes read back.
     pub bytes_down: u64,
     /// Host → device copies (`write_buffer` calls) of the uploads: two per dispatch that
-    /// uploads kernel inputs ([`crate::gpu::upload`]), plus the device solver's operation
+    /// uploads kernel inputs (`gpu::upload`), plus the device solver's operation
     /// words and read-back list when they change.
     pub copies: u64,
     /// Device → host copy commands of the read-backs.
@@ -393,7 +393,7 @@ impl ElementKernel {
     }
 
     /// Writes the frozen scalars of slot `i` and marks it active (its increment is written
-    /// on the device, see [`Self::gather_increments_on_device`]); the slot goes up with the
+    /// on the device, see `gather_increments_on_device`); the slot goes up with the
     /// next dispatch only if that changed something (the scalars change once per staggered
     /// round, not per Newton iteration).
     pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {

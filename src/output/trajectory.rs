@@ -231,9 +231,9 @@ impl TrajectoryRecorder {
         npz_finish(npz, path)
     }
 
-    /// Writes the `cosseratbench` layout into `dir`: `trajectory.npz` with `times` [T],
-    /// per rod `rod{i}` [T, N_i, 3] (its node positions in order) and `rod{i}_directors`
-    /// [T, N_i − 1, 3] (unit `d1` at the middle of each element), and `result.json` from
+    /// Writes the `cosseratbench` layout into `dir`: `trajectory.npz` with `times` `[T]`,
+    /// per rod `rod{i}` `[T, N_i, 3]` (its node positions in order) and `rod{i}_directors`
+    /// `[T, N_i − 1, 3]` (unit `d1` at the middle of each element), and `result.json` from
     /// `result` (see [`CosseratBenchResult`]).
     pub fn write_cosseratbench(
         &self,

@@ -32,7 +32,7 @@ use crate::observe::probe::node_director_ends;
 pub const PVD_EVERY: usize = 64;
 
 /// Writes `NAME_000042.vtu` files into a folder and `NAME.pvd` on [`finish`](Self::finish)
-/// (and every [`PVD_EVERY`] frames).
+/// (and every `PVD_EVERY` frames).
 #[derive(Debug)]
 pub struct VtkSeries {
     dir: PathBuf,
