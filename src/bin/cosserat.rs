@@ -102,6 +102,9 @@ enum Command {
     /// Speed-vs-accuracy and stability studies over the schemes.
     #[command(subcommand)]
     Study(StudyCommand),
+    /// List the GPU adapters wgpu sees, say which one `--backend auto` would use and why,
+    /// and diagnose a host whose NVIDIA GPU is not a Vulkan adapter.
+    Gpu(cmds::gpu::GpuArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -508,6 +511,7 @@ fn main() -> ExitCode {
         Some(Command::Study(StudyCommand::Damping(a))) => damping_command(&a),
         Some(Command::Sweep(a)) => cmds::sweep_command(a),
         Some(Command::Bench(a)) => cmds::bench_command(a),
+        Some(Command::Gpu(a)) => cmds::gpu::gpu_command(a),
         Some(Command::Scenes) => {
             let scenes = builtin_scenes();
             let width = scenes

@@ -87,14 +87,24 @@ fn adapter_line(info: &wgpu::AdapterInfo) -> String {
     format!("{} [{:?}, {:?}]", info.name, info.backend, info.device_type)
 }
 
-fn type_rank(t: wgpu::DeviceType) -> u8 {
-    match t {
+/// The order in which adapters are preferred (smaller first): adapters with `SHADER_F64`
+/// first, then discrete, integrated, virtual, other and software (CPU) adapters. Used by
+/// [`GpuContext::new`] and by `cosserat gpu` ([`super::inventory::auto_choice`]).
+pub(crate) fn adapter_rank(f64: bool, t: wgpu::DeviceType) -> (bool, u8) {
+    let t = match t {
         wgpu::DeviceType::DiscreteGpu => 0,
         wgpu::DeviceType::IntegratedGpu => 1,
         wgpu::DeviceType::VirtualGpu => 2,
         wgpu::DeviceType::Other => 3,
         wgpu::DeviceType::Cpu => 4,
-    }
+    };
+    (!f64, t)
+}
+
+/// `COSSERAT_GPU_NO_F64` (any value) treats every adapter as one without f64: the f32 path
+/// and the refusals that depend on it can be exercised on any adapter.
+pub(crate) fn env_disables_f64() -> bool {
+    std::env::var_os("COSSERAT_GPU_NO_F64").is_some()
 }
 
 impl GpuContext {
@@ -130,8 +140,8 @@ impl GpuContext {
             adapters.retain(|a| a.get_info().name.to_lowercase().contains(&f));
         }
         adapters.sort_by_key(|a| {
-            let f64 = a.features().contains(wgpu::Features::SHADER_F64);
-            (!f64, type_rank(a.get_info().device_type))
+            let f64 = a.features().contains(wgpu::Features::SHADER_F64) && !env_disables_f64();
+            adapter_rank(f64, a.get_info().device_type)
         });
         let Some(adapter) = adapters.into_iter().next() else {
             return Err(GpuError::NoAdapter {
@@ -140,10 +150,7 @@ impl GpuContext {
             });
         };
         let info = adapter.get_info();
-        // `COSSERAT_GPU_NO_F64` (any value) treats the adapter as one without f64: the f32
-        // path and the refusals that depend on it can be exercised on any adapter.
-        let f64 = adapter.features().contains(wgpu::Features::SHADER_F64)
-            && std::env::var_os("COSSERAT_GPU_NO_F64").is_none();
+        let f64 = adapter.features().contains(wgpu::Features::SHADER_F64) && !env_disables_f64();
         let cache_path = cache_dir
             .filter(|_| adapter.features().contains(wgpu::Features::PIPELINE_CACHE))
             .and_then(|dir| {

@@ -19,6 +19,8 @@
 //! * `upload`: a dispatch's uploads (changed mirror rows, node increments) in two copies
 //!   and a scatter pass; `compact`: the solver's reports and iterates packed by a pass
 //!   and read back in one copy.
+//! * [`inventory`]: what `cosserat gpu` reports: the adapters, the `--backend auto` choice,
+//!   and why a host's NVIDIA GPU is not an adapter.
 //!
 //! f64 is used whenever the adapter offers `SHADER_F64`; otherwise the same shader runs in
 //! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (docs/gpu.md,
@@ -28,6 +30,7 @@ pub mod assemble;
 pub mod blocktri;
 pub(crate) mod compact;
 pub mod context;
+pub mod inventory;
 pub mod kernel;
 pub mod layout;
 pub mod planar;

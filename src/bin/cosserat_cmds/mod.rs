@@ -20,6 +20,8 @@ use cosserat::sweep::{
     check_shard_folder, load_sweep, merge_shards_from, run_sweep, MemberStatus, Shard, SweepOptions,
 };
 
+pub mod gpu;
+
 /// Prints a status line on stdout. A stdout that cannot be written (redirected to a full
 /// disk) does not stop a sweep or a merge: their results are their files, whose write
 /// errors are errors.
