@@ -820,6 +820,7 @@ fn snapshots_chart_draws_every_rod_from_blue_to_red() {
     assert!(counts.iter().all(|&n| n > 100), "{counts:?}");
 }
 
+/// With `CHARTS_KEEP=DIR`, copies a drawn chart to `DIR` (to look at what the tests draw).
 fn keep(p: &std::path::Path) {
     if let Ok(d) = std::env::var("CHARTS_KEEP") {
         std::fs::create_dir_all(&d).unwrap();
