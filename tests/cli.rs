@@ -180,7 +180,7 @@ fn study_commands_write_csv_and_png() {
     }
     let csv = std::fs::read_to_string(out.join("work_precision.csv")).unwrap();
     assert!(
-        csv.starts_with("scheme,param,dt,error,wall_s,status,newton_iters_total,observed_order\n")
+        csv.starts_with("scheme,param,dt,error,wall_s,status,newton_iters_total,observed_order,fit_dt_min,fit_dt_max\n")
     );
     assert_eq!(csv.lines().count(), 1 + 3 * 2);
 

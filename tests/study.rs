@@ -102,6 +102,8 @@ fn work_precision_orders_and_csv() {
         assert!(rows.iter().all(|r| r.status == RunStatus::Completed));
         let order = rows[0].observed_order;
         assert!((order - p).abs() < 0.08, "{}: order {order}", spec.label());
+        // Inside the asymptotic range: the order is fitted over every Δt.
+        assert_eq!((rows[0].fit_dt_min, rows[0].fit_dt_max), (1e-4, 4e-4));
     }
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("work_precision.csv");

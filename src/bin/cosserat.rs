@@ -940,10 +940,19 @@ fn work_precision_command(a: &WorkPrecisionArgs) -> Result<ExitCode> {
                 .iter()
                 .filter(|x| x.status == RunStatus::Failed)
                 .count();
+            let order = if r.observed_order.is_finite() {
+                format!(
+                    "observed order {:>6.3} (fit over Δt {}–{})",
+                    r.observed_order,
+                    num(r.fit_dt_min),
+                    num(r.fit_dt_max)
+                )
+            } else {
+                "no asymptotic range".to_string()
+            };
             println!(
-                "{:<18} observed order {:>6.3}   errors {}   ({} of {} runs failed)",
+                "{:<18} {order}   errors {}   ({} of {} runs failed)",
                 r.spec.label(),
-                r.observed_order,
                 runs.iter()
                     .map(|x| format!("{:.2e}", x.error))
                     .collect::<Vec<_>>()

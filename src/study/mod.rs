@@ -11,8 +11,8 @@
 //!   over the `K` sample times `t_k = k·Δt_s ≤ t_end` (`Δt_s` the largest Δt of the study;
 //!   a run whose levels miss a sample time is linearly interpolated there) and the `N`
 //!   nodes; units of length. Beside the error: wall time, Newton iterations and the
-//!   observed order (least-squares slope of log error against log Δt over the completed
-//!   runs of each scheme/parameter).
+//!   observed order of each scheme/parameter, fitted over its asymptotic range only
+//!   ([`asymptotic_fit`]: the longest run of its finest Δt whose local orders agree).
 //! * [`stability`]: a grid Δt × dissipation parameter per scheme; each run reports how far
 //!   it got and the largest relative growth of `H − H_0 − W` (energy created beyond the
 //!   external work).
@@ -160,6 +160,15 @@ impl SchemeKind {
             },
             SchemeKind::Edmc2 => Scheme::edmc2(param),
             SchemeKind::GenAlpha => Scheme::GenAlpha { rho_inf: param },
+        }
+    }
+
+    /// The order of accuracy of the family on a smooth solution: 1 for EDMC-1 (its
+    /// dissipation is O(Δt)), 2 for the others (measured in `tests/study.rs`).
+    pub fn nominal_order(self) -> u32 {
+        match self {
+            SchemeKind::Edmc1 => 1,
+            _ => 2,
         }
     }
 
@@ -469,8 +478,13 @@ pub struct WorkPrecisionRow {
     pub status: RunStatus,
     /// Total Newton iterations.
     pub newton_iters_total: usize,
-    /// Observed order of this row's scheme/parameter (same on all its rows).
+    /// Observed order of this row's scheme/parameter over its asymptotic range (same on
+    /// all its rows; NaN when it has none, see [`asymptotic_fit`]).
     pub observed_order: f64,
+    /// Smallest Δt of the range the order was fitted over (NaN when none).
+    pub fit_dt_min: f64,
+    /// Largest Δt of the range the order was fitted over (NaN when none).
+    pub fit_dt_max: f64,
     /// Failure reason, if any.
     pub reason: Option<String>,
 }
@@ -513,6 +527,67 @@ pub fn loglog_slope(points: &[(f64, f64)]) -> f64 {
     } else {
         f64::NAN
     }
+}
+
+/// The local orders of an asymptotic range may spread (largest − smallest) by at most this
+/// fraction of their mean (see [`asymptotic_fit`]).
+pub const ORDER_AGREEMENT: f64 = 0.15;
+
+/// The observed order of a convergence series and the Δt range it was fitted over.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OrderFit {
+    /// Least-squares slope of log error against log Δt over the range.
+    pub order: f64,
+    /// Smallest Δt of the range.
+    pub dt_min: f64,
+    /// Largest Δt of the range.
+    pub dt_max: f64,
+}
+
+impl OrderFit {
+    /// Whether `dt` lies in the fitted range (to round-off).
+    pub fn contains(&self, dt: f64) -> bool {
+        dt >= self.dt_min * (1.0 - 1e-12) && dt <= self.dt_max * (1.0 + 1e-12)
+    }
+}
+
+/// Local orders `ln(e_i/e_{i+1}) / ln(Δt_i/Δt_{i+1})` of `(Δt, error)` pairs sorted by
+/// decreasing Δt.
+pub fn local_orders(sorted: &[(f64, f64)]) -> Vec<f64> {
+    sorted
+        .windows(2)
+        .map(|w| (w[0].1 / w[1].1).ln() / (w[0].0 / w[1].0).ln())
+        .collect()
+}
+
+/// The observed order over the **asymptotic range** of `(Δt, error)` pairs: the longest
+/// run of the finest Δt (at least three, i.e. two intervals) whose local orders are
+/// positive and all within [`ORDER_AGREEMENT`] × their mean of each other; the order is
+/// the least-squares slope of log error against log Δt over that run. Failed runs (error
+/// NaN or ≤ 0) are left out first. `None` when no such run exists: the error at these Δt
+/// is not yet (or no longer, at a tolerance floor) a power of Δt.
+pub fn asymptotic_fit(points: &[(f64, f64)]) -> Option<OrderFit> {
+    let mut pts: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|(h, e)| h.is_finite() && e.is_finite() && *h > 0.0 && *e > 0.0)
+        .collect();
+    pts.sort_by(|a, b| b.0.total_cmp(&a.0));
+    pts.dedup_by(|a, b| a.0 == b.0);
+    let n = pts.len();
+    // Longest first: the runs pts[start..] ending at the finest Δt.
+    (0..n.saturating_sub(2)).find_map(|start| {
+        let run = &pts[start..];
+        let local = local_orders(run);
+        let mean = local.iter().sum::<f64>() / local.len() as f64;
+        let lo = local.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = local.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lo > 0.0 && hi - lo <= ORDER_AGREEMENT * mean).then(|| OrderFit {
+            order: loglog_slope(run),
+            dt_min: run[run.len() - 1].0,
+            dt_max: run[0].0,
+        })
+    })
 }
 
 /// L2-in-time error between two sampled trajectories over the first `k` samples.
@@ -605,6 +680,8 @@ pub fn work_precision(
                 status: m.status,
                 newton_iters_total: m.newton_iters_total,
                 observed_order: f64::NAN,
+                fit_dt_min: f64::NAN,
+                fit_dt_max: f64::NAN,
                 reason: m.reason,
             }
         })
@@ -615,10 +692,12 @@ pub fn work_precision(
             .filter(|r| r.spec == *s)
             .map(|r| (r.dt, r.error))
             .collect();
-        let order = loglog_slope(&pts);
-        rows.iter_mut()
-            .filter(|r| r.spec == *s)
-            .for_each(|r| r.observed_order = order);
+        let fit = asymptotic_fit(&pts);
+        rows.iter_mut().filter(|r| r.spec == *s).for_each(|r| {
+            r.observed_order = fit.map_or(f64::NAN, |f| f.order);
+            r.fit_dt_min = fit.map_or(f64::NAN, |f| f.dt_min);
+            r.fit_dt_max = fit.map_or(f64::NAN, |f| f.dt_max);
+        });
     }
     Ok(WorkPrecision {
         scene: scene.name.clone(),
@@ -839,5 +918,49 @@ mod tests {
         assert!((loglog_slope(&pts) - 2.0).abs() < 1e-12);
         // Failed runs (NaN) are ignored; one point is not a fit.
         assert!(loglog_slope(&[(0.1, 1.0), (0.05, f64::NAN)]).is_nan());
+    }
+
+    /// `(Δt, error)` for `dts` with the given local orders, finest last.
+    fn series(dts: &[f64], local: &[f64]) -> Vec<(f64, f64)> {
+        let mut e = 1.0;
+        let mut out = vec![(dts[0], e)];
+        for (w, p) in dts.windows(2).zip(local) {
+            e *= (w[1] / w[0]).powf(*p);
+            out.push((w[1], e));
+        }
+        out
+    }
+
+    #[test]
+    fn asymptotic_fit_takes_the_longest_agreeing_run_of_finest_steps() {
+        let dts = [0.08, 0.04, 0.02, 0.01, 0.005];
+        // Pre-asymptotic at the coarse end, then order 2 (local orders within 15 %).
+        let f = asymptotic_fit(&series(&dts, &[0.3, 1.2, 2.1, 1.95])).unwrap();
+        assert_eq!((f.dt_min, f.dt_max), (0.005, 0.02));
+        assert!((f.order - 2.0).abs() < 0.15, "{f:?}");
+        assert!(f.contains(0.01) && !f.contains(0.04));
+        // Every interval agrees: the whole series; order as the plain fit.
+        let pts = series(&dts, &[2.0, 2.05, 1.98, 2.02]);
+        let f = asymptotic_fit(&pts).unwrap();
+        assert_eq!((f.dt_min, f.dt_max), (0.005, 0.08));
+        assert!((f.order - loglog_slope(&pts)).abs() < 1e-12);
+        // Failed runs are dropped before the ranges are formed (a failed coarse step).
+        let mut pts = series(&dts, &[2.0, 2.0, 2.0, 2.0]);
+        pts[0].1 = f64::NAN;
+        assert_eq!(asymptotic_fit(&pts).unwrap().dt_max, 0.04);
+    }
+
+    #[test]
+    fn no_asymptotic_range_when_the_finest_orders_disagree_or_stall() {
+        let dts = [0.1, 0.05, 0.025, 0.0125];
+        // The frame's EM (orders 0.31, 1.23, 1.01): the finest two differ by 20 %.
+        assert_eq!(asymptotic_fit(&series(&dts, &[0.31, 1.23, 1.01])), None);
+        // A tolerance floor: the error stops falling at the finest step.
+        assert_eq!(asymptotic_fit(&series(&dts, &[2.0, 2.0, 0.0])), None);
+        // The error grows under refinement.
+        assert_eq!(asymptotic_fit(&series(&dts, &[-1.0, -1.0, -1.0])), None);
+        // Two intervals are the least: three points with agreeing orders fit, two do not.
+        assert!(asymptotic_fit(&series(&dts[1..], &[1.0, 1.0])).is_some());
+        assert_eq!(asymptotic_fit(&series(&dts[2..], &[1.0])), None);
     }
 }

@@ -1,6 +1,7 @@
-//! `work_precision.png` (log-log error against wall time, one line per scheme) and
-//! `stability.png` (heat maps of the fraction of the run completed, one panel per scheme).
-//! Same embedded font as the run charts.
+//! `work_precision.png` (log-log error against wall time, one line per scheme),
+//! `stability.png` (heat maps of the fraction of the run completed, one panel per scheme)
+//! and `damping.png` (modal damping ratio per dissipation parameter). Same embedded font as
+//! the run charts; a path ending in `.svg` is drawn as SVG with the same layout.
 
 use std::path::Path;
 
@@ -8,9 +9,12 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::{Damping, ModeKind, SchemeKind, SchemeSpec, Stability, WorkPrecision, PARAMETERS};
+use super::{
+    Damping, ModeKind, OrderFit, SchemeKind, SchemeSpec, Stability, WorkPrecision, ORDER_AGREEMENT,
+    PARAMETERS,
+};
 use crate::observe::record::RunStatus;
-use crate::output::{ensure_font, OutputError, FONT};
+use crate::output::{ensure_font, num, OutputError, FONT};
 
 const PALETTE: [RGBColor; 8] = [
     RGBColor(20, 20, 20),
@@ -28,6 +32,31 @@ fn plot_err(path: &Path) -> impl Fn(String) -> OutputError + '_ {
         path: path.to_path_buf(),
         message,
     }
+}
+
+/// Whether a chart path asks for SVG (by extension); anything else is a bitmap whose
+/// format follows the extension (normally PNG).
+fn is_svg(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("svg"))
+}
+
+/// Draws `$draw(&root, args…)` on an SVG or bitmap backend of `$size`, chosen by the
+/// extension of `$path`, and writes the file.
+macro_rules! render {
+    ($path:expr, $size:expr, $draw:ident ( $($arg:expr),* )) => {{
+        ensure_font();
+        let path: &Path = $path;
+        let r = if is_svg(path) {
+            let root = SVGBackend::new(path, $size).into_drawing_area();
+            $draw(&root, $($arg),*).and_then(|()| root.present().map_err(|e| e.to_string()))
+        } else {
+            let root = BitMapBackend::new(path, $size).into_drawing_area();
+            $draw(&root, $($arg),*).and_then(|()| root.present().map_err(|e| e.to_string()))
+        };
+        r.map_err(plot_err(path))
+    }};
 }
 
 /// Decade range `[10^floor(log lo), 10^ceil(log hi)]` around positive data.
@@ -54,14 +83,110 @@ fn sci(v: f64) -> String {
     s.strip_suffix("e0").map_or(s.clone(), str::to_string)
 }
 
+/// [`sci`] at 1, 2 and 5 × 10^k only (the other ticks of a log axis that spans about one
+/// decade crowd each other): empty elsewhere.
+fn sci_125(v: f64) -> String {
+    let s = sci(v);
+    if ["1", "2", "5"].iter().any(|m| s.starts_with(m)) {
+        s
+    } else {
+        String::new()
+    }
+}
+
+/// Left-aligned, vertically centred text style.
+fn left(px: u32, color: &RGBColor) -> TextStyle<'static> {
+    (FONT, px)
+        .into_font()
+        .color(color)
+        .pos(Pos::new(HPos::Left, VPos::Center))
+}
+
+/// Marker shapes, one per Δt of a work–precision chart (coarsest first), cycled.
+const MARKER_SHAPES: usize = 6;
+
+/// Vertices (pixel offsets) of marker `shape`; `None` for the circle.
+fn marker_vertices(shape: usize) -> Option<Vec<(i32, i32)>> {
+    match shape % MARKER_SHAPES {
+        0 => None,
+        1 => Some(vec![(-6, -6), (6, -6), (6, 6), (-6, 6)]),
+        2 => Some(vec![(0, -8), (7, 5), (-7, 5)]),
+        3 => Some(vec![(0, -8), (8, 0), (0, 8), (-8, 0)]),
+        4 => Some(vec![(0, 8), (7, -5), (-7, -5)]),
+        _ => Some(vec![(-4, -7), (4, -7), (8, 0), (4, 7), (-4, 7), (-8, 0)]),
+    }
+}
+
+/// Draws marker `shape` centred at the pixel `at` of `area`: filled in `color`, or hollow
+/// (white inside, outlined in `color`).
+fn draw_marker<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    at: (i32, i32),
+    shape: usize,
+    color: RGBColor,
+    filled: bool,
+) -> Result<(), String> {
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    let (x, y) = at;
+    match marker_vertices(shape) {
+        None => {
+            if filled {
+                area.draw(&Circle::new(at, 7, color.filled())).map_err(e)?;
+            } else {
+                area.draw(&Circle::new(at, 6, WHITE.filled())).map_err(e)?;
+                area.draw(&Circle::new(at, 6, color.stroke_width(2)))
+                    .map_err(e)?;
+            }
+        }
+        Some(v) => {
+            let pts: Vec<(i32, i32)> = v.iter().map(|(dx, dy)| (x + dx, y + dy)).collect();
+            if filled {
+                area.draw(&Polygon::new(pts, color.filled())).map_err(e)?;
+            } else {
+                area.draw(&Polygon::new(pts.clone(), WHITE.filled()))
+                    .map_err(e)?;
+                let mut ring = pts.clone();
+                ring.push(pts[0]);
+                area.draw(&PathElement::new(ring, color.stroke_width(2)))
+                    .map_err(e)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Size of `work_precision.png`: the plot on the left, the legend column on the right.
+const WP_SIZE: (u32, u32) = (1500, 900);
+/// Width of the legend column.
+const WP_LEGEND_W: u32 = 560;
+/// A fitted order this far below the nominal one is "below nominal" (the chart then
+/// explains what that means).
+const BELOW_NOMINAL: f64 = 0.3;
+
+/// The legend text of a scheme: its observed order and the Δt range it was fitted over,
+/// or that it has no asymptotic range.
+fn order_label(spec: &SchemeSpec, fit: Option<OrderFit>) -> String {
+    match fit {
+        Some(f) => format!(
+            "{}: order {:.2} (fit over Δt {}–{})",
+            spec.label(),
+            f.order,
+            num(f.dt_min),
+            num(f.dt_max)
+        ),
+        None => format!("{}: no asymptotic range", spec.label()),
+    }
+}
+
 /// Draws `work_precision.png`: error against wall time on log-log axes, one line per
-/// scheme/parameter (points ordered by Δt, labelled in the legend with the observed
-/// order), failed runs as crosses on the bottom edge at their wall time.
+/// scheme/parameter (colour) through its runs ordered by Δt, one marker shape per Δt (a
+/// legend of them instead of text at the points). The legend gives each scheme's observed
+/// order and the Δt range it was fitted over ([`super::asymptotic_fit`]); markers of runs
+/// outside that range are hollow (all of a scheme's with no asymptotic range). The fit is
+/// the rows' `observed_order`, `fit_dt_min` and `fit_dt_max`, as in the CSV. Failed runs
+/// are crosses on the bottom edge at their wall time.
 pub fn plot_work_precision(path: &Path, wp: &WorkPrecision) -> Result<(), OutputError> {
-    ensure_font();
-    let root = BitMapBackend::new(path, (1100, 800)).into_drawing_area();
-    draw_wp(&root, wp).map_err(plot_err(path))?;
-    root.present().map_err(|e| plot_err(path)(e.to_string()))
+    render!(path, WP_SIZE, draw_wp(wp))
 }
 
 fn draw_wp<DB: DrawingBackend>(
@@ -87,14 +212,61 @@ fn draw_wp<DB: DrawingBackend>(
         ok.iter().map(|r| r.error).fold(f64::INFINITY, f64::min),
         ok.iter().map(|r| r.error).fold(0.0, f64::max),
     );
-    let title = format!(
-        "{}: work–precision (t_end = {}, reference EM Δt = {:e})",
-        wp.scene, wp.t_end, wp.reference_dt
-    );
-    let h_px = root.dim_in_pixel().1;
-    let (main, foot) = root.split_vertically(h_px - 28);
-    let mut chart = ChartBuilder::on(&main)
-        .caption(title, (FONT, 26))
+    let mut specs: Vec<SchemeSpec> = Vec::new();
+    for r in &wp.rows {
+        if !specs.contains(&r.spec) {
+            specs.push(r.spec);
+        }
+    }
+    // Δt, coarsest first: one marker shape each.
+    let mut dts: Vec<f64> = Vec::new();
+    for r in &wp.rows {
+        if !dts.contains(&r.dt) {
+            dts.push(r.dt);
+        }
+    }
+    dts.sort_by(|a, b| b.total_cmp(a));
+    let shape_of = |dt: f64| dts.iter().position(|&d| d == dt).unwrap_or(0);
+    // Each scheme's fit, as its rows (and the CSV) give it.
+    let fits: Vec<Option<OrderFit>> = specs
+        .iter()
+        .map(|s| {
+            wp.rows
+                .iter()
+                .find(|r| r.spec == *s)
+                .filter(|r| {
+                    r.observed_order.is_finite()
+                        && r.fit_dt_min.is_finite()
+                        && r.fit_dt_max.is_finite()
+                })
+                .map(|r| OrderFit {
+                    order: r.observed_order,
+                    dt_min: r.fit_dt_min,
+                    dt_max: r.fit_dt_max,
+                })
+        })
+        .collect();
+
+    let (w, h) = root.dim_in_pixel();
+    let (head, rest) = root.split_vertically(50);
+    let (body, foot) = rest.split_vertically(h - 50 - 90);
+    let (plot, side) = body.split_horizontally(w - WP_LEGEND_W);
+    head.draw(&Text::new(
+        format!(
+            "{}: work–precision (t_end = {}, reference EM Δt = {})",
+            wp.scene,
+            num(wp.t_end),
+            num(wp.reference_dt)
+        ),
+        (w as i32 / 2, 28),
+        (FONT, 26)
+            .into_font()
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Center, VPos::Center)),
+    ))
+    .map_err(e)?;
+
+    let mut chart = ChartBuilder::on(&plot)
         .margin(20)
         .x_label_area_size(70)
         .y_label_area_size(100)
@@ -110,61 +282,26 @@ fn draw_wp<DB: DrawingBackend>(
         .y_label_formatter(&|v| sci(*v))
         .draw()
         .map_err(e)?;
-    let mut specs: Vec<SchemeSpec> = Vec::new();
-    for r in &wp.rows {
-        if !specs.contains(&r.spec) {
-            specs.push(r.spec);
-        }
-    }
-    for (i, spec) in specs.iter().enumerate() {
+    for (i, (spec, fit)) in specs.iter().zip(&fits).enumerate() {
         let color = PALETTE[i % PALETTE.len()];
         let mut rows: Vec<_> = ok.iter().filter(|r| r.spec == *spec).collect();
         rows.sort_by(|a, b| b.dt.total_cmp(&a.dt));
-        let order = wp
-            .rows
-            .iter()
-            .find(|r| r.spec == *spec)
-            .map_or(f64::NAN, |r| r.observed_order);
-        let failed = wp
-            .rows
-            .iter()
-            .filter(|r| r.spec == *spec && r.status == RunStatus::Failed)
-            .count();
-        let label = format!(
-            "{} (order {}){}",
-            spec.label(),
-            if order.is_finite() {
-                format!("{order:.2}")
-            } else {
-                "n/a".into()
-            },
-            if failed > 0 {
-                format!(", {failed} failed")
-            } else {
-                String::new()
-            }
-        );
         let pts: Vec<(f64, f64)> = rows.iter().map(|r| (wall(r.wall_s), r.error)).collect();
-        let style = ShapeStyle::from(color).stroke_width(2);
-        chart
-            .draw_series(LineSeries::new(pts.clone(), style))
-            .map_err(e)?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
-        chart
-            .draw_series(pts.iter().map(|&p| Circle::new(p, 5, color.filled())))
-            .map_err(e)?;
-        // Δt next to each point.
-        chart
-            .draw_series(rows.iter().map(|r| {
-                EmptyElement::at((wall(r.wall_s), r.error))
-                    + Text::new(
-                        format!("Δt={}", r.dt),
-                        (9, -4),
-                        (FONT, 13).into_font().color(&color),
-                    )
-            }))
-            .map_err(e)?;
+        // A scheme with no asymptotic range: a thin dashed line.
+        if fit.is_some() {
+            chart
+                .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+                .map_err(e)?;
+        } else {
+            chart
+                .draw_series(DashedLineSeries::new(pts, 8, 5, color.stroke_width(1)))
+                .map_err(e)?;
+        }
+        for r in &rows {
+            let at = chart.backend_coord(&(wall(r.wall_s), r.error));
+            let inside = fit.is_some_and(|f| f.contains(r.dt));
+            draw_marker(root, at, shape_of(r.dt), color, inside)?;
+        }
         chart
             .draw_series(
                 wp.rows
@@ -174,24 +311,148 @@ fn draw_wp<DB: DrawingBackend>(
             )
             .map_err(e)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 17))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(e)?;
-    let (w, _) = foot.dim_in_pixel();
-    foot.draw(&Text::new(
-        "× on the bottom edge: failed run (at its wall time); lower-left is better",
-        (w as i32 - 30, 22),
-        (FONT, 15)
-            .into_font()
-            .color(&BLACK)
-            .pos(Pos::new(HPos::Right, VPos::Bottom)),
+
+    // The legend column: schemes (colour, order, fitted range), then Δt (marker shape).
+    let (sx, _) = side.get_base_pixel();
+    let (_, sy) = body.get_base_pixel();
+    let x0 = sx + 4;
+    let mut y = sy + 30;
+    let head_style = left(18, &BLACK);
+    root.draw(&Text::new(
+        "scheme (colour): observed order, Δt range fitted",
+        (x0, y),
+        head_style.clone(),
     ))
     .map_err(e)?;
+    y += 30;
+    for (i, (spec, fit)) in specs.iter().zip(&fits).enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let failed = wp
+            .rows
+            .iter()
+            .filter(|r| r.spec == *spec && r.status == RunStatus::Failed)
+            .count();
+        if fit.is_some() {
+            root.draw(&PathElement::new(
+                vec![(x0, y), (x0 + 30, y)],
+                color.stroke_width(3),
+            ))
+            .map_err(e)?;
+        } else {
+            for k in 0..3 {
+                root.draw(&PathElement::new(
+                    vec![(x0 + 11 * k, y), (x0 + 11 * k + 7, y)],
+                    color.stroke_width(1),
+                ))
+                .map_err(e)?;
+            }
+        }
+        root.draw(&Text::new(
+            order_label(spec, *fit),
+            (x0 + 40, y),
+            left(16, &color),
+        ))
+        .map_err(e)?;
+        let nominal = spec.kind.nominal_order();
+        let mut note = format!("nominal order {nominal}");
+        if fit.is_some_and(|f| f.order < nominal as f64 - BELOW_NOMINAL) {
+            note += " (observed below it, see below)";
+        }
+        if failed > 0 {
+            note += &format!("; {failed} failed");
+        }
+        root.draw(&Text::new(
+            note,
+            (x0 + 40, y + 19),
+            left(14, &RGBColor(90, 90, 90)),
+        ))
+        .map_err(e)?;
+        y += 46;
+    }
+    y += 14;
+    root.draw(&Text::new(
+        "time step (marker shape)",
+        (x0, y),
+        head_style.clone(),
+    ))
+    .map_err(e)?;
+    y += 28;
+    for (k, dt) in dts.iter().enumerate() {
+        draw_marker(root, (x0 + 15, y), k, BLACK, true)?;
+        root.draw(&Text::new(
+            format!("Δt = {}", num(*dt)),
+            (x0 + 40, y),
+            left(16, &BLACK),
+        ))
+        .map_err(e)?;
+        y += 26;
+    }
+    y += 14;
+    draw_marker(root, (x0 + 15, y), 0, BLACK, true)?;
+    root.draw(&Text::new(
+        "filled: Δt in the fitted (asymptotic) range",
+        (x0 + 40, y),
+        left(16, &BLACK),
+    ))
+    .map_err(e)?;
+    y += 26;
+    draw_marker(root, (x0 + 15, y), 0, BLACK, false)?;
+    root.draw(&Text::new(
+        "hollow: outside it, not in the order fit",
+        (x0 + 40, y),
+        left(16, &BLACK),
+    ))
+    .map_err(e)?;
+    y += 26;
+    for k in 0..3 {
+        root.draw(&PathElement::new(
+            vec![(x0 + 11 * k, y), (x0 + 11 * k + 7, y)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(e)?;
+    }
+    root.draw(&Text::new(
+        "thin dashed line: no asymptotic range",
+        (x0 + 40, y),
+        left(16, &BLACK),
+    ))
+    .map_err(e)?;
+    y += 26;
+    root.draw(&Cross::new((x0 + 15, y), 7, BLACK.stroke_width(3)))
+        .map_err(e)?;
+    root.draw(&Text::new(
+        "on the bottom edge: failed run (at its wall time)",
+        (x0 + 40, y),
+        left(16, &BLACK),
+    ))
+    .map_err(e)?;
+
+    // The rule, and what an order below the nominal one means.
+    let (_, fy) = foot.get_base_pixel();
+    let mut notes = vec![format!(
+        "order = least-squares slope of log error vs log Δt over the asymptotic range (longest run of the finest Δt, ≥ 3, whose local orders agree within {:.0} %); lower-left is better.",
+        100.0 * ORDER_AGREEMENT
+    )];
+    let below = specs.iter().zip(&fits).any(|(s, f)| match f {
+        Some(f) => f.order < s.kind.nominal_order() as f64 - BELOW_NOMINAL,
+        None => true,
+    });
+    if below {
+        notes.push(
+            "An order below the nominal one, or no asymptotic range, means the error at these Δt is dominated by motion none of them resolves".into(),
+        );
+        notes.push(
+            "(e.g. modes excited by a sudden load or a point-velocity start), not by the scheme's truncation error.".into(),
+        );
+    }
+    for (k, n) in notes.iter().enumerate() {
+        root.draw(&Text::new(
+            n.as_str(),
+            (20, fy + 18 + 24 * k as i32),
+            left(15, &BLACK),
+        ))
+        .map_err(e)?;
+    }
     Ok(())
 }
 
@@ -212,17 +473,15 @@ fn heat(f: f64) -> RGBColor {
 }
 
 /// Draws `stability.png`: per scheme a grid Δt (x) × parameter (y); each cell's colour is
-/// the fraction of the run completed, its text the percentage reached and the largest
-/// relative energy growth `(H − H_0 − W)/H_0` (`≤0` when no energy was created).
+/// the fraction of the run completed (colour bar below the panels), its text the
+/// percentage reached and the largest relative energy growth `(H − H_0 − W)/H_0` (`≤0`
+/// when no energy was created). The title says that every run takes fixed steps.
 pub fn plot_stability(path: &Path, st: &Stability) -> Result<(), OutputError> {
-    ensure_font();
     let kinds = &st.config.kinds;
     let cols = kinds.len().clamp(1, 3);
     let rows = kinds.len().div_ceil(cols).max(1);
-    let size = (560 * cols as u32, 440 * rows as u32 + 110);
-    let root = BitMapBackend::new(path, size).into_drawing_area();
-    draw_stability(&root, st, rows, cols).map_err(plot_err(path))?;
-    root.present().map_err(|e| plot_err(path)(e.to_string()))
+    let size = (560 * cols as u32, 440 * rows as u32 + 150);
+    render!(path, size, draw_stability(st, rows, cols))
 }
 
 /// Relative energy growth below this is round-off (the EM acceptance tolerance
@@ -239,6 +498,16 @@ fn growth_text(g: f64) -> String {
     }
 }
 
+/// The parameter axis of a stability panel, with what the parameter sets.
+fn param_desc(kind: SchemeKind) -> String {
+    match kind {
+        SchemeKind::Edmc1 => "χ = χ_Γ = χ_Ω [–]".into(),
+        SchemeKind::Edmc2 => "α = α_Γv [–]".into(),
+        SchemeKind::GenAlpha => "ρ∞ (spectral radius at Δt → ∞) [–]".into(),
+        SchemeKind::Em | SchemeKind::Midpoint => "(no parameter)".into(),
+    }
+}
+
 fn draw_stability<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     st: &Stability,
@@ -249,9 +518,13 @@ fn draw_stability<DB: DrawingBackend>(
     root.fill(&WHITE).map_err(e)?;
     let (w, h) = root.dim_in_pixel();
     let (head, rest) = root.split_vertically(60);
-    let (body, foot) = rest.split_vertically(h - 60 - 50);
+    let (body, foot) = rest.split_vertically(h - 60 - 90);
     head.draw(&Text::new(
-        format!("{}: stability map (t_end = {})", st.scene, st.config.t_end),
+        format!(
+            "{}: stability map, fixed step (no cut-back), t_end = {}",
+            st.scene,
+            num(st.config.t_end)
+        ),
         (w as i32 / 2, 30),
         (FONT, 26)
             .into_font()
@@ -259,9 +532,42 @@ fn draw_stability<DB: DrawingBackend>(
             .pos(Pos::new(HPos::Center, VPos::Center)),
     ))
     .map_err(e)?;
-    foot.draw(&Text::new(
-        "colour: fraction of t_end reached (red 0 → yellow ½ → green 1); cell: % reached and largest relative energy growth (H − H₀ − W)/H₀ (ΔH≤0: no growth beyond 1e-9)",
-        (w as i32 / 2, 22),
+    // Colour bar: fraction of t_end reached.
+    let (_, fy) = foot.get_base_pixel();
+    let bar_w = 360;
+    let bx = w as i32 / 2 - bar_w / 2;
+    let by = fy + 14;
+    for k in 0..bar_w {
+        let c = heat(k as f64 / (bar_w - 1) as f64);
+        root.draw(&Rectangle::new(
+            [(bx + k, by), (bx + k + 1, by + 16)],
+            c.filled(),
+        ))
+        .map_err(e)?;
+    }
+    root.draw(&Rectangle::new(
+        [(bx, by), (bx + bar_w, by + 16)],
+        BLACK.stroke_width(1),
+    ))
+    .map_err(e)?;
+    let small = (FONT, 14).into_font().color(&BLACK);
+    for (f, label) in [(0.0, "0 %"), (0.5, "50 %"), (1.0, "100 %")] {
+        root.draw(&Text::new(
+            label,
+            (bx + (f * bar_w as f64) as i32, by + 20),
+            small.pos(Pos::new(HPos::Center, VPos::Top)),
+        ))
+        .map_err(e)?;
+    }
+    root.draw(&Text::new(
+        "colour: fraction of t_end reached",
+        (bx - 14, by + 8),
+        small.pos(Pos::new(HPos::Right, VPos::Center)),
+    ))
+    .map_err(e)?;
+    root.draw(&Text::new(
+        "cell text: % of t_end reached; ΔH: largest relative energy growth (H − H₀ − W)/H₀ (ΔH≤0: none beyond 1e-9)",
+        (w as i32 / 2, by + 58),
         (FONT, 15)
             .into_font()
             .color(&BLACK)
@@ -287,11 +593,6 @@ fn draw_stability_panel<DB: DrawingBackend>(
     let params = st.config.params_of(kind);
     let (nx, ny) = (dts.len(), params.len());
     let name = SchemeSpec { kind, param: 0.0 }.label();
-    let y_desc = if kind.has_param() {
-        format!("{} [–]", kind.param_symbol())
-    } else {
-        "(no parameter)".into()
-    };
     let mut chart = ChartBuilder::on(area)
         .caption(name.split(' ').next().unwrap_or(""), (FONT, 22))
         .margin(12)
@@ -306,7 +607,7 @@ fn draw_stability_panel<DB: DrawingBackend>(
         .x_labels(0)
         .y_labels(0)
         .x_desc("time step Δt [s]")
-        .y_desc(y_desc)
+        .y_desc(param_desc(kind))
         .axis_desc_style((FONT, 17))
         .draw()
         .map_err(e)?;
@@ -314,7 +615,7 @@ fn draw_stability_panel<DB: DrawingBackend>(
     for (i, dt) in dts.iter().enumerate() {
         let (px, py) = chart.backend_coord(&(i as f64 + 0.5, 0.0));
         root.draw(&Text::new(
-            dt.to_string(),
+            num(*dt),
             (px, py + 8),
             tick.pos(Pos::new(HPos::Center, VPos::Top)),
         ))
@@ -324,7 +625,7 @@ fn draw_stability_panel<DB: DrawingBackend>(
         for (j, p) in params.iter().enumerate() {
             let (px, py) = chart.backend_coord(&(0.0, j as f64 + 0.5));
             root.draw(&Text::new(
-                p.to_string(),
+                num(*p),
                 (px - 8, py),
                 tick.pos(Pos::new(HPos::Right, VPos::Center)),
             ))
@@ -373,17 +674,26 @@ fn draw_stability_panel<DB: DrawingBackend>(
 }
 
 /// Draws `damping.png`: the modal damping ratio ζ against the parameter value on log-log
-/// axes, one panel per mode (axial, bending), one line per dissipation parameter; EM's
-/// ζ (round-off) is given in each panel's caption. Failed runs are left out of the lines.
+/// axes, one panel per mode (axial, bending), one line per dissipation parameter (legend
+/// column on the right); EM's ζ (round-off) is given in each panel's caption. Failed runs
+/// are left out of the lines and drawn as crosses on the bottom edge (their count in the
+/// panel's caption).
 pub fn plot_damping(path: &Path, d: &Damping) -> Result<(), OutputError> {
-    ensure_font();
-    let root = BitMapBackend::new(path, (1400, 700)).into_drawing_area();
-    draw_damping(&root, d).map_err(plot_err(path))?;
-    root.present().map_err(|e| plot_err(path)(e.to_string()))
+    render!(path, (1600, 740), draw_damping(d))
 }
 
 /// Smallest ζ drawn (smaller values, e.g. EDMC-2 at small amplitude, sit on the floor).
 const ZETA_FLOOR: f64 = 1e-8;
+/// Width of the damping chart's legend column.
+const DAMPING_LEGEND_W: u32 = 210;
+
+/// Line style and marker (circle: EDMC-1, triangle: EDMC-2) of damping parameter `i`.
+fn damping_style(i: usize) -> (RGBColor, ShapeStyle, bool) {
+    let color = PALETTE[i % PALETTE.len()];
+    let edmc1 = i < 4;
+    let width = if edmc1 { 2 } else { 1 };
+    (color, ShapeStyle::from(&color).stroke_width(width), edmc1)
+}
 
 fn draw_damping<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
@@ -393,17 +703,55 @@ fn draw_damping<DB: DrawingBackend>(
     root.fill(&WHITE).map_err(e)?;
     let c = &d.config;
     let title = format!(
-        "{}: modal damping ratio per dissipation parameter ({} steps per period, tip amplitude {:e} L, {} periods)",
-        d.scene, c.steps_per_period, c.amplitude, c.periods
+        "{}: modal damping ratio per dissipation parameter ({} steps per period, tip amplitude {} L, {} periods)",
+        d.scene,
+        c.steps_per_period,
+        num(c.amplitude),
+        num(c.periods)
     );
-    let (top, body) = root.split_vertically(40);
+    let (w, h) = root.dim_in_pixel();
+    let (top, rest) = root.split_vertically(40);
+    let (body, foot) = rest.split_vertically(h - 40 - 34);
+    let (plots, side) = body.split_horizontally(w - DAMPING_LEGEND_W);
     top.draw(&Text::new(
         title,
         (20, 10),
         (FONT, 22).into_font().color(&BLACK),
     ))
     .map_err(e)?;
-    let panels = body.split_evenly((1, 2));
+    foot.draw(&Text::new(
+        format!(
+            "ζ = r/2ω (r: fitted decay rate of H); ζ < {} drawn on the bottom line; × on the bottom edge: failed run (left out of the line).",
+            sci(ZETA_FLOOR)
+        ),
+        (20, 14),
+        left(15, &BLACK),
+    ))
+    .map_err(e)?;
+    // Legend column: one entry per parameter run.
+    let (sx, sy) = side.get_base_pixel();
+    let mut y = sy + 60;
+    side.draw(&Text::new("parameter", (sx + 4, y), left(16, &BLACK)))
+        .map_err(e)?;
+    for (i, p) in PARAMETERS.iter().enumerate() {
+        if !d.rows.iter().any(|r| r.param == p.key) {
+            continue;
+        }
+        y += 26;
+        let (color, style, edmc1) = damping_style(i);
+        root.draw(&PathElement::new(vec![(sx + 4, y), (sx + 34, y)], style))
+            .map_err(e)?;
+        if edmc1 {
+            root.draw(&Circle::new((sx + 19, y), 4, color.filled()))
+                .map_err(e)?;
+        } else {
+            root.draw(&TriangleMarker::new((sx + 19, y), 5, color.filled()))
+                .map_err(e)?;
+        }
+        root.draw(&Text::new(p.symbol, (sx + 42, y), left(15, &BLACK)))
+            .map_err(e)?;
+    }
+    let panels = plots.split_evenly((1, 2));
     let ok = |r: &&super::DampingRow| r.status == RunStatus::Completed && r.zeta.is_finite();
     let (xl, xh) = decades(
         c.values.iter().copied().fold(f64::INFINITY, f64::min),
@@ -419,50 +767,51 @@ fn draw_damping<DB: DrawingBackend>(
     for (panel, mode) in panels.iter().zip([ModeKind::Axial, ModeKind::Bending]) {
         let rows: Vec<_> = d.rows.iter().filter(|r| r.mode == mode).collect();
         let em = rows.iter().find(|r| r.param == "em");
+        let failed = rows
+            .iter()
+            .filter(|r| r.status == RunStatus::Failed)
+            .count();
         let caption = format!(
-            "first {} mode, ωΔt = {:.3}; EM ζ = {}",
+            "first {} mode, ωΔt = {:.3}; EM ζ = {}{}",
             mode.name(),
             rows.first().map_or(f64::NAN, |r| r.omega * r.dt),
-            em.map_or("—".to_string(), |r| format!("{:.1e}", r.zeta))
+            em.map_or("—".to_string(), |r| format!("{:.1e}", r.zeta)),
+            if failed > 0 {
+                format!("; {failed} failed (×)")
+            } else {
+                String::new()
+            }
         );
         let mut chart = ChartBuilder::on(panel)
             .caption(caption, (FONT, 20))
             .margin(15)
+            .margin_right(25)
             .x_label_area_size(55)
             .y_label_area_size(80)
             .build_cartesian_2d((xl..xh).log_scale(), (yl..yh).log_scale())
             .map_err(e)?;
         chart
             .configure_mesh()
-            .x_desc("parameter value (χ or α)")
-            .y_desc("modal damping ratio ζ")
+            .x_desc("parameter value (χ or α) [–]")
+            .y_desc("modal damping ratio ζ [–]")
             .axis_desc_style((FONT, 18))
             .label_style((FONT, 15))
-            .x_label_formatter(&|v| sci(*v))
+            .x_label_formatter(&|v| sci_125(*v))
             .y_label_formatter(&|v| sci(*v))
             .draw()
             .map_err(e)?;
         for (i, p) in PARAMETERS.iter().enumerate() {
-            let color = PALETTE[i % PALETTE.len()];
-            let style = if i < 4 {
-                ShapeStyle::from(&color).stroke_width(2)
-            } else {
-                ShapeStyle::from(&color).stroke_width(1)
-            };
-            let pts: Vec<(f64, f64)> = rows
+            let (color, style, edmc1) = damping_style(i);
+            let mine: Vec<_> = rows.iter().filter(|r| r.param == p.key).collect();
+            let pts: Vec<(f64, f64)> = mine
                 .iter()
-                .filter(|r| r.param == p.key && ok(r))
+                .filter(|r| ok(r))
                 .map(|r| (r.value, r.zeta.max(ZETA_FLOOR)))
                 .collect();
-            if pts.is_empty() {
-                continue;
-            }
             chart
                 .draw_series(LineSeries::new(pts.clone(), style))
-                .map_err(e)?
-                .label(p.symbol)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-            if i < 4 {
+                .map_err(e)?;
+            if edmc1 {
                 chart
                     .draw_series(pts.iter().map(|&q| Circle::new(q, 4, color.filled())))
                     .map_err(e)?;
@@ -474,15 +823,14 @@ fn draw_damping<DB: DrawingBackend>(
                     )
                     .map_err(e)?;
             }
+            chart
+                .draw_series(
+                    mine.iter()
+                        .filter(|r| r.status == RunStatus::Failed)
+                        .map(|r| Cross::new((r.value, yl * 1.25), 7, color.stroke_width(3))),
+                )
+                .map_err(e)?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .label_font((FONT, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(e)?;
     }
     Ok(())
 }

@@ -8,8 +8,10 @@ use crate::observe::record::RunStatus;
 use crate::output::OutputError;
 
 /// Header of `work_precision.csv`. `error` is NaN for a failed run; `observed_order` is
-/// the fitted order of the row's scheme/parameter (repeated on each of its rows).
-pub const WORK_PRECISION_COLUMNS: [&str; 8] = [
+/// the order of the row's scheme/parameter fitted over its asymptotic range, whose
+/// smallest and largest Δt are `fit_dt_min` and `fit_dt_max` (all three repeated on each
+/// of its rows; NaN when it has no asymptotic range).
+pub const WORK_PRECISION_COLUMNS: [&str; 10] = [
     "scheme",
     "param",
     "dt",
@@ -18,6 +20,8 @@ pub const WORK_PRECISION_COLUMNS: [&str; 8] = [
     "status",
     "newton_iters_total",
     "observed_order",
+    "fit_dt_min",
+    "fit_dt_max",
 ];
 
 /// Header of `stability.csv`.
@@ -57,7 +61,7 @@ pub fn write_work_precision_csv(path: &Path, wp: &WorkPrecision) -> Result<(), O
         .iter()
         .map(|r| {
             format!(
-                "{},{},{},{:e},{:.6},{},{},{:.4}",
+                "{},{},{},{:e},{:.6},{},{},{:.4},{},{}",
                 r.spec.kind.name(),
                 r.spec.param,
                 r.dt,
@@ -65,7 +69,9 @@ pub fn write_work_precision_csv(path: &Path, wp: &WorkPrecision) -> Result<(), O
                 r.wall_s,
                 status(r.status),
                 r.newton_iters_total,
-                r.observed_order
+                r.observed_order,
+                r.fit_dt_min,
+                r.fit_dt_max
             )
         })
         .collect();
