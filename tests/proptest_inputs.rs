@@ -5,29 +5,16 @@
 //! number of a completed run finite.
 
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Output};
+use std::time::Duration;
 
 use proptest::prelude::*;
 
+mod common;
+
 /// Runs the binary with a 60 s limit (a hang fails the case).
-fn run_limited(mut c: Command) -> Output {
-    let mut child = c
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t0 = Instant::now();
-    loop {
-        if child.try_wait().unwrap().is_some() {
-            return child.wait_with_output().unwrap();
-        }
-        if t0.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            panic!("hangs: {c:?}");
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
+fn run_limited(c: Command) -> Output {
+    common::run_limited(c, None, Duration::from_secs(60))
 }
 
 /// `error: …FILE[:L:C]: KEY: REASON`.
