@@ -732,12 +732,7 @@ fn run_floor(
 ) {
     let s = parse_scene(text, "floor.toml").unwrap();
     let mut sim = Simulation::new(s.model, s.params).unwrap();
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
     let st = sim.state();
     let n = st.r.len() as f64;

@@ -57,12 +57,7 @@ fn roll_with(
     params.scheme = scheme;
     params.cutback = cutback;
     let mut sim = Simulation::new(s.model.clone(), params).unwrap();
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     (out, recs)
 }
 
@@ -205,12 +200,7 @@ fn tiny_energy_states_are_stepped_by_every_scheme() {
             params.cutback = 6;
         }
         let mut sim = Simulation::new(s.model.clone(), params).unwrap();
-        let mut recs = Vec::new();
-        let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-            recs.push(r.clone());
-            Ok::<(), ()>(())
-        })
-        .unwrap();
+        let (out, recs) = common::run_recording(&mut sim);
         assert_eq!(
             out.status,
             RunStatus::Completed,

@@ -218,6 +218,24 @@ pub fn run_limited(
     }
 }
 
+/// Runs `sim` to its end, keeping every step's record.
+pub fn run_recording(
+    sim: &mut cosserat::integrator::Simulation,
+) -> (
+    cosserat::integrator::run::RunOutcome,
+    Vec<cosserat::observe::record::StepRecord>,
+) {
+    use cosserat::integrator::Simulation;
+    use cosserat::observe::record::StepRecord;
+    let mut recs = Vec::new();
+    let out = cosserat::integrator::run::run(sim, 1, |r: &StepRecord, _: &Simulation| {
+        recs.push(r.clone());
+        Ok::<(), ()>(())
+    })
+    .unwrap();
+    (out, recs)
+}
+
 /// Scene text (TOML) built from the tables the scene tests repeat. Numbers are written
 /// with `Display`, so a literal given as a string stays that literal.
 pub mod scene_text {
