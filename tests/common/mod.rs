@@ -236,6 +236,40 @@ pub fn run_recording(
     (out, recs)
 }
 
+/// Every file below `dir`, relative to it, sorted.
+pub fn files_below(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().to_path_buf());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Rows of a sweep's `members.csv` by member, without the wall time (column 7).
+pub fn member_rows(out: &std::path::Path) -> Vec<(usize, String)> {
+    let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
+    let mut v: Vec<(usize, String)> = csv
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(',').collect();
+            f.remove(7);
+            (f[0].parse().unwrap(), f.join(","))
+        })
+        .collect();
+    v.sort();
+    v
+}
+
 /// Scene text (TOML) built from the tables the scene tests repeat. Numbers are written
 /// with `Display`, so a literal given as a string stays that literal.
 pub mod scene_text {
