@@ -3,7 +3,7 @@
 //! the supports.
 
 use super::check::{fmt_v, Ctx, Result};
-use super::mesh::{node_at, rod_chain, NodeSet};
+use super::mesh::{node_at, rod_chain, rod_index, rod_segment, NodeSet};
 use super::rods::RodPlan;
 use crate::model::{Element, Mat3, RodInfo, ShapeSetup, Support, Vec3};
 use crate::scene::raw::{RawInitialVelocity, RawRod};
@@ -337,29 +337,13 @@ pub(super) fn initial_velocities(
         }
         if let Some(rod) = &iv.rod {
             let rp = path.key("rod");
-            let Some(ri) = rods.iter().position(|r| &r.name == rod) else {
-                let names: Vec<&str> = rods.iter().map(|r| r.name.as_str()).collect();
-                return Err(cx.err(
-                    &rp,
-                    format!("no rod named `{rod}` (rods: {})", names.join(", ")),
-                ));
-            };
+            let ri = rod_index(cx, &rp, rod, rods)?;
             let chain = rod_chain(elements, &rods[ri]);
             let (sel, what) = match iv.segment {
                 None => (chain, format!("rod `{rod}`")),
                 Some(sg) => {
                     let counts = &plans[ri].counts;
-                    if sg < 0 || sg as usize >= counts.len() {
-                        return Err(cx.err(
-                            &path.key("segment"),
-                            format!(
-                                "rod `{rod}` has segments 0..{} (got {sg})",
-                                counts.len() - 1
-                            ),
-                        ));
-                    }
-                    let sg = sg as usize;
-                    let start: usize = counts[..sg].iter().sum();
+                    let (sg, start) = rod_segment(cx, &path, rod, sg, counts)?;
                     (
                         chain[start..=start + counts[sg]].to_vec(),
                         format!("segment {sg} of rod `{rod}`"),

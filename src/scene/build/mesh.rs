@@ -132,32 +132,50 @@ pub(super) fn rod_elements(
 ) -> Result<Vec<usize>> {
     let rp = path.key("rod");
     let rod = cx.required(&rp, rod.as_ref())?;
-    let Some(ri) = rods.iter().position(|r| &r.name == rod) else {
-        let names: Vec<&str> = rods.iter().map(|r| r.name.as_str()).collect();
-        return Err(cx.err(
-            &rp,
-            format!("no rod named `{rod}` (rods: {})", names.join(", ")),
-        ));
-    };
+    let ri = rod_index(cx, &rp, rod, rods)?;
     let range = rods[ri].elements.clone();
     match segment {
         None => Ok(range.collect()),
         Some(sg) => {
             let counts = &plans[ri].counts;
-            if sg < 0 || sg as usize >= counts.len() {
-                return Err(cx.err(
-                    &path.key("segment"),
-                    format!(
-                        "rod `{rod}` has segments 0..{} (got {sg})",
-                        counts.len() - 1
-                    ),
-                ));
-            }
-            let sg = sg as usize;
-            let start = range.start + counts[..sg].iter().sum::<usize>();
+            let (sg, offset) = rod_segment(cx, path, rod, sg, counts)?;
+            let start = range.start + offset;
             Ok((start..start + counts[sg]).collect())
         }
     }
+}
+
+/// The index of the rod named `rod` (the error, at `path`, lists the rods).
+pub(super) fn rod_index(cx: &Ctx, path: &KeyPath, rod: &str, rods: &[RodInfo]) -> Result<usize> {
+    rods.iter().position(|r| r.name == rod).ok_or_else(|| {
+        let names: Vec<&str> = rods.iter().map(|r| r.name.as_str()).collect();
+        cx.err(
+            path,
+            format!("no rod named `{rod}` (rods: {})", names.join(", ")),
+        )
+    })
+}
+
+/// Segment `sg` (the `segment` key under `path`) of rod `rod`, whose segments have
+/// `counts` elements: its index, and the number of elements before it along the rod.
+pub(super) fn rod_segment(
+    cx: &Ctx,
+    path: &KeyPath,
+    rod: &str,
+    sg: i64,
+    counts: &[usize],
+) -> Result<(usize, usize)> {
+    if sg < 0 || sg as usize >= counts.len() {
+        return Err(cx.err(
+            &path.key("segment"),
+            format!(
+                "rod `{rod}` has segments 0..{} (got {sg})",
+                counts.len() - 1
+            ),
+        ));
+    }
+    let sg = sg as usize;
+    Ok((sg, counts[..sg].iter().sum()))
 }
 
 /// Checks a rod's segments (length, `d1` transverse) and returns each segment's

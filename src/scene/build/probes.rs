@@ -1,7 +1,7 @@
 //! `[[probe]]` entries: named nodes observed every step.
 
 use super::check::{Ctx, Result};
-use super::mesh::{node_at, NodeSet};
+use super::mesh::{node_at, rod_index, NodeSet};
 use crate::model::{Element, RodInfo};
 use crate::scene::fmt_num;
 use crate::scene::raw::RawProbe;
@@ -44,13 +44,7 @@ fn probe(
             node_at(cx, nodes, &path.key("at"), &p.at)?
         }
         (None, Some(rod)) => {
-            let Some(info) = rods.iter().find(|r| &r.name == rod) else {
-                let names: Vec<&str> = rods.iter().map(|r| r.name.as_str()).collect();
-                return Err(cx.err(
-                    &path.key("rod"),
-                    format!("no rod named `{rod}` (rods: {})", names.join(", ")),
-                ));
-            };
+            let info = &rods[rod_index(cx, &path.key("rod"), rod, rods)?];
             let els = &elements[info.elements.clone()];
             let mut chain = vec![els[0].nodes[0]];
             let mut arc = vec![0.0];
