@@ -10,6 +10,8 @@ use cosserat::integrator::{Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::{load_scene, parse_scene};
 
+mod common;
+
 /// The built-in `bounce` scene's text with `edit` applied.
 fn bounce_text(edit: impl Fn(String) -> String) -> String {
     let text = cosserat::scene::builtin_scenes()
@@ -693,17 +695,7 @@ fn moving_floor(motion: &str, extra: &str, t_end: f64) -> String {
         r#"
 gravity = [0, 0, -9.81]
 
-[material.soft]
-E = 1e6
-nu = 0.5
-density = 1000
-
-[section.round]
-A = 1.2566370614359173e-3
-I11 = 1.2566370614359173e-7
-I22 = 1.2566370614359173e-7
-J = 2.5132741228718346e-7
-
+{soft_round}
 [[rod]]
 name = "rod"
 material = "soft"
@@ -724,7 +716,8 @@ scheme = "em"
 dt = 1e-3
 t_end = {t_end}
 cutback = 6
-"#
+"#,
+        soft_round = common::scene_text::soft_round()
     )
 }
 
@@ -739,12 +732,7 @@ fn run_floor(
 ) {
     let s = parse_scene(text, "floor.toml").unwrap();
     let mut sim = Simulation::new(s.model, s.params).unwrap();
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
     let st = sim.state();
     let n = st.r.len() as f64;

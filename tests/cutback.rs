@@ -2,10 +2,12 @@
 //! complete sub-steps of the same scheme, so the run goes on with the scheme's invariants
 //! intact: in free flight L and J stay constant to round-off across the sub-steps and EM
 //! keeps H; off by default, so the fixed-Δt failure is still reported without it.
-use cosserat::integrator::run::{run, RunOutcome};
+use cosserat::integrator::run::RunOutcome;
 use cosserat::integrator::{Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::load_scene;
+
+mod common;
 
 fn frame(scheme: Scheme, dt: f64, cutback: usize) -> (RunOutcome, Vec<StepRecord>) {
     let s = load_scene("frame").unwrap();
@@ -14,12 +16,7 @@ fn frame(scheme: Scheme, dt: f64, cutback: usize) -> (RunOutcome, Vec<StepRecord
     params.dt = dt;
     params.cutback = cutback;
     let mut sim = Simulation::new(s.model.clone(), params).unwrap();
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     (out, recs)
 }
 

@@ -8,6 +8,8 @@
 use cosserat::integrator::Simulation;
 use cosserat::scene::parse_scene;
 
+mod common;
+
 const R: f64 = 0.02;
 const E: f64 = 1e6;
 const RHO: f64 = 1000.0;
@@ -15,8 +17,7 @@ const RHO: f64 = 1000.0;
 /// The DESIGN cantilever (L = 1, R = 0.02, E = 1e6, ν = 0.5, ρ = 1000), started in the
 /// Euler–Bernoulli first mode shape with tip amplitude `amp` along e3.
 fn cantilever(n: usize, eta: f64, dt: f64, t_end: f64, amp: f64) -> String {
-    let a = std::f64::consts::PI * R * R;
-    let i = a * R * R / 4.0;
+    use common::scene_text::{material, rod_scene, round_section};
     let b: f64 = 1.875_104_068_711_961;
     let sg = (b.cosh() + b.cos()) / (b.sinh() + b.sin());
     let shape = |x: f64| (b * x).cosh() - (b * x).cos() - sg * ((b * x).sinh() - (b * x).sin());
@@ -24,41 +25,16 @@ fn cantilever(n: usize, eta: f64, dt: f64, t_end: f64, amp: f64) -> String {
     let disp: Vec<String> = (0..=n)
         .map(|j| format!("[0, 0, {}]", amp * shape(j as f64 / n as f64) / tip))
         .collect();
-    format!(
-        r#"name = "kv"
-[material.m]
-E = {E}
-nu = 0.5
-density = {RHO}
-damping = {eta}
-
-[section.s]
-A = {a}
-I11 = {i}
-I22 = {i}
-J = {j}
-
-[[rod]]
-name = "rod"
-material = "m"
-section = "s"
-points = [[0, 0, 0], [1, 0, 0]]
-elements = {n}
-d1 = [0, 0, 1]
-
-[rod.initial]
-displacement = [{disp}]
-
-[[clamp]]
-at = [0, 0, 0]
-
-[integrator]
-scheme = "em"
-dt = {dt}
-t_end = {t_end}
-"#,
-        j = 2.0 * i,
-        disp = disp.join(", ")
+    rod_scene(
+        "kv",
+        &(material("m", E, 0.5, RHO) + &format!("damping = {eta}\n")),
+        &round_section("s", R),
+        n,
+        &format!(
+            "[rod.initial]\ndisplacement = [{}]\n\n[[clamp]]\nat = [0, 0, 0]",
+            disp.join(", ")
+        ),
+        &format!("scheme = \"em\"\ndt = {dt}\nt_end = {t_end}"),
     )
 }
 

@@ -4,6 +4,8 @@
 use cosserat::integrator::{Scheme, Simulation};
 use cosserat::scene::{builtin_scenes, parse_scene};
 
+mod common;
+
 /// Per-step tolerance of the balance, relative to max(|H|, |W|), at ≤ 10× the measured
 /// worst step.
 fn bound(scheme: &str) -> f64 {
@@ -125,17 +127,7 @@ fn gen_alpha_work_of_constant_loads_closes_the_balance() {
     const M: f64 = 0.005;
     let text = format!(
         r#"name = "ga_loaded"
-[material.soft]
-E = 1e6
-nu = 0.5
-density = 1000
-
-[section.round]
-A = 1.2566370614359173e-3
-I11 = 1.2566370614359173e-7
-I22 = 1.2566370614359173e-7
-J = 2.5132741228718346e-7
-
+{soft_round}
 [[rod]]
 material = "soft"
 section = "round"
@@ -156,7 +148,8 @@ scheme = "gen-alpha"
 rho_inf = 0.8
 dt = 0.01
 t_end = 3.0
-"#
+"#,
+        soft_round = common::scene_text::soft_round()
     );
     let scene = parse_scene(&text, "ga_loaded.toml").unwrap();
     assert!(matches!(scene.params.scheme, Scheme::GenAlpha { .. }));

@@ -7,10 +7,12 @@
 //! interpolation's soft branch, on which the coupler used to stretch to 77 times its
 //! length) and is refused, so that run now fails there, saying why. The monolithic
 //! strategy falls back to the staggered loop the same way.
-use cosserat::integrator::run::{run, RunOutcome};
+use cosserat::integrator::run::RunOutcome;
 use cosserat::integrator::{Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::load_scene;
+
+mod common;
 
 fn simulate(
     scene: &str,
@@ -38,12 +40,7 @@ fn simulate_with(
     params.t_end = t_end;
     params.fallback = fallback;
     let mut sim = Simulation::new(s.model.clone(), params).unwrap();
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     (out, recs)
 }
 

@@ -19,29 +19,14 @@ use cosserat::scene::parse_scene;
 const STATE_RTOL: f64 = 1e-15;
 
 fn scene(scheme: &str, extra: &str) -> String {
+    use common::scene_text::{material, rod, section};
     format!(
         r#"name = "features"
 gravity = [0, 0, -9.81]
-[material.m]
-E = 1e6
-nu = 0.3
-density = 1000
-damping = 0.01
+{material}damping = 0.01
 
-[section.s]
-A = 1.2566e-3
-I11 = 1.2566e-7
-I22 = 1.2566e-7
-J = 2.5133e-7
-
-[[rod]]
-name = "rod"
-material = "m"
-section = "s"
-points = [[0, 0, 0], [1, 0, 0]]
-elements = 8
-d1 = [0, 0, 1]
-curvature = [0.3, 0.1, 0.2]
+{section}
+{rod}curvature = [0.3, 0.1, 0.2]
 drag = 0.3
 
 [rod.initial]
@@ -63,7 +48,10 @@ follower = true
 {scheme}
 dt = 0.01
 t_end = 0.1
-"#
+"#,
+        material = material("m", "1e6", "0.3", "1000"),
+        section = section("s", "1.2566e-3", "1.2566e-7", "2.5133e-7"),
+        rod = rod("rod", "[[0, 0, 0], [1, 0, 0]]", 8, "[0, 0, 1]"),
     )
 }
 

@@ -12,6 +12,9 @@ use std::time::{Duration, Instant};
 use cosserat::batch::Executor;
 use cosserat::sweep::{load_sweep, run_sweep, SweepOptions};
 
+mod common;
+use common::{files_below, member_rows as rows};
+
 fn cosserat() -> Command {
     Command::new(env!("CARGO_BIN_EXE_cosserat"))
 }
@@ -30,24 +33,6 @@ fn frame_with(from: &str, to: &str) -> String {
     let base = include_str!("../scenes/frame.toml");
     assert!(base.contains(from), "frame.toml has no `{from}`");
     base.replacen(from, to, 1)
-}
-
-/// Every file below `dir`, relative to it.
-fn files_below(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.push(p.strip_prefix(dir).unwrap().to_path_buf());
-            }
-        }
-    }
-    out.sort();
-    out
 }
 
 // ---- 1. Path traversal ------------------------------------------------------------
@@ -89,22 +74,6 @@ fn scene_name_cannot_steer_outputs_out_of_the_folder() {
 // ---- sweeps --------------------------------------------------------------------------
 
 const SWEEP: &str = "base = \"frame\"\n\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [0.0, 0.25, 0.5]\n\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [0.4]\n";
-
-/// Rows of members.csv by member, without the wall time (column 7).
-fn rows(out: &Path) -> Vec<(usize, String)> {
-    let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
-    let mut v: Vec<(usize, String)> = csv
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let mut f: Vec<&str> = l.split(',').collect();
-            f.remove(7);
-            (f[0].parse().unwrap(), f.join(","))
-        })
-        .collect();
-    v.sort();
-    v
-}
 
 fn sweep_into(spec_path: &Path, out: &Path, resume: bool) -> cosserat::sweep::SweepSummary {
     let spec = load_sweep(spec_path).unwrap();

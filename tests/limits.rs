@@ -4,13 +4,14 @@
 //! address-space limit (`ulimit -v`), so an allocation that escaped the estimate aborts the
 //! case (exit 134) instead of passing, and within a watchdog that fails a hang.
 
-use std::os::unix::process::CommandExt;
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Output};
+use std::time::Duration;
 
 use cosserat::scene::limits::{self, Footprint};
 use proptest::prelude::*;
+
+mod common;
 
 /// The address-space limit every case runs under.
 const AS_LIMIT: u64 = 4 << 30;
@@ -22,35 +23,7 @@ fn run_bounded(args: &[&str], env: &[(&str, &str)], dir: &Path) -> Output {
     for (k, v) in env {
         c.env(k, v);
     }
-    // SAFETY: setrlimit is async-signal-safe; the closure allocates nothing.
-    unsafe {
-        c.pre_exec(|| {
-            let r = libc::rlimit {
-                rlim_cur: AS_LIMIT as libc::rlim_t,
-                rlim_max: AS_LIMIT as libc::rlim_t,
-            };
-            if libc::setrlimit(libc::RLIMIT_AS, &r) != 0 {
-                return Err(std::io::Error::last_os_error());
-            }
-            Ok(())
-        });
-    }
-    let mut child = c
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t0 = Instant::now();
-    loop {
-        if child.try_wait().unwrap().is_some() {
-            return child.wait_with_output().unwrap();
-        }
-        if t0.elapsed() > Duration::from_secs(120) {
-            let _ = child.kill();
-            panic!("hangs: {args:?}");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    common::run_limited(c, Some(AS_LIMIT), Duration::from_secs(120))
 }
 
 fn stderr(o: &Output) -> String {

@@ -9,36 +9,20 @@ use cosserat::model::Vec3;
 use cosserat::observe::balance::BalanceObserver;
 use cosserat::scene::parse_scene;
 
+mod common;
+
 const RHO: f64 = 1000.0;
 const A: f64 = 1e-3;
 
 fn scene(elements: usize, extra: &str, integrator: &str) -> String {
-    format!(
-        r#"name = "ll"
-[material.m]
-E = 1e6
-nu = 0.3
-density = {RHO}
-
-[section.s]
-A = {A}
-I11 = 1e-7
-I22 = 1e-7
-J = 2e-7
-
-[[rod]]
-name = "rod"
-material = "m"
-section = "s"
-points = [[0, 0, 0], [1, 0, 0]]
-elements = {elements}
-d1 = [0, 0, 1]
-
-{extra}
-
-[integrator]
-{integrator}
-"#
+    use common::scene_text::{material, rod_scene, section};
+    rod_scene(
+        "ll",
+        &material("m", "1e6", "0.3", RHO),
+        &section("s", A, "1e-7", "2e-7"),
+        elements,
+        extra,
+        integrator,
     )
 }
 

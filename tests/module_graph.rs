@@ -676,3 +676,33 @@ fn the_checker_sees_use_groups_super_and_code_paths_but_not_comments() {
     assert_eq!(comps.len(), 1);
     assert_eq!(show_cycle(&g, &comps[0]), "x → y → x");
 }
+
+/// The validation pass is split into one file a stage (`src/scene/build/`): the checker
+/// maps every stage file to its own child of `scene::build`, sees the stages' imports of
+/// one another (so the cycle test above covers them), and the shared value checks
+/// (`check`) import no other stage.
+#[test]
+fn the_checker_covers_every_scene_build_stage() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/scene/build");
+    let mut paths = Vec::new();
+    rust_files(&dir, &mut paths);
+    let stages: BTreeSet<String> = paths
+        .iter()
+        .filter(|p| !p.ends_with("mod.rs"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert!(stages.len() > 1, "no stage files under {}", dir.display());
+    let parent: ModPath = vec!["scene".into(), "build".into()];
+    let g = child_graph(&crate_graph(), &parent);
+    let seen: BTreeSet<String> = g.keys().cloned().collect();
+    assert_eq!(seen, stages, "stage files vs children the checker maps");
+    for (stage, uses) in &g {
+        if stage != "check" {
+            assert!(
+                uses.contains("check"),
+                "{stage} does not import check: {uses:?}"
+            );
+        }
+    }
+    assert!(g["check"].is_empty(), "check imports {:?}", g["check"]);
+}

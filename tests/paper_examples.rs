@@ -6,6 +6,8 @@ use cosserat::integrator::{Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::load_scene;
 
+mod common;
+
 /// Runs a built-in scene with `scheme`, `dt`, `t_end` (staggered EDMC with the default
 /// monolithic fallback); every level recorded.
 fn simulate(
@@ -39,12 +41,7 @@ fn simulate_with(
         model.planar = None;
     }
     let mut sim = Simulation::new(model, params).unwrap();
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     (out, recs, sim)
 }
 

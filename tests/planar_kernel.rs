@@ -7,7 +7,6 @@
 //! planar-kernel runs of the paper's arch and mechanism equal 3D runs to 1e-10.
 mod common;
 
-use cosserat::integrator::run::run;
 use cosserat::integrator::{IntegratorParams, Scheme, Simulation, Strategy};
 use cosserat::model::{
     LineLoad, Model, Plane, Ramp, Slide, Support, SupportDrive, TimeTable, Vec3,
@@ -373,12 +372,7 @@ fn trajectory(
     }
     let mut sim = Simulation::new(model, params).unwrap();
     sim.set_planar_kernel(kind == "planar");
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     assert_eq!(
         out.status,
         cosserat::observe::record::RunStatus::Completed,
@@ -452,12 +446,7 @@ fn featured_frame_runs_alike_on_both_kernels() {
             let mut s = Simulation::new(featured_frame(), p).unwrap();
             assert!(s.set_planar_kernel(planar));
             assert_eq!(s.planar_kernel(), planar);
-            let mut recs: Vec<StepRecord> = Vec::new();
-            let out = run(&mut s, 1, |r: &StepRecord, _: &Simulation| {
-                recs.push(r.clone());
-                Ok::<(), ()>(())
-            })
-            .unwrap();
+            let (out, recs) = common::run_recording(&mut s);
             assert_eq!(
                 out.status,
                 cosserat::observe::record::RunStatus::Completed,

@@ -5,29 +5,16 @@
 //! number of a completed run finite.
 
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Output};
+use std::time::Duration;
 
 use proptest::prelude::*;
 
+mod common;
+
 /// Runs the binary with a 60 s limit (a hang fails the case).
-fn run_limited(mut c: Command) -> Output {
-    let mut child = c
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t0 = Instant::now();
-    loop {
-        if child.try_wait().unwrap().is_some() {
-            return child.wait_with_output().unwrap();
-        }
-        if t0.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            panic!("hangs: {c:?}");
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
+fn run_limited(c: Command) -> Output {
+    common::run_limited(c, None, Duration::from_secs(60))
 }
 
 /// `error: …FILE[:L:C]: KEY: REASON`.
@@ -53,19 +40,10 @@ fn names_file_and_key(err: &str, file: &str) -> bool {
 
 /// Every file below `dir` (relative).
 fn files_below(dir: &Path) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.push(p.strip_prefix(dir).unwrap().to_string_lossy().into_owned());
-            }
-        }
-    }
-    out
+    common::files_below(dir)
+        .iter()
+        .map(|p| p.to_string_lossy().into_owned())
+        .collect()
 }
 
 fn all_finite(v: &serde_json::Value, path: &str, bad: &mut Vec<String>) {

@@ -16,18 +16,14 @@ use cosserat::integrator::{Scheme, Simulation, Strategy};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::parse_scene;
 
-const SCENE: &str = r#"
+mod common;
+
+/// The roll-up: a clamped soft rod bent into a full circle by an end moment `2π EI / L`.
+fn scene() -> String {
+    format!(
+        r#"
 name = "rollup"
-[material.soft]
-E = 1e6
-nu = 0.5
-density = 1000
-[section.round]
-A = 1.2566370614359173e-3
-I11 = 1.2566370614359173e-7
-I22 = 1.2566370614359173e-7
-J = 2.5132741228718346e-7
-[[rod]]
+{soft_round}[[rod]]
 name = "beam"
 material = "soft"
 section = "round"
@@ -43,7 +39,10 @@ moment = [0, 0.7895683520871486, 0]   # 2π EI / L
 scheme = "em"
 dt = 0.002
 t_end = 1.0
-"#;
+"#,
+        soft_round = common::scene_text::soft_round()
+    )
+}
 
 fn roll(scheme: Scheme) -> (cosserat::integrator::run::RunOutcome, Vec<StepRecord>) {
     roll_with(scheme, 0)
@@ -53,17 +52,12 @@ fn roll_with(
     scheme: Scheme,
     cutback: usize,
 ) -> (cosserat::integrator::run::RunOutcome, Vec<StepRecord>) {
-    let s = parse_scene(SCENE, "rollup.toml").unwrap();
+    let s = parse_scene(&scene(), "rollup.toml").unwrap();
     let mut params = s.params;
     params.scheme = scheme;
     params.cutback = cutback;
     let mut sim = Simulation::new(s.model.clone(), params).unwrap();
-    let mut recs = Vec::new();
-    let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-        recs.push(r.clone());
-        Ok::<(), ()>(())
-    })
-    .unwrap();
+    let (out, recs) = common::run_recording(&mut sim);
     (out, recs)
 }
 
@@ -183,7 +177,7 @@ fn rollup_with_director_velocity_dissipation_completes_with_cutback() {
 /// (step 12 at moments 1e-3, 1e-6, 1e-9 and 1e-12 of the roll-up's).
 #[test]
 fn tiny_energy_states_are_stepped_by_every_scheme() {
-    let scene = SCENE
+    let scene = scene()
         .replace(
             "moment = [0, 0.7895683520871486, 0]",
             "moment = [0, 0.7895683520871486e-12, 0]",
@@ -206,12 +200,7 @@ fn tiny_energy_states_are_stepped_by_every_scheme() {
             params.cutback = 6;
         }
         let mut sim = Simulation::new(s.model.clone(), params).unwrap();
-        let mut recs = Vec::new();
-        let out = run(&mut sim, 1, |r: &StepRecord, _: &Simulation| {
-            recs.push(r.clone());
-            Ok::<(), ()>(())
-        })
-        .unwrap();
+        let (out, recs) = common::run_recording(&mut sim);
         assert_eq!(
             out.status,
             RunStatus::Completed,
@@ -261,7 +250,7 @@ fn tiny_energy_states_are_stepped_by_every_scheme() {
 /// refused at t = 1).
 #[test]
 fn large_steps_never_accept_a_stretched_rod() {
-    let scene = SCENE
+    let scene = scene()
         .replace("dt = 0.002", "dt = 0.5")
         .replace("t_end = 1.0", "t_end = 20");
     let s = parse_scene(&scene, "big_steps.toml").unwrap();
@@ -308,7 +297,7 @@ fn rollup_settles_to_a_closed_circle_at_second_order_in_h() {
     let mut gaps = Vec::new();
     let mut energies = Vec::new();
     for n in [40usize, 80] {
-        let scene = SCENE
+        let scene = scene()
             .replace("elements = 40", &format!("elements = {n}"))
             .replace("dt = 0.002", "dt = 0.1")
             .replace("t_end = 1.0", "t_end = 50");

@@ -9,41 +9,15 @@ use cosserat::integrator::Simulation;
 use cosserat::math::cay_inv;
 use cosserat::scene::parse_scene;
 
+mod common;
+
 const E: f64 = 1e6;
 const RHO: f64 = 1000.0;
 const R: f64 = 0.02;
 
+/// A 1 m rod along e1 of a round section (radius `R`), with `extra` appended.
 fn scene(elements: usize, extra: &str, integrator: &str) -> String {
-    let a = std::f64::consts::PI * R * R;
-    let i = a * R * R / 4.0;
-    format!(
-        r#"name = "drive"
-[material.m]
-E = {E}
-nu = 0.5
-density = {RHO}
-
-[section.s]
-A = {a}
-I11 = {i}
-I22 = {i}
-J = {j}
-
-[[rod]]
-name = "rod"
-material = "m"
-section = "s"
-points = [[0, 0, 0], [1, 0, 0]]
-elements = {elements}
-d1 = [0, 0, 1]
-
-{extra}
-
-[integrator]
-{integrator}
-"#,
-        j = 2.0 * i
-    )
+    common::scene_text::straight_rod("drive", elements, extra, integrator)
 }
 
 /// Rotation angle of node `a` about e1 (from its first element end's triad).

@@ -7,6 +7,9 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+use common::member_rows as rows;
+
 const SWEEP: &str = "base = \"frame\"\nmode = \"random\"\nseed = 11\nsamples = 12\n\n[[vary]]\nkey = \"integrator.alpha\"\nrange = [0.0, 1.0]\n\n[[vary]]\nkey = \"integrator.t_end\"\nrange = [4.0, 12.0]\n";
 
 fn sweep(file: &Path, out: &Path, resume: bool) -> Command {
@@ -22,22 +25,6 @@ fn sweep(file: &Path, out: &Path, resume: bool) -> Command {
         c.arg("--resume");
     }
     c
-}
-
-/// members.csv rows by member, without the wall time (column 7).
-fn rows(out: &Path) -> Vec<(usize, String)> {
-    let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
-    let mut v: Vec<(usize, String)> = csv
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let mut f: Vec<&str> = l.split(',').collect();
-            f.remove(7);
-            (f[0].parse().unwrap(), f.join(","))
-        })
-        .collect();
-    v.sort();
-    v
 }
 
 /// A small seeded generator (xorshift) for the kill times: the test repeats exactly.

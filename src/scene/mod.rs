@@ -9,7 +9,7 @@
 //!    `line:column`);
 //! 2. serde structs with `deny_unknown_fields` (`raw.rs`) reject unknown keys and wrong
 //!    types — the error's byte span is mapped back to the key path;
-//! 3. a validation pass (`build.rs`) checks every value and builds the model; each error
+//! 3. a validation pass (`build/`) checks every value and builds the model; each error
 //!    names the key path and, through the document tree, its `line:column`.
 //!
 //! Every error reads `FILE[:LINE:COL]: KEY: REASON`, e.g.

@@ -173,3 +173,180 @@ pub fn image_rgb(path: &std::path::Path) -> (usize, usize, Vec<u8>) {
         .collect();
     (info.width as usize, info.height as usize, rgb)
 }
+
+/// Runs `c` with its output captured; a run past `limit` is killed and fails the test (a
+/// hang fails the case instead of stalling the suite). `address_space`: the most bytes of
+/// address space the process may map (`ulimit -v`), so that an allocation no estimate
+/// foresaw aborts it instead of passing.
+pub fn run_limited(
+    mut c: std::process::Command,
+    address_space: Option<u64>,
+    limit: std::time::Duration,
+) -> std::process::Output {
+    use std::os::unix::process::CommandExt;
+    use std::process::Stdio;
+    if let Some(bytes) = address_space {
+        // SAFETY: setrlimit is async-signal-safe; the closure allocates nothing.
+        unsafe {
+            c.pre_exec(move || {
+                let r = libc::rlimit {
+                    rlim_cur: bytes as libc::rlim_t,
+                    rlim_max: bytes as libc::rlim_t,
+                };
+                if libc::setrlimit(libc::RLIMIT_AS, &r) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+    let mut child = c
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            return child.wait_with_output().unwrap();
+        }
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            panic!("hangs: {c:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+/// Runs `sim` to its end, keeping every step's record.
+pub fn run_recording(
+    sim: &mut cosserat::integrator::Simulation,
+) -> (
+    cosserat::integrator::run::RunOutcome,
+    Vec<cosserat::observe::record::StepRecord>,
+) {
+    use cosserat::integrator::Simulation;
+    use cosserat::observe::record::StepRecord;
+    let mut recs = Vec::new();
+    let out = cosserat::integrator::run::run(sim, 1, |r: &StepRecord, _: &Simulation| {
+        recs.push(r.clone());
+        Ok::<(), ()>(())
+    })
+    .unwrap();
+    (out, recs)
+}
+
+/// Every file below `dir`, relative to it, sorted.
+pub fn files_below(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().to_path_buf());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Rows of a sweep's `members.csv` by member, without the wall time (column 7).
+pub fn member_rows(out: &std::path::Path) -> Vec<(usize, String)> {
+    let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
+    let mut v: Vec<(usize, String)> = csv
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(',').collect();
+            f.remove(7);
+            (f[0].parse().unwrap(), f.join(","))
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+/// Scene text (TOML) built from the tables the scene tests repeat. Numbers are written
+/// with `Display`, so a literal given as a string stays that literal.
+pub mod scene_text {
+    use std::fmt::Display;
+
+    /// `[material.NAME]` with `E`, `nu` and `density` (more keys may follow on the next
+    /// lines).
+    pub fn material(
+        name: &str,
+        e: impl Display,
+        nu: impl Display,
+        density: impl Display,
+    ) -> String {
+        format!("[material.{name}]\nE = {e}\nnu = {nu}\ndensity = {density}\n")
+    }
+
+    /// `[section.NAME]` with `A`, `I11 = I22 = i` and `J`.
+    pub fn section(name: &str, a: impl Display, i: impl Display, j: impl Display) -> String {
+        format!("[section.{name}]\nA = {a}\nI11 = {i}\nI22 = {i}\nJ = {j}\n")
+    }
+
+    /// `[section.NAME]` of a solid round section of radius `r`: `A = π r²`,
+    /// `I11 = I22 = A r²/4`, `J = 2 I11`.
+    pub fn round_section(name: &str, r: f64) -> String {
+        let a = std::f64::consts::PI * r * r;
+        let i = a * r * r / 4.0;
+        section(name, a, i, 2.0 * i)
+    }
+
+    /// A `[[rod]]` named `name` of material `m` and section `s` through `points` (a TOML
+    /// array), `elements` elements, transverse `d1` (a TOML array).
+    pub fn rod(name: &str, points: &str, elements: impl Display, d1: &str) -> String {
+        format!(
+            "[[rod]]\nname = \"{name}\"\nmaterial = \"m\"\nsection = \"s\"\npoints = {points}\nelements = {elements}\nd1 = {d1}\n"
+        )
+    }
+
+    /// `[material.soft]` (E = 1e6, ν = 0.5, ρ = 1000) and `[section.round]` (solid, radius
+    /// 2 cm).
+    pub fn soft_round() -> String {
+        material("soft", "1e6", "0.5", "1000")
+            + "\n"
+            + &section(
+                "round",
+                "1.2566370614359173e-3",
+                "1.2566370614359173e-7",
+                "2.5132741228718346e-7",
+            )
+    }
+
+    /// Scene `name`: the tables `material` and `section` (named `m` and `s`), a 1 m rod
+    /// `rod` along e1 (d1 = e3) of `elements` elements, then the tables `extra`, then
+    /// `[integrator]` with the keys `integrator`.
+    pub fn rod_scene(
+        name: &str,
+        material: &str,
+        section: &str,
+        elements: usize,
+        extra: &str,
+        integrator: &str,
+    ) -> String {
+        format!(
+            "name = \"{name}\"\n{material}\n{section}\n{}\n{extra}\n\n[integrator]\n{integrator}\n",
+            rod("rod", "[[0, 0, 0], [1, 0, 0]]", elements, "[0, 0, 1]"),
+        )
+    }
+
+    /// [`rod_scene`] of material `m` (E = 1e6, ν = 0.5, ρ = 1000) and section `s` (solid
+    /// round, radius 0.02).
+    pub fn straight_rod(name: &str, elements: usize, extra: &str, integrator: &str) -> String {
+        rod_scene(
+            name,
+            &material("m", 1e6, 0.5, 1000.0),
+            &round_section("s", 0.02),
+            elements,
+            extra,
+            integrator,
+        )
+    }
+}
