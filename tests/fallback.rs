@@ -205,13 +205,24 @@ fn cosserat_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, St
     mechanism_run(&args, out)
 }
 
-/// `cosserat run mechanism --scheme edmc2 --alpha 0.5 --dt 0.05` with `extra`.
+/// `cosserat run mechanism --scheme edmc2 --alpha 0.5 --dt 0.05 --cutback 0` with `extra`
+/// (these tests are about where the fixed-step scheme fails: no cut-back, which `run`
+/// turns on by default).
 fn mechanism_run(extra: &[&str], out: &std::path::Path) -> (serde_json::Value, String) {
-    let args: Vec<&str> = ["--scheme", "edmc2", "--alpha", "0.5", "--dt", "0.05"]
-        .iter()
-        .chain(extra)
-        .copied()
-        .collect();
+    let args: Vec<&str> = [
+        "--scheme",
+        "edmc2",
+        "--alpha",
+        "0.5",
+        "--dt",
+        "0.05",
+        "--cutback",
+        "0",
+    ]
+    .iter()
+    .chain(extra)
+    .copied()
+    .collect();
     scene_run("mechanism", &args, out)
 }
 
@@ -261,7 +272,14 @@ fn cli_run_of_the_mechanism_counts_fallback_steps_and_fails_without_fallback() {
     std::fs::write(&scene, mechanism_chi_nu()).unwrap();
     let (s, csv) = scene_run(
         scene.to_str().unwrap(),
-        &["--strategy", "staggered", "--t-end", "6.3"],
+        &[
+            "--strategy",
+            "staggered",
+            "--t-end",
+            "6.3",
+            "--cutback",
+            "0",
+        ],
         &dir.path().join("a"),
     );
     assert_eq!(s["status"], "completed", "{s}");

@@ -273,7 +273,7 @@ pub struct MemberOpts {
     #[arg(long)]
     pub no_fallback: bool,
     /// Step cut-back in every member: a failed step is redone as up to 2^N sub-steps
-    /// (default: each member's scene, else 0 = off).
+    /// (default: each member's scene, else 4; 0 = off).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
     pub cutback: Option<u8>,
     /// GPU path: where the Newton systems are solved (docs/gpu.md, "Device solve").
