@@ -79,7 +79,7 @@ pub struct SolveTimers {
     /// assembled for them).
     pub chord_corrections: u64,
     /// Newton solves stopped because their residual had not decreased for several
-    /// iterations (the step moved on to its next predictor, fallback or cut-back).
+    /// iterations (the step moved on to its next predictor or its fallback strategy).
     pub stagnation_stops: u64,
 }
 
