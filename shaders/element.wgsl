@@ -209,6 +209,15 @@ fn solve4(m_in: array<Real, 16>, rhs_in: array<Real, 4>) -> array<Real, 4> {
     return x;
 }
 
+// s = 3ρ² − 2ρ³ for ρ = V/F < 1, else 1 (twin of element::dissipation::fade).
+fn fade(speed: Real, forcing: Real) -> Real {
+    if forcing <= 0.0 || speed >= forcing {
+        return 1.0;
+    }
+    let rho = speed / forcing;
+    return rho * rho * (3.0 - 2.0 * rho);
+}
+
 fn local_scalars(inp: Inputs, a_rho: Real, dt_h: Real) -> Local {
     let kind = u32(ld_e(E_SCHEME));
     let p0 = ld_e(E_SP);
@@ -219,12 +228,20 @@ fn local_scalars(inp: Inputs, a_rho: Real, dt_h: Real) -> Local {
         return Local(p0, p1, p2 * (inp.v_n1 - inp.v_n), p3 * (inp.nu_n1 - inp.nu_n));
     }
     if kind == 2u {
-        let agv = p0 * dt_h;
-        let agn = p1 * dt_h;
-        let aov = p2 * dt_h;
-        let aon = p3 * dt_h;
         let xg = inp.x_g;
         let xo = inp.x_o;
+        // The velocity couplings faded where the point is slower than the law's own
+        // dissipative speed (twin of element::dissipation::fade).
+        let a0gv = p0 * dt_h;
+        let a0gn = p1 * dt_h;
+        let a0ov = p2 * dt_h;
+        let a0on = p3 * dt_h;
+        let sv = fade(inp.v_n + inp.v_n1, (a0gv * xg + a0ov * xo) / a_rho);
+        let snu = fade(inp.nu_n + inp.nu_n1, (a0gn * xg + a0on * xo) / a_rho);
+        let agv = sv * a0gv;
+        let agn = snu * a0gn;
+        let aov = sv * a0ov;
+        let aon = snu * a0on;
         let m = array<Real, 16>(
             1.0, 0.0, -agv, -agn,
             0.0, 1.0, -aov, -aon,

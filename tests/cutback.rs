@@ -1,7 +1,9 @@
 //! Step cut-back (issue 15): a step that fails at the fixed Δt is redone as 2, 4, …
 //! complete sub-steps of the same scheme, so the run goes on with the scheme's invariants
 //! intact: in free flight L and J stay constant to round-off across the sub-steps and EM
-//! keeps H; off by default, so the fixed-Δt failure is still reported without it.
+//! keeps H. Off by default in the library (the fixed-Δt failure is still reported
+//! without it); `cosserat run` and `sweep` cut back up to 4 halvings unless the scene or
+//! `--cutback` says otherwise.
 use cosserat::integrator::run::RunOutcome;
 use cosserat::integrator::{Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, StepRecord};
@@ -106,6 +108,76 @@ fn cli_cutback_reports_cut_steps() {
         .output()
         .unwrap();
     assert_eq!(bad.status.code(), Some(2));
+}
+
+/// `cosserat run` cuts back by default (4 halvings): EM on the frame at Δt = 0.5, which
+/// fails at a fixed step (t = 2.0), completes with its cut-back steps counted in
+/// summary.json, marked in history.csv (on the Δt grid) and named on the terminal;
+/// `--cutback 0` reports the fixed-step failure.
+#[test]
+fn run_cuts_back_by_default_and_cutback_0_turns_it_off() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str], name: &str| {
+        let out = dir.path().join(name);
+        let st = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+            .args([
+                "run", "frame", "--scheme", "em", "--dt", "0.5", "--every", "1",
+            ])
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        let csv = std::fs::read_to_string(out.join("history.csv")).unwrap();
+        (st, s, csv)
+    };
+    let (st, s, csv) = run(&[], "default");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert_eq!(s["status"], "completed", "{s}");
+    assert_eq!(s["params"]["cutback"], 4);
+    let n = s["cutback_steps"].as_u64().unwrap();
+    assert!(n > 0, "{s}");
+    let stdout = String::from_utf8_lossy(&st.stdout);
+    assert!(
+        stdout.contains(&format!("{n} of 20 steps were cut back")),
+        "{stdout}"
+    );
+    // Outputs on the Δt grid: one row per step (and t = 0), at multiples of 0.5.
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let (tc, sc) = (
+        header.iter().position(|c| *c == "t").unwrap(),
+        header.iter().position(|c| *c == "substeps").unwrap(),
+    );
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 21);
+    for (k, r) in rows.iter().enumerate() {
+        assert!(
+            (r[tc] - 0.5 * k as f64).abs() < 1e-9,
+            "row {k}: t = {}",
+            r[tc]
+        );
+    }
+    assert_eq!(rows.iter().filter(|r| r[sc] > 1.0).count() as u64, n);
+    let (st, s, _) = run(&["--cutback", "0"], "off");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert_eq!(s["status"], "failed", "{s}");
+    assert_eq!(s["cutback_steps"], 0);
+    assert_eq!(s["params"]["cutback"], 0);
 }
 
 /// Runs the CLI on the frame with `args` (every step in `history.csv`) and returns

@@ -175,7 +175,9 @@ fn cli_sweep_exit_codes_and_auto_backend() {
 /// A member that fails at run time is a result: the sweep goes on, the member's row says
 /// `failed` with the time reached and the reason (Newton's, here: EM on the frame at
 /// Δt = 0.5 fails in its fifth step, from t = 2 to 2.5; tests/cutback.rs), its history
-/// ends at the last accepted step, and the members before and after it complete.
+/// ends at the last accepted step, and the members before and after it complete. The
+/// sweep runs with `cutback: Some(0)` (the fixed-step scheme): by default a sweep cuts a
+/// failed step back, and that member would complete.
 #[test]
 fn a_member_failing_at_run_time_is_recorded_with_its_reason_and_the_sweep_goes_on() {
     let dir = tempfile::tempdir().unwrap();
@@ -185,10 +187,21 @@ fn a_member_failing_at_run_time_is_recorded_with_its_reason_and_the_sweep_goes_o
     let out = dir.path().join("out");
     let opts = SweepOptions {
         histories: true,
+        cutback: Some(0),
         ..Default::default()
     };
     let s = run_sweep(&spec, &Executor::Cpu, &out, &opts, |_| {}).unwrap();
     assert_eq!((s.completed, s.failed), (2, 1));
+    // By default the sweep cuts the failing step back, and every member completes.
+    let default = run_sweep(
+        &spec,
+        &Executor::Cpu,
+        &dir.path().join("cut"),
+        &SweepOptions::default(),
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!((default.completed, default.failed), (3, 0));
     let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
     let mut lines = csv.lines();
     let head: Vec<&str> = lines.next().unwrap().split(',').collect();

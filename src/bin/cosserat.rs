@@ -175,7 +175,8 @@ struct StudyCommon {
     #[arg(long)]
     no_fallback: bool,
     /// Step cut-back of every run: a failed step is redone as up to 2^N sub-steps
-    /// (default: the scene's, else 0 = off).
+    /// (default: the scene's, else 0 = off: a stability map shows where the fixed-step
+    /// scheme fails, unlike `run` and `sweep`, which cut back by default).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
     cutback: Option<u8>,
 }
@@ -264,8 +265,8 @@ struct RunArgs {
     #[arg(long)]
     no_fallback: bool,
     /// Step cut-back: redo a failed step as 2, 4, … 2^N sub-steps of the same scheme
-    /// before reporting the failure (default: the scene's `[integrator] cutback`, else 0 =
-    /// off; CPU element kernel only).
+    /// before reporting the failure (default: the scene's `[integrator] cutback`, else 4;
+    /// 0 = off; CPU element kernel only).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
     cutback: Option<u8>,
     /// Output directory (default: `out/<scene name>`).
@@ -689,9 +690,8 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
     if a.no_fallback {
         p.fallback = false;
     }
-    if let Some(n) = a.cutback {
-        p.cutback = n.into();
-    }
+    // Cut-back is on by default for `run` (cosserat::scene::RUN_CUTBACK halvings).
+    p.cutback = a.cutback.map_or_else(|| scene.run_cutback(), usize::from);
     Ok(p)
 }
 
@@ -811,6 +811,12 @@ fn print_summary(s: &RunSummary, out: &Path) {
         e.max_abs_residual,
         out.display()
     );
+    if s.cutback_steps > 0 {
+        println!(
+            "{} of {} steps were cut back into sub-steps (cutback = {}; --cutback 0 turns it off).",
+            s.cutback_steps, s.steps, s.params.cutback
+        );
+    }
 }
 
 fn default_jobs(jobs: Option<usize>) -> usize {

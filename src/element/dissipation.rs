@@ -92,7 +92,7 @@ pub fn local_scalars(
             dnu: chi_nu * (inp.nu_n1 - inp.nu_n),
         },
         Scheme::Edmc2 { .. } => {
-            let (m, rhs, _) = edmc2_system(scheme, inp, a_rho, dt_over_h);
+            let (m, rhs, _, _) = edmc2_system(scheme, inp, a_rho, dt_over_h);
             // The matrix is I + (rank-2 coupling) with a positive Aρ block: always regular
             // for X ≥ 0 (its determinant is Aρ² + Aρ Σ a² X > 0 in the single-α case).
             let s = m.lu().solve(&rhs).unwrap_or_else(Vector4::zeros);
@@ -107,8 +107,8 @@ pub fn local_scalars(
 }
 
 /// EDMC-2's local law as the linear system `M s = r` in the unknowns
-/// `s = (β_Γ, β_Ω, ṽ, ν̃)`, and its scaled constants `[a_Γv, a_Γν, a_Ωv, a_Ων]`
-/// (`a = α Δt/h`):
+/// `s = (β_Γ, β_Ω, ṽ, ν̃)`, its scaled constants `[a_Γv, a_Γν, a_Ωv, a_Ων]` and the
+/// law's [`Fades`]:
 ///
 /// ```text
 /// β_Γ − a_Γv ṽ − a_Γν ν̃ = −a_Γv v_{n+1} − a_Γν ν_{n+1}
@@ -117,13 +117,16 @@ pub fn local_scalars(
 /// a_Γν X_Γ β_Γ + a_Ων X_Ω β_Ω + Aρ ν̃ = Aρ ν_n + a_Γν X_Γ + a_Ων X_Ω
 /// ```
 ///
+/// with `a_xv = s_v α_xv Δt/h` and `a_xν = s_ν α_xν Δt/h`, the velocity couplings faded
+/// where the point's speed is below the law's own dissipative speed ([`fade`]).
+///
 /// `scheme` must be EDMC-2 (other schemes give the zero system).
 fn edmc2_system(
     scheme: &Scheme,
     inp: &LocalInputs,
     a_rho: f64,
     dt_over_h: f64,
-) -> (Matrix4<f64>, Vector4<f64>, [f64; 4]) {
+) -> (Matrix4<f64>, Vector4<f64>, [f64; 4], Fades) {
     let Scheme::Edmc2 {
         alpha_gv,
         alpha_gn,
@@ -131,15 +134,27 @@ fn edmc2_system(
         alpha_on,
     } = *scheme
     else {
-        return (Matrix4::zeros(), Vector4::zeros(), [0.0; 4]);
+        return (
+            Matrix4::zeros(),
+            Vector4::zeros(),
+            [0.0; 4],
+            Fades::default(),
+        );
     };
-    let (agv, agn, aov, aon) = (
+    let (xg, xo) = (inp.x_gamma, inp.x_omega);
+    let a0 = [
         alpha_gv * dt_over_h,
         alpha_gn * dt_over_h,
         alpha_ov * dt_over_h,
         alpha_on * dt_over_h,
+    ];
+    let fades = Fades::new(a0, inp, a_rho);
+    let (agv, agn, aov, aon) = (
+        fades.v.0 * a0[0],
+        fades.nu.0 * a0[1],
+        fades.v.0 * a0[2],
+        fades.nu.0 * a0[3],
     );
-    let (xg, xo) = (inp.x_gamma, inp.x_omega);
     let m = Matrix4::new(
         1.0,
         0.0,
@@ -164,7 +179,71 @@ fn edmc2_system(
         a_rho * inp.v_n + agv * xg + aov * xo,
         a_rho * inp.nu_n + agn * xg + aon * xo,
     );
-    (m, rhs, [agv, agn, aov, aon])
+    (m, rhs, a0, fades)
+}
+
+/// The fade of EDMC-2's velocity couplings, `(s, ∂s/∂V, ∂s/∂F)`: `s = 3ρ² − 2ρ³` for
+/// `ρ = V/F < 1` and `s = 1` from `ρ = 1` on (continuously differentiable), for the
+/// point's speed sum `V = v_n + v_{n+1}` and the law's own dissipative speed at rest
+/// `F = (a_Γv X_Γ + a_Ωv X_Ω)/Aρ` (the ṽ equation's forcing; likewise with ν and the
+/// `a_xν`); `s = 1` where `F = 0`.
+///
+/// The paper's law asks, at a point at rest (`v_n = 0`), for a dissipative speed
+/// `ṽ − v_n → a X/(Aρ + a²X) ≠ 0` as `v_{n+1} → 0`, along `v^h_{n+1}/v_{n+1}`: the
+/// dissipative velocity jumps as the point's velocity passes through zero, and where a
+/// point's new speed lands within that jump the step has no solution (a roll-up from rest
+/// failed at step 1 for some Δt only, docs/damping.md). Scaling the couplings `a_xv` by
+/// `s` keeps the law's structure, so the dissipation identity, D ≥ 0 (its sum of squares)
+/// and the momenta hold as before, while `ṽ − v_n = O(V²)` and `c_v = O(V/F)` below `F`:
+/// the dissipative velocity is continuous and vanishes with the speed. Wherever the point
+/// moves faster than `F` (`F = O(Δt³)`) the law is the paper's, bit for bit.
+fn fade(speed: f64, forcing: f64) -> (f64, f64, f64) {
+    if forcing <= 0.0 || speed >= forcing {
+        return (1.0, 0.0, 0.0);
+    }
+    let rho = speed / forcing;
+    let ds = 6.0 * rho * (1.0 - rho);
+    (
+        rho * rho * (3.0 - 2.0 * rho),
+        ds / forcing,
+        -ds * rho / forcing,
+    )
+}
+
+/// The two fades of EDMC-2's law (translational and director velocity couplings), each
+/// `(s, ∂s/∂w)` for `w = (v_{n+1}, ν_{n+1}, X_Γ, X_Ω)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Fades {
+    v: (f64, [f64; 4]),
+    nu: (f64, [f64; 4]),
+}
+
+impl Default for Fades {
+    fn default() -> Self {
+        Fades {
+            v: (1.0, [0.0; 4]),
+            nu: (1.0, [0.0; 4]),
+        }
+    }
+}
+
+impl Fades {
+    /// The fades at `inp` for the unfaded constants `a0 = [a_Γv, a_Γν, a_Ωv, a_Ων]`.
+    fn new(a0: [f64; 4], inp: &LocalInputs, a_rho: f64) -> Self {
+        let (xg, xo) = (inp.x_gamma, inp.x_omega);
+        let one = |speed: f64, ag: f64, ao: f64, speed_index: usize| {
+            let (s, ds_dv, ds_df) = fade(speed, (ag * xg + ao * xo) / a_rho);
+            let mut d = [0.0; 4];
+            d[speed_index] = ds_dv;
+            d[2] = ds_df * ag / a_rho;
+            d[3] = ds_df * ao / a_rho;
+            (s, d)
+        };
+        Fades {
+            v: one(inp.v_n + inp.v_n1, a0[0], a0[2], 0),
+            nu: one(inp.nu_n + inp.nu_n1, a0[1], a0[3], 1),
+        }
+    }
 }
 
 /// [`local_scalars`] and its derivative with respect to the inputs that vary with the
@@ -190,7 +269,9 @@ pub(crate) fn local_scalars_jacobian(
             (local_scalars(scheme, inp, a_rho, dt_over_h), d)
         }
         Scheme::Edmc2 { .. } => {
-            let (m, rhs, [agv, agn, aov, aon]) = edmc2_system(scheme, inp, a_rho, dt_over_h);
+            let (m, rhs, a0, fades) = edmc2_system(scheme, inp, a_rho, dt_over_h);
+            let (sv, snu) = (fades.v.0, fades.nu.0);
+            let (agv, agn, aov, aon) = (sv * a0[0], snu * a0[1], sv * a0[2], snu * a0[3]);
             let lu = m.lu();
             // As `local_scalars` (the same factorization and solve, so the same values).
             let s = lu.solve(&rhs).unwrap_or_else(Vector4::zeros);
@@ -200,9 +281,9 @@ pub(crate) fn local_scalars_jacobian(
                 dv: s[2] - inp.v_n,
                 dnu: s[3] - inp.nu_n,
             };
-            // Columns ∂r/∂w_j − (∂M/∂w_j) s: the speeds enter r's first two rows, the X
-            // both r and M's last two rows (through β_Γ X_Γ and β_Ω X_Ω).
-            let cols = Matrix4::new(
+            // Columns ∂r/∂w_j − (∂M/∂w_j) s at fixed fades: the speeds enter r's first two
+            // rows, the X both r and M's last two rows (through β_Γ X_Γ and β_Ω X_Ω).
+            let mut cols = Matrix4::new(
                 -agv,
                 -agn,
                 0.0,
@@ -220,6 +301,26 @@ pub(crate) fn local_scalars_jacobian(
                 agn * (1.0 - s[0]),
                 aon * (1.0 - s[1]),
             );
+            // The fades' own variation: ∂r/∂s_v − (∂M/∂s_v) s (likewise s_ν) times ∂s/∂w.
+            let (xg, xo) = (inp.x_gamma, inp.x_omega);
+            let by_sv = Vector4::new(
+                a0[0] * (s[2] - inp.v_n1),
+                a0[2] * (s[2] - inp.v_n1),
+                a0[0] * xg * (1.0 - s[0]) + a0[2] * xo * (1.0 - s[1]),
+                0.0,
+            );
+            let by_snu = Vector4::new(
+                a0[1] * (s[3] - inp.nu_n1),
+                a0[3] * (s[3] - inp.nu_n1),
+                0.0,
+                a0[1] * xg * (1.0 - s[0]) + a0[3] * xo * (1.0 - s[1]),
+            );
+            for j in 0..4 {
+                let add = by_sv * fades.v.1[j] + by_snu * fades.nu.1[j];
+                for i in 0..4 {
+                    cols[(i, j)] += add[i];
+                }
+            }
             if let Some(ds) = lu.solve(&cols) {
                 for (i, row) in d.iter_mut().enumerate() {
                     for (j, v) in row.iter_mut().enumerate() {
@@ -254,6 +355,7 @@ mod tests {
         };
         let (a_rho, dt_h) = (3.0, 0.4);
         let s = local_scalars(&scheme, &inp, a_rho, dt_h);
+        // (V = 1.7 exceeds the law's speed at rest F = a X/Aρ = 0.23: no fade.)
         let a = 0.7 * dt_h;
         let x = inp.x_gamma;
         let vt = (a_rho * inp.v_n + a * x * (1.0 + a * inp.v_n1)) / (a_rho + a * a * x);
@@ -295,6 +397,62 @@ mod tests {
         assert!((d - positive).abs() < 1e-13);
     }
 
+    /// From rest (`v_n = 0`) the paper's law kept a dissipative speed
+    /// `ṽ − v_n → a X/(Aρ + a²X)` as `v_{n+1} → 0`, along a direction that flips there;
+    /// the faded law's dissipative velocity `c_v (v^h_n + v^h_{n+1})` vanishes with the
+    /// speed (`c_v ≤ ¼`, `c_v → 0`), and its D keeps the positive form.
+    #[test]
+    fn the_dissipative_velocity_vanishes_with_the_speed_from_rest() {
+        let scheme = Scheme::Edmc2 {
+            alpha_gv: 0.0,
+            alpha_gn: 0.0,
+            alpha_ov: 0.5,
+            alpha_on: 0.0,
+        };
+        // The roll-up's element 42 at Δt = 0.113: Aρ = 1.2566, a = 2.825, X_Ω = 8.08e-6
+        // (F = 1.8e-5).
+        let (a_rho, dt_h) = (1.2566, 5.65);
+        let mut last_cv = f64::INFINITY;
+        for k in 0..12 {
+            let v1 = 1e-3 * 0.1f64.powi(k);
+            let inp = LocalInputs {
+                v_n: 0.0,
+                v_n1: v1,
+                x_omega: 8.08e-6,
+                ..LocalInputs::default()
+            };
+            let s = local_scalars(&scheme, &inp, a_rho, dt_h);
+            let cv = s.c_v(&inp);
+            // |v_diss| = c_v v_{n+1}: c_v ≈ ½ s F/V = ½ρ(3 − 2ρ) ≤ 9/16 (ρ = V/F).
+            assert!((0.0..=0.57).contains(&cv), "c_v = {cv} at v = {v1}");
+            if v1 < 1e-6 {
+                assert!(cv < last_cv, "c_v = {cv} at v = {v1}: not falling");
+            }
+            last_cv = cv;
+            let d = s.dissipation_density(&inp, a_rho);
+            let positive = 0.5 * a_rho * s.dv * s.dv + 0.5 * s.beta_omega.powi(2) * inp.x_omega;
+            // (d is a difference of terms of size ½|β|X: compare at their round-off.)
+            let terms = 0.5 * a_rho * (s.dv * v1).abs() + 0.5 * (s.beta_omega * inp.x_omega).abs();
+            assert!(
+                (d - positive).abs() <= 1e-14 * terms,
+                "D = {d:e}, positive form {positive:e}, terms {terms:e} at v = {v1}"
+            );
+        }
+        assert!(last_cv < 1e-5, "c_v = {last_cv} at v = 1e-14");
+        // Where the point moves faster than F the law is the paper's.
+        let inp = LocalInputs {
+            v_n: 2e-5,
+            v_n1: 1e-6,
+            x_omega: 8.08e-6,
+            ..LocalInputs::default()
+        };
+        let a = 0.5 * dt_h;
+        let x = inp.x_omega;
+        let paper = (a_rho * inp.v_n + a * x * (1.0 + a * inp.v_n1)) / (a_rho + a * a * x);
+        let faded = local_scalars(&scheme, &inp, a_rho, dt_h).dv + inp.v_n;
+        assert!((faded - paper).abs() <= 1e-14 * paper);
+    }
+
     /// The law's Jacobian equals central differences of the law on coupled EDMC-2 and
     /// EDMC-1 inputs (1e-8 of the largest entry; measured 2.2e-10, the differences' own
     /// error), and the law
@@ -315,10 +473,21 @@ mod tests {
                 chi_nu: 0.4,
             },
         ];
-        let inp = coupled_inputs();
+        // Coupled inputs, and inputs where both fades act (V/F ≈ 0.5).
+        let slow = LocalInputs {
+            v_n: 0.005,
+            v_n1: 0.008,
+            nu_n: 0.005,
+            nu_n1: 0.02,
+            x_gamma: 0.2,
+            x_omega: 0.3,
+        };
         let out = |s: &LocalScalars| [s.beta_gamma, s.beta_omega, s.dv, s.dnu];
         let mut worst: f64 = 0.0;
-        for scheme in schemes {
+        for (scheme, inp) in schemes
+            .iter()
+            .flat_map(|s| [(*s, coupled_inputs()), (*s, slow)])
+        {
             let (law, d) = local_scalars_jacobian(&scheme, &inp, 2.0, 0.3);
             assert_eq!(law, local_scalars(&scheme, &inp, 2.0, 0.3));
             let size = d.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));

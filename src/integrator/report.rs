@@ -78,6 +78,9 @@ pub struct SolveTimers {
     /// corrected with the last factorization instead (a chord step; no tangent is
     /// assembled for them).
     pub chord_corrections: u64,
+    /// Newton solves stopped because their residual had not decreased for several
+    /// iterations (the step moved on to its next predictor or its fallback strategy).
+    pub stagnation_stops: u64,
 }
 
 impl SolveTimers {
@@ -92,6 +95,7 @@ impl SolveTimers {
         self.tangents_skipped += o.tangents_skipped;
         self.tangent_skip_misses += o.tangent_skip_misses;
         self.chord_corrections += o.chord_corrections;
+        self.stagnation_stops += o.stagnation_stops;
     }
 }
 

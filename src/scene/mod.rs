@@ -48,6 +48,28 @@ pub struct Scene {
     pub output_every: usize,
     /// `[[probe]]` nodes whose state goes to `probes.csv` every step.
     pub probes: Vec<Probe>,
+    /// Whether the scene's `[integrator]` table sets `cutback` (else `params.cutback` is
+    /// the library's default: 0, or 6 with friction; `run` and `sweep` then cut back up to
+    /// [`RUN_CUTBACK`] halvings).
+    pub cutback_set: bool,
+}
+
+/// The step cut-back `cosserat run` and `cosserat sweep` use when neither the scene nor
+/// `--cutback` sets one: a step Newton cannot solve at Δt is redone as up to 2⁴ = 16
+/// sub-steps, so that a run does not die where a smaller step passes (outputs stay on the Δt
+/// grid; cut-back steps are counted). The stability study keeps it off.
+pub const RUN_CUTBACK: usize = 4;
+
+impl Scene {
+    /// The cut-back of a `run` or `sweep` member of this scene when `--cutback` is not
+    /// given: the scene's own where it sets one, else at least [`RUN_CUTBACK`].
+    pub fn run_cutback(&self) -> usize {
+        if self.cutback_set {
+            self.params.cutback
+        } else {
+            self.params.cutback.max(RUN_CUTBACK)
+        }
+    }
 }
 
 /// A `[[probe]]`: a named node observed every step.

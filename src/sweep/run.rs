@@ -708,9 +708,12 @@ pub fn run_sweep(
                         reason: e.to_string(),
                     }
                 })?;
+                // Cut-back on by default (`--cutback` overrides it in every member).
+                let mut params = scene.params;
+                params.cutback = scene.run_cutback();
                 members.push(Member {
                     model: scene.model,
-                    params: scene.params,
+                    params,
                 });
                 ids.push(i);
             }

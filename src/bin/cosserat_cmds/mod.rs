@@ -275,7 +275,7 @@ pub struct MemberOpts {
     #[arg(long)]
     pub no_fallback: bool,
     /// Step cut-back in every member: a failed step is redone as up to 2^N sub-steps
-    /// (default: each member's scene, else 0 = off).
+    /// (default: each member's scene, else 4; 0 = off).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=20))]
     pub cutback: Option<u8>,
     /// GPU path: where the Newton systems are solved (docs/gpu.md, "Device solve").
@@ -784,6 +784,7 @@ fn stages_json(obj: &mut serde_json::Value, p: &str, t: &SolveTimers) {
     obj[format!("{p}_factorizations")] = t.factorizations.into();
     obj[format!("{p}_solves")] = t.solves.into();
     obj[format!("{p}_chord_corrections")] = t.chord_corrections.into();
+    obj[format!("{p}_stagnation_stops")] = t.stagnation_stops.into();
     obj[format!("{p}_factor_us_each")] =
         (1e6 * t.factor_s / (t.factorizations.max(1) as f64)).into();
     obj[format!("{p}_solve_us_each")] = (1e6 * t.solve_s / (t.solves.max(1) as f64)).into();

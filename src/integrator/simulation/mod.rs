@@ -169,6 +169,9 @@ pub struct Simulation {
     /// The step is on its last predictor: the monolithic strategy falls back to the
     /// staggered loop only then (its other predictors come first).
     last_predictor: bool,
+    /// Whether the solve under way is the step's first strategy with its fallback still to
+    /// come (a stagnation stop then moves on to it).
+    fallback_pending: bool,
     /// The last checked solve was accepted with the consistent scalars (monolithic, its
     /// fallback, or an inexact solve on its floor), not frozen ones: the mode of the
     /// step's support work.
@@ -275,6 +278,7 @@ impl Simulation {
             factored: None,
             fell_back: false,
             last_predictor: true,
+            fallback_pending: false,
             solved_consistent: false,
             inexact_tangent: false,
             lanes: assemble::LANES_PAY,

@@ -52,7 +52,10 @@ impl Simulation {
         }
         let q0 = q.to_vec();
         let frozen0 = self.frozen.clone();
-        match self.solve_by(strategy, q, total_iters).await {
+        self.fallback_pending = true;
+        let first = self.solve_by(strategy, q, total_iters).await;
+        self.fallback_pending = false;
+        match first {
             Ok(x) => Ok(x),
             Err(first) => {
                 q.copy_from_slice(&q0);

@@ -283,5 +283,6 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
         params,
         output_every,
         probes,
+        cutback_set: raw_int.cutback.is_some(),
     })
 }
