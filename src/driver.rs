@@ -370,7 +370,7 @@ fn cosseratbench_result(
         options: Default::default(),
         missing: vec![],
         failure: o.reason.clone(),
-        diverged_at: failed.then(|| o.t_reached + p.dt),
+        diverged_at: failed.then_some(o.t_reached + p.dt),
         wall_time: o.wall_s,
         metrics: Default::default(),
         observations: Default::default(),
