@@ -212,7 +212,19 @@ fn bad_support_motions_are_named() {
         ),
         (
             "[[clamp]]\nat = [1, 0, 0]\nslide = [1, 0, 0]\ndisplacement = [1, 0, 0]\ntime = [0, 1]\nfactor = [0, 1]",
-            "clamp[0].slide: a sliding clamp cannot also be driven",
+            "clamp[0].displacement: (1, 0, 0): a sliding clamp is driven only across its axis (component 1 along it)",
+        ),
+        (
+            "[[clamp]]\nat = [1, 0, 0]\nslide = [1, 0, 0]\nrotation = [0, 1, 0]\ntime = [0, 1]\nfactor = [0, 1]",
+            "clamp[0].rotation: (0, 1, 0): a sliding clamp is turned only about its axis",
+        ),
+        (
+            "[[clamp]]\nat = [1, 0, 0]\nslide = [1, 0, 0]\nspin = true\nrotation = [1, 0, 0]\ntime = [0, 1]\nfactor = [0, 1]",
+            "clamp[0].rotation: a spinning sliding clamp turns freely about its axis: it cannot also be turned",
+        ),
+        (
+            "[[clamp]]\nat = [1, 0, 0]\nslide = [1, 1, 0]\ndisplacement = [0, 0, 1]\ntime = [0, 1]\nfactor = [0, 1]",
+            "clamp[0].slide: (1, 1, 0): a driven sliding clamp needs a coordinate axis",
         ),
     ];
     let ga = parse_scene(
@@ -421,23 +433,15 @@ fn planar_scene_refuses_a_slide_out_of_its_plane() {
     sim.step().unwrap();
 }
 
-/// The scene's model with a clamp at node `node` also sliding along e1 (the form a
-/// driven clamp with `slide` takes in the model).
-fn sliding_along_e1(
+/// The scene's model and parameters.
+fn parsed(
     text: &str,
-    node: usize,
 ) -> (
     cosserat::model::Model,
     cosserat::integrator::IntegratorParams,
 ) {
     let s = parse_scene(text, "t.toml").unwrap();
-    let mut model = s.model;
-    model.slides.push(cosserat::model::Slide {
-        node,
-        axis: nalgebra::Vector3::x(),
-        spin: false,
-    });
-    (model, s.params)
+    (s.model, s.params)
 }
 
 #[test]
@@ -448,12 +452,9 @@ fn clamp_turned_about_its_slide_axis_twists_and_slides() {
     // on its axis, and slides to the static stretch P L/(E A); the twist is linear.
     let (n, phi, p) = (20, 0.5, 1e-2);
     let extra = format!(
-        "[[clamp]]\nat = [0, 0, 0]\n\n[[clamp]]\nat = [1, 0, 0]\nrotation = [{phi}, 0, 0]\ntime = [0, 4]\nfactor = [0, 1]\nramp = \"smooth\"\n\n[[load]]\nat = [1, 0, 0]\nforce = [{p}, 0, 0]\ntime = [0, 4]\nfactor = [0, 1]"
+        "[[clamp]]\nat = [0, 0, 0]\n\n[[clamp]]\nat = [1, 0, 0]\nslide = [1, 0, 0]\nrotation = [{phi}, 0, 0]\ntime = [0, 4]\nfactor = [0, 1]\nramp = \"smooth\"\n\n[[load]]\nat = [1, 0, 0]\nforce = [{p}, 0, 0]\ntime = [0, 4]\nfactor = [0, 1]"
     );
-    let (model, params) = sliding_along_e1(
-        &scene(n, &extra, "scheme = \"em\"\ndt = 0.01\nt_end = 4.5"),
-        n,
-    );
+    let (model, params) = parsed(&scene(n, &extra, "scheme = \"em\"\ndt = 0.01\nt_end = 4.5"));
     let steps = params.n_steps();
     let mut sim = Simulation::new(model, params).unwrap();
     let (mut worst, mut w_sup) = (0.0f64, 0.0);
@@ -493,12 +494,13 @@ fn sliding_clamp_carried_across_its_axis_follows_exactly_and_closes_the_balance(
     // pull: it follows the table exactly across the axis, and EM closes the balance.
     let (n, dy, phi, p) = (10, 0.02, 0.3, 1e-2);
     let extra = format!(
-        "[[clamp]]\nat = [0, 0, 0]\n\n[[clamp]]\nat = [1, 0, 0]\ndisplacement = [0, {dy}, 0]\nrotation = [{phi}, 0, 0]\ntime = [0, 0.5]\nfactor = [0, 1]\n\n[[load]]\nat = [1, 0, 0]\nforce = [{p}, 0, 0]"
+        "[[clamp]]\nat = [0, 0, 0]\n\n[[clamp]]\nat = [1, 0, 0]\nslide = [1, 0, 0]\ndisplacement = [0, {dy}, 0]\nrotation = [{phi}, 0, 0]\ntime = [0, 0.5]\nfactor = [0, 1]\n\n[[load]]\nat = [1, 0, 0]\nforce = [{p}, 0, 0]"
     );
-    let (model, params) = sliding_along_e1(
-        &scene(n, &extra, "scheme = \"em\"\ndt = 0.005\nt_end = 0.6"),
+    let (model, params) = parsed(&scene(
         n,
-    );
+        &extra,
+        "scheme = \"em\"\ndt = 0.005\nt_end = 0.6",
+    ));
     let steps = params.n_steps();
     let mut sim = Simulation::new(model, params).unwrap();
     let (mut worst, mut slid) = (0.0f64, 0.0f64);
