@@ -12,8 +12,8 @@ use crate::observe::balance::BalanceObserver;
 use crate::observe::record::{LastAccepted, RunStatus, RunSummary, StepRecord};
 use crate::output::{
     animate_snapshots, plot_accelerations, plot_energy, plot_momenta, plot_snapshots,
-    write_summary, CosseratBenchResult, HistoryWriter, OutputError, OutputTimes, ProbeWriter,
-    Progress, Snapshot, TrajectoryRecorder, VtkSeries,
+    write_summary, CosseratBenchOptions, CosseratBenchResult, HistoryWriter, OutputError,
+    OutputTimes, ProbeWriter, Progress, Snapshot, TrajectoryRecorder, VtkSeries,
 };
 use crate::scene::limits::Footprint;
 use crate::scene::Scene;
@@ -37,8 +37,8 @@ pub struct RunOptions {
     /// Write `animation.gif` from the levels at every this many steps (`None`: none).
     pub animate_every: Option<usize>,
     /// Also write the `cosseratbench` layout into `cosseratbench/` (needs `trajectory`),
-    /// with this scenario digest in its `result.json` (`None`: `null`).
-    pub cosseratbench: Option<Option<String>>,
+    /// with these identities in its `result.json`.
+    pub cosseratbench: Option<CosseratBenchOptions>,
 }
 
 impl Default for RunOptions {
@@ -310,8 +310,8 @@ pub fn run_sim_to_dir(
     if let Some(tr) = &trajectory {
         tr.write(&out.join("trajectory.npz"))?;
         written.push(format!("trajectory.npz ({} frames)", tr.len()));
-        if let Some(digest) = &opts.cosseratbench {
-            let cb = cosseratbench_result(scene, sim, &outcome, digest.clone());
+        if let Some(cbo) = &opts.cosseratbench {
+            let cb = cosseratbench_result(scene, sim, &outcome, cbo, tr.len());
             tr.write_cosseratbench(sim.model(), &out.join("cosseratbench"), &cb)?;
             written.push("cosseratbench/trajectory.npz".into());
             written.push("cosseratbench/result.json".into());
@@ -355,30 +355,36 @@ fn cosseratbench_result(
     scene: &Scene,
     sim: &Simulation,
     o: &RunOutcome,
-    digest: Option<String>,
+    cb: &CosseratBenchOptions,
+    n_frames: usize,
 ) -> CosseratBenchResult {
     let failed = o.status == RunStatus::Failed;
+    let p = sim.params();
     CosseratBenchResult {
-        experiment: scene.name.clone(),
+        experiment: cb.experiment.clone().unwrap_or_else(|| scene.name.clone()),
         solver: "cosserat".into(),
         outcome: if failed { "diverged" } else { "completed" }.into(),
-        n_elements: sim.model().elements.len(),
-        values: Default::default(),
-        options: serde_json::json!({
-            "scheme": sim.params().scheme,
-            "dt": sim.params().dt,
-            "strategy": sim.strategy(),
-        }),
+        n_elements: sim.model().rods.first().map_or(0, |r| r.elements.len()),
+        n_frames,
+        values: cb.values.clone(),
+        options: Default::default(),
         missing: vec![],
         failure: o.reason.clone(),
-        diverged_at: failed.then(|| o.t_reached + sim.params().dt),
+        diverged_at: failed.then_some(o.t_reached + p.dt),
         wall_time: o.wall_s,
         metrics: Default::default(),
         observations: Default::default(),
         provenance: serde_json::json!({
-            "scenario": digest,
+            "scenario": cb.scenario_digest,
             "code": null,
             "solver_version": format!("cosserat {}", env!("CARGO_PKG_VERSION")),
+        }),
+        jobs: 1,
+        settings: serde_json::json!({
+            "scheme": p.scheme.name(),
+            "dt": p.dt,
+            "t_end": p.t_end,
+            "strategy": p.scheme.is_dissipative().then(|| sim.strategy().name()),
         }),
     }
 }

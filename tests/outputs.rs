@@ -7,7 +7,7 @@ use std::path::Path;
 
 use cosserat::driver::{run_sim_to_dir, RunOptions, RunResult};
 use cosserat::integrator::Simulation;
-use cosserat::output::{read_history, OutputTimes};
+use cosserat::output::{read_history, CosseratBenchOptions, OutputTimes};
 use cosserat::scene::{builtin_scenes, parse_scene, Scene};
 use ndarray::{Array1, Array3, Array4};
 use ndarray_npy::NpzReader;
@@ -61,7 +61,11 @@ fn trajectory_npz_reads_back_the_states_at_exact_step_times() {
     let dt = scene.params.dt;
     let opts = RunOptions {
         trajectory: Some(OutputTimes::from_dt(0.6, dt).unwrap()),
-        cosseratbench: Some(Some("0123456789abcdef".into())),
+        cosseratbench: Some(CosseratBenchOptions {
+            scenario_digest: Some("0123456789abcdef".into()),
+            experiment: Some("cantilever".into()),
+            values: serde_json::from_str(r#"{"force": 0.5}"#).unwrap(),
+        }),
         ..RunOptions::default()
     };
     let (res, sim) = run(&scene, dir.path(), &opts);
@@ -129,10 +133,87 @@ fn trajectory_npz_reads_back_the_states_at_exact_step_times() {
     }
     let result: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(cb.join("result.json")).unwrap()).unwrap();
+    // The keys of cosseratbench 0.3's `Result.summary()`, no more and no fewer, with its
+    // types (the map reads back sorted).
+    let mut keys: Vec<&str> = result
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(String::as_str)
+        .collect();
+    keys.sort_unstable();
+    let mut suite = [
+        "experiment",
+        "solver",
+        "outcome",
+        "n_elements",
+        "n_frames",
+        "values",
+        "options",
+        "missing",
+        "failure",
+        "diverged_at",
+        "wall_time",
+        "metrics",
+        "observations",
+        "provenance",
+        "jobs",
+        "settings",
+    ];
+    suite.sort_unstable();
+    assert_eq!(keys, suite);
+    assert_eq!(result["experiment"], "cantilever");
     assert_eq!(result["outcome"], "completed");
     assert_eq!(result["solver"], "cosserat");
-    assert_eq!(result["n_elements"], 15);
+    // Elements per rod, as the suite's resolution (each of the frame's three rods has 5).
+    assert_eq!(result["n_elements"], 5);
+    assert_eq!(result["n_frames"], times.len());
+    assert_eq!(result["values"]["force"], 0.5);
+    // Solver options are the suite's constructor options: none were given.
+    assert_eq!(result["options"], serde_json::json!({}));
+    assert_eq!(result["missing"], serde_json::json!([]));
+    assert!(result["failure"].is_null() && result["diverged_at"].is_null());
+    assert!(result["wall_time"].as_f64().unwrap() >= 0.0);
+    assert!(result["metrics"].as_object().unwrap().is_empty());
+    assert!(result["observations"].as_object().unwrap().is_empty());
     assert_eq!(result["provenance"]["scenario"], "0123456789abcdef");
+    assert!(result["provenance"]["code"].is_null());
+    assert_eq!(result["jobs"], 1);
+    // The numerical choices read as summary.json states them.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(result["settings"]["scheme"], "edmc2");
+    assert_eq!(
+        result["settings"]["scheme"],
+        summary["params"]["scheme"]["name"]
+    );
+    assert_eq!(result["settings"]["dt"], dt);
+    assert_eq!(result["settings"]["strategy"], summary["strategy"]);
+}
+
+#[test]
+fn cosseratbench_result_reads_the_suites_experiment_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("experiment.json");
+    std::fs::write(
+        &path,
+        r#"{"name": "twist", "values": {"tension": 1.0, "twist": 1.02}, "varied": {}}"#,
+    )
+    .unwrap();
+    let mut cb = CosseratBenchOptions::default();
+    cb.read_experiment(&path).unwrap();
+    assert_eq!(cb.experiment.as_deref(), Some("twist"));
+    assert_eq!(cb.values["twist"], 1.02);
+    std::fs::write(&path, r#"{"name": "twist", "values": {"twist": "high"}}"#).unwrap();
+    let e = cb.read_experiment(&path).unwrap_err();
+    assert!(
+        e.contains("experiment.json") && e.contains("values.twist"),
+        "{e}"
+    );
+    std::fs::write(&path, r#"{"values": {}}"#).unwrap();
+    let e = cb.read_experiment(&path).unwrap_err();
+    assert!(e.contains("key `name`"), "{e}");
 }
 
 #[test]

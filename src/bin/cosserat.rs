@@ -10,7 +10,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use cosserat::driver::{run_sim_to_dir, RunOptions};
 use cosserat::integrator::{IntegratorParams, Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, RunSummary};
-use cosserat::output::OutputTimes;
+use cosserat::output::{CosseratBenchOptions, OutputTimes};
 use cosserat::reproduce::reproduce;
 use cosserat::scene::{builtin_scenes, load_scene, printable, Scene};
 use cosserat::study;
@@ -305,6 +305,10 @@ struct RunArgs {
     /// cosseratbench's digest of the matching scenario, written to its `result.json`.
     #[arg(long, value_name = "HEX", requires = "cosseratbench")]
     scenario_digest: Option<String>,
+    /// The suite's `experiment.json` of the matching variant: its `name` and `values` go
+    /// to `result.json`'s `experiment` and `values`.
+    #[arg(long, value_name = "PATH", requires = "cosseratbench")]
+    experiment_json: Option<PathBuf>,
     /// Override a numeric scene key before the run, with the key paths and checks of sweep
     /// files (`--set integrator.dt=0.1`, `--set rod.beam.elements=100`); repeatable.
     #[arg(long = "set", value_name = "KEY=VALUE", value_parser = parse_set)]
@@ -499,6 +503,7 @@ fn main() -> ExitCode {
             times: None,
             cosseratbench: false,
             scenario_digest: None,
+            experiment_json: None,
             sets: vec![],
             backend: cmds::BackendArg::Cpu,
             adapter: None,
@@ -717,6 +722,19 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
     } else {
         (a.trajectory || a.cosseratbench).then_some(OutputTimes::Every(every))
     };
+    let cosseratbench = if a.cosseratbench {
+        let mut cb = CosseratBenchOptions {
+            scenario_digest: a.scenario_digest.clone(),
+            ..Default::default()
+        };
+        if let Some(path) = &a.experiment_json {
+            cb.read_experiment(path)
+                .map_err(|e| anyhow!("--experiment-json: {e}"))?;
+        }
+        Some(cb)
+    } else {
+        None
+    };
     let opts = RunOptions {
         every,
         vtk_every: a.vtk.then_some(every),
@@ -729,7 +747,7 @@ fn run_command(a: RunArgs) -> Result<ExitCode> {
             (None, true) => Some(params.n_steps().div_ceil(100).max(1)),
             (None, false) => None,
         },
-        cosseratbench: a.cosseratbench.then(|| a.scenario_digest.clone()),
+        cosseratbench,
     };
     // The frames kept for the outputs, sized before anything is set up or written.
     if let Err(e) = opts.check_memory(&scene.model, params.n_steps()) {

@@ -22,7 +22,7 @@ pub use probes::ProbeWriter;
 pub use progress::Progress;
 pub use snapshot::{animate_snapshots, plot_snapshots, Snapshot};
 pub use summary::write_summary;
-pub use trajectory::{CosseratBenchResult, OutputTimes, TrajectoryRecorder};
+pub use trajectory::{CosseratBenchOptions, CosseratBenchResult, OutputTimes, TrajectoryRecorder};
 pub use vtk::VtkSeries;
 
 /// `v` as the shortest text that reads back as the identical `f64`, in plain notation for

@@ -309,22 +309,25 @@ fn npz_create(path: &Path) -> Result<NpzWriter<BufWriter<File>>, OutputError> {
     Ok(NpzWriter::new(BufWriter::new(file)))
 }
 
-/// `result.json` of the `cosseratbench` layout (the fields its loader reads).
+/// `result.json` of the `cosseratbench` layout: the fields, order and types of the suite's
+/// `Result.summary()`, so its `rescore` and viewer read it as one of its own runs.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CosseratBenchResult {
-    /// The experiment (our scene name).
+    /// The suite's experiment (from its `experiment.json`; else our scene name).
     pub experiment: String,
     /// Always `cosserat`.
     pub solver: String,
     /// `completed` or `diverged`.
     pub outcome: String,
-    /// Elements of the model.
+    /// Elements per rod (the suite's resolution; the first rod's count).
     pub n_elements: usize,
-    /// Varied values (none).
+    /// Frames in `trajectory.npz`.
+    pub n_frames: usize,
+    /// The experiment's parameter values (from its `experiment.json`; else empty).
     pub values: serde_json::Map<String, serde_json::Value>,
-    /// Solver options: scheme, Δt and the scheme's constants.
-    pub options: serde_json::Value,
-    /// Missing features (none).
+    /// The suite's solver options as run (its `time_step_scale` and the like): none, `{}`.
+    pub options: serde_json::Map<String, serde_json::Value>,
+    /// Missing capabilities (none).
     pub missing: Vec<String>,
     /// Why the run failed (`null` when completed).
     pub failure: Option<String>,
@@ -340,4 +343,45 @@ pub struct CosseratBenchResult {
     /// the experiment's scenario, which its `rescore` compares) or `null`; `code`: `null`;
     /// `solver_version`: `cosserat VERSION`.
     pub provenance: serde_json::Value,
+    /// Runs going at once when this one was timed: 1.
+    pub jobs: usize,
+    /// Our numerical choices, as `summary.json` states them: `scheme` (its name), `dt`,
+    /// `strategy` (`null` for a scheme without one), `t_end`.
+    pub settings: serde_json::Value,
+}
+
+/// What `--cosseratbench` writes into `result.json` beyond the run itself.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CosseratBenchOptions {
+    /// The suite's digest of the matching scenario (`provenance.scenario`; `None`: `null`).
+    pub scenario_digest: Option<String>,
+    /// The suite's experiment name (`None`: the scene name).
+    pub experiment: Option<String>,
+    /// The experiment's parameter values.
+    pub values: serde_json::Map<String, serde_json::Value>,
+}
+
+impl CosseratBenchOptions {
+    /// Reads `name` and `values` from the `experiment.json` the suite writes into each
+    /// variant's folder (`RESULTS/EXPERIMENT/VARIANT/experiment.json`).
+    pub fn read_experiment(&mut self, path: &Path) -> Result<(), String> {
+        let shown = path.display();
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{shown}: {e}"))?;
+        let v: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| format!("{shown}: not JSON: {e}"))?;
+        let name = v
+            .get("name")
+            .and_then(|n| n.as_str())
+            .ok_or_else(|| format!("{shown}: key `name`: missing or not a string"))?;
+        let values = v
+            .get("values")
+            .and_then(|n| n.as_object())
+            .ok_or_else(|| format!("{shown}: key `values`: missing or not an object"))?;
+        if let Some((k, _)) = values.iter().find(|(_, x)| !x.is_number()) {
+            return Err(format!("{shown}: key `values.{k}`: not a number"));
+        }
+        self.experiment = Some(name.to_string());
+        self.values = values.clone();
+        Ok(())
+    }
 }

@@ -47,10 +47,53 @@ fn slide(
         Some(k) => Vec3::from_fn(|c, _| if c == k { v[k].signum() } else { 0.0 }),
         None => v / n,
     };
-    if c.displacement.is_some() || c.rotation.is_some() {
-        return Err(cx.err(&sp, "a sliding clamp cannot also be driven"));
-    }
     let spin = c.spin.unwrap_or(false);
+    // Driven while it slides: moved only across the axis and turned only about it (a
+    // coordinate axis, whose other components are removed and take the prescribed
+    // motion; an oblique slide's constraint rows hold no motion).
+    if c.displacement.is_some() || c.rotation.is_some() {
+        let Some(k) = (0..3).find(|&k| (0..3).all(|j| j == k || axis[j] == 0.0)) else {
+            return Err(cx.err(
+                &sp,
+                format!(
+                    "{}: a driven sliding clamp needs a coordinate axis ([1, 0, 0], [0, 1, 0], [0, 0, 1] or their negatives)",
+                    fmt_v(&v)
+                ),
+            ));
+        };
+        let along = |key: &str, raw: &Option<Vec<f64>>| -> Result<Option<Vec3>> {
+            raw.as_ref().map(|r| cx.vec3(&path.key(key), r)).transpose()
+        };
+        if let Some(d) = along("displacement", &c.displacement)? {
+            if d[k] != 0.0 {
+                return Err(cx.err(
+                    &path.key("displacement"),
+                    format!(
+                        "{}: a sliding clamp is driven only across its axis (component {} along it)",
+                        fmt_v(&d),
+                        d[k]
+                    ),
+                ));
+            }
+        }
+        if let Some(r) = along("rotation", &c.rotation)? {
+            if spin && r != Vec3::zeros() {
+                return Err(cx.err(
+                    &path.key("rotation"),
+                    "a spinning sliding clamp turns freely about its axis: it cannot also be turned",
+                ));
+            }
+            if (0..3).any(|j| j != k && r[j] != 0.0) {
+                return Err(cx.err(
+                    &path.key("rotation"),
+                    format!(
+                        "{}: a sliding clamp is turned only about its axis",
+                        fmt_v(&r)
+                    ),
+                ));
+            }
+        }
+    }
     if matches!(params.scheme, Scheme::GenAlpha { .. }) {
         return Err(cx.err(
             &sp,
