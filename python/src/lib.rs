@@ -17,7 +17,7 @@ use numpy::{IntoPyArray, PyReadonlyArray2};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyBool, PyDict, PyList};
 
 create_exception!(
     _cosserat,
@@ -39,7 +39,9 @@ fn scene_error(e: &cosserat::scene::SceneError, file: &str) -> PyErr {
             Some(k) => msg
                 .split_once(&format!("{k}: "))
                 .map_or(msg.clone(), |(_, r)| r.to_string()),
-            None => msg.rsplit_once(": ").map_or(msg.clone(), |(_, r)| r.to_string()),
+            None => msg
+                .rsplit_once(": ")
+                .map_or(msg.clone(), |(_, r)| r.to_string()),
         };
         let _ = v.setattr("file", file);
         let _ = v.setattr("key", e.key());
@@ -107,8 +109,7 @@ impl Scene {
     #[staticmethod]
     fn load(path: PathBuf) -> PyResult<Self> {
         let source = path.display().to_string();
-        let text =
-            cosserat::scene::read_scene_file(&path).map_err(|e| scene_error(&e, &source))?;
+        let text = cosserat::scene::read_scene_file(&path).map_err(|e| scene_error(&e, &source))?;
         Self::parse(text, source, vec![])
     }
 
@@ -487,12 +488,13 @@ impl Simulation {
         let s = &scene.scene;
         let params = resolve_params(s, scheme, alpha, rho_inf, dt, t_end)?;
         let choice = backend_choice(backend)?;
-        let mut sim = cosserat::integrator::Simulation::new(s.model.clone(), params).map_err(|e| {
-            PyValueError::new_err(format!(
-                "{}: (model): cannot set up the linear solver for this scene: {e}",
-                s.source
-            ))
-        })?;
+        let mut sim =
+            cosserat::integrator::Simulation::new(s.model.clone(), params).map_err(|e| {
+                PyValueError::new_err(format!(
+                    "{}: (model): cannot set up the linear solver for this scene: {e}",
+                    s.source
+                ))
+            })?;
         let mut gpu = None;
         if choice != BackendChoice::Cpu {
             let (exec, _note) = Executor::resolve(choice, adapter)
@@ -579,7 +581,10 @@ impl Simulation {
         }
         let start = Instant::now();
         let bar = progress.then(|| {
-            cosserat::output::Progress::new(target.saturating_sub(self.step) as u64, &self.scene_name)
+            cosserat::output::Progress::new(
+                target.saturating_sub(self.step) as u64,
+                &self.scene_name,
+            )
         });
         // Ok(true): stopped by the callback.
         let outcome: PyResult<bool> = py.allow_threads(|| {
@@ -591,13 +596,14 @@ impl Simulation {
                 if let Some(b) = &bar {
                     b.step(self.last.t, self.last.newton_iters);
                 }
-                let kept = self.step % every == 0 || self.step == target;
+                let kept = self.step.is_multiple_of(every) || self.step == target;
                 if kept {
                     self.records.push(self.last.clone());
                     if let Some(cb) = &callback {
                         let go = Python::with_gil(|py| -> PyResult<bool> {
                             let r = cb.call1(py, (record_dict(py, &self.last)?,))?;
-                            Ok(!r.bind(py).is(&false.into_pyobject(py)?.to_owned()))
+                            // Only `False` itself stops (None, the usual return, goes on).
+                            Ok(!r.bind(py).downcast::<PyBool>().is_ok_and(|b| !b.is_true()))
                         })?;
                         if !go {
                             return Ok(true);
@@ -771,7 +777,6 @@ impl Simulation {
     /// of `history.csv`.
     fn _history<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        let n = self.records.len();
         let rows: Vec<[f64; 25]> = self.records.iter().map(record_values).collect();
         for (c, k) in HISTORY_COLUMNS.iter().enumerate() {
             let col: Vec<f64> = rows.iter().map(|r| r[c]).collect();
@@ -783,7 +788,6 @@ impl Simulation {
                 _ => d.set_item(k, Array1::from_vec(col).into_pyarray(py))?,
             }
         }
-        debug_assert!(d.len() == HISTORY_COLUMNS.len() && n == self.records.len());
         Ok(d)
     }
 
