@@ -404,6 +404,10 @@ struct Simulation {
     work_total: f64,
     dissipation_total: f64,
     records: Vec<StepRecord>,
+    /// Whether each kept record also keeps the state (`Simulation(trajectory=True)`).
+    trajectory: bool,
+    /// Per kept record: positions, velocities and node directors, flattened.
+    frames: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>,
     /// The record of the current level when `records` (thinned) does not end with it.
     last: StepRecord,
     status: Status,
@@ -457,8 +461,35 @@ impl Simulation {
 
     fn keep_last(&mut self) {
         if self.records.last().map(|r| r.step) != Some(self.last.step) {
-            self.records.push(self.last.clone());
+            self.keep();
         }
+    }
+
+    /// Appends the current level to the history (and its state to the trajectory).
+    fn keep(&mut self) {
+        self.records.push(self.last.clone());
+        if self.trajectory {
+            let frame = self.frame();
+            self.frames.push(frame);
+        }
+    }
+
+    /// The current state: positions, velocities, node directors (flattened, row-major).
+    fn frame(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let s = self.sim.state();
+        let r = s.r.iter().flat_map(|x| [x.x, x.y, x.z]).collect();
+        let v = s.v.iter().flat_map(|x| [x.x, x.y, x.z]).collect();
+        let mut d = Vec::with_capacity(self.node_end.len() * 9);
+        for &(e, l) in &self.node_end {
+            if e == usize::MAX {
+                d.extend([f64::NAN; 9]);
+            } else {
+                for k in 0..3 {
+                    d.extend(s.d[e][l].column(k).iter());
+                }
+            }
+        }
+        (r, v, d)
     }
 
     fn n_nodes(&self) -> usize {
@@ -471,9 +502,9 @@ impl Simulation {
     /// A simulation of `scene` at its initial state. `scheme`, `alpha`, `rho_inf`, `dt` and
     /// `t_end` override the scene's integrator settings as `cosserat run` does; `backend`
     /// is where the element kernel runs (`cpu`, `gpu`, `auto`), `adapter` picks a GPU by
-    /// name.
+    /// name. `trajectory=True` keeps the state of every recorded step (`_trajectory`).
     #[new]
-    #[pyo3(signature = (scene, scheme = None, alpha = None, rho_inf = None, dt = None, t_end = None, backend = "cpu", adapter = None))]
+    #[pyo3(signature = (scene, scheme = None, alpha = None, rho_inf = None, dt = None, t_end = None, backend = "cpu", adapter = None, trajectory = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scene: &Scene,
@@ -484,6 +515,7 @@ impl Simulation {
         t_end: Option<f64>,
         backend: &str,
         adapter: Option<&str>,
+        trajectory: bool,
     ) -> PyResult<Self> {
         let s = &scene.scene;
         let params = resolve_params(s, scheme, alpha, rho_inf, dt, t_end)?;
@@ -514,7 +546,7 @@ impl Simulation {
         }
         let rec0 = record_of(&sim, 0, None);
         let (node_end, _) = cosserat::observe::probe::node_director_ends(sim.model());
-        Ok(Self {
+        let mut this = Self {
             t0: sim.state().t,
             energy_initial: rec0.total,
             sim,
@@ -525,14 +557,18 @@ impl Simulation {
             step: 0,
             work_total: 0.0,
             dissipation_total: 0.0,
-            records: vec![rec0.clone()],
+            records: vec![],
+            trajectory,
+            frames: vec![],
             last: rec0,
             status: Status::Ready,
             reason: None,
             failed_step_residuals: vec![],
             newton_iters_total: 0,
             wall_s: 0.0,
-        })
+        };
+        this.keep();
+        Ok(this)
     }
 
     /// Takes one time step. Returns True when it was accepted; False when Newton failed
@@ -541,7 +577,7 @@ impl Simulation {
     fn step(&mut self, py: Python<'_>) -> bool {
         let ok = py.allow_threads(|| self.advance().is_ok());
         if ok {
-            self.records.push(self.last.clone());
+            self.keep();
         }
         ok
     }
@@ -598,7 +634,7 @@ impl Simulation {
                 }
                 let kept = self.step.is_multiple_of(every) || self.step == target;
                 if kept {
-                    self.records.push(self.last.clone());
+                    self.keep();
                     if let Some(cb) = &callback {
                         let go = Python::with_gil(|py| -> PyResult<bool> {
                             let r = cb.call1(py, (record_dict(py, &self.last)?,))?;
@@ -731,13 +767,19 @@ impl Simulation {
         rec.t = self.last.t;
         rec.work_total = self.work_total;
         rec.dissipation_total = self.dissipation_total;
-        if self.step == 0 {
-            self.energy_initial = rec.total;
-            self.records = vec![rec.clone()];
-        } else if let Some(r) = self.records.last_mut().filter(|r| r.step == self.step) {
-            *r = rec.clone();
-        }
+        self.energy_initial = if self.step == 0 {
+            rec.total
+        } else {
+            self.energy_initial
+        };
         self.last = rec;
+        if self.records.last().map(|r| r.step) == Some(self.step) {
+            self.records.pop();
+            if self.trajectory {
+                self.frames.pop();
+            }
+        }
+        self.keep();
         Ok(())
     }
 
@@ -788,6 +830,49 @@ impl Simulation {
                 _ => d.set_item(k, Array1::from_vec(col).into_pyarray(py))?,
             }
         }
+        Ok(d)
+    }
+
+    /// The states kept with the history (`Simulation(trajectory=True)`): `times` [T],
+    /// `steps` [T] (int64), `positions` and `velocities` [T, nodes, 3], `directors`
+    /// [T, nodes, 3, 3], as in `trajectory.npz`.
+    fn _trajectory<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        if !self.trajectory {
+            return Err(PyValueError::new_err(
+                "trajectory: not recorded; create the simulation with Simulation(..., trajectory=True)",
+            ));
+        }
+        let (t, n) = (self.frames.len(), self.node_end.len());
+        let cat = |k: usize| -> Vec<f64> {
+            self.frames
+                .iter()
+                .flat_map(|f| [&f.0, &f.1, &f.2][k].iter().copied())
+                .collect()
+        };
+        let shape_err = |e: numpy::ndarray::ShapeError| PyRuntimeError::new_err(e.to_string());
+        let d = PyDict::new(py);
+        let times: Vec<f64> = self.records.iter().map(|r| r.t).collect();
+        let steps: Vec<i64> = self.records.iter().map(|r| r.step as i64).collect();
+        d.set_item("times", Array1::from_vec(times).into_pyarray(py))?;
+        d.set_item("steps", Array1::from_vec(steps).into_pyarray(py))?;
+        d.set_item(
+            "positions",
+            Array3::from_shape_vec((t, n, 3), cat(0))
+                .map_err(shape_err)?
+                .into_pyarray(py),
+        )?;
+        d.set_item(
+            "velocities",
+            Array3::from_shape_vec((t, n, 3), cat(1))
+                .map_err(shape_err)?
+                .into_pyarray(py),
+        )?;
+        d.set_item(
+            "directors",
+            numpy::ndarray::Array4::from_shape_vec((t, n, 3, 3), cat(2))
+                .map_err(shape_err)?
+                .into_pyarray(py),
+        )?;
         Ok(d)
     }
 

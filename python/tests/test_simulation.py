@@ -193,3 +193,19 @@ def test_a_run_releases_the_gil():
     # 100 steps of the 50-element cantilever take well over 10 ms; a run holding the
     # GIL would let the counter tick at most at its few signal checks.
     assert during > 5, during
+
+
+def test_trajectory_equals_the_cli_trajectory_npz(cli, tmp_path):
+    cli("run", "frame", "--trajectory", "--every", "5", "--out", tmp_path)
+    ref = np.load(tmp_path / "trajectory.npz")
+    sim = frame_sim(trajectory=True)
+    sim.run(every=5)
+    tr = sim.trajectory
+    n = cosserat.Scene.builtin("frame").nodes
+    assert tr["positions"].shape == (len(tr["times"]), n, 3)
+    assert tr["directors"].shape == (len(tr["times"]), n, 3, 3)
+    for k in ("times", "steps", "positions", "velocities", "directors"):
+        np.testing.assert_array_equal(tr[k], ref[k], err_msg=k)
+    np.testing.assert_array_equal(tr["positions"][-1], sim.positions)
+    with pytest.raises(ValueError, match="trajectory=True"):
+        frame_sim().trajectory

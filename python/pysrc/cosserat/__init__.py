@@ -78,6 +78,13 @@ class Simulation(_Simulation):
         _Simulation.velocities.__set__(self, np.ascontiguousarray(v, dtype=np.float64))
 
     @property
+    def trajectory(self) -> Dict[str, np.ndarray]:
+        """The states kept with the history (needs `Simulation(..., trajectory=True)`):
+        `times` [T], `steps` [T], `positions`/`velocities` [T, nodes, 3], `directors`
+        [T, nodes, 3, 3], as in `trajectory.npz`."""
+        return self._trajectory()
+
+    @property
     def history(self) -> History:
         """The recorded steps as a dict of NumPy arrays (columns of `history.csv`)."""
         return History(self._history())
