@@ -1,0 +1,177 @@
+"""Nonlinear dynamics of geometrically exact (Cosserat) rods from Python.
+
+The engine is the `cosserat` Rust crate; this package is a thin layer over it:
+
+>>> import cosserat
+>>> scene = cosserat.Scene.builtin("frame")
+>>> sim = cosserat.Simulation(scene, scheme="edmc2", alpha=0.5)
+>>> summary = sim.run()
+>>> sim.history["total"]        # energy per recorded step, a NumPy array
+
+See docs/python.md for the whole API.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import os
+import tempfile
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from ._cosserat import Scene, SceneError, __version__, builtin_scenes
+from ._cosserat import Simulation as _Simulation
+from ._cosserat import _run_sweep
+
+__all__ = [
+    "Scene",
+    "SceneError",
+    "Simulation",
+    "History",
+    "Table",
+    "sweep",
+    "read_members",
+    "builtin_scenes",
+    "__version__",
+]
+
+
+class _Columns(dict):
+    """A dict of equally long NumPy arrays, one per column."""
+
+    def to_pandas(self):
+        """The columns as a pandas DataFrame (needs pandas installed)."""
+        try:
+            import pandas as pd
+        except ImportError as e:  # pragma: no cover - depends on the environment
+            raise ImportError("to_pandas() needs pandas: pip install pandas") from e
+        return pd.DataFrame({k: v for k, v in self.items()})
+
+    @property
+    def rows(self) -> int:
+        """Number of rows."""
+        for v in self.values():
+            return len(v)
+        return 0
+
+
+class History(_Columns):
+    """The recorded steps of a simulation: one array per column of `history.csv`."""
+
+
+class Table(_Columns):
+    """The members of a sweep: one array (or list of str) per column of `members.csv`."""
+
+
+class Simulation(_Simulation):
+    """One simulation of a scene, stepped from Python (see `cosserat._cosserat.Simulation`)."""
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Node velocities, float64 [nodes, 3] (a copy); assign any array-like [nodes, 3]."""
+        return _Simulation.velocities.__get__(self)
+
+    @velocities.setter
+    def velocities(self, v) -> None:
+        _Simulation.velocities.__set__(self, np.ascontiguousarray(v, dtype=np.float64))
+
+    @property
+    def trajectory(self) -> Dict[str, np.ndarray]:
+        """The states kept with the history (needs `Simulation(..., trajectory=True)`):
+        `times` [T], `steps` [T], `positions`/`velocities` [T, nodes, 3], `directors`
+        [T, nodes, 3, 3], as in `trajectory.npz`."""
+        return self._trajectory()
+
+    @property
+    def history(self) -> History:
+        """The recorded steps as a dict of NumPy arrays (columns of `history.csv`)."""
+        return History(self._history())
+
+
+def _sweep_toml(base: str, params: Mapping[str, Sequence[float]], mode: str) -> str:
+    lines = [f"base = {_toml_str(base)}", f"mode = {_toml_str(mode)}", ""]
+    for key, values in params.items():
+        vals = [float(v) for v in np.asarray(values, dtype=float).ravel()]
+        if not vals:
+            raise ValueError(f"sweep: {key}: no values")
+        lines += [
+            "[[vary]]",
+            f"key = {_toml_str(key)}",
+            "values = [" + ", ".join(repr(v) for v in vals) + "]",
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def _toml_str(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+_INT_COLUMNS = {"member", "newton_iters_total"}
+_STR_COLUMNS = {"status", "reason"}
+
+
+def read_members(path: Union[str, os.PathLike]) -> Table:
+    """Reads a sweep's `members.csv` into a Table sorted by member (empty cells are NaN)."""
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    body.sort(key=lambda r: int(r[0]))
+    table = Table()
+    for c, name in enumerate(header):
+        cells = [r[c] if c < len(r) else "" for r in body]
+        if name in _STR_COLUMNS:
+            table[name] = cells
+        elif name in _INT_COLUMNS:
+            table[name] = np.array([int(x) if x else -1 for x in cells], dtype=np.int64)
+        else:
+            table[name] = np.array([float(x) if x else np.nan for x in cells], dtype=np.float64)
+    return table
+
+
+def sweep(
+    scene: Scene,
+    params: Mapping[str, Sequence[float]],
+    backend: str = "auto",
+    mode: str = "grid",
+    out: Optional[Union[str, os.PathLike]] = None,
+    resume: bool = False,
+    adapter: Optional[str] = None,
+    histories: bool = False,
+) -> Table:
+    """Runs an ensemble of `scene` with the values of `params` ({key path: values}) written
+    in, as `cosserat sweep` does: `mode="grid"` (Cartesian product, the first key varying
+    slowest) or `"list"` (values zipped). The members run on `backend` (`"cpu"`, `"gpu"`,
+    `"auto"`) into the folder `out` (a temporary one when None) with the same files,
+    resume and streaming guarantees as the command; returns the rows of `members.csv`
+    as a Table (dict of arrays; `to_pandas()`). Values set on `scene` with `Scene.set`
+    are varied as single-valued keys ahead of `params`.
+    """
+    if mode not in ("grid", "list"):
+        raise ValueError(f"mode: expected 'grid' or 'list', got {mode!r}")
+    if not params:
+        raise ValueError("sweep: params is empty (expected {key path: [values]})")
+    folder = os.fspath(out) if out is not None else tempfile.mkdtemp(prefix="cosserat-sweep-")
+    os.makedirs(folder, exist_ok=True)
+    base = os.path.join(folder, "base.toml")
+    with open(base, "w") as f:
+        f.write(scene.text)
+    varied: Dict[str, Sequence[float]] = {}
+    for key, value in scene.sets:
+        if key not in params:
+            varied[key] = [value] if mode == "grid" else None  # type: ignore[assignment]
+    n = None
+    if mode == "list":
+        lengths = {len(v) for v in params.values()}
+        if len(lengths) != 1:
+            raise ValueError("sweep: mode 'list' needs value lists of one length")
+        n = lengths.pop()
+        varied = {k: [v] * n for k, v in scene.sets if k not in params}
+    varied.update(params)
+    spec = os.path.join(folder, "sweep.toml")
+    with open(spec, "w") as f:
+        f.write(_sweep_toml("base.toml", varied, mode))
+    _run_sweep(spec, folder, backend=backend, adapter=adapter, resume=resume, histories=histories)
+    return read_members(os.path.join(folder, "members.csv"))

@@ -1,0 +1,990 @@
+//! Python bindings of the `cosserat` crate: scenes, one simulation stepped from Python with
+//! its state as NumPy arrays, and sweeps. A thin layer: every number comes from the engine
+//! (`cosserat::integrator::Simulation::step`, `cosserat::integrator::run::record_of`,
+//! `cosserat::sweep::run_sweep`); nothing here computes physics.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use cosserat::batch::{BackendChoice, Executor, GpuBatcher};
+use cosserat::integrator::record::StepRecord;
+use cosserat::integrator::run::record_of;
+use cosserat::integrator::{IntegratorParams, Scheme};
+use cosserat::output::HISTORY_COLUMNS;
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{IntoPyArray, PyReadonlyArray2};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyList};
+
+create_exception!(
+    _cosserat,
+    SceneError,
+    PyValueError,
+    "A scene (or a value set in it) is invalid. The message reads `FILE[:LINE:COL]: KEY: REASON`; the attributes `file`, `key`, `line`, `column` and `reason` give the parts (None when not known)."
+);
+
+/// How often a long run looks at Python's signal handlers (Ctrl-C).
+const SIGNAL_CHECK: Duration = Duration::from_millis(20);
+
+fn scene_error(e: &cosserat::scene::SceneError, file: &str) -> PyErr {
+    let err = SceneError::new_err(e.to_string());
+    Python::with_gil(|py| {
+        let v = err.value(py);
+        let (line, column) = e.location().unzip();
+        let msg = e.to_string();
+        let reason = match e.key() {
+            Some(k) => msg
+                .split_once(&format!("{k}: "))
+                .map_or(msg.clone(), |(_, r)| r.to_string()),
+            None => msg
+                .rsplit_once(": ")
+                .map_or(msg.clone(), |(_, r)| r.to_string()),
+        };
+        let _ = v.setattr("file", file);
+        let _ = v.setattr("key", e.key());
+        let _ = v.setattr("line", line);
+        let _ = v.setattr("column", column);
+        let _ = v.setattr("reason", reason);
+    });
+    err
+}
+
+/// A validated scene: its TOML text, where it came from and the values set in it.
+#[pyclass(module = "cosserat")]
+#[derive(Clone)]
+struct Scene {
+    text: String,
+    source: String,
+    sets: Vec<(String, f64)>,
+    scene: cosserat::scene::Scene,
+}
+
+impl Scene {
+    fn parse(text: String, source: String, sets: Vec<(String, f64)>) -> PyResult<Self> {
+        let scene = cosserat::scene::parse_scene_with_sets(&text, &source, &sets)
+            .map_err(|e| scene_error(&e, &source))?;
+        Ok(Self {
+            text,
+            source,
+            sets,
+            scene,
+        })
+    }
+}
+
+#[pymethods]
+impl Scene {
+    /// A built-in scene by name (`cosserat.builtin_scenes()` lists them).
+    #[staticmethod]
+    fn builtin(name: &str) -> PyResult<Self> {
+        let b = cosserat::scene::builtin_scenes()
+            .iter()
+            .find(|b| b.name == name)
+            .ok_or_else(|| {
+                let names: Vec<&str> = cosserat::scene::builtin_scenes()
+                    .iter()
+                    .map(|b| b.name)
+                    .collect();
+                let e = SceneError::new_err(format!(
+                    "unknown built-in scene `{name}` (built-in scenes: {})",
+                    names.join(", ")
+                ));
+                Python::with_gil(|py| {
+                    let v = e.value(py);
+                    let _ = v.setattr("file", format!("builtin:{name}"));
+                    let _ = v.setattr("key", py.None());
+                    let _ = v.setattr("line", py.None());
+                    let _ = v.setattr("column", py.None());
+                    let _ = v.setattr("reason", "no built-in scene of that name");
+                });
+                e
+            })?;
+        Self::parse(b.toml.to_string(), format!("builtin:{}", b.name), vec![])
+    }
+
+    /// A scene file.
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Self> {
+        let source = path.display().to_string();
+        let text = cosserat::scene::read_scene_file(&path).map_err(|e| scene_error(&e, &source))?;
+        Self::parse(text, source, vec![])
+    }
+
+    /// A scene from TOML text; `source` names it in errors.
+    #[staticmethod]
+    #[pyo3(signature = (text, source = "<string>"))]
+    fn from_toml(text: String, source: &str) -> PyResult<Self> {
+        Self::parse(text, source.to_string(), vec![])
+    }
+
+    /// Writes the number `value` at the key path `key` (`integrator.dt`,
+    /// `rod[0].elements`, `rod.beam.elements`), with the checks of `cosserat run --set`;
+    /// an invalid value raises SceneError and leaves the scene as it was.
+    fn set(&mut self, key: &str, value: f64) -> PyResult<()> {
+        let mut sets = self.sets.clone();
+        sets.push((key.to_string(), value));
+        *self = Self::parse(self.text.clone(), self.source.clone(), sets)?;
+        Ok(())
+    }
+
+    /// A copy of the scene (the values set so far included).
+    fn copy(&self) -> Self {
+        self.clone()
+    }
+
+    /// The human summary `cosserat check` prints (the scene is valid, or it would not exist).
+    fn check(&self) -> String {
+        self.scene.describe()
+    }
+
+    /// The TOML text as given (values set with `set` are not written into it).
+    #[getter]
+    fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// Scene name.
+    #[getter]
+    fn name(&self) -> &str {
+        &self.scene.name
+    }
+
+    /// Where the scene came from: the path as given, `builtin:NAME` or `<string>`.
+    #[getter]
+    fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// The values set with `set`, in order, as (key, value).
+    #[getter]
+    fn sets(&self) -> Vec<(String, f64)> {
+        self.sets.clone()
+    }
+
+    /// Time step Δt.
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.scene.params.dt
+    }
+
+    /// End time.
+    #[getter]
+    fn t_end(&self) -> f64 {
+        self.scene.params.t_end
+    }
+
+    /// The scheme's name (`em`, `edmc1`, `edmc2`, `midpoint`, `gen-alpha`).
+    #[getter]
+    fn scheme(&self) -> &'static str {
+        self.scene.params.scheme.name()
+    }
+
+    /// Number of nodes.
+    #[getter]
+    fn nodes(&self) -> usize {
+        self.scene.model.n_nodes()
+    }
+
+    /// Number of elements.
+    #[getter]
+    fn elements(&self) -> usize {
+        self.scene.model.elements.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene({:?} from {}, {} nodes, {} elements, {} Δt = {}, t_end = {}{})",
+            self.scene.name,
+            self.source,
+            self.scene.model.n_nodes(),
+            self.scene.model.elements.len(),
+            self.scene.params.scheme.name(),
+            self.scene.params.dt,
+            self.scene.params.t_end,
+            if self.sets.is_empty() {
+                String::new()
+            } else {
+                format!(", sets {:?}", self.sets)
+            }
+        )
+    }
+}
+
+/// The scheme a run uses, as `cosserat run --scheme/--alpha/--rho-inf/--dt/--t-end` resolve
+/// it: a named scheme replaces the scene's (keeping its constants when it is the same
+/// scheme, zero otherwise); `alpha` sets EDMC-2's α_Γv and implies `edmc2`; `rho_inf`
+/// sets generalized-α's ρ∞ and implies `gen-alpha`.
+fn resolve_params(
+    scene: &cosserat::scene::Scene,
+    scheme: Option<&str>,
+    alpha: Option<f64>,
+    rho_inf: Option<f64>,
+    dt: Option<f64>,
+    t_end: Option<f64>,
+) -> PyResult<IntegratorParams> {
+    let bad = |m: String| PyValueError::new_err(m);
+    let mut p = scene.params;
+    if alpha.is_some() && rho_inf.is_some() {
+        return Err(bad(
+            "alpha and rho_inf set parameters of two different schemes".into(),
+        ));
+    }
+    let wanted = match scheme {
+        Some(s) => Some(s.to_ascii_lowercase()),
+        None => match (alpha, rho_inf, p.scheme) {
+            (Some(_), _, Scheme::Edmc2 { .. }) | (_, Some(_), Scheme::GenAlpha { .. }) => None,
+            (Some(_), _, _) => Some("edmc2".into()),
+            (_, Some(_), _) => Some("gen-alpha".into()),
+            _ => None,
+        },
+    };
+    if let Some(s) = wanted {
+        p.scheme = match (s.as_str(), p.scheme) {
+            ("em", _) => Scheme::Em,
+            ("midpoint", _) => Scheme::Midpoint,
+            ("gen-alpha" | "gen_alpha", s @ Scheme::GenAlpha { .. }) => s,
+            ("gen-alpha" | "gen_alpha", _) => Scheme::GenAlpha {
+                rho_inf: cosserat::integrator::gen_alpha::DEFAULT_RHO_INF,
+            },
+            ("edmc1", s @ Scheme::Edmc1 { .. }) => s,
+            ("edmc1", _) => Scheme::Edmc1 {
+                chi_gamma: 0.0,
+                chi_omega: 0.0,
+                chi_v: 0.0,
+                chi_nu: 0.0,
+            },
+            ("edmc2", s @ Scheme::Edmc2 { .. }) => s,
+            ("edmc2", _) => Scheme::edmc2(0.0),
+            (other, _) => {
+                return Err(bad(format!(
+                    "scheme: unknown scheme `{other}` (expected em, edmc1, edmc2, midpoint or gen-alpha)"
+                )))
+            }
+        };
+    }
+    if let Some(a) = alpha {
+        if !(a.is_finite() && a >= 0.0) {
+            return Err(bad(format!("alpha: must be a finite number ≥ 0 (got {a})")));
+        }
+        match &mut p.scheme {
+            Scheme::Edmc2 { alpha_gv, .. } => *alpha_gv = a,
+            other => {
+                return Err(bad(format!(
+                    "alpha sets the EDMC-2 parameter α_Γv, but the scheme is {}",
+                    other.name()
+                )))
+            }
+        }
+    }
+    if let Some(r) = rho_inf {
+        if !(0.0..=1.0).contains(&r) {
+            return Err(bad(format!("rho_inf: must be in [0, 1] (got {r})")));
+        }
+        match &mut p.scheme {
+            Scheme::GenAlpha { rho_inf } => *rho_inf = r,
+            other => {
+                return Err(bad(format!(
+                    "rho_inf sets the generalized-α parameter ρ∞, but the scheme is {}",
+                    other.name()
+                )))
+            }
+        }
+    }
+    if let Some(dt) = dt {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(bad(format!("dt: must be a finite number > 0 (got {dt})")));
+        }
+        p.dt = dt;
+    }
+    if let Some(t) = t_end {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(bad(format!("t_end: must be a finite number > 0 (got {t})")));
+        }
+        p.t_end = t;
+    }
+    if matches!(p.scheme, Scheme::GenAlpha { .. }) && !scene.model.links.is_empty() {
+        return Err(bad(format!(
+            "{}: gen-alpha does not support rigid links ([[link]]); use em, edmc1, edmc2 or midpoint",
+            scene.source
+        )));
+    }
+    Ok(p)
+}
+
+fn backend_choice(backend: &str) -> PyResult<BackendChoice> {
+    match backend {
+        "cpu" => Ok(BackendChoice::Cpu),
+        "gpu" => Ok(BackendChoice::Gpu),
+        "auto" => Ok(BackendChoice::Auto),
+        other => Err(PyValueError::new_err(format!(
+            "backend: unknown backend `{other}` (expected cpu, gpu or auto)"
+        ))),
+    }
+}
+
+/// How the last `run` ended, or `"ready"` before any.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Status {
+    Ready,
+    Completed,
+    Stopped,
+    Interrupted,
+    Failed,
+}
+
+impl Status {
+    fn name(self) -> &'static str {
+        match self {
+            Status::Ready => "ready",
+            Status::Completed => "completed",
+            Status::Stopped => "stopped",
+            Status::Interrupted => "interrupted",
+            Status::Failed => "failed",
+        }
+    }
+}
+
+/// The values of one record in `HISTORY_COLUMNS` order.
+fn record_values(r: &StepRecord) -> [f64; 25] {
+    [
+        r.step as f64,
+        r.t,
+        r.kinetic,
+        r.potential,
+        r.total,
+        r.l.x,
+        r.l.y,
+        r.l.z,
+        r.j.x,
+        r.j.y,
+        r.j.z,
+        r.dissipation,
+        r.external_work,
+        r.acc_trans,
+        r.acc_rot,
+        r.newton_iters as f64,
+        r.outer_iters as f64,
+        r.residual,
+        r.max_link_g,
+        r.work_total,
+        r.dissipation_total,
+        f64::from(u8::from(r.fallback)),
+        r.substeps as f64,
+        r.support_work,
+        r.friction,
+    ]
+}
+
+fn record_dict<'py>(py: Python<'py>, r: &StepRecord) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for (k, v) in HISTORY_COLUMNS.iter().zip(record_values(r)) {
+        match *k {
+            "step" | "newton_iters" | "outer_iters" | "substeps" => d.set_item(k, v as u64)?,
+            "fallback" => d.set_item(k, v != 0.0)?,
+            _ => d.set_item(k, v)?,
+        }
+    }
+    Ok(d)
+}
+
+/// One simulation of a scene, stepped from Python.
+#[pyclass(module = "cosserat", subclass)]
+struct Simulation {
+    sim: cosserat::integrator::Simulation,
+    /// Keeps the GPU batch alive while the simulation uses it.
+    _gpu: Option<Arc<GpuBatcher>>,
+    scene_source: String,
+    scene_name: String,
+    node_end: Vec<(usize, usize)>,
+    t0: f64,
+    step: usize,
+    work_total: f64,
+    dissipation_total: f64,
+    records: Vec<StepRecord>,
+    /// Whether each kept record also keeps the state (`Simulation(trajectory=True)`).
+    trajectory: bool,
+    /// Per kept record: positions, velocities and node directors, flattened.
+    frames: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+    /// The record of the current level when `records` (thinned) does not end with it.
+    last: StepRecord,
+    status: Status,
+    reason: Option<String>,
+    failed_step_residuals: Vec<f64>,
+    newton_iters_total: usize,
+    energy_initial: f64,
+    wall_s: f64,
+}
+
+impl Simulation {
+    /// One step, recorded like `cosserat::integrator::run::run` records it (`t = t_0 +
+    /// step·Δt`, running totals of work and dissipation). `Err(reason)` on a failed step,
+    /// the state left at the last accepted level.
+    fn advance(&mut self) -> Result<(), String> {
+        if self.status == Status::Failed {
+            return Err(self
+                .reason
+                .clone()
+                .unwrap_or_else(|| "the simulation failed".into()));
+        }
+        let dt = self.sim.params().dt;
+        match self.sim.step() {
+            Ok(rep) => {
+                self.step += 1;
+                self.work_total += rep.external_work;
+                self.dissipation_total += rep.dissipation;
+                self.newton_iters_total += rep.newton_iters;
+                let mut rec = record_of(&self.sim, self.step, Some(&rep));
+                rec.t = self.t0 + self.step as f64 * dt;
+                rec.work_total = self.work_total;
+                rec.dissipation_total = self.dissipation_total;
+                self.last = rec;
+                Ok(())
+            }
+            Err(f) => {
+                let step = self.step + 1;
+                let reason = format!(
+                    "step {step} (t = {:.6} → {:.6}) failed: {}",
+                    self.t0 + (step - 1) as f64 * dt,
+                    self.t0 + step as f64 * dt,
+                    f.reason
+                );
+                self.status = Status::Failed;
+                self.reason = Some(reason.clone());
+                self.failed_step_residuals = f.residuals;
+                Err(reason)
+            }
+        }
+    }
+
+    fn keep_last(&mut self) {
+        if self.records.last().map(|r| r.step) != Some(self.last.step) {
+            self.keep();
+        }
+    }
+
+    /// Appends the current level to the history (and its state to the trajectory).
+    fn keep(&mut self) {
+        self.records.push(self.last.clone());
+        if self.trajectory {
+            let frame = self.frame();
+            self.frames.push(frame);
+        }
+    }
+
+    /// The current state: positions, velocities, node directors (flattened, row-major).
+    fn frame(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let s = self.sim.state();
+        let r = s.r.iter().flat_map(|x| [x.x, x.y, x.z]).collect();
+        let v = s.v.iter().flat_map(|x| [x.x, x.y, x.z]).collect();
+        let mut d = Vec::with_capacity(self.node_end.len() * 9);
+        for &(e, l) in &self.node_end {
+            if e == usize::MAX {
+                d.extend([f64::NAN; 9]);
+            } else {
+                for k in 0..3 {
+                    d.extend(s.d[e][l].column(k).iter());
+                }
+            }
+        }
+        (r, v, d)
+    }
+
+    fn n_nodes(&self) -> usize {
+        self.sim.model().n_nodes()
+    }
+}
+
+#[pymethods]
+impl Simulation {
+    /// A simulation of `scene` at its initial state. `scheme`, `alpha`, `rho_inf`, `dt` and
+    /// `t_end` override the scene's integrator settings as `cosserat run` does; `backend`
+    /// is where the element kernel runs (`cpu`, `gpu`, `auto`), `adapter` picks a GPU by
+    /// name. `trajectory=True` keeps the state of every recorded step (`_trajectory`).
+    #[new]
+    #[pyo3(signature = (scene, scheme = None, alpha = None, rho_inf = None, dt = None, t_end = None, backend = "cpu", adapter = None, trajectory = false))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        scene: &Scene,
+        scheme: Option<&str>,
+        alpha: Option<f64>,
+        rho_inf: Option<f64>,
+        dt: Option<f64>,
+        t_end: Option<f64>,
+        backend: &str,
+        adapter: Option<&str>,
+        trajectory: bool,
+    ) -> PyResult<Self> {
+        let s = &scene.scene;
+        let params = resolve_params(s, scheme, alpha, rho_inf, dt, t_end)?;
+        let choice = backend_choice(backend)?;
+        let mut sim =
+            cosserat::integrator::Simulation::new(s.model.clone(), params).map_err(|e| {
+                PyValueError::new_err(format!(
+                    "{}: (model): cannot set up the linear solver for this scene: {e}",
+                    s.source
+                ))
+            })?;
+        let mut gpu = None;
+        if choice != BackendChoice::Cpu {
+            let (exec, _note) = Executor::resolve(choice, adapter)
+                .map_err(|e| PyRuntimeError::new_err(format!("backend: {e}")))?;
+            if let Executor::Gpu(ctx) = exec {
+                if sim.params().scheme.has_gpu_kernel() {
+                    let b = Arc::new(
+                        GpuBatcher::new(&ctx, 1, sim.model().elements.len(), sim.model().n_nodes())
+                            .map_err(|e| PyRuntimeError::new_err(format!("backend: {e}")))?,
+                    );
+                    let _ = sim.set_backend(b.clone(), 0);
+                    b.register(0, &sim)
+                        .map_err(|e| PyRuntimeError::new_err(format!("backend: {e}")))?;
+                    gpu = Some(b);
+                }
+            }
+        }
+        let rec0 = record_of(&sim, 0, None);
+        let (node_end, _) = cosserat::observe::probe::node_director_ends(sim.model());
+        let mut this = Self {
+            t0: sim.state().t,
+            energy_initial: rec0.total,
+            sim,
+            _gpu: gpu,
+            scene_source: s.source.clone(),
+            scene_name: s.name.clone(),
+            node_end,
+            step: 0,
+            work_total: 0.0,
+            dissipation_total: 0.0,
+            records: vec![],
+            trajectory,
+            frames: vec![],
+            last: rec0,
+            status: Status::Ready,
+            reason: None,
+            failed_step_residuals: vec![],
+            newton_iters_total: 0,
+            wall_s: 0.0,
+        };
+        this.keep();
+        Ok(this)
+    }
+
+    /// Takes one time step. Returns True when it was accepted; False when Newton failed
+    /// (then `status` is `"failed"`, `reason` says why, and the state stays at the last
+    /// accepted level). Every step is appended to `history`.
+    fn step(&mut self, py: Python<'_>) -> bool {
+        let ok = py.allow_threads(|| self.advance().is_ok());
+        if ok {
+            self.keep();
+        }
+        ok
+    }
+
+    /// Steps until `t_end` (default: the end time of the scene or of `Simulation(t_end=)`,
+    /// counted from the initial time, as `cosserat run` counts its steps) or the first
+    /// failed step. Keeps every `every`-th step in `history` (and the last accepted one);
+    /// `callback(record)` is called with each kept record (a dict of the history columns)
+    /// and stops the run when it returns False. The GIL is released between callbacks.
+    /// Ctrl-C raises KeyboardInterrupt with the state at the last accepted step. Returns
+    /// the summary dict.
+    #[pyo3(signature = (t_end = None, every = 1, callback = None, progress = false))]
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        t_end: Option<f64>,
+        every: usize,
+        callback: Option<PyObject>,
+        progress: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if every == 0 {
+            return Err(PyValueError::new_err("every: must be ≥ 1"));
+        }
+        let t_end = t_end.unwrap_or(self.sim.params().t_end);
+        if !t_end.is_finite() {
+            return Err(PyValueError::new_err(format!(
+                "t_end: must be finite (got {t_end})"
+            )));
+        }
+        let dt = self.sim.params().dt;
+        let target = (((t_end - self.t0) / dt) - 1e-9).ceil().max(0.0) as usize;
+        if target > cosserat::scene::limits::MAX_STEPS as usize {
+            return Err(PyValueError::new_err(format!(
+                "t_end: {target} steps, above the limit of {:e} steps per run",
+                cosserat::scene::limits::MAX_STEPS
+            )));
+        }
+        let start = Instant::now();
+        let bar = progress.then(|| {
+            cosserat::output::Progress::new(
+                target.saturating_sub(self.step) as u64,
+                &self.scene_name,
+            )
+        });
+        // Ok(true): stopped by the callback.
+        let outcome: PyResult<bool> = py.allow_threads(|| {
+            let mut last_check = Instant::now();
+            while self.step < target {
+                if self.advance().is_err() {
+                    break;
+                }
+                if let Some(b) = &bar {
+                    b.step(self.last.t, self.last.newton_iters);
+                }
+                let kept = self.step.is_multiple_of(every) || self.step == target;
+                if kept {
+                    self.keep();
+                    if let Some(cb) = &callback {
+                        let go = Python::with_gil(|py| -> PyResult<bool> {
+                            let r = cb.call1(py, (record_dict(py, &self.last)?,))?;
+                            // Only `False` itself stops (None, the usual return, goes on).
+                            Ok(!r.bind(py).downcast::<PyBool>().is_ok_and(|b| !b.is_true()))
+                        })?;
+                        if !go {
+                            return Ok(true);
+                        }
+                    }
+                }
+                if last_check.elapsed() >= SIGNAL_CHECK {
+                    last_check = Instant::now();
+                    Python::with_gil(|py| py.check_signals())?;
+                }
+            }
+            Ok(false)
+        });
+        if let Some(b) = &bar {
+            b.finish();
+        }
+        self.wall_s += start.elapsed().as_secs_f64();
+        self.keep_last();
+        match outcome {
+            Ok(stopped) => {
+                if self.status != Status::Failed {
+                    self.status = if stopped {
+                        Status::Stopped
+                    } else {
+                        Status::Completed
+                    };
+                }
+                self.summary(py)
+            }
+            Err(e) => {
+                if e.is_instance_of::<PyKeyboardInterrupt>(py) {
+                    self.status = Status::Interrupted;
+                }
+                Err(e)
+            }
+        }
+    }
+
+    /// `"ready"` (no run yet), `"completed"`, `"stopped"` (by the callback),
+    /// `"interrupted"` (Ctrl-C) or `"failed"` (a step could not be accepted).
+    #[getter]
+    fn status(&self) -> &'static str {
+        self.status.name()
+    }
+
+    /// Why the simulation failed (None unless `status == "failed"`).
+    #[getter]
+    fn reason(&self) -> Option<String> {
+        self.reason.clone()
+    }
+
+    /// Time of the current (last accepted) level.
+    #[getter]
+    fn t(&self) -> f64 {
+        self.last.t
+    }
+
+    /// Accepted steps so far.
+    #[getter]
+    fn steps(&self) -> usize {
+        self.step
+    }
+
+    /// Time step Δt.
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.sim.params().dt
+    }
+
+    /// Node positions, float64 [nodes, 3] (a copy).
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray2<f64>> {
+        let r = &self.sim.state().r;
+        let flat: Vec<f64> = r.iter().flat_map(|x| [x.x, x.y, x.z]).collect();
+        Array2::from_shape_vec((r.len(), 3), flat)
+            .expect("[nodes, 3]")
+            .into_pyarray(py)
+    }
+
+    /// Node velocities, float64 [nodes, 3] (a copy). Assigning an array [nodes, 3] sets
+    /// them (an initial velocity field; supported nodes must stay at rest).
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray2<f64>> {
+        let v = &self.sim.state().v;
+        let flat: Vec<f64> = v.iter().flat_map(|x| [x.x, x.y, x.z]).collect();
+        Array2::from_shape_vec((v.len(), 3), flat)
+            .expect("[nodes, 3]")
+            .into_pyarray(py)
+    }
+
+    #[setter]
+    fn set_velocities(&mut self, v: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+        let n = self.n_nodes();
+        let a = v.as_array();
+        if a.shape() != [n, 3] {
+            return Err(PyValueError::new_err(format!(
+                "velocities: expected an array of shape ({n}, 3), got {:?}",
+                a.shape()
+            )));
+        }
+        if matches!(self.sim.params().scheme, Scheme::GenAlpha { .. }) {
+            return Err(PyValueError::new_err(
+                "velocities: gen-alpha keeps its own nodal state; set initial velocities in the scene",
+            ));
+        }
+        let model = self.sim.model();
+        let mut state = self.sim.state().clone();
+        for i in 0..n {
+            let x = cosserat::model::Vec3::new(a[[i, 0]], a[[i, 1]], a[[i, 2]]);
+            if !x.iter().all(|c| c.is_finite()) {
+                return Err(PyValueError::new_err(format!(
+                    "velocities: node {i}: not finite ({x:?})"
+                )));
+            }
+            if model.supports[i].translation && x != cosserat::model::Vec3::zeros() {
+                return Err(PyValueError::new_err(format!(
+                    "velocities: node {i} is supported (its translation is fixed); its velocity must be 0"
+                )));
+            }
+            state.v[i] = x;
+        }
+        self.sim.set_state(state);
+        // The current level's record now has the new energies.
+        let mut rec = record_of(&self.sim, self.step, None);
+        rec.t = self.last.t;
+        rec.work_total = self.work_total;
+        rec.dissipation_total = self.dissipation_total;
+        self.energy_initial = if self.step == 0 {
+            rec.total
+        } else {
+            self.energy_initial
+        };
+        self.last = rec;
+        if self.records.last().map(|r| r.step) == Some(self.step) {
+            self.records.pop();
+            if self.trajectory {
+                self.frames.pop();
+            }
+        }
+        self.keep();
+        Ok(())
+    }
+
+    /// Node director triads, float64 [nodes, 3, 3]: `directors[a, k]` is the vector
+    /// `d_{k+1}` at node `a` (the triad of the lowest-numbered element touching it; NaN
+    /// for a node outside every element), as in `trajectory.npz`.
+    #[getter]
+    fn directors<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray3<f64>> {
+        let s = self.sim.state();
+        let mut flat = Vec::with_capacity(self.node_end.len() * 9);
+        for &(e, l) in &self.node_end {
+            if e == usize::MAX {
+                flat.extend([f64::NAN; 9]);
+            } else {
+                let d = &s.d[e][l];
+                for k in 0..3 {
+                    flat.extend(d.column(k).iter());
+                }
+            }
+        }
+        Array3::from_shape_vec((self.node_end.len(), 3, 3), flat)
+            .expect("[nodes, 3, 3]")
+            .into_pyarray(py)
+    }
+
+    /// Kinetic, potential and total energy of the current level, as a dict.
+    #[getter]
+    fn energy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("kinetic", self.last.kinetic)?;
+        d.set_item("potential", self.last.potential)?;
+        d.set_item("total", self.last.total)?;
+        Ok(d)
+    }
+
+    /// The recorded steps as a dict of float64 arrays (int64 for counts), one per column
+    /// of `history.csv`.
+    fn _history<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let rows: Vec<[f64; 25]> = self.records.iter().map(record_values).collect();
+        for (c, k) in HISTORY_COLUMNS.iter().enumerate() {
+            let col: Vec<f64> = rows.iter().map(|r| r[c]).collect();
+            match *k {
+                "step" | "newton_iters" | "outer_iters" | "substeps" | "fallback" => {
+                    let ints: Vec<i64> = col.iter().map(|&x| x as i64).collect();
+                    d.set_item(k, Array1::from_vec(ints).into_pyarray(py))?
+                }
+                _ => d.set_item(k, Array1::from_vec(col).into_pyarray(py))?,
+            }
+        }
+        Ok(d)
+    }
+
+    /// The states kept with the history (`Simulation(trajectory=True)`): `times` [T],
+    /// `steps` [T] (int64), `positions` and `velocities` [T, nodes, 3], `directors`
+    /// [T, nodes, 3, 3], as in `trajectory.npz`.
+    fn _trajectory<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        if !self.trajectory {
+            return Err(PyValueError::new_err(
+                "trajectory: not recorded; create the simulation with Simulation(..., trajectory=True)",
+            ));
+        }
+        let (t, n) = (self.frames.len(), self.node_end.len());
+        let cat = |k: usize| -> Vec<f64> {
+            self.frames
+                .iter()
+                .flat_map(|f| [&f.0, &f.1, &f.2][k].iter().copied())
+                .collect()
+        };
+        let shape_err = |e: numpy::ndarray::ShapeError| PyRuntimeError::new_err(e.to_string());
+        let d = PyDict::new(py);
+        let times: Vec<f64> = self.records.iter().map(|r| r.t).collect();
+        let steps: Vec<i64> = self.records.iter().map(|r| r.step as i64).collect();
+        d.set_item("times", Array1::from_vec(times).into_pyarray(py))?;
+        d.set_item("steps", Array1::from_vec(steps).into_pyarray(py))?;
+        d.set_item(
+            "positions",
+            Array3::from_shape_vec((t, n, 3), cat(0))
+                .map_err(shape_err)?
+                .into_pyarray(py),
+        )?;
+        d.set_item(
+            "velocities",
+            Array3::from_shape_vec((t, n, 3), cat(1))
+                .map_err(shape_err)?
+                .into_pyarray(py),
+        )?;
+        d.set_item(
+            "directors",
+            numpy::ndarray::Array4::from_shape_vec((t, n, 3, 3), cat(2))
+                .map_err(shape_err)?
+                .into_pyarray(py),
+        )?;
+        Ok(d)
+    }
+
+    /// What the simulation did so far, with the keys of `summary.json` it can fill.
+    #[getter]
+    fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let p = self.sim.params();
+        d.set_item("scene", &self.scene_source)?;
+        d.set_item("name", &self.scene_name)?;
+        d.set_item("status", self.status.name())?;
+        d.set_item("reason", self.reason.clone())?;
+        d.set_item(
+            "failed_step_residuals",
+            PyList::new(py, &self.failed_step_residuals)?,
+        )?;
+        d.set_item("t_reached", self.last.t)?;
+        d.set_item("steps", self.step)?;
+        d.set_item("scheme", p.scheme.name())?;
+        d.set_item("dt", p.dt)?;
+        d.set_item("t_end", p.t_end)?;
+        d.set_item("nodes", self.sim.model().n_nodes())?;
+        d.set_item("elements", self.sim.model().elements.len())?;
+        d.set_item("dofs", self.sim.n_dofs())?;
+        d.set_item("newton_iters_total", self.newton_iters_total)?;
+        d.set_item("energy_initial", self.energy_initial)?;
+        d.set_item("energy_final", self.last.total)?;
+        d.set_item("work_total", self.work_total)?;
+        d.set_item("dissipation_total", self.dissipation_total)?;
+        d.set_item("wall_s", self.wall_s)?;
+        d.set_item("backend", self.sim.backend_name())?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Simulation({} {} Δt = {}, t = {}, {} steps, {})",
+            self.scene_name,
+            self.sim.params().scheme.name(),
+            self.sim.params().dt,
+            self.last.t,
+            self.step,
+            self.status.name()
+        )
+    }
+}
+
+/// Runs the sweep file `sweep` into the folder `out` as `cosserat sweep` does (same files,
+/// resume and streaming guarantees); the GIL is released while it runs. Returns the
+/// summary as a dict; the members are in `out/members.csv`.
+#[pyfunction]
+#[pyo3(signature = (sweep, out, backend = "auto", adapter = None, resume = false, histories = false))]
+fn _run_sweep<'py>(
+    py: Python<'py>,
+    sweep: PathBuf,
+    out: PathBuf,
+    backend: &str,
+    adapter: Option<&str>,
+    resume: bool,
+    histories: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let choice = backend_choice(backend)?;
+    let spec = cosserat::sweep::load_sweep(&sweep).map_err(|e| {
+        let err = SceneError::new_err(e.to_string());
+        let v = err.value(py);
+        let _ = v.setattr("file", sweep.display().to_string());
+        let _ = v.setattr("key", py.None());
+        let _ = v.setattr("line", py.None());
+        let _ = v.setattr("column", py.None());
+        let _ = v.setattr("reason", e.to_string());
+        err
+    })?;
+    let (exec, note) = Executor::resolve(choice, adapter)
+        .map_err(|e| PyRuntimeError::new_err(format!("backend: {e}")))?;
+    let opts = cosserat::sweep::SweepOptions {
+        resume,
+        histories,
+        ..Default::default()
+    };
+    let described = exec.describe();
+    let summary = py
+        .allow_threads(|| cosserat::sweep::run_sweep(&spec, &exec, &out, &opts, |_| {}))
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let d = PyDict::new(py);
+    d.set_item("members", summary.members)?;
+    d.set_item("skipped", summary.skipped)?;
+    d.set_item("completed", summary.completed)?;
+    d.set_item("failed", summary.failed)?;
+    d.set_item("rejected", summary.rejected)?;
+    d.set_item("wall_s", summary.wall_s)?;
+    d.set_item("backend", described)?;
+    d.set_item("note", note)?;
+    Ok(d)
+}
+
+/// Names of the built-in scenes.
+#[pyfunction]
+fn builtin_scenes() -> Vec<&'static str> {
+    cosserat::scene::builtin_scenes()
+        .iter()
+        .map(|b| b.name)
+        .collect()
+}
+
+/// The `cosserat._cosserat` extension module.
+#[pymodule]
+fn _cosserat(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Scene>()?;
+    m.add_class::<Simulation>()?;
+    m.add_function(wrap_pyfunction!(builtin_scenes, m)?)?;
+    m.add_function(wrap_pyfunction!(_run_sweep, m)?)?;
+    m.add("SceneError", m.py().get_type::<SceneError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
