@@ -26,8 +26,17 @@ pub(crate) const SCATTER_WGSL: &str = include_str!("../../shaders/scatter.wgsl")
 /// The WGSL source of the solver-report compaction pass.
 pub(crate) const COMPACT_WGSL: &str = include_str!("../../shaders/compact.wgsl");
 
-/// The sources the on-disk pipeline cache is keyed by.
-pub(crate) const CACHE_KEYED: [&str; 4] = [ELEMENT_WGSL, ASSEMBLE_WGSL, GATHER_WGSL, BLOCKTRI_WGSL];
+/// The sources the on-disk pipeline cache is keyed by: every shader the crate compiles, so
+/// that a changed pass never reuses a stale compiled pipeline.
+pub(crate) const CACHE_KEYED: [&str; 7] = [
+    ELEMENT_WGSL,
+    ASSEMBLE_WGSL,
+    GATHER_WGSL,
+    BLOCKTRI_WGSL,
+    PLANAR_WGSL,
+    SCATTER_WGSL,
+    COMPACT_WGSL,
+];
 
 /// `src` for precision `p` (the f32 variant rewrites `Real` and, where present, the two
 /// element-kernel constants that do not fit an f32).
@@ -49,5 +58,29 @@ pub(crate) fn real_width(p: Precision) -> usize {
     match p {
         Precision::F64 => 8,
         Precision::F32 => 4,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every WGSL file in `shaders/` keys the pipeline cache (a shader added without it
+    /// would let a changed pass reuse a stale compiled pipeline).
+    #[test]
+    fn every_shader_keys_the_pipeline_cache() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+        let mut n = 0;
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().is_some_and(|x| x == "wgsl") {
+                let src = std::fs::read_to_string(&path).unwrap();
+                assert!(
+                    super::CACHE_KEYED.contains(&src.as_str()),
+                    "{} does not key the pipeline cache",
+                    path.display()
+                );
+                n += 1;
+            }
+        }
+        assert_eq!(n, super::CACHE_KEYED.len());
     }
 }
