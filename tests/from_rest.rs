@@ -21,38 +21,8 @@ use cosserat::scene::parse_scene;
 mod common;
 
 /// The roll-up from rest of the report: moment 2πEI/L = 0.78957 about e3, ramped over
-/// 56.51 s.
-const SCENE: &str = r#"
-name = "rest"
-[material.soft]
-E = 1e6
-nu = 0.5
-density = 1000
-[section.round]
-A = 1.2566370614359173e-3
-I11 = 1.2566370614359173e-7
-I22 = 1.2566370614359173e-7
-J = 2.5132741228718346e-7
-[[rod]]
-name = "beam"
-material = "soft"
-section = "round"
-points = [[0, 0, 0], [1, 0, 0]]
-elements = 50
-d1 = [0, 1, 0]
-[[clamp]]
-at = [0, 0, 0]
-[[load]]
-at = [1, 0, 0]
-moment = [0, 0, 0.7895683520871486]
-time = [0, 56.51]
-factor = [0, 1]
-[integrator]
-scheme = "edmc2"
-alpha_ov = 0.5
-dt = 0.113
-t_end = 2.0
-"#;
+/// 56.51 s (the scene `scripts/from_rest_scan.py` scans).
+const SCENE: &str = include_str!("../examples/scenes/rollup_from_rest.toml");
 
 fn roll(dt: f64, scheme: Scheme) -> (RunOutcome, Vec<StepRecord>) {
     let s = parse_scene(SCENE, "rest.toml").unwrap();
