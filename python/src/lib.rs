@@ -1,6 +1,6 @@
 //! Python bindings of the `cosserat` crate: scenes, one simulation stepped from Python with
 //! its state as NumPy arrays, and sweeps. A thin layer: every number comes from the engine
-//! (`cosserat::integrator::Simulation::step`, `cosserat::integrator::run::record_of`,
+//! (`cosserat::integrator::Simulation::step`, `cosserat::integrator::run::RunLog`,
 //! `cosserat::sweep::run_sweep`); nothing here computes physics.
 
 use std::path::PathBuf;
@@ -9,9 +9,9 @@ use std::time::{Duration, Instant};
 
 use cosserat::batch::{BackendChoice, Executor, GpuBatcher};
 use cosserat::integrator::record::StepRecord;
-use cosserat::integrator::run::record_of;
+use cosserat::integrator::run::RunLog;
 use cosserat::integrator::{IntegratorParams, Scheme};
-use cosserat::output::HISTORY_COLUMNS;
+use cosserat::output::{history_values, HISTORY_COLUMNS};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyReadonlyArray2};
 use pyo3::create_exception;
@@ -347,40 +347,9 @@ impl Status {
     }
 }
 
-/// The values of one record in `HISTORY_COLUMNS` order.
-fn record_values(r: &StepRecord) -> [f64; 25] {
-    [
-        r.step as f64,
-        r.t,
-        r.kinetic,
-        r.potential,
-        r.total,
-        r.l.x,
-        r.l.y,
-        r.l.z,
-        r.j.x,
-        r.j.y,
-        r.j.z,
-        r.dissipation,
-        r.external_work,
-        r.acc_trans,
-        r.acc_rot,
-        r.newton_iters as f64,
-        r.outer_iters as f64,
-        r.residual,
-        r.max_link_g,
-        r.work_total,
-        r.dissipation_total,
-        f64::from(u8::from(r.fallback)),
-        r.substeps as f64,
-        r.support_work,
-        r.friction,
-    ]
-}
-
 fn record_dict<'py>(py: Python<'py>, r: &StepRecord) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    for (k, v) in HISTORY_COLUMNS.iter().zip(record_values(r)) {
+    for (k, v) in HISTORY_COLUMNS.iter().zip(history_values(r)) {
         match *k {
             "step" | "newton_iters" | "outer_iters" | "substeps" => d.set_item(k, v as u64)?,
             "fallback" => d.set_item(k, v != 0.0)?,
@@ -399,10 +368,8 @@ struct Simulation {
     scene_source: String,
     scene_name: String,
     node_end: Vec<(usize, usize)>,
-    t0: f64,
-    step: usize,
-    work_total: f64,
-    dissipation_total: f64,
+    /// Step index, time grid and running totals, kept as `cosserat run` keeps them.
+    log: RunLog,
     records: Vec<StepRecord>,
     /// Whether each kept record also keeps the state (`Simulation(trajectory=True)`).
     trajectory: bool,
@@ -429,28 +396,15 @@ impl Simulation {
                 .clone()
                 .unwrap_or_else(|| "the simulation failed".into()));
         }
-        let dt = self.sim.params().dt;
         match self.sim.step() {
             Ok(rep) => {
-                self.step += 1;
-                self.work_total += rep.external_work;
-                self.dissipation_total += rep.dissipation;
+                self.log.accept(&rep);
                 self.newton_iters_total += rep.newton_iters;
-                let mut rec = record_of(&self.sim, self.step, Some(&rep));
-                rec.t = self.t0 + self.step as f64 * dt;
-                rec.work_total = self.work_total;
-                rec.dissipation_total = self.dissipation_total;
-                self.last = rec;
+                self.last = self.log.record(&self.sim, Some(&rep));
                 Ok(())
             }
             Err(f) => {
-                let step = self.step + 1;
-                let reason = format!(
-                    "step {step} (t = {:.6} → {:.6}) failed: {}",
-                    self.t0 + (step - 1) as f64 * dt,
-                    self.t0 + step as f64 * dt,
-                    f.reason
-                );
+                let reason = self.log.failure(&f.reason);
                 self.status = Status::Failed;
                 self.reason = Some(reason.clone());
                 self.failed_step_residuals = f.residuals;
@@ -544,19 +498,17 @@ impl Simulation {
                 }
             }
         }
-        let rec0 = record_of(&sim, 0, None);
+        let log = RunLog::new(&sim);
+        let rec0 = log.record(&sim, None);
         let (node_end, _) = cosserat::observe::probe::node_director_ends(sim.model());
         let mut this = Self {
-            t0: sim.state().t,
+            log,
             energy_initial: rec0.total,
             sim,
             _gpu: gpu,
             scene_source: s.source.clone(),
             scene_name: s.name.clone(),
             node_end,
-            step: 0,
-            work_total: 0.0,
-            dissipation_total: 0.0,
             records: vec![],
             trajectory,
             frames: vec![],
@@ -608,7 +560,7 @@ impl Simulation {
             )));
         }
         let dt = self.sim.params().dt;
-        let target = (((t_end - self.t0) / dt) - 1e-9).ceil().max(0.0) as usize;
+        let target = (((t_end - self.log.time(0)) / dt) - 1e-9).ceil().max(0.0) as usize;
         if target > cosserat::scene::limits::MAX_STEPS as usize {
             return Err(PyValueError::new_err(format!(
                 "t_end: {target} steps, above the limit of {:e} steps per run",
@@ -618,21 +570,21 @@ impl Simulation {
         let start = Instant::now();
         let bar = progress.then(|| {
             cosserat::output::Progress::new(
-                target.saturating_sub(self.step) as u64,
+                target.saturating_sub(self.log.step()) as u64,
                 &self.scene_name,
             )
         });
         // Ok(true): stopped by the callback.
         let outcome: PyResult<bool> = py.allow_threads(|| {
             let mut last_check = Instant::now();
-            while self.step < target {
+            while self.log.step() < target {
                 if self.advance().is_err() {
                     break;
                 }
                 if let Some(b) = &bar {
                     b.step(self.last.t, self.last.newton_iters);
                 }
-                let kept = self.step.is_multiple_of(every) || self.step == target;
+                let kept = self.log.step().is_multiple_of(every) || self.log.step() == target;
                 if kept {
                     self.keep();
                     if let Some(cb) = &callback {
@@ -700,7 +652,7 @@ impl Simulation {
     /// Accepted steps so far.
     #[getter]
     fn steps(&self) -> usize {
-        self.step
+        self.log.step()
     }
 
     /// Time step Δt.
@@ -763,17 +715,14 @@ impl Simulation {
         }
         self.sim.set_state(state);
         // The current level's record now has the new energies.
-        let mut rec = record_of(&self.sim, self.step, None);
-        rec.t = self.last.t;
-        rec.work_total = self.work_total;
-        rec.dissipation_total = self.dissipation_total;
-        self.energy_initial = if self.step == 0 {
+        let rec = self.log.record(&self.sim, None);
+        self.energy_initial = if self.log.step() == 0 {
             rec.total
         } else {
             self.energy_initial
         };
         self.last = rec;
-        if self.records.last().map(|r| r.step) == Some(self.step) {
+        if self.records.last().map(|r| r.step) == Some(self.log.step()) {
             self.records.pop();
             if self.trajectory {
                 self.frames.pop();
@@ -819,7 +768,7 @@ impl Simulation {
     /// of `history.csv`.
     fn _history<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        let rows: Vec<[f64; 25]> = self.records.iter().map(record_values).collect();
+        let rows: Vec<[f64; 25]> = self.records.iter().map(history_values).collect();
         for (c, k) in HISTORY_COLUMNS.iter().enumerate() {
             let col: Vec<f64> = rows.iter().map(|r| r[c]).collect();
             match *k {
@@ -890,7 +839,7 @@ impl Simulation {
             PyList::new(py, &self.failed_step_residuals)?,
         )?;
         d.set_item("t_reached", self.last.t)?;
-        d.set_item("steps", self.step)?;
+        d.set_item("steps", self.log.step())?;
         d.set_item("scheme", p.scheme.name())?;
         d.set_item("dt", p.dt)?;
         d.set_item("t_end", p.t_end)?;
@@ -900,8 +849,8 @@ impl Simulation {
         d.set_item("newton_iters_total", self.newton_iters_total)?;
         d.set_item("energy_initial", self.energy_initial)?;
         d.set_item("energy_final", self.last.total)?;
-        d.set_item("work_total", self.work_total)?;
-        d.set_item("dissipation_total", self.dissipation_total)?;
+        d.set_item("work_total", self.last.work_total)?;
+        d.set_item("dissipation_total", self.last.dissipation_total)?;
         d.set_item("wall_s", self.wall_s)?;
         d.set_item("backend", self.sim.backend_name())?;
         Ok(d)
@@ -914,7 +863,7 @@ impl Simulation {
             self.sim.params().scheme.name(),
             self.sim.params().dt,
             self.last.t,
-            self.step,
+            self.log.step(),
             self.status.name()
         )
     }

@@ -48,6 +48,73 @@ pub struct RunOutcome {
     pub accepted: crate::integrator::record::AcceptedExtremes,
 }
 
+/// Where a run stands: the index of its last accepted step, the exact time grid
+/// `t_0 + k·Δt` of its levels and the running totals of work and dissipation. The one
+/// bookkeeping of [`run_async`] and of drivers that step a simulation themselves (the Python
+/// bindings), so that both record the same levels and name a failed step alike.
+#[derive(Clone, Copy, Debug)]
+pub struct RunLog {
+    t0: f64,
+    dt: f64,
+    step: usize,
+    work_total: f64,
+    dissipation_total: f64,
+}
+
+impl RunLog {
+    /// A run starting at the current level of `sim` (step 0, totals 0).
+    pub fn new(sim: &Simulation) -> Self {
+        RunLog {
+            t0: sim.state().t,
+            dt: sim.params().dt,
+            step: 0,
+            work_total: 0.0,
+            dissipation_total: 0.0,
+        }
+    }
+
+    /// Counts an accepted step: its index and its work and dissipation into the totals.
+    pub fn accept(&mut self, rep: &crate::integrator::StepReport) {
+        self.step += 1;
+        self.work_total += rep.external_work;
+        self.dissipation_total += rep.dissipation;
+    }
+
+    /// The index of the last accepted step (0 before any).
+    pub fn step(&self) -> usize {
+        self.step
+    }
+
+    /// The time of level `k` on the run's grid, `t_0 + k·Δt`.
+    pub fn time(&self, k: usize) -> f64 {
+        self.t0 + k as f64 * self.dt
+    }
+
+    /// The record of the current level of `sim` (`rep`: the step that reached it), on the
+    /// time grid and with the running totals.
+    pub fn record(
+        &self,
+        sim: &Simulation,
+        rep: Option<&crate::integrator::StepReport>,
+    ) -> StepRecord {
+        let mut rec = record_of(sim, self.step, rep);
+        rec.t = self.time(self.step);
+        rec.work_total = self.work_total;
+        rec.dissipation_total = self.dissipation_total;
+        rec
+    }
+
+    /// The reason a run reports for a failed next step: `step k (t = a → b) failed: …`.
+    pub fn failure(&self, reason: &str) -> String {
+        let k = self.step + 1;
+        format!(
+            "step {k} (t = {:.6} → {:.6}) failed: {reason}",
+            self.time(k - 1),
+            self.time(k)
+        )
+    }
+}
+
 /// The record of the current level of `sim` (its `t` is the state's; the running totals are
 /// left at 0: [`run`] fills both).
 pub fn record_of(
@@ -143,14 +210,8 @@ pub async fn run_async<E>(
     // structure starts at rest: its initial scale is zero).
     let (mut l_ref, mut j_ref) = momentum_scales(sim, &inv0);
     let (mut max_dl, mut max_dj) = (0.0f64, 0.0f64);
-    let (t0, dt) = (sim.state().t, sim.params().dt);
-    let (mut work_total, mut dissipation_total) = (0.0f64, 0.0f64);
-    let exact = |mut rec: StepRecord, w: f64, d: f64| {
-        rec.t = t0 + rec.step as f64 * dt;
-        rec.work_total = w;
-        rec.dissipation_total = d;
-        rec
-    };
+    let dt = sim.params().dt;
+    let mut log = RunLog::new(sim);
     let mut out = RunOutcome {
         status: RunStatus::Completed,
         t_reached: sim.state().t,
@@ -178,10 +239,11 @@ pub async fn run_async<E>(
         out.wall_s = start.elapsed().as_secs_f64();
         return Ok(out);
     }
-    observer(&exact(record_of(sim, 0, None), 0.0, 0.0), sim)?;
+    observer(&log.record(sim, None), sim)?;
     let mut prev = inv0;
     let every = every.max(1);
-    let mut unshown: Option<(usize, crate::integrator::StepReport, f64, f64)> = None;
+    // The last accepted level not yet shown to the observer (thinning), with its step.
+    let mut unshown: Option<(RunLog, crate::integrator::StepReport)> = None;
     for step in 1..=n_steps {
         match sim.step_async().await {
             Ok(rep) => {
@@ -213,32 +275,25 @@ pub async fn run_async<E>(
                         acc.max_rel_energy_growth.max(growth / href.max(1e-300));
                 }
                 acc.max_residual = acc.max_residual.max(rep.residual);
+                log.accept(&rep);
                 out.steps = step;
-                out.t_reached = t0 + step as f64 * dt;
-                work_total += rep.external_work;
-                dissipation_total += rep.dissipation;
+                out.t_reached = log.time(step);
                 out.energy_final = inv.total();
                 prev = inv;
                 if step % every == 0 || step == n_steps {
-                    let rec = record_of(sim, step, Some(&rep));
-                    observer(&exact(rec, work_total, dissipation_total), sim)?;
+                    observer(&log.record(sim, Some(&rep)), sim)?;
                     unshown = None;
                 } else {
-                    unshown = Some((step, rep, work_total, dissipation_total));
+                    unshown = Some((log, rep));
                 }
             }
             Err(f) => {
                 // Keep the last accepted level in the output even when thinning.
-                if let Some((k, rep, w, d)) = unshown.take() {
-                    observer(&exact(record_of(sim, k, Some(&rep)), w, d), sim)?;
+                if let Some((at, rep)) = unshown.take() {
+                    observer(&at.record(sim, Some(&rep)), sim)?;
                 }
                 out.status = RunStatus::Failed;
-                out.reason = Some(format!(
-                    "step {step} (t = {:.6} → {:.6}) failed: {}",
-                    t0 + (step - 1) as f64 * dt,
-                    t0 + step as f64 * dt,
-                    f.reason
-                ));
+                out.reason = Some(log.failure(&f.reason));
                 out.failed_step_residuals = f.residuals;
                 break;
             }

@@ -99,10 +99,12 @@ pub(crate) fn fmt_f64(v: f64, out: &mut String) {
     };
 }
 
-fn format_row(r: &StepRecord, out: &mut String) {
-    use std::fmt::Write as _;
-    let _ = write!(out, "{}", r.step);
-    let floats = [
+/// The values of one record in [`HISTORY_COLUMNS`] order (counts and the fallback flag as
+/// exact small integers): the one mapping of a record to the history's columns, for
+/// `history.csv` and for callers that tabulate records themselves (the Python bindings).
+pub fn history_values(r: &StepRecord) -> [f64; 25] {
+    [
+        r.step as f64,
         r.t,
         r.kinetic,
         r.potential,
@@ -117,23 +119,28 @@ fn format_row(r: &StepRecord, out: &mut String) {
         r.external_work,
         r.acc_trans,
         r.acc_rot,
-    ];
-    for v in floats {
-        out.push(',');
+        r.newton_iters as f64,
+        r.outer_iters as f64,
+        r.residual,
+        r.max_link_g,
+        r.work_total,
+        r.dissipation_total,
+        f64::from(u8::from(r.fallback)),
+        r.substeps as f64,
+        r.support_work,
+        r.friction,
+    ]
+}
+
+/// One row of `history.csv`. Integers below 2^53 print as integers (`{}` of an integral
+/// `f64` has no fraction), so the row is the same text as formatting each field by type.
+fn format_row(r: &StepRecord, out: &mut String) {
+    for (k, v) in history_values(r).into_iter().enumerate() {
+        if k > 0 {
+            out.push(',');
+        }
         fmt_f64(v, out);
     }
-    let _ = write!(out, ",{},{},", r.newton_iters, r.outer_iters);
-    fmt_f64(r.residual, out);
-    out.push(',');
-    fmt_f64(r.max_link_g, out);
-    for v in [r.work_total, r.dissipation_total] {
-        out.push(',');
-        fmt_f64(v, out);
-    }
-    let _ = write!(out, ",{},{},", u8::from(r.fallback), r.substeps);
-    fmt_f64(r.support_work, out);
-    out.push(',');
-    fmt_f64(r.friction, out);
     out.push('\n');
 }
 

@@ -15,7 +15,7 @@ mod summary;
 mod trajectory;
 mod vtk;
 
-pub use history::{read_history, HistoryWriter, HISTORY_COLUMNS};
+pub use history::{history_values, read_history, HistoryWriter, HISTORY_COLUMNS};
 pub(crate) use plot::{ensure_font, FONT};
 pub use plot::{plot_accelerations, plot_comparison, plot_energy, plot_momenta, LabelledHistory};
 pub use probes::ProbeWriter;
