@@ -285,3 +285,39 @@ fn uniform_twist_stores_the_sin_delta_over_delta_squared_share_of_the_continuum_
     let order = ((1.0 - factors[0]) / (1.0 - factors[1])).log2();
     assert!((order - 1.986).abs() < 2e-3, "order {order}");
 }
+
+/// One element bent by `δ` (its second end triad turned about e2, the chord along the
+/// bisector and lengthened by 1/cos(δ/2) so that the shrunk mean director `d₃ʰ` sees no
+/// stretch and no shear) stores `½ EI sin²δ / h`: the element's curvature is `sin δ / h`
+/// (docs/theory.md §2, "Folds past π/4 per element"). Its moment `dV/dδ = EI sin 2δ / 2h`
+/// therefore peaks at δ = π/4 and falls beyond: a fold that needs more than π/4 per
+/// element concentrates in one element. Measured to round-off from 0.1 to 2 rad.
+#[test]
+fn one_element_bent_by_delta_stores_half_ei_sin_squared_delta_over_h() {
+    let ei = E * inertia();
+    let energy = |delta: f64| {
+        let c = 1.0 / (delta / 2.0).cos();
+        let (x, z) = (c * (delta / 2.0).cos(), -c * (delta / 2.0).sin());
+        let extra = format!(
+            "[rod.initial]\npositions = [[0, 0, 0], [{x}, 0, {z}]]\nrotations = [[0, 0, 0], [0, {delta}, 0]]"
+        );
+        let s = parse_scene(&scene(1, &extra, EM), "t.toml").unwrap();
+        Simulation::new(s.model, s.params)
+            .unwrap()
+            .invariants()
+            .potential
+    };
+    for delta in [0.1, 0.5, std::f64::consts::FRAC_PI_4, 1.2, 2.0] {
+        let expect = 0.5 * ei * delta.sin().powi(2);
+        let v = energy(delta);
+        assert!(
+            (v - expect).abs() < 1e-12 * expect,
+            "δ = {delta}: V = {v}, ½EI sin²δ/h = {expect}"
+        );
+    }
+    // The moment (central difference of V) rises to π/4 and falls beyond it.
+    let moment = |d: f64| (energy(d + 1e-6) - energy(d - 1e-6)) / 2e-6;
+    let peak = moment(std::f64::consts::FRAC_PI_4);
+    assert!((peak - 0.5 * ei).abs() < 1e-6 * ei, "{peak}");
+    assert!(moment(0.6) < peak && moment(1.0) < peak && moment(1.5) < moment(1.0));
+}
