@@ -474,12 +474,51 @@ fn quiet_mesa_device_select() {
     }
 }
 
+/// Whether the command may open a GPU: `gpu`, `bench`, and `run`, `sweep` and `study
+/// stability` with a backend other than `cpu`.
+fn may_use_gpu(cmd: &Option<Command>) -> bool {
+    use cmds::BackendArg::Cpu;
+    match cmd {
+        Some(Command::Gpu(a)) => !a.enumerate_only(),
+        Some(Command::Bench(_)) => true,
+        Some(Command::Run(a)) => a.backend != Cpu,
+        Some(Command::Sweep(a)) => a.member.backend != Cpu,
+        Some(Command::Study(StudyCommand::Stability(a))) => a.backend != Cpu,
+        _ => false,
+    }
+}
+
+/// On a host whose NVIDIA GPU the default Vulkan setup does not list, the routes of
+/// `cosserat::gpu::reach` (an ICD file naming the driver's EGL library, …), tried before
+/// any thread exists: the first that lists the GPU stays in `VK_DRIVER_FILES`.
+fn reach_gpu() -> cosserat::gpu::reach::Reach {
+    let facts = cosserat::gpu::inventory::HostFacts::of_this_host();
+    let root = std::env::var_os("COSSERAT_GPU_HOST_ROOT")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("/"));
+    cosserat::gpu::reach::reach_nvidia_gpu(
+        &facts,
+        &root,
+        cosserat::gpu::context::pipeline_cache_dir().as_deref(),
+    )
+}
+
 fn main() -> ExitCode {
     if let Some(code) = require_build_target_cpu() {
         return code;
     }
     quiet_mesa_device_select();
     let cli = parse_cli();
+    let reach = if may_use_gpu(&cli.command) {
+        reach_gpu()
+    } else {
+        Default::default()
+    };
+    if !matches!(cli.command, Some(Command::Gpu(_))) {
+        if let Some(line) = reach.summary() {
+            eprintln!("{line}");
+        }
+    }
     let result = match cli.command {
         None => run_command(RunArgs {
             scene: "frame".into(),
@@ -517,7 +556,7 @@ fn main() -> ExitCode {
         Some(Command::Study(StudyCommand::Damping(a))) => damping_command(&a),
         Some(Command::Sweep(a)) => cmds::sweep_command(a),
         Some(Command::Bench(a)) => cmds::bench_command(a),
-        Some(Command::Gpu(a)) => cmds::gpu::gpu_command(a),
+        Some(Command::Gpu(a)) => cmds::gpu::gpu_command(a, reach),
         Some(Command::Scenes) => {
             let scenes = builtin_scenes();
             let width = scenes

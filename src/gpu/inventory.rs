@@ -13,7 +13,7 @@ use serde::Serialize;
 use super::context::{adapter_rank, env_disables_f64};
 
 /// PCI vendor id of NVIDIA.
-const NVIDIA_VENDOR: u32 = 0x10de;
+pub(crate) const NVIDIA_VENDOR: u32 = 0x10de;
 
 /// One adapter as wgpu reports it, with what the batch path needs of it.
 #[derive(Clone, Debug, Serialize)]
@@ -209,7 +209,11 @@ impl HostFacts {
         }
         for var in ["VK_DRIVER_FILES", "VK_ICD_FILENAMES"] {
             if let Some(v) = std::env::var_os(var) {
-                files.extend(std::env::split_paths(&v));
+                for f in std::env::split_paths(&v) {
+                    if !files.contains(&f) {
+                        files.push(f);
+                    }
+                }
             }
         }
         let icd_files = files

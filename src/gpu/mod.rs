@@ -21,6 +21,8 @@
 //!   and read back in one copy.
 //! * [`inventory`]: what `cosserat gpu` reports: the adapters, the `--backend auto` choice,
 //!   and why a host's NVIDIA GPU is not an adapter.
+//! * [`reach`]: the routes round a headless host's missing Vulkan adapter (an ICD file
+//!   naming the driver's EGL library, then its GLX library by path), tried at start-up.
 //!
 //! f64 is used whenever the adapter offers `SHADER_F64`; otherwise the same shader runs in
 //! f32 ([`Precision::F32`]) and its error is measured by `tests/gpu_kernel.rs` (docs/gpu.md,
@@ -34,6 +36,7 @@ pub mod inventory;
 pub mod kernel;
 pub mod layout;
 pub mod planar;
+pub mod reach;
 pub mod shaders;
 pub(crate) mod upload;
 

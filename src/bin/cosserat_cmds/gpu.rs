@@ -7,6 +7,7 @@ use anyhow::Result;
 use serde::Serialize;
 
 use cosserat::gpu::inventory::{self, AdapterReport, AutoChoice, HostFacts};
+use cosserat::gpu::reach::Reach;
 
 /// Arguments of `cosserat gpu`.
 #[derive(clap::Args, Debug)]
@@ -20,11 +21,20 @@ pub struct GpuArgs {
     enumerate_only: bool,
 }
 
+impl GpuArgs {
+    /// The internal child that only enumerates (it inherits the parent's routes).
+    pub fn enumerate_only(&self) -> bool {
+        self.enumerate_only
+    }
+}
+
 #[derive(Serialize)]
 struct Report {
     adapters: Vec<AdapterReport>,
     auto: AutoChoice,
     host: HostFacts,
+    /// The routes tried at start-up round a missing NVIDIA adapter, and the one applied.
+    reach: Reach,
     diagnosis: Option<Vec<String>>,
 }
 
@@ -69,7 +79,8 @@ fn gib(b: u64) -> String {
 }
 
 /// Runs `cosserat gpu`.
-pub fn gpu_command(a: GpuArgs) -> Result<ExitCode> {
+/// `reach`: what the start-up tried round a missing NVIDIA adapter (already applied).
+pub fn gpu_command(a: GpuArgs, reach: Reach) -> Result<ExitCode> {
     let adapters = inventory::list_adapters();
     if a.enumerate_only {
         return Ok(ExitCode::SUCCESS);
@@ -87,6 +98,7 @@ pub fn gpu_command(a: GpuArgs) -> Result<ExitCode> {
         adapters,
         auto,
         host,
+        reach,
         diagnosis,
     };
     if a.json {
@@ -117,6 +129,27 @@ pub fn gpu_command(a: GpuArgs) -> Result<ExitCode> {
         );
     }
     println!("--backend auto would use {}", report.auto.why);
+    for t in &report.reach.tries {
+        println!(
+            "route tried: {} ({} -> {}): {}",
+            t.route,
+            t.manifest.display(),
+            t.library,
+            if t.reached {
+                format!("reached: {}", t.adapters.join("; "))
+            } else if t.adapters.is_empty() {
+                "no Vulkan adapter".to_string()
+            } else {
+                format!("not the GPU: {}", t.adapters.join("; "))
+            }
+        );
+    }
+    if let Some(m) = &report.reach.applied {
+        println!(
+            "applied for this process: VK_DRIVER_FILES={} (set it yourself to skip the tries)",
+            m.display()
+        );
+    }
     if let Some(lines) = &report.diagnosis {
         println!("NVIDIA GPU not reachable through Vulkan:");
         for l in lines {
