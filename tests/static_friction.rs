@@ -126,6 +126,8 @@ fn a_rod_below_the_friction_angle_holds_without_creep() {
         "incline tan φ = 0.8 μ, stick: moved {total:.3e} m in all, drift {drift:.3e} m between the mean positions over [0.2, 0.6] and [0.6, 1.0] s; balance {:.1e}; {cut} of {steps} steps cut back",
         stick.balance()
     );
+    // Measured: drift 1.1e-16 m, balance 6.3e-12 (the Newton tolerance's residual work),
+    // no cut-back.
     assert!(drift.abs() <= 1e-9, "the stuck rod drifted {drift:e} m");
     assert!(stick.balance() <= 1e-10, "balance {:e}", stick.balance());
     assert!(stick.recs.iter().all(|r| r.friction >= 0.0));
@@ -134,6 +136,7 @@ fn a_rod_below_the_friction_angle_holds_without_creep() {
     let reg = trace(&incline(angle, "slip = 1e-3", 224.0, 1.0), mean_x);
     let creep = (reg.mean(0.6, 1.0) - reg.mean(0.2, 0.6)) / 0.4;
     eprintln!("incline tan φ = 0.8 μ, regularized (ε = 1e-3): creeps {creep:.3e} m/s");
+    // Measured 1.15e-3 m/s.
     assert!(creep > 1e-4, "the regularized law held ({creep:e} m/s)");
 }
 
@@ -173,10 +176,11 @@ fn a_rod_above_the_friction_angle_slides_with_the_coulomb_acceleration() {
         tr.balance()
     );
     assert!(
-        (fitted / a - 1.0).abs() <= 1e-3,
+        (fitted / a - 1.0).abs() <= 1e-4,
         "acceleration {fitted} vs {a}"
     );
-    assert!(tr.balance() <= 1e-10, "balance {:e}", tr.balance());
+    // Measured: 6.4e-6 relative, balance 2.3e-15, no cut-back.
+    assert!(tr.balance() <= 1e-12, "balance {:e}", tr.balance());
     let friction: f64 = tr.recs.iter().map(|r| r.friction).sum();
     assert!(friction > 0.0 && tr.recs.iter().all(|r| r.friction >= 0.0));
     assert!(cut * 100 <= steps, "{cut} of {steps} steps cut back");
@@ -219,11 +223,13 @@ fn the_capstan_holds_below_its_slip_load_and_slides_above() {
         hold.value.last().unwrap(),
         hold.balance()
     );
+    // Measured: creep 1.9e-7 m/s (4.4e-7 with windows half as long: what is left is the
+    // vibration, not a slide), balance 5.7e-13, no cut-back.
     assert!(
         creep.abs() <= 1e-6,
         "creeps {creep:e} m/s below the slip load"
     );
-    assert!(hold.balance() <= 1e-9, "balance {:e}", hold.balance());
+    assert!(hold.balance() <= 1e-11, "balance {:e}", hold.balance());
     assert!(cut * 100 <= steps, "{cut} of {steps} steps cut back");
     let slide = capstan(1.02, 0.4);
     let (cut, steps) = slide.cutbacks();
@@ -236,5 +242,7 @@ fn the_capstan_holds_below_its_slip_load_and_slides_above() {
         *slide.value.last().unwrap() > 2e-2,
         "held above the slip load"
     );
-    assert!(slide.balance() <= 1e-9, "balance {:e}", slide.balance());
+    // Measured: slid 0.194 m, balance 2.2e-14, 1 of 401 steps cut back.
+    assert!(slide.balance() <= 1e-11, "balance {:e}", slide.balance());
+    assert!(cut * 100 <= steps, "{cut} of {steps} steps cut back");
 }
