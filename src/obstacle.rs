@@ -307,8 +307,9 @@ impl Obstacle {
         }
     }
 
-    /// Anchors of the nodes in contact at positions `r` and time `t` (the initial
-    /// state's); empty unless the obstacle keeps anchors.
+    /// Anchors of the nodes in contact or on the surface (gap below `1e-6 ρ`, the scene
+    /// check's tolerance) at positions `r` and time `t` (the initial state's): a rod laid
+    /// on an obstacle sticks from its first step. Empty unless the obstacle keeps anchors.
     pub fn initial_anchors(&self, r: &[V3], t: f64) -> Vec<Option<Anchor>> {
         if !self.has_anchors() {
             return Vec::new();
@@ -318,7 +319,7 @@ impl Obstacle {
             .iter()
             .map(|n| {
                 let x = r[n.node] - p;
-                (self.gap(n, &x) < 0.0).then(|| self.anchor_at(n, &x))
+                (self.gap(n, &x) < 1e-6 * n.radius).then(|| self.anchor_at(n, &x))
             })
             .collect()
     }
