@@ -472,14 +472,9 @@ impl Obstacle {
         let p = M3::identity() - m * m.transpose();
         // Normal force magnitude N = −q|G| and its derivative.
         let gn = g.norm();
-        let (big_n, dn) = if q != 0.0 && gn > 0.0 {
+        let (big_n, dn) = if q < 0.0 && gn > 0.0 {
             let mg = g / gn;
             (-q * gn, -gn * dq - q * (mg.transpose() * dg))
-        } else {
-            (0.0, nalgebra::RowVector3::zeros())
-        };
-        let (big_n, dn) = if big_n > 0.0 {
-            (big_n, dn)
         } else {
             (0.0, nalgebra::RowVector3::zeros())
         };
@@ -529,14 +524,17 @@ impl Obstacle {
         }
         // A slipped anchor is carried to the surface below the node, in the plane of the
         // normal there, with the spring force turned into that plane at its magnitude: the
-        // stick energy is unchanged.
+        // stick energy is unchanged. (A spring force turned by more than 60° in one step,
+        // which no resolved slide produces, keeps the anchor's plane instead.)
         let m1 = self.normal_at(x1);
         let turned = s1 - m1 * m1.dot(&s1);
         let tn = turned.norm();
-        let s1n = if tn > 0.0 {
-            turned * (s1.norm() / tn)
+        let (m1, s1n) = if tn > 0.5 * s1.norm() && tn > 0.0 {
+            (m1, turned * (s1.norm() / tn))
+        } else if s1 == V3::zeros() {
+            (m1, s1)
         } else {
-            V3::zeros()
+            (m, s1)
         };
         out.anchor = Some(Anchor {
             point: x1 - s1n / ct - m1 * (self.gap(n, x1) + n.radius),
