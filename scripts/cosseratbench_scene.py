@@ -11,8 +11,11 @@ is straight (the suite's rods are), along its first element, with `d1` its `norm
 start shape, pre-stretch included, goes to `[rod.initial] positions`; supports, end loads,
 gravity, obstacles and contact map key for key; EM throughout. Quasi-static experiments
 (the suite lets a solver add dissipation to reach equilibrium) get drag `2 ω ρA`, ω the
-suite's slowest frequency, and Kelvin-Voigt damping η = Δt/2. Contact stiffness and the
-friction law's slip speed are cosserat's defaults.
+suite's slowest frequency, and Kelvin-Voigt damping η = Δt/2. Contact stiffness is
+cosserat's default; friction against obstacles uses the elastic-stick law
+(`friction_law = "stick"`, tangential stiffness the contact stiffness), the one
+docs/scenes.md offers for a load that must hold; FRICTION_LAW=regularized in the
+environment writes the regularized law at its default slip speed instead.
 
 A driven sliding end (twist) is a driven `[[clamp]]` with `slide` along a coordinate axis.
 """
@@ -20,6 +23,7 @@ A driven sliding end (twist) is a driven `[[clamp]]` with `slide` along a coordi
 from __future__ import annotations
 
 import math
+import os
 import sys
 
 import numpy as np
@@ -206,6 +210,9 @@ def scene(name: str) -> tuple[str, float, str]:
                     f"normal = {vec(ob.normal)}"]
         if mu > 0:
             out.append(f"friction = {mu!r}")
+            law = os.environ.get("FRICTION_LAW", "stick")
+            if law != "regularized":
+                out.append(f"friction_law = {law!r}".replace("'", '"'))
         out.append("")
     k = len(sc.rods)
     pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]

@@ -832,6 +832,7 @@ fn observer_state(model: &Model, data: &[ElementData], t: f64, lv: &Level) -> St
         vd,
         eps: Vec::new(),
         lambda: vec![0.0; model.links.len()],
+        anchors: Vec::new(),
     };
     s.eps = s.strains(model, data);
     s

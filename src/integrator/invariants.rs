@@ -15,7 +15,7 @@ pub struct Invariants {
     /// Kinetic energy.
     pub kinetic: f64,
     /// Stored energy (strain energy of the rods, the `λg + ½κg²` of rigid links and the
-    /// penalty energy of contact with obstacles and between rods).
+    /// penalty and stick energy of contact with obstacles and between rods).
     pub potential: f64,
     /// Linear momentum.
     pub l: Vec3,
@@ -64,8 +64,11 @@ pub fn invariants(model: &Model, data: &[ElementData], state: &State) -> Invaria
     for (link, &lambda) in model.links.iter().zip(&state.lambda) {
         out.potential += link.energy(lambda, &state.r[link.node]);
     }
-    for o in &model.obstacles {
+    for (i, o) in model.obstacles.iter().enumerate() {
         out.potential += o.energy(&state.r, state.t);
+        if let Some(a) = state.anchors.get(i) {
+            out.potential += o.stick_energy(&state.r, state.t, a);
+        }
     }
     for c in &model.rod_contacts {
         out.potential += c.energy(&state.r);

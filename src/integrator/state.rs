@@ -5,6 +5,7 @@ use nalgebra::Vector6;
 use crate::element::strain::Config;
 use crate::element::{strains6, ElementData, ElementState};
 use crate::model::{Mat3, Model, Vec3};
+use crate::obstacle::Anchor;
 
 /// Nodal positions/velocities and per-element-end director triads/velocities at `t`.
 #[derive(Clone, Debug, PartialEq)]
@@ -23,12 +24,16 @@ pub struct State {
     pub eps: Vec<Vector6<f64>>,
     /// Augmented-Lagrangian multiplier `λ` of each rigid link (the bar force factor).
     pub lambda: Vec<f64>,
+    /// Elastic-stick anchors per obstacle and contact node (`[o][k]`, `None`: not in
+    /// contact; an obstacle without the stick law has an empty list). Part of the state:
+    /// the stick energy depends on them.
+    pub anchors: Vec<Vec<Option<Anchor>>>,
 }
 
 impl State {
     /// The state `dt` later before its element fields are written: time, nodal positions
-    /// and velocities (nodes outside every element keep theirs) and link multipliers
-    /// copied; triads, director velocities and strains empty, with room for every
+    /// and velocities (nodes outside every element keep theirs), link multipliers and
+    /// stick anchors copied; triads, director velocities and strains empty, with room for every
     /// element, for the caller to push in element order (nothing copied only to be
     /// overwritten).
     pub fn successor_frame(&self, dt: f64) -> State {
@@ -41,6 +46,7 @@ impl State {
             vd: Vec::with_capacity(n),
             eps: Vec::with_capacity(n),
             lambda: self.lambda.clone(),
+            anchors: self.anchors.clone(),
         }
     }
 
@@ -62,8 +68,14 @@ impl State {
             vd,
             eps: Vec::new(),
             lambda: vec![0.0; model.links.len()],
+            anchors: Vec::new(),
         };
         s.eps = s.strains(model, data);
+        s.anchors = model
+            .obstacles
+            .iter()
+            .map(|o| o.initial_anchors(&s.r, 0.0))
+            .collect();
         // Supported nodes do not move.
         for (a, sup) in model.supports.iter().enumerate() {
             if sup.translation {

@@ -657,11 +657,18 @@ impl Scene {
                     ),
                 };
                 let friction = if o.friction > 0.0 {
-                    format!(
-                        "friction μ = {} (slip {} m/s)",
-                        fmt_num(o.friction),
-                        fmt_num(o.slip)
-                    )
+                    match o.law {
+                        crate::obstacle::FrictionLaw::Regularized => format!(
+                            "friction μ = {} (slip {} m/s)",
+                            fmt_num(o.friction),
+                            fmt_num(o.slip)
+                        ),
+                        crate::obstacle::FrictionLaw::Stick { stiffness } => format!(
+                            "friction μ = {} (stick, tangential stiffness {} N/m²)",
+                            fmt_num(o.friction),
+                            fmt_num(stiffness)
+                        ),
+                    }
                 } else {
                     "frictionless".to_string()
                 };

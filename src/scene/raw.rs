@@ -67,6 +67,8 @@ pub(crate) struct RawObstacle {
     pub stiffness: Option<f64>,
     pub friction: Option<f64>,
     pub slip: Option<f64>,
+    pub friction_law: Option<String>,
+    pub tangential_stiffness: Option<f64>,
     pub rods: Option<Vec<String>>,
     pub contact_radius: Option<f64>,
     pub displacement: Option<Vec<f64>>,

@@ -11,8 +11,9 @@ impl Simulation {
     /// The state an increment produces (with the frozen scalars of `mode`), the
     /// predicted dissipation at it, and the consistent scalars.
     pub(super) fn advance(&self, q: &[f64], mode: Mode) -> (State, f64, Vec<FrozenScalars>) {
-        if let Some((next, diss, consistent)) = self.advance_planar(q, mode) {
+        if let Some((mut next, diss, consistent)) = self.advance_planar(q, mode) {
             let extra = self.drag_dissipation(q) + self.contact_friction_work(q);
+            next.anchors = self.contact_anchors(q);
             return (next, diss + extra, consistent);
         }
         let k = self.consts();
@@ -51,6 +52,7 @@ impl Simulation {
             }
         }
         diss += self.drag_dissipation(q) + self.contact_friction_work(q);
+        next.anchors = self.contact_anchors(q);
         (next, diss, consistent)
     }
 
@@ -199,6 +201,7 @@ mod tests {
             vd: vec![[[Vec3::zeros(); 2]; 2]; 2],
             eps: vec![nalgebra::Vector6::zeros(); 2],
             lambda: vec![],
+            anchors: vec![],
         }
     }
 

@@ -4,12 +4,14 @@
 //! ([`crate::obstacle`]), a nodal term like drag. The penalty energy is part of the
 //! stored energy `V`, so without friction EM keeps `H` to round-off through impacts; the
 //! friction's work is part of the dissipation `D` (and of the history's `friction`
-//! column). A scene without obstacles pays nothing.
+//! column). Under the elastic-stick law each contact node's anchor is part of the state:
+//! the step's forces use the anchors at its start, and [`Simulation::advance`] writes the
+//! returned ones into the state it produces. A scene without obstacles pays nothing.
 
 use super::Simulation;
 use crate::integrator::dofs::NONE;
 use crate::model::Vec3;
-use crate::obstacle::NodeContact;
+use crate::obstacle::{Anchor, NodeContact};
 
 impl Simulation {
     /// Slots of the `(u, u)` block of every contact node, per obstacle.
@@ -45,16 +47,40 @@ impl Simulation {
         self.model
             .obstacles
             .iter()
-            .map(|o| {
+            .enumerate()
+            .map(|(i, o)| {
                 let (p0, p1) = (o.offset(t), o.offset(t + dt));
+                let anchors = self.state.anchors.get(i).map_or(&[][..], |a| &a[..]);
                 o.nodes
                     .iter()
-                    .map(|n| {
+                    .enumerate()
+                    .map(|(k, n)| {
                         let (u, _) = self.node_increment(n.node, q);
                         let x0 = self.state.r[n.node];
-                        o.node_force(n, &(x0 - p0), &(x0 + u - p1), dt, jacobian)
+                        let a = anchors.get(k).and_then(Option::as_ref);
+                        o.node_force(n, &(x0 - p0), &(x0 + u - p1), dt, jacobian, a)
                     })
                     .collect()
+            })
+            .collect()
+    }
+
+    /// The elastic-stick anchors after the step at `q` (per obstacle and contact node;
+    /// empty lists for obstacles without the stick law).
+    pub(super) fn contact_anchors(&self, q: &[f64]) -> Vec<Vec<Option<Anchor>>> {
+        if !self.model.obstacles.iter().any(|o| o.has_anchors()) {
+            return vec![Vec::new(); self.model.obstacles.len()];
+        }
+        self.model
+            .obstacles
+            .iter()
+            .zip(self.contact_forces(q, false))
+            .map(|(o, fs)| {
+                if o.has_anchors() {
+                    fs.iter().map(|f| f.anchor).collect()
+                } else {
+                    Vec::new()
+                }
             })
             .collect()
     }

@@ -158,6 +158,40 @@ pub(super) fn obstacle(
     if o.slip.is_some() && friction == 0.0 {
         return Err(cx.err(&path.key("slip"), "only with `friction` > 0"));
     }
+    let law = match o.friction_law.as_deref() {
+        None | Some("regularized") => {
+            if o.tangential_stiffness.is_some() {
+                return Err(cx.err(
+                    &path.key("tangential_stiffness"),
+                    "only with friction_law = \"stick\"",
+                ));
+            }
+            crate::obstacle::FrictionLaw::Regularized
+        }
+        Some("stick") => {
+            if friction == 0.0 {
+                return Err(cx.err(&path.key("friction_law"), "only with `friction` > 0"));
+            }
+            if o.slip.is_some() {
+                return Err(cx.err(
+                    &path.key("slip"),
+                    "only with friction_law = \"regularized\" (the stick law has no slip speed)",
+                ));
+            }
+            crate::obstacle::FrictionLaw::Stick {
+                stiffness: match o.tangential_stiffness {
+                    None => stiffness,
+                    Some(k) => cx.positive(&path.key("tangential_stiffness"), k)?,
+                },
+            }
+        }
+        Some(other) => {
+            return Err(cx.err(
+                &path.key("friction_law"),
+                format!("unknown friction law `{other}` (expected \"regularized\" or \"stick\")"),
+            ))
+        }
+    };
     let motion = match cx.opt_vec3(&path.key("displacement"), &o.displacement)? {
         None => {
             for (key, present) in [
@@ -194,6 +228,7 @@ pub(super) fn obstacle(
         stiffness,
         friction,
         slip,
+        law,
         nodes: per_node
             .into_iter()
             .map(|(node, (radius, length))| ContactNode {
