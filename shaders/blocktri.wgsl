@@ -524,8 +524,22 @@ const HSTRIDE: u32 = 33u; // 1 + 2 KMAX
 // Per member HSTRIDE: the count c, then (residual, outcome) per iteration.
 @group(0) @binding(18) var<storage, read_write> hist: array<Real>;
 // Per member 4: Newton tolerance, 1 for quadratic convergence (full Newton), the
-// corrections before a residual may be accepted, this submission's K.
+// corrections before a residual may be accepted, this submission's K; then the element
+// kernel's slot count and element slots per member (0, 0 without a kernel).
 @group(0) @binding(19) var<storage, read> spec: array<Real>;
+// The element kernel's iteration buffer (field-major, `src/gpu/layout.rs`): a stopped
+// member's element slots get I_ACTIVE = 0, so that the element passes of the later
+// iterations skip them (the host re-uploads the field after the submission).
+@group(0) @binding(20) var<storage, read_write> kiter: array<Real>;
+const I_ACTIVE: u32 = 22u;
+
+fn deactivate(m: u32) {
+    let cap = u32(spec[4u * prm.n_member]);
+    let per = u32(spec[4u * prm.n_member + 1u]);
+    for (var e = 0u; e < per; e++) {
+        kiter[I_ACTIVE * cap + m * per + e] = 0.0;
+    }
+}
 
 fn spec_accepts(m: u32, hb: u32, c: u32, res: Real) -> bool {
     let tol = spec[4u * m];
@@ -549,7 +563,10 @@ fn spec_record(m: u32, res: Real, code: Real, ok: bool) {
     hist[hb] = Real(c + 1u);
     var stop = !ok || Real(c + 1u) >= spec[4u * m + 3u] || c + 1u >= KMAX;
     if !stop { stop = spec_accepts(m, hb, c, res); }
-    if stop { ops[m] = 0u; }
+    if stop {
+        ops[m] = 0u;
+        deactivate(m);
+    }
 }
 
 // Before the first iteration: the count of every SPEC member goes to 0.
@@ -560,11 +577,14 @@ fn spec_reset_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (ops[m] & 16u) != 0u { hist[m * HSTRIDE] = 0.0; }
 }
 
-// After each iteration: members without SPEC (one iteration asked) stop.
+// After each iteration: device-solved members without SPEC (one iteration asked) stop.
 @compute @workgroup_size(64)
 fn spec_gate_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let m = gid.x;
     if m >= prm.n_member { return; }
-    if (ops[m] & 16u) == 0u { ops[m] = 0u; }
+    if ops[m] != 0u && (ops[m] & 16u) == 0u {
+        ops[m] = 0u;
+        deactivate(m);
+    }
 }
 

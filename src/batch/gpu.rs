@@ -240,6 +240,11 @@ impl GpuEvaluator {
             layout,
             self.assembler.buffer(),
             Some(self.assembler.increments_buffer()),
+            Some((
+                self.kernel.iter_buffer(),
+                self.kernel.capacity(),
+                self.per_slot,
+            )),
         )?);
         Ok(())
     }
@@ -810,6 +815,14 @@ impl GpuEvaluator {
             };
             (slot, out)
         }));
+        if repeats > 1 {
+            // The device deactivated the element slots of the members it stopped: the
+            // host's rows go back up with the next dispatch.
+            for &(slot, _) in &pending {
+                let lo = slot * self.per_slot;
+                self.kernel.touch_iter(lo, lo + self.per_slot);
+            }
+        }
         // Multi-iteration runs: each member's first iteration is answered now, the
         // others as its Newton loop asks for them.
         let hist_of: &[(usize, Vec<Report>)] = solved.as_ref().map_or(&[], |s| &s.hist);

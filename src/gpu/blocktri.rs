@@ -185,7 +185,7 @@ pub struct BlockTriSolver {
     scale_dirty: Vec<bool>,
     /// Factors, pivots and backward-error terms: only ever touched by the shader (kept
     /// alive with the solver).
-    _fac_piv: [wgpu::Buffer; 4],
+    _fac_piv: [wgpu::Buffer; 5],
     mask_host: Vec<u32>,
     n_host: Vec<u32>,
     topo_dirty: bool,
@@ -247,12 +247,17 @@ impl BlockTriSolver {
     /// the assembly's gather pass reads them; `None`: a buffer of its own), and the
     /// residual region of each member must then end in its three row scales
     /// (`rpm ≥ 9 NPN + 3`, as [`crate::gpu::layout::AsmLayout`]).
+    ///
+    /// `kernel`: the element kernel's iteration buffer, its slot count and the element
+    /// slots per member; a member that stops in a multi-iteration submission ([`OP_SPEC`])
+    /// deactivates its element slots there (`None`: no kernel to skip).
     pub fn new(
         ctx: &GpuContext,
         members: usize,
         layout: BatchLayout,
         sys: &wgpu::Buffer,
         node_x: Option<&wgpu::Buffer>,
+        kernel: Option<(&wgpu::Buffer, usize, usize)>,
     ) -> Result<Self, GpuError> {
         if ctx.precision != Precision::F64 {
             return Err(GpuError::Kernel(
@@ -311,6 +316,7 @@ impl BlockTriSolver {
                 entry(17, rw),
                 entry(18, rw),
                 entry(19, ro),
+                entry(20, rw),
             ],
         });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -378,8 +384,16 @@ impl BlockTriSolver {
                 (8 * HSTRIDE * members) as u64,
                 src,
             ),
-            storage(&device, "newton tests", 32 * members as u64, dst),
+            storage(&device, "newton tests", 32 * members as u64 + 16, dst),
         ];
+        let (cap, per) = kernel.map_or((0, 0), |k| (k.1, k.2));
+        ctx.queue.write_buffer(
+            &spec[1],
+            32 * members as u64,
+            bytemuck::cast_slice(&[cap as f64, per as f64]),
+        );
+        let own_iter = storage(&device, "no element kernel", 8, none);
+        let kiter = kernel.map_or(&own_iter, |k| k.0);
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("blocktri staging"),
             size: 16 * xn + 36 * members as u64 + (8 * HSTRIDE * members) as u64,
@@ -429,6 +443,7 @@ impl BlockTriSolver {
                     &resident[4],
                     &spec[0],
                     &spec[1],
+                    kiter,
                 ];
                 let entries: Vec<wgpu::BindGroupEntry> = bufs
                     .iter()
@@ -459,7 +474,7 @@ impl BlockTriSolver {
             status,
             berr,
             staging,
-            _fac_piv: [fac, piv, acc, own_x],
+            _fac_piv: [fac, piv, acc, own_x, own_iter],
             extra,
             extra_host: vec![0.0; xn as usize],
             extra_dirty: vec![false; members],
