@@ -496,7 +496,8 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if apply { node_x[at] = q + xs[x + 9u * i + r]; }
         }
     }    if (ops[m] & 16u) != 0u {
-        spec_record(m, worst, report[2u * m + 1u], finite && apply);
+        // (Without a solve: `spec_check_main` found the iterate accepted.)
+        spec_record(m, worst, report[2u * m + 1u], finite && (apply || !solved));
     }
 }
 
@@ -567,6 +568,36 @@ fn spec_record(m: u32, res: Real, code: Real, ok: bool) {
         ops[m] = 0u;
         deactivate(m);
     }
+}
+
+// After the assembly, before the factorization: a SPEC member whose iterate the host's
+// Newton loop will accept skips the factorization and the solve (the update pass then
+// records the iteration with outcome 0 and stops it), as `--solve device` does for an
+// iterate the host predicts to accept.
+@compute @workgroup_size(64)
+fn spec_check_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let m = gid.x;
+    if m >= prm.n_member { return; }
+    let n = member_n[m];
+    if n == 0u || (ops[m] & 16u) == 0u { return; }
+    let sc = m * prm.rpm + 9u * prm.npn;
+    var s: array<Real, 3>;
+    for (var k = 0u; k < 3u; k++) {
+        s[k] = max(max(sys[sc + k], host_scale[3u * m + k]), 1e-300);
+    }
+    var worst: Real = 0.0;
+    for (var i = 0u; i < n; i++) {
+        let mi = mask[m * prm.npn + i];
+        for (var r = 0u; r < 9u; r++) {
+            if ((mi >> r) & 1u) == 0u { continue; }
+            let v = sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
+            let rel = abs(v) / s[r / 3u];
+            if !is_finite(rel) { return; }
+            worst = max(worst, rel);
+        }
+    }
+    let hb = m * HSTRIDE;
+    if spec_accepts(m, hb, u32(hist[hb]), worst) { ops[m] = ops[m] & ~3u; }
 }
 
 // Before the first iteration: the count of every SPEC member goes to 0.

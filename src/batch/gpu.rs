@@ -82,6 +82,26 @@ struct MultiRun {
     last: usize,
     /// The iterate evaluated in the last device iteration and its residual work.
     iterate: Option<(Vec<[f64; 9]>, f64)>,
+    /// The device found the last iterate accepted (and neither factorized nor solved
+    /// there): the host's Newton loop stops there too.
+    accepted_last: bool,
+}
+
+/// The host's Newton acceptance test (`newton.rs`, `accepted`, for full or fresh Newton
+/// on the device) on a multi-iteration run's residuals: whether iteration `c` (residual
+/// `res`, after `hist`) is accepted. The twin of `spec_accepts` in `shaders/blocktri.wgsl`.
+fn run_accepts(hist: &[f64], res: f64, tol: f64, quadratic: bool) -> bool {
+    use crate::integrator::scaling::MIN_CORRECTIONS;
+    let c = hist.len();
+    if res <= tol && c >= MIN_CORRECTIONS {
+        return true;
+    }
+    if c < 2 {
+        return false;
+    }
+    let (r2, r1) = (hist[c - 2], hist[c - 1]);
+    (res <= 1e5 * tol && res >= 0.5 * r1)
+        || (quadratic && res <= 10.0 * tol && r1 < r2 && res >= 1e3 * (r1 * (r1 / r2) * (r1 / r2)))
 }
 
 /// `slots` members of at most `per_slot` elements and `nodes_per_slot` nodes each on one
@@ -497,6 +517,15 @@ impl GpuEvaluator {
             st.multi_answers += 1;
             return Some(out);
         }
+        if run.next >= n && run.accepted_last && !r.upload {
+            // The device stopped where the host's test accepts, without a correction; the
+            // host went on: its iterate is not on the device.
+            st.multi_mismatches += 1;
+            self.multi[slot] = None;
+            return Some(Err(
+                "the device stopped its Newton iterations where the host went on".into(),
+            ));
+        }
         if r.upload || r.restore || req.states.is_some() || run.next >= n {
             self.multi[slot] = None;
             return None;
@@ -568,6 +597,8 @@ impl GpuEvaluator {
         let mut with_iterate: Vec<usize> = Vec::new();
         // `--solve resident`: Newton solves starting here that run several iterations.
         let mut multi: Vec<usize> = Vec::new();
+        // Their Newton tests (tolerance, quadratic convergence).
+        let mut multi_test: Vec<(f64, bool)> = vec![(0.0, false); self.sizes.len()];
         let multi_k = self.multi_k;
         let packed = self.pack(&reqs);
         for (&(slot, ref req), packed) in reqs.iter().zip(packed) {
@@ -606,6 +637,7 @@ impl GpuEvaluator {
                             );
                             op |= OP_UPDATE | OP_SPEC;
                             multi.push(slot);
+                            multi_test[slot] = (tol, !req.consistent);
                         } else if let Some(r) = resident {
                             solver.set_host_scale(slot, r.scale);
                             op |= OP_UPDATE;
@@ -680,6 +712,9 @@ impl GpuEvaluator {
                         },
                         &mut |enc| {
                             let mut s = solver.borrow_mut();
+                            if repeats > 1 {
+                                s.encode_spec_check(enc);
+                            }
                             s.encode(enc, &ops);
                             if repeats > 1 {
                                 s.encode_spec_gate(enc);
@@ -762,7 +797,7 @@ impl GpuEvaluator {
                 .collect()
         };
         let (solved, report_of, iterate_of) = (&solved, &report_of, &iterate_of);
-        let multi_slot = &multi_slot;
+        let (multi_slot, multi_test) = (&multi_slot, &multi_test);
         answers.par_extend(pending.par_iter().filter(|p| !multi_slot[p.0]).map(
             |&(slot, tangent)| {
                 let (n_elems, n_nodes) = sizes[slot];
@@ -831,12 +866,18 @@ impl GpuEvaluator {
             .map(|&slot| {
                 let run = match (&res, hist_of.iter().find(|h| h.0 == slot)) {
                     (Err(e), _) => Err(e.to_string()),
-                    (Ok(()), Some((_, reports))) if !reports.is_empty() => Ok(MultiRun {
-                        reports: reports.clone(),
-                        next: 0,
-                        last: 0,
-                        iterate: iterate_of[slot].map(|(q, rw)| (rows(q, sizes[slot].1), rw)),
-                    }),
+                    (Ok(()), Some((_, reports))) if !reports.is_empty() => {
+                        let res: Vec<f64> = reports.iter().map(|r| r.residual).collect();
+                        let (last, before) = res.split_last().expect("not empty");
+                        let (tol, quadratic) = multi_test[slot];
+                        Ok(MultiRun {
+                            reports: reports.clone(),
+                            next: 0,
+                            last: 0,
+                            iterate: iterate_of[slot].map(|(q, rw)| (rows(q, sizes[slot].1), rw)),
+                            accepted_last: run_accepts(before, *last, tol, quadratic),
+                        })
+                    }
                     _ => Err("the device did not report a resident iteration".into()),
                 };
                 (slot, run)

@@ -158,8 +158,8 @@ pub struct BlockTriSolver {
     device: wgpu::Device,
     queue: wgpu::Queue,
     /// `factor_main`, `forward_main`, `backward_main`, `berr_main`, `restore_main`,
-    /// `update_main`, `spec_reset_main`, `spec_gate_main`.
-    pipelines: [wgpu::ComputePipeline; 8],
+    /// `update_main`, `spec_reset_main`, `spec_gate_main`, `spec_check_main`.
+    pipelines: [wgpu::ComputePipeline; 9],
     /// One bind group per node chunk (each with its own `lo`, `hi`).
     bind_groups: Vec<wgpu::BindGroup>,
     /// `[xs, mask, member_n, ops, status, berr]` (factors and pivots are never read back).
@@ -343,6 +343,7 @@ impl BlockTriSolver {
             pipe("update_main"),
             pipe("spec_reset_main"),
             pipe("spec_gate_main"),
+            pipe("spec_check_main"),
         ];
         ctx.save_pipeline_cache();
         let none = wgpu::BufferUsages::empty();
@@ -624,6 +625,12 @@ impl BlockTriSolver {
     pub fn encode_spec_gate(&mut self, enc: &mut wgpu::CommandEncoder) {
         self.single_pass(enc, 7);
         self.ops_host.fill(0);
+    }
+
+    /// Encodes the check after an assembly of a multi-iteration submission: an [`OP_SPEC`]
+    /// member whose iterate the host will accept skips its factorization and solve.
+    pub fn encode_spec_check(&mut self, enc: &mut wgpu::CommandEncoder) {
+        self.single_pass(enc, 8);
     }
 
     fn single_pass(&self, enc: &mut wgpu::CommandEncoder, p: usize) {
