@@ -422,7 +422,10 @@ impl Assembler {
     /// [`Self::run`] with `before` encoded ahead of the gather pass and `more` after the
     /// assembly pass (and before the readback: the device block solver of
     /// [`crate::gpu::blocktri`]); the tangent blocks of member slot `m` are read back only
-    /// when `blocks_back(m)`, its residual region only when `residual_back(m)`.
+    /// when `blocks_back(m)`, its residual region only when `residual_back(m)`. The
+    /// gather, element, assembly and `more` passes are recorded `repeats` times (several
+    /// device-resident Newton iterations in one submission).
+    #[allow(clippy::too_many_arguments)]
     pub fn run_with(
         &mut self,
         kernel: &mut ElementKernel,
