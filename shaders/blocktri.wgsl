@@ -66,8 +66,9 @@ struct Params {
 @group(0) @binding(4) var<storage, read> mask: array<u32>;
 // Per member slot: its number of nodes (0: inactive).
 @group(0) @binding(5) var<storage, read> member_n: array<u32>;
-// Per member slot: bit 0 factorize, bit 1 solve in this dispatch.
-@group(0) @binding(6) var<storage, read> ops: array<u32>;
+// Per member slot: bit 0 factorize, bit 1 solve in this dispatch (bits 2–4: below). The
+// passes of a multi-iteration submission clear a member's word when it stops (SPEC).
+@group(0) @binding(6) var<storage, read_write> ops: array<u32>;
 // Per member slot: status code.
 @group(0) @binding(7) var<storage, read_write> status: array<u32>;
 // Per member slot: normwise backward error of the last solve,
@@ -494,5 +495,127 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
             q_prev[p] = q;
             if apply { node_x[at] = q + xs[x + 9u * i + r]; }
         }
+    }    if (ops[m] & 16u) != 0u {
+        // (Without a solve: `spec_check_main` found the iterate accepted.)
+        spec_record(m, worst, report[2u * m + 1u], finite && (apply || !solved));
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// SEVERAL NEWTON ITERATIONS PER SUBMISSION (ops bit 4, SPEC; `--solve resident`,
+// `src/batch/gpu.rs`). The host records K iterations (gather → element passes → assembly
+// → factor → solve → update) into one command buffer. Per member, `hist` holds the count c
+// of iterations done and, per iteration, the report pair (relative residual, solve
+// outcome) of the update pass. After recording iteration c the update pass stops the
+// member — clears its operation word, so that every later solver pass skips it — when the
+// residual is not finite, the solve failed, c reached the member's K, or the host's Newton
+// loop would accept the iterate just evaluated (`newton.rs`, `accepted`: the same test on
+// the same f64 values):
+//   res ≤ tol and c ≥ min corrections, or (c ≥ 2, r2 = hist[c−2], r1 = hist[c−1])
+//   res ≤ 1e5·tol and res ≥ ½ r1 (the round-off floor), or (quadratic convergence only)
+//   res ≤ 10·tol, r1 < r2 and res ≥ 1e3 · r1 (r1/r2)².
+// The stopping iteration still applies its correction (as every resident iteration does),
+// so `q_prev` holds the iterate the host accepts, and a host that goes on finds the next
+// iterate in `node_x`.
+
+// Iterations a submission holds at most (`RESIDENT_MAX_K` in `src/gpu/blocktri.rs`).
+const KMAX: u32 = 16u;
+const HSTRIDE: u32 = 33u; // 1 + 2 KMAX
+
+// Per member HSTRIDE: the count c, then (residual, outcome) per iteration.
+@group(0) @binding(18) var<storage, read_write> hist: array<Real>;
+// Per member 4: Newton tolerance, 1 for quadratic convergence (full Newton), the
+// corrections before a residual may be accepted, this submission's K; then the element
+// kernel's slot count and element slots per member (0, 0 without a kernel).
+@group(0) @binding(19) var<storage, read> spec: array<Real>;
+// The element kernel's iteration buffer (field-major, `src/gpu/layout.rs`): a stopped
+// member's element slots get I_ACTIVE = 0, so that the element passes of the later
+// iterations skip them (the host re-uploads the field after the submission).
+@group(0) @binding(20) var<storage, read_write> kiter: array<Real>;
+const I_ACTIVE: u32 = 22u;
+
+fn deactivate(m: u32) {
+    let cap = u32(spec[4u * prm.n_member]);
+    let per = u32(spec[4u * prm.n_member + 1u]);
+    for (var e = 0u; e < per; e++) {
+        kiter[I_ACTIVE * cap + m * per + e] = 0.0;
+    }
+}
+
+fn spec_accepts(m: u32, hb: u32, c: u32, res: Real) -> bool {
+    let tol = spec[4u * m];
+    if res <= tol && Real(c) >= spec[4u * m + 2u] { return true; }
+    if c < 2u { return false; }
+    let r2 = hist[hb + 1u + 2u * (c - 2u)];
+    let r1 = hist[hb + 1u + 2u * (c - 1u)];
+    if res <= 1e5 * tol && res >= 0.5 * r1 { return true; }
+    if spec[4u * m + 1u] != 0.0 && res <= 10.0 * tol && r1 < r2 {
+        let q = r1 * (r1 / r2) * (r1 / r2);
+        if res >= 1e3 * q { return true; }
+    }
+    return false;
+}
+
+fn spec_record(m: u32, res: Real, code: Real, ok: bool) {
+    let hb = m * HSTRIDE;
+    let c = u32(hist[hb]);
+    hist[hb + 1u + 2u * c] = res;
+    hist[hb + 2u + 2u * c] = code;
+    hist[hb] = Real(c + 1u);
+    var stop = !ok || Real(c + 1u) >= spec[4u * m + 3u] || c + 1u >= KMAX;
+    if !stop { stop = spec_accepts(m, hb, c, res); }
+    if stop {
+        ops[m] = 0u;
+        deactivate(m);
+    }
+}
+
+// After the assembly, before the factorization: a SPEC member whose iterate the host's
+// Newton loop will accept skips the factorization and the solve (the update pass then
+// records the iteration with outcome 0 and stops it), as `--solve device` does for an
+// iterate the host predicts to accept.
+@compute @workgroup_size(64)
+fn spec_check_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let m = gid.x;
+    if m >= prm.n_member { return; }
+    let n = member_n[m];
+    if n == 0u || (ops[m] & 16u) == 0u { return; }
+    let sc = m * prm.rpm + 9u * prm.npn;
+    var s: array<Real, 3>;
+    for (var k = 0u; k < 3u; k++) {
+        s[k] = max(max(sys[sc + k], host_scale[3u * m + k]), 1e-300);
+    }
+    var worst: Real = 0.0;
+    for (var i = 0u; i < n; i++) {
+        let mi = mask[m * prm.npn + i];
+        for (var r = 0u; r < 9u; r++) {
+            if ((mi >> r) & 1u) == 0u { continue; }
+            let v = sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
+            let rel = abs(v) / s[r / 3u];
+            if !is_finite(rel) { return; }
+            worst = max(worst, rel);
+        }
+    }
+    let hb = m * HSTRIDE;
+    if spec_accepts(m, hb, u32(hist[hb]), worst) { ops[m] = ops[m] & ~3u; }
+}
+
+// Before the first iteration: the count of every SPEC member goes to 0.
+@compute @workgroup_size(64)
+fn spec_reset_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let m = gid.x;
+    if m >= prm.n_member { return; }
+    if (ops[m] & 16u) != 0u { hist[m * HSTRIDE] = 0.0; }
+}
+
+// After each iteration: device-solved members without SPEC (one iteration asked) stop.
+@compute @workgroup_size(64)
+fn spec_gate_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let m = gid.x;
+    if m >= prm.n_member { return; }
+    if ops[m] != 0u && (ops[m] & 16u) == 0u {
+        ops[m] = 0u;
+        deactivate(m);
+    }
+}
+

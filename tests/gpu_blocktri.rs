@@ -301,7 +301,7 @@ fn twin(b: &Batch) -> Twin {
 
 fn solver(ctx: &GpuContext, b: &Batch) -> (BlockTriSolver, wgpu::Buffer) {
     let buf = BlockTriSolver::system_buffer(ctx, &b.sys);
-    let mut s = BlockTriSolver::new(ctx, b.nodes.len(), b.l, &buf, None).unwrap();
+    let mut s = BlockTriSolver::new(ctx, b.nodes.len(), b.l, &buf, None, None).unwrap();
     for m in 0..b.nodes.len() {
         s.set_member(m, &b.masks[m * NPN..m * NPN + b.nodes[m]]);
     }

@@ -11,7 +11,9 @@ use rayon::prelude::*;
 
 use crate::element::StepConsts;
 use crate::gpu::assemble::MemberIncrements;
-use crate::gpu::blocktri::{Readback, Report, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_UPDATE};
+use crate::gpu::blocktri::{
+    Readback, Report, SpecParams, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_SPEC, OP_UPDATE,
+};
 use crate::gpu::kernel::{KernelTimers, MemberPack};
 use crate::gpu::layout::{AsmLayout, A_NODE};
 use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
@@ -48,6 +50,58 @@ pub struct ServeTimers {
     /// Bytes read back for [`Self::fetches`] and [`Self::iterates_sent`] (72 per node slot
     /// and 8 each).
     pub fetch_bytes_down: u64,
+    /// Dispatches (each ends in one read-back that waits: a host sync).
+    pub dispatches: u64,
+    /// `--solve resident`: dispatches that ran several Newton iterations.
+    pub multi_dispatches: u64,
+    /// `--solve resident`: Newton solves started with a multi-iteration submission.
+    pub multi_solves: u64,
+    /// `--solve resident`: Newton iterations the device ran in them.
+    pub multi_iterations: u64,
+    /// `--solve resident`: the host's Newton iterations answered from them without a
+    /// dispatch.
+    pub multi_answers: u64,
+    /// `--solve resident`: bytes read back for them (iteration histories and the
+    /// accepted iterates).
+    pub multi_bytes_down: u64,
+    /// `--solve resident`: the host asked for an iterate the device had moved past (its
+    /// Newton test stopped later than the device's): the step fails. Expected 0.
+    pub multi_mismatches: u64,
+}
+
+/// `--solve resident`: a member's Newton solve as its multi-iteration submission ran it
+/// on the device; the host's Newton loop then reads it iteration by iteration without a
+/// dispatch.
+#[derive(Clone, Debug)]
+struct MultiRun {
+    /// Per device iteration: its report.
+    reports: Vec<Report>,
+    /// The next iteration to answer.
+    next: usize,
+    /// The iteration answered last.
+    last: usize,
+    /// The iterate evaluated in the last device iteration and its residual work.
+    iterate: Option<(Vec<[f64; 9]>, f64)>,
+    /// The device found the last iterate accepted (and neither factorized nor solved
+    /// there): the host's Newton loop stops there too.
+    accepted_last: bool,
+}
+
+/// The host's Newton acceptance test (`newton.rs`, `accepted`, for full or fresh Newton
+/// on the device) on a multi-iteration run's residuals: whether iteration `c` (residual
+/// `res`, after `hist`) is accepted. The twin of `spec_accepts` in `shaders/blocktri.wgsl`.
+fn run_accepts(hist: &[f64], res: f64, tol: f64, quadratic: bool) -> bool {
+    use crate::integrator::scaling::MIN_CORRECTIONS;
+    let c = hist.len();
+    if res <= tol && c >= MIN_CORRECTIONS {
+        return true;
+    }
+    if c < 2 {
+        return false;
+    }
+    let (r2, r1) = (hist[c - 2], hist[c - 1]);
+    (res <= 1e5 * tol && res >= 0.5 * r1)
+        || (quadratic && res <= 10.0 * tol && r1 < r2 && res >= 1e3 * (r1 * (r1 / r2) * (r1 / r2)))
 }
 
 /// `slots` members of at most `per_slot` elements and `nodes_per_slot` nodes each on one
@@ -77,6 +131,15 @@ pub struct GpuEvaluator {
     /// Members attached with a device solve, and with a host solve although device
     /// solves were asked for (a feature the device solver does not cover).
     pub device_members: (u64, u64),
+    /// `--solve resident`: Newton iterations per submission (0: one per dispatch).
+    multi_k: usize,
+    /// Per slot: the Newton tolerance of its member when it runs several iterations per
+    /// submission (full or fresh Newton, device-resident), else `None`.
+    multi_tol: Vec<Option<f64>>,
+    /// Per slot: its Newton solve's multi-iteration run being read.
+    multi: Vec<Option<MultiRun>>,
+    /// Requests held back (lockstep): they wait while other members read their runs.
+    deferred: Vec<(usize, EvalRequest)>,
 }
 
 /// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
@@ -172,6 +235,10 @@ impl GpuEvaluator {
             active: vec![false; slots],
             resident: true,
             device_members: (0, 0),
+            multi_k: 0,
+            multi_tol: vec![None; slots],
+            multi: vec![None; slots],
+            deferred: Vec::new(),
         })
     }
 
@@ -193,6 +260,11 @@ impl GpuEvaluator {
             layout,
             self.assembler.buffer(),
             Some(self.assembler.increments_buffer()),
+            Some((
+                self.kernel.iter_buffer(),
+                self.kernel.capacity(),
+                self.per_slot,
+            )),
         )?);
         Ok(())
     }
@@ -203,6 +275,13 @@ impl GpuEvaluator {
     /// `--solve device`, kept for comparison (`tests/device_solve.rs`).
     pub fn set_resident(&mut self, on: bool) {
         self.resident = on;
+    }
+
+    /// `--solve resident`: device-resident members with full or fresh Newton run up to
+    /// `k` Newton iterations per submission (0 or 1: one), the device stopping each where
+    /// the host's Newton loop stops; set before attaching members.
+    pub fn set_iterations_per_submission(&mut self, k: usize) {
+        self.multi_k = k.min(crate::gpu::blocktri::RESIDENT_MAX_K);
     }
 
     /// Largest number of slots of `per_slot` elements and `nodes_per_slot` nodes that fits
@@ -297,6 +376,13 @@ impl GpuEvaluator {
             None => false,
         };
         self.device[slot] = on;
+        let p = sim.params();
+        self.multi_tol[slot] = (on
+            && self.resident
+            && self.multi_k > 1
+            && p.newton != crate::integrator::NewtonVariant::Modified)
+            .then_some(p.newton_tol);
+        self.multi[slot] = None;
         sim.set_device_solve(on);
         sim.set_device_resident(on && self.resident);
         self.assembler.set_device_owned(slot, on && self.resident);
@@ -315,6 +401,8 @@ impl GpuEvaluator {
     /// Frees `slot` (its member finished).
     pub fn detach(&mut self, slot: usize) {
         self.ports[slot] = None;
+        self.multi[slot] = None;
+        self.multi_tol[slot] = None;
         self.deactivate(slot);
         if self.device[slot] {
             // The device changed the slot's increments: the next member uploads all.
@@ -395,6 +483,73 @@ impl GpuEvaluator {
         outcomes
     }
 
+    /// `--solve resident`: the answer to `req` from `slot`'s multi-iteration run, when it
+    /// holds one (`None`: the request goes to a dispatch, and the run is over).
+    fn answer_from_run(
+        &mut self,
+        slot: usize,
+        req: &EvalRequest,
+    ) -> Option<Result<AssembledSystem, String>> {
+        let r = req.resident.filter(|_| self.device[slot])?;
+        let run = self.multi[slot].as_mut()?;
+        let n = run.reports.len();
+        let st = &mut self.serve_timers;
+        if r.fetch {
+            // The host accepted the iterate answered last: the device holds it if that was
+            // its last iteration.
+            let out = match (&run.iterate, run.last + 1 == n) {
+                (Some((q, rw)), true) => Ok(AssembledSystem {
+                    resident: Some(ResidentAnswer::Fetched {
+                        q: q.clone(),
+                        residual_work: *rw,
+                    }),
+                    ..AssembledSystem::default()
+                }),
+                _ => {
+                    st.multi_mismatches += 1;
+                    Err(format!(
+                        "the host accepted Newton iteration {} but the device went on to {}",
+                        run.last, n
+                    ))
+                }
+            };
+            self.multi[slot] = None;
+            st.multi_answers += 1;
+            return Some(out);
+        }
+        if run.next >= n && run.accepted_last && !r.upload {
+            // The device stopped where the host's test accepts, without a correction; the
+            // host went on: its iterate is not on the device.
+            st.multi_mismatches += 1;
+            self.multi[slot] = None;
+            return Some(Err(
+                "the device stopped its Newton iterations where the host went on".into(),
+            ));
+        }
+        if r.upload || r.restore || req.states.is_some() || run.next >= n {
+            self.multi[slot] = None;
+            return None;
+        }
+        let j = run.next;
+        let residual_only = r.predict_accept && !req.tangent;
+        let mut report = run.reports[j];
+        if residual_only {
+            // (A dispatch would neither factorize nor solve: the outcome reads 0.)
+            (report.status, report.berr) = (crate::linsolve::batched::OK, 0.0);
+        } else {
+            run.next += 1;
+        }
+        run.last = j;
+        let iterate = ((r.predict_accept || r.send_iterate) && j + 1 == n)
+            .then(|| run.iterate.clone())
+            .flatten();
+        st.multi_answers += 1;
+        Some(Ok(AssembledSystem {
+            resident: Some(resident_outcome(&report, iterate)),
+            ..AssembledSystem::default()
+        }))
+    }
+
     /// Evaluates the given (slot, request) pairs in one dispatch; one answer per pair, in
     /// order. Device-resident fetches ([`crate::integrator::evaluate::Resident::fetch`])
     /// evaluate nothing: their iterates are read back with the dispatch's results.
@@ -403,6 +558,21 @@ impl GpuEvaluator {
         reqs: Vec<(usize, EvalRequest)>,
     ) -> Vec<(usize, Result<AssembledSystem, String>)> {
         let t0 = Instant::now();
+        // `--solve resident`: iterations the device already ran are answered from there.
+        let mut answers = Vec::with_capacity(reqs.len());
+        let reqs: Vec<(usize, EvalRequest)> = reqs
+            .into_iter()
+            .filter_map(|(slot, req)| match self.answer_from_run(slot, &req) {
+                Some(a) => {
+                    answers.push((slot, a));
+                    None
+                }
+                None => Some((slot, req)),
+            })
+            .collect();
+        if reqs.is_empty() {
+            return answers;
+        }
         // Slots active from an earlier evaluation that evaluate nothing now go inactive
         // (the evaluating ones are activated by packing).
         let evaluating: Vec<bool> = {
@@ -418,7 +588,6 @@ impl GpuEvaluator {
                 self.deactivate(slot);
             }
         }
-        let mut answers = Vec::with_capacity(reqs.len());
         let mut pending = Vec::with_capacity(reqs.len());
         let mut ops: Vec<(usize, u32)> = Vec::new();
         // Device-resident slots of this dispatch: iterating, fetching, and iterating with
@@ -426,6 +595,11 @@ impl GpuEvaluator {
         let mut iterating: Vec<usize> = Vec::new();
         let mut fetching: Vec<usize> = Vec::new();
         let mut with_iterate: Vec<usize> = Vec::new();
+        // `--solve resident`: Newton solves starting here that run several iterations.
+        let mut multi: Vec<usize> = Vec::new();
+        // Their Newton tests (tolerance, quadratic convergence).
+        let mut multi_test: Vec<(f64, bool)> = vec![(0.0, false); self.sizes.len()];
+        let multi_k = self.multi_k;
         let packed = self.pack(&reqs);
         for (&(slot, ref req), packed) in reqs.iter().zip(packed) {
             let resident = req.resident.filter(|_| self.device[slot]);
@@ -443,7 +617,28 @@ impl GpuEvaluator {
                         } else {
                             OP_SOLVE
                         };
-                        if let Some(r) = resident {
+                        let multi_tol = self.multi_tol[slot].filter(|_| {
+                            resident.is_some_and(|r| {
+                                r.upload && !r.restore && !r.predict_accept && req.tangent
+                            })
+                        });
+                        if let (Some(r), Some(tol)) = (resident, multi_tol) {
+                            solver.set_host_scale(slot, r.scale);
+                            solver.set_spec(
+                                slot,
+                                SpecParams {
+                                    tol,
+                                    // (The inexact strategy's tangent leaves the scalars'
+                                    // linearization out: it contracts linearly.)
+                                    quadratic: !req.consistent,
+                                    min_corrections: crate::integrator::scaling::MIN_CORRECTIONS,
+                                    k: multi_k,
+                                },
+                            );
+                            op |= OP_UPDATE | OP_SPEC;
+                            multi.push(slot);
+                            multi_test[slot] = (tol, !req.consistent);
+                        } else if let Some(r) = resident {
                             solver.set_host_scale(slot, r.scale);
                             op |= OP_UPDATE;
                             if r.restore {
@@ -481,8 +676,18 @@ impl GpuEvaluator {
         }
         let device = &self.device;
         let mut resident_slot = vec![false; self.sizes.len()];
-        for &m in &iterating {
+        for &m in iterating.iter().chain(&multi) {
             resident_slot[m] = true;
+        }
+        let mut multi_slot = vec![false; self.sizes.len()];
+        for &m in &multi {
+            multi_slot[m] = true;
+        }
+        let repeats = if multi.is_empty() { 1 } else { multi_k };
+        self.serve_timers.dispatches += 1;
+        if !multi.is_empty() {
+            self.serve_timers.multi_dispatches += 1;
+            self.serve_timers.multi_solves += multi.len() as u64;
         }
         let is_resident = |m: usize| resident_slot[m];
         let mut res = if pending.is_empty() {
@@ -498,8 +703,24 @@ impl GpuEvaluator {
                         &pending,
                         &|m| !device[m],
                         &|m| !is_resident(m),
-                        &mut |enc| solver.borrow_mut().encode_restore(enc, &ops),
-                        &mut |enc| solver.borrow_mut().encode(enc, &ops),
+                        &mut |enc| {
+                            let mut s = solver.borrow_mut();
+                            s.encode_restore(enc, &ops);
+                            if repeats > 1 {
+                                s.encode_spec_reset(enc, &ops);
+                            }
+                        },
+                        &mut |enc| {
+                            let mut s = solver.borrow_mut();
+                            if repeats > 1 {
+                                s.encode_spec_check(enc);
+                            }
+                            s.encode(enc, &ops);
+                            if repeats > 1 {
+                                s.encode_spec_gate(enc);
+                            }
+                        },
+                        repeats,
                     )
                 }
                 _ => self.assembler.run(&mut self.kernel, &pending),
@@ -518,7 +739,13 @@ impl GpuEvaluator {
                 status: !per_iteration.is_empty(),
                 x: per_iteration,
                 report: iterating.clone(),
-                fetch: fetching.iter().chain(&with_iterate).copied().collect(),
+                fetch: fetching
+                    .iter()
+                    .chain(&with_iterate)
+                    .chain(&multi)
+                    .copied()
+                    .collect(),
+                hist: multi.clone(),
             };
             let t0 = Instant::now();
             let npn = self.assembler.layout().nodes_per_slot as u64;
@@ -527,7 +754,8 @@ impl GpuEvaluator {
             st.resident_bytes_down += 16 * what.report.len() as u64;
             st.fetches += fetching.len() as u64;
             st.iterates_sent += with_iterate.len() as u64;
-            st.fetch_bytes_down += (72 * npn + 8) * what.fetch.len() as u64;
+            st.fetch_bytes_down += (72 * npn + 8) * (what.fetch.len() - multi.len()) as u64;
+            st.multi_bytes_down += (72 * npn + 8 + 8 + 16 * multi_k as u64) * multi.len() as u64;
             match solver.read_back(&what) {
                 Ok(s) => solved = Some(s),
                 Err(e) => res = Err(e),
@@ -539,7 +767,7 @@ impl GpuEvaluator {
             // When every evaluated member is device-resident the assembly read nothing
             // back, so this read is where the wait for the passes happens: kernel time.
             let waited = t0.elapsed().as_secs_f64();
-            if !pending.is_empty() && iterating.len() == pending.len() {
+            if !pending.is_empty() && iterating.len() + multi.len() == pending.len() {
                 self.kernel.timers.kernel_s += waited;
             } else {
                 self.kernel.timers.readback_s += waited;
@@ -569,38 +797,41 @@ impl GpuEvaluator {
                 .collect()
         };
         let (solved, report_of, iterate_of) = (&solved, &report_of, &iterate_of);
-        answers.par_extend(pending.par_iter().map(|&(slot, tangent)| {
-            let (n_elems, n_nodes) = sizes[slot];
-            let out = match &res {
-                Ok(()) if is_resident(slot) => {
-                    let iterate = iterate_of[slot].map(|(q, rw)| (rows(q, n_nodes), rw));
-                    match report_of[slot] {
-                        Some(r) => Ok(AssembledSystem {
-                            resident: Some(resident_outcome(r, iterate)),
-                            ..AssembledSystem::default()
-                        }),
-                        None => Err("the device did not report a resident iteration".into()),
+        let (multi_slot, multi_test) = (&multi_slot, &multi_test);
+        answers.par_extend(pending.par_iter().filter(|p| !multi_slot[p.0]).map(
+            |&(slot, tangent)| {
+                let (n_elems, n_nodes) = sizes[slot];
+                let out = match &res {
+                    Ok(()) if is_resident(slot) => {
+                        let iterate = iterate_of[slot].map(|(q, rw)| (rows(q, n_nodes), rw));
+                        match report_of[slot] {
+                            Some(r) => Ok(AssembledSystem {
+                                resident: Some(resident_outcome(r, iterate)),
+                                ..AssembledSystem::default()
+                            }),
+                            None => Err("the device did not report a resident iteration".into()),
+                        }
                     }
-                }
-                Ok(()) if device[slot] => {
-                    let mut sys = asm.system(slot, n_nodes, n_elems, false);
-                    // (No status read back: this request did not ask the device to solve.)
-                    sys.solution = solved.as_ref().filter(|s| !s.status.is_empty()).map(|s| {
-                        let x = s.x.as_deref().unwrap_or(&[]);
-                        device_outcome(
-                            s.status[slot],
-                            s.berr[slot],
-                            &x[9 * npn * slot..9 * npn * (slot + 1)],
-                            n_nodes,
-                        )
-                    });
-                    Ok(sys)
-                }
-                Ok(()) => Ok(asm.system(slot, n_nodes, n_elems, tangent)),
-                Err(e) => Err(e.to_string()),
-            };
-            (slot, out)
-        }));
+                    Ok(()) if device[slot] => {
+                        let mut sys = asm.system(slot, n_nodes, n_elems, false);
+                        // (No status read back: this request did not ask the device to solve.)
+                        sys.solution = solved.as_ref().filter(|s| !s.status.is_empty()).map(|s| {
+                            let x = s.x.as_deref().unwrap_or(&[]);
+                            device_outcome(
+                                s.status[slot],
+                                s.berr[slot],
+                                &x[9 * npn * slot..9 * npn * (slot + 1)],
+                                n_nodes,
+                            )
+                        });
+                        Ok(sys)
+                    }
+                    Ok(()) => Ok(asm.system(slot, n_nodes, n_elems, tangent)),
+                    Err(e) => Err(e.to_string()),
+                };
+                (slot, out)
+            },
+        ));
         answers.par_extend(fetching.par_iter().map(|&slot| {
             let n_nodes = sizes[slot].1;
             let out = match (&res, solved.as_ref()) {
@@ -619,6 +850,58 @@ impl GpuEvaluator {
             };
             (slot, out)
         }));
+        if repeats > 1 {
+            // The device deactivated the element slots of the members it stopped: the
+            // host's rows go back up with the next dispatch.
+            for &(slot, _) in &pending {
+                let lo = slot * self.per_slot;
+                self.kernel.touch_iter(lo, lo + self.per_slot);
+            }
+        }
+        // Multi-iteration runs: each member's first iteration is answered now, the
+        // others as its Newton loop asks for them.
+        let hist_of: &[(usize, Vec<Report>)] = solved.as_ref().map_or(&[], |s| &s.hist);
+        let runs: Vec<(usize, Result<MultiRun, String>)> = multi
+            .par_iter()
+            .map(|&slot| {
+                let run = match (&res, hist_of.iter().find(|h| h.0 == slot)) {
+                    (Err(e), _) => Err(e.to_string()),
+                    (Ok(()), Some((_, reports))) if !reports.is_empty() => {
+                        let res: Vec<f64> = reports.iter().map(|r| r.residual).collect();
+                        let (last, before) = res.split_last().expect("not empty");
+                        let (tol, quadratic) = multi_test[slot];
+                        Ok(MultiRun {
+                            reports: reports.clone(),
+                            next: 0,
+                            last: 0,
+                            iterate: iterate_of[slot].map(|(q, rw)| (rows(q, sizes[slot].1), rw)),
+                            accepted_last: run_accepts(before, *last, tol, quadratic),
+                        })
+                    }
+                    _ => Err("the device did not report a resident iteration".into()),
+                };
+                (slot, run)
+            })
+            .collect();
+        for (slot, run) in runs {
+            match run {
+                Ok(run) => {
+                    self.serve_timers.multi_iterations += run.reports.len() as u64;
+                    let mut run = run;
+                    let first = run.reports[0];
+                    run.next = 1;
+                    answers.push((
+                        slot,
+                        Ok(AssembledSystem {
+                            resident: Some(resident_outcome(&first, None)),
+                            ..AssembledSystem::default()
+                        }),
+                    ));
+                    self.multi[slot] = Some(run);
+                }
+                Err(e) => answers.push((slot, Err(e))),
+            }
+        }
         for &(slot, _) in &pending {
             self.active[slot] = true;
         }
@@ -628,6 +911,10 @@ impl GpuEvaluator {
 
     /// Serves every request posted by the attached members in one dispatch and answers
     /// each. Returns the number of requests served (0: nobody was waiting).
+    ///
+    /// `--solve resident`: requests that members' multi-iteration runs answer are answered
+    /// without a dispatch; while there are such, the others wait (so that the members'
+    /// next Newton solves start in one dispatch: one sync per step for the batch).
     pub fn serve(&mut self) -> usize {
         let reqs: Vec<(usize, EvalRequest)> = self
             .ports
@@ -635,10 +922,26 @@ impl GpuEvaluator {
             .enumerate()
             .filter_map(|(slot, p)| Some((slot, p.as_ref()?.take_request()?)))
             .collect();
-        let n = reqs.len();
-        for (slot, answer) in self.evaluate(reqs) {
-            if let Some(p) = &self.ports[slot] {
-                p.respond(answer);
+        let mut n = reqs.len();
+        let mut answered = 0usize;
+        for (slot, req) in reqs {
+            match self.answer_from_run(slot, &req) {
+                Some(a) => {
+                    answered += 1;
+                    if let Some(p) = &self.ports[slot] {
+                        p.respond(a);
+                    }
+                }
+                None => self.deferred.push((slot, req)),
+            }
+        }
+        if answered == 0 && !self.deferred.is_empty() {
+            let reqs = std::mem::take(&mut self.deferred);
+            n += reqs.len();
+            for (slot, answer) in self.evaluate(reqs) {
+                if let Some(p) = &self.ports[slot] {
+                    p.respond(answer);
+                }
             }
         }
         n
@@ -689,6 +992,11 @@ impl GpuBatcher {
         let mut g = self.lock();
         g.register(slot, sim)?;
         Ok(g.connect_device(slot, sim))
+    }
+
+    /// See [`GpuEvaluator::set_iterations_per_submission`].
+    pub fn set_iterations_per_submission(&self, k: usize) {
+        self.lock().set_iterations_per_submission(k)
     }
 
     /// Layout of the assembled buffer.

@@ -79,9 +79,12 @@ pub(super) fn run(
     let slots = want.min(cap).min(members.len()).max(1);
     let t0 = Instant::now();
     let mut gpu = GpuEvaluator::new(ctx, slots, per_slot, nodes_per_slot)?;
-    if opts.solve == super::SolveMode::Device {
+    if opts.solve.on_device() {
         gpu.enable_device_solve(ctx)?;
         gpu.set_resident(!opts.host_update);
+        if opts.solve == super::SolveMode::Resident {
+            gpu.set_iterations_per_submission(super::resident_k());
+        }
     }
     stats.setup_s = t0.elapsed().as_secs_f64();
     stats.slots = slots;

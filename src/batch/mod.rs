@@ -168,16 +168,41 @@ pub enum SolveMode {
     /// sends back the corrections instead of the blocks; members it does not cover are
     /// solved on the host within the same batch.
     Device,
+    /// As [`Self::Device`], and the members with full or fresh Newton run up to
+    /// [`RESIDENT_K`] Newton iterations per submission: the device stops each member where
+    /// the host's Newton loop stops, and the host reads the iterations back once
+    /// (docs/gpu.md, "Whole step on the device").
+    Resident,
 }
 
 impl SolveMode {
-    /// `host` or `device` (as on the command line and in `summary.json`).
+    /// `host`, `device` or `resident` (as on the command line and in `summary.json`).
     pub fn name(self) -> &'static str {
         match self {
             SolveMode::Host => "host",
             SolveMode::Device => "device",
+            SolveMode::Resident => "resident",
         }
     }
+
+    /// Whether the device solves the Newton systems (`device` or `resident`).
+    pub fn on_device(self) -> bool {
+        self != SolveMode::Host
+    }
+}
+
+/// `--solve resident`: Newton iterations per submission (`COSSERAT_RESIDENT_K` overrides
+/// it, 2–16, for measurements).
+pub const RESIDENT_K: usize = 6;
+
+/// [`RESIDENT_K`] or its override.
+pub fn resident_k() -> usize {
+    std::env::var("COSSERAT_RESIDENT_K")
+        .ok()
+        .and_then(|v| v.trim().parse::<usize>().ok())
+        .map_or(RESIDENT_K, |k| {
+            k.clamp(2, crate::gpu::blocktri::RESIDENT_MAX_K)
+        })
 }
 
 /// Members in flight at once on the GPU path unless [`BatchOptions::workers`] says

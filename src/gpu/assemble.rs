@@ -388,6 +388,7 @@ impl Assembler {
             &|_| true,
             &mut |_| {},
             &mut |_| {},
+            1,
         )
     }
 
@@ -421,7 +422,10 @@ impl Assembler {
     /// [`Self::run`] with `before` encoded ahead of the gather pass and `more` after the
     /// assembly pass (and before the readback: the device block solver of
     /// [`crate::gpu::blocktri`]); the tangent blocks of member slot `m` are read back only
-    /// when `blocks_back(m)`, its residual region only when `residual_back(m)`.
+    /// when `blocks_back(m)`, its residual region only when `residual_back(m)`. The
+    /// gather, element, assembly and `more` passes are recorded `repeats` times (several
+    /// device-resident Newton iterations in one submission).
+    #[allow(clippy::too_many_arguments)]
     pub fn run_with(
         &mut self,
         kernel: &mut ElementKernel,
@@ -430,6 +434,7 @@ impl Assembler {
         residual_back: &dyn Fn(usize) -> bool,
         before: &mut dyn FnMut(&mut wgpu::CommandEncoder),
         more: &mut dyn FnMut(&mut wgpu::CommandEncoder),
+        repeats: usize,
     ) -> Result<(), GpuError> {
         let want_tangent = pending.iter().any(|p| p.1);
         let mut enc = self
@@ -502,44 +507,48 @@ impl Assembler {
         }
         kernel.timers.upload_s += t0.elapsed().as_secs_f64();
         before(&mut enc);
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("gather"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.gather_pipeline);
-            pass.set_bind_group(0, &self.gather_group, &[]);
-            pass.dispatch_workgroups(self.n_elems.div_ceil(64) as u32, 1, 1);
+        // `repeats` Newton iterations in one submission (`--solve resident`: `more` records
+        // the device solve and update after each assembly).
+        for _ in 0..repeats.max(1) {
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("gather"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.gather_pipeline);
+                pass.set_bind_group(0, &self.gather_group, &[]);
+                pass.dispatch_workgroups(self.n_elems.div_ceil(64) as u32, 1, 1);
+            }
+            let tangent = if want_tangent {
+                TangentSlots::List(&self.tan_slots)
+            } else {
+                TangentSlots::None
+            };
+            kernel.encode(&mut enc, KernelMode::Frozen, tangent);
+            let prm = Params {
+                n_elem: self.n_elems as u32,
+                n_node: self.n_nodes as u32,
+                n_member: l.members as u32,
+                per_slot: l.per_slot as u32,
+                nodes_per_slot: l.nodes_per_slot as u32,
+                want_tangent: want_tangent as u32,
+                k_start: l.tangent_start() as u32,
+                pad: 0,
+            };
+            self.queue
+                .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("assemble"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                let threads = self.n_nodes.max(self.n_elems).max(l.members);
+                pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
+            }
+            more(&mut enc);
         }
-        let tangent = if want_tangent {
-            TangentSlots::List(&self.tan_slots)
-        } else {
-            TangentSlots::None
-        };
-        kernel.encode(&mut enc, KernelMode::Frozen, tangent);
-        let prm = Params {
-            n_elem: self.n_elems as u32,
-            n_node: self.n_nodes as u32,
-            n_member: l.members as u32,
-            per_slot: l.per_slot as u32,
-            nodes_per_slot: l.nodes_per_slot as u32,
-            want_tangent: want_tangent as u32,
-            k_start: l.tangent_start() as u32,
-            pad: 0,
-        };
-        self.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("assemble"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            let threads = self.n_nodes.max(self.n_elems).max(l.members);
-            pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
-        }
-        more(&mut enc);
         // The waiting members' residual regions, and the tangent regions of those that
         // asked for it: one range per run of adjacent such members.
         let w = ElementKernel::width(self.precision) as u64;

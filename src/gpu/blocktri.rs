@@ -31,6 +31,31 @@ pub const OP_UPDATE: u32 = 4;
 /// increments from before the correction that led to the iterate evaluated last
 /// (`restore_main`: the device already applied that iterate's own correction).
 pub const OP_RESTORE: u32 = 8;
+/// Per-member operation bit (`--solve resident`): this member iterates in every Newton
+/// iteration of a multi-iteration submission ([`BlockTriSolver::encode_spec_reset`],
+/// [`BlockTriSolver::encode_spec_gate`]), records each iteration's [`Report`] in its history
+/// and stops where the host's Newton loop would stop (`spec_record` in
+/// `shaders/blocktri.wgsl`).
+pub const OP_SPEC: u32 = 16;
+
+/// Newton iterations one submission holds at most (`KMAX` in `shaders/blocktri.wgsl`).
+pub const RESIDENT_MAX_K: usize = 16;
+/// Scalars per member of the iteration history: the count, then two per iteration.
+const HSTRIDE: usize = 1 + 2 * RESIDENT_MAX_K;
+
+/// What the host's Newton loop accepts, per member, for [`OP_SPEC`]'s stopping test.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpecParams {
+    /// Newton tolerance on the relative residual.
+    pub tol: f64,
+    /// Quadratic convergence (full or fresh Newton on the frozen-scalar tangent): the
+    /// floor test's quadratic sign applies.
+    pub quadratic: bool,
+    /// Corrections before a residual may be accepted.
+    pub min_corrections: usize,
+    /// Iterations of this submission.
+    pub k: usize,
+}
 
 /// What an [`OP_UPDATE`] member reports (16 bytes per member and iteration).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,7 +69,8 @@ pub struct Report {
 }
 
 impl Report {
-    fn decode(res: f64, code: f64) -> Self {
+    /// A report from its two stored scalars (relative residual, solve outcome).
+    pub fn decode(res: f64, code: f64) -> Self {
         let (status, berr) = if code >= 0.0 {
             (crate::linsolve::batched::OK, code)
         } else {
@@ -89,6 +115,9 @@ pub struct Solved {
     /// (node slots in node-local order, 9 each: the iterate before the last update), then
     /// `Σ |R_i q_i|` of that iterate. See [`Self::iterates`].
     pub iterates: Vec<f64>,
+    /// Per member slot asked for ([`Readback::hist`]): the [`Report`]s of the iterations
+    /// of its multi-iteration submission, in order.
+    pub hist: Vec<(usize, Vec<Report>)>,
 }
 
 impl Solved {
@@ -118,6 +147,8 @@ pub struct Readback {
     pub report: Vec<usize>,
     /// Accepted iterates of these slots ([`Solved::iterates`]).
     pub fetch: Vec<usize>,
+    /// Iteration histories of these slots ([`Solved::hist`]; 8 + 16 K bytes each).
+    pub hist: Vec<usize>,
 }
 
 /// A batch of `members` block-tridiagonal systems on the device.
@@ -127,8 +158,8 @@ pub struct BlockTriSolver {
     device: wgpu::Device,
     queue: wgpu::Queue,
     /// `factor_main`, `forward_main`, `backward_main`, `berr_main`, `restore_main`,
-    /// `update_main`.
-    pipelines: [wgpu::ComputePipeline; 6],
+    /// `update_main`, `spec_reset_main`, `spec_gate_main`, `spec_check_main`.
+    pipelines: [wgpu::ComputePipeline; 9],
     /// One bind group per node chunk (each with its own `lo`, `hi`).
     bind_groups: Vec<wgpu::BindGroup>,
     /// `[xs, mask, member_n, ops, status, berr]` (factors and pivots are never read back).
@@ -146,11 +177,15 @@ pub struct BlockTriSolver {
     resident: [wgpu::Buffer; 5],
     /// Packs the reports and iterates asked for into one buffer for the read-back.
     compact: Compact,
+    /// [`OP_SPEC`]: `[hist, spec]`.
+    spec: [wgpu::Buffer; 2],
+    spec_host: Vec<f64>,
+    spec_dirty: Vec<bool>,
     scale_host: Vec<f64>,
     scale_dirty: Vec<bool>,
     /// Factors, pivots and backward-error terms: only ever touched by the shader (kept
     /// alive with the solver).
-    _fac_piv: [wgpu::Buffer; 4],
+    _fac_piv: [wgpu::Buffer; 5],
     mask_host: Vec<u32>,
     n_host: Vec<u32>,
     topo_dirty: bool,
@@ -212,12 +247,17 @@ impl BlockTriSolver {
     /// the assembly's gather pass reads them; `None`: a buffer of its own), and the
     /// residual region of each member must then end in its three row scales
     /// (`rpm ≥ 9 NPN + 3`, as [`crate::gpu::layout::AsmLayout`]).
+    ///
+    /// `kernel`: the element kernel's iteration buffer, its slot count and the element
+    /// slots per member; a member that stops in a multi-iteration submission ([`OP_SPEC`])
+    /// deactivates its element slots there (`None`: no kernel to skip).
     pub fn new(
         ctx: &GpuContext,
         members: usize,
         layout: BatchLayout,
         sys: &wgpu::Buffer,
         node_x: Option<&wgpu::Buffer>,
+        kernel: Option<(&wgpu::Buffer, usize, usize)>,
     ) -> Result<Self, GpuError> {
         if ctx.precision != Precision::F64 {
             return Err(GpuError::Kernel(
@@ -262,7 +302,7 @@ impl BlockTriSolver {
                 entry(3, rw),
                 entry(4, ro),
                 entry(5, ro),
-                entry(6, ro),
+                entry(6, rw),
                 entry(7, rw),
                 entry(8, rw),
                 entry(9, wgpu::BufferBindingType::Uniform),
@@ -274,6 +314,9 @@ impl BlockTriSolver {
                 entry(15, rw),
                 entry(16, rw),
                 entry(17, rw),
+                entry(18, rw),
+                entry(19, ro),
+                entry(20, rw),
             ],
         });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -298,6 +341,9 @@ impl BlockTriSolver {
             pipe("berr_main"),
             pipe("restore_main"),
             pipe("update_main"),
+            pipe("spec_reset_main"),
+            pipe("spec_gate_main"),
+            pipe("spec_check_main"),
         ];
         ctx.save_pipeline_cache();
         let none = wgpu::BufferUsages::empty();
@@ -332,9 +378,26 @@ impl BlockTriSolver {
             &resident[0],
             &resident[3],
         );
+        let spec = [
+            storage(
+                &device,
+                "iteration histories",
+                (8 * HSTRIDE * members) as u64,
+                src,
+            ),
+            storage(&device, "newton tests", 32 * members as u64 + 16, dst),
+        ];
+        let (cap, per) = kernel.map_or((0, 0), |k| (k.1, k.2));
+        ctx.queue.write_buffer(
+            &spec[1],
+            32 * members as u64,
+            bytemuck::cast_slice(&[cap as f64, per as f64]),
+        );
+        let own_iter = storage(&device, "no element kernel", 8, none);
+        let kiter = kernel.map_or(&own_iter, |k| k.0);
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("blocktri staging"),
-            size: 16 * xn + 36 * members as u64,
+            size: 16 * xn + 36 * members as u64 + (8 * HSTRIDE * members) as u64,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -379,6 +442,9 @@ impl BlockTriSolver {
                     &resident[2],
                     &resident[3],
                     &resident[4],
+                    &spec[0],
+                    &spec[1],
+                    kiter,
                 ];
                 let entries: Vec<wgpu::BindGroupEntry> = bufs
                     .iter()
@@ -409,12 +475,15 @@ impl BlockTriSolver {
             status,
             berr,
             staging,
-            _fac_piv: [fac, piv, acc, own_x],
+            _fac_piv: [fac, piv, acc, own_x, own_iter],
             extra,
             extra_host: vec![0.0; xn as usize],
             extra_dirty: vec![false; members],
             resident,
             compact,
+            spec,
+            spec_host: vec![0.0; 4 * members],
+            spec_dirty: vec![false; members],
             scale_host: vec![0.0; 3 * members],
             scale_dirty: vec![false; members],
             mask_host: vec![0; layout.npn * members],
@@ -527,6 +596,53 @@ impl BlockTriSolver {
         pass.dispatch_workgroups(self.members.div_ceil(64) as u32, 1, 1);
     }
 
+    /// Sets member `m`'s Newton test for [`OP_SPEC`]; uploaded with the next operations
+    /// when changed.
+    pub fn set_spec(&mut self, m: usize, p: SpecParams) {
+        let v = [
+            p.tol,
+            f64::from(u8::from(p.quadratic)),
+            p.min_corrections as f64,
+            p.k.min(RESIDENT_MAX_K) as f64,
+        ];
+        let dst = &mut self.spec_host[4 * m..4 * m + 4];
+        if dst != v {
+            dst.copy_from_slice(&v);
+            self.spec_dirty[m] = true;
+        }
+    }
+
+    /// Encodes the reset of the [`OP_SPEC`] members' iteration counts (before the first
+    /// iteration of a multi-iteration submission); uploads what changed first.
+    pub fn encode_spec_reset(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
+        self.prepare(ops);
+        self.single_pass(enc, 6);
+    }
+
+    /// Encodes the gate after an iteration of a multi-iteration submission: members
+    /// without [`OP_SPEC`] stop. After the submission every operation word on the device
+    /// is 0 (the [`OP_SPEC`] members stopped by their K at the latest).
+    pub fn encode_spec_gate(&mut self, enc: &mut wgpu::CommandEncoder) {
+        self.single_pass(enc, 7);
+        self.ops_host.fill(0);
+    }
+
+    /// Encodes the check after an assembly of a multi-iteration submission: an [`OP_SPEC`]
+    /// member whose iterate the host will accept skips its factorization and solve.
+    pub fn encode_spec_check(&mut self, enc: &mut wgpu::CommandEncoder) {
+        self.single_pass(enc, 8);
+    }
+
+    fn single_pass(&self, enc: &mut wgpu::CommandEncoder, p: usize) {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("blocktri spec"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&self.pipelines[p]);
+        pass.set_bind_group(0, &self.bind_groups[0], &[]);
+        pass.dispatch_workgroups(self.members.div_ceil(64) as u32, 1, 1);
+    }
+
     /// Sets member `m`'s host row scales (u, θ, g) of its nodal terms, for
     /// [`OP_UPDATE`]'s relative residual; uploaded with the next operations when changed.
     pub fn set_host_scale(&mut self, m: usize, scale: [f64; 3]) {
@@ -569,6 +685,15 @@ impl BlockTriSolver {
                 bytemuck::cast_slice(&self.scale_host[3 * lo..3 * hi]),
             );
             self.bytes_up += 24 * (hi - lo) as u64;
+            self.copies_up += 1;
+        }
+        for (lo, hi) in super::kernel::take_runs(&mut self.spec_dirty) {
+            self.queue.write_buffer(
+                &self.spec[1],
+                32 * lo as u64,
+                bytemuck::cast_slice(&self.spec_host[4 * lo..4 * hi]),
+            );
+            self.bytes_up += 32 * (hi - lo) as u64;
             self.copies_up += 1;
         }
         // The operation words that changed, as one span (one copy: a copy per run of
@@ -642,6 +767,11 @@ impl BlockTriSolver {
         if packed > 0 {
             copies.push((self.compact.out(), 0, packed));
         }
+        let hb = 8 * HSTRIDE as u64;
+        let h_runs = index_runs(what.hist.iter().copied());
+        for &(lo, hi) in &h_runs {
+            copies.push((&self.spec[0], hb * lo as u64, hb * (hi - lo) as u64));
+        }
         let mut out = Solved::default();
         let down: u64 = copies.iter().map(|c| c.2).sum();
         self.last_bytes_down = down;
@@ -704,6 +834,18 @@ impl BlockTriSolver {
                 // Decoded per member by the caller (in parallel), not here.
                 out.fetched = what.fetch.clone();
                 out.iterates = bytemuck::pod_collect_to_vec(take(packed as usize - 16 * nr));
+            }
+            for &(lo, hi) in &h_runs {
+                let h: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * HSTRIDE * (hi - lo)));
+                out.hist
+                    .extend((lo..hi).zip(h.chunks_exact(HSTRIDE)).map(|(m, h)| {
+                        let c = (h[0] as usize).min(RESIDENT_MAX_K);
+                        let reports = h[1..1 + 2 * c]
+                            .chunks_exact(2)
+                            .map(|r| Report::decode(r[0], r[1]))
+                            .collect();
+                        (m, reports)
+                    }));
             }
         }
         self.staging.unmap();

@@ -445,6 +445,12 @@ impl ElementKernel {
         }
     }
 
+    /// Marks the iteration rows of element slots `lo..hi` for upload with the next
+    /// dispatch (a pass on the device changed their activity: `--solve resident`).
+    pub(crate) fn touch_iter(&mut self, lo: usize, hi: usize) {
+        self.dirty[2][lo..hi.min(self.cap)].fill(true);
+    }
+
     /// Records the uploads queued so far (the kernel's changed slots, one block of slots ×
     /// uploaded fields per run, and whatever [`Self::scatter_mut`] queued) as the next pass of `enc`, ahead of the passes that
     /// read them. At most one such pass per command buffer may carry data: its two copies

@@ -131,6 +131,9 @@ pub enum SolveArg {
     /// The device factorizes and solves the block-tridiagonal systems; only corrections,
     /// statuses and backward errors come back (docs/gpu.md, "Device solve").
     Device,
+    /// As `device`, with several Newton iterations per submission: one host sync per
+    /// step (docs/gpu.md, "Whole step on the device").
+    Resident,
 }
 
 impl SolveArg {
@@ -139,14 +142,16 @@ impl SolveArg {
         match self {
             SolveArg::Host => SolveMode::Host,
             SolveArg::Device => SolveMode::Device,
+            SolveArg::Resident => SolveMode::Resident,
         }
     }
 }
 
 /// `--solve device` needs the GPU path: an error (exit 2) on the CPU path.
 pub fn check_solve(solve: SolveArg, exec: &Executor) -> Result<SolveMode> {
-    if solve == SolveArg::Device && matches!(exec, Executor::Cpu) {
-        bail!("--solve device: the device solve runs on the GPU path; add --backend gpu (or auto with a GPU present)");
+    if solve != SolveArg::Host && matches!(exec, Executor::Cpu) {
+        let name = solve.mode().name();
+        bail!("--solve {name}: the device solve runs on the GPU path; add --backend gpu (or auto with a GPU present)");
     }
     Ok(solve.mode())
 }
@@ -211,11 +216,15 @@ pub fn attach(
                 sim.model().n_nodes(),
             )?);
             let _ = sim.set_backend(b.clone(), 0);
-            if solve == SolveMode::Device {
+            if solve.on_device() {
                 b.enable_device_solve(&ctx)?;
+                if solve == SolveMode::Resident {
+                    b.set_iterations_per_submission(cosserat::batch::resident_k());
+                }
                 if !b.register_device(0, sim)? {
                     let why = cosserat::batch::gpu::device_solve_refusal(sim).unwrap_or("");
-                    bail!("--solve device: the device solver does not cover this scene ({why}); run it with --solve host");
+                    let name = solve.name();
+                    bail!("--solve {name}: the device solver does not cover this scene ({why}); run it with --solve host");
                 }
             } else {
                 b.register(0, sim)?;
@@ -316,8 +325,8 @@ impl MemberOpts {
         if let Some(c) = self.cutback {
             a.extend(["--cutback".into(), c.to_string()]);
         }
-        if self.solve == SolveArg::Device {
-            a.extend(["--solve".into(), "device".into()]);
+        if self.solve != SolveArg::Host {
+            a.extend(["--solve".into(), self.solve.mode().name().into()]);
         }
         a
     }
@@ -707,6 +716,10 @@ pub enum BenchSolveArg {
     Device,
     /// Both, one after the other in this process.
     Both,
+    /// Device solves, then several Newton iterations per submission (`--solve
+    /// resident`), one after the other in this process (JSON: the `device` and `resident`
+    /// objects).
+    Resident,
 }
 
 /// One timed batch: its stats, Newton iterations, failed members, the members' summed
@@ -845,6 +858,23 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
     obj["model_host_own_assemble_us_per_eval"] =
         (1e6 * g.stages.assemble_s / (sv.requests.max(1) as f64)).into();
     obj["gpu_peak_rss_bytes"] = g.peak_rss.into();
+    // The whole-step figures (docs/gpu.md, "Whole step on the device").
+    obj["host_syncs"] = sv.dispatches.into();
+    obj["host_syncs_per_step"] = (sv.dispatches as f64 / a.steps.max(1) as f64).into();
+    obj["host_thread_us_per_member_step"] =
+        (1e6 * (w.host_s * threads + w.serve_thread_s) / member_steps).into();
+    obj["bus_bytes_per_member_step"] = ((k.bytes_up + k.bytes_down) as f64 / member_steps).into();
+    obj["bus_bytes_up_per_member_step"] = (k.bytes_up as f64 / member_steps).into();
+    obj["bus_bytes_down_per_member_step"] = (k.bytes_down as f64 / member_steps).into();
+    obj["device_pass_s"] = k.kernel_s.into();
+    obj["gpu_wall_over_device_pass"] = ((w.wall_s - w.setup_s) / k.kernel_s.max(1e-12)).into();
+    obj["multi_dispatches"] = sv.multi_dispatches.into();
+    obj["multi_solves"] = sv.multi_solves.into();
+    obj["multi_iterations"] = sv.multi_iterations.into();
+    obj["multi_answers"] = sv.multi_answers.into();
+    obj["multi_bytes_down_per_solve"] =
+        (sv.multi_bytes_down as f64 / sv.multi_solves.max(1) as f64).into();
+    obj["multi_mismatches"] = sv.multi_mismatches.into();
     stages_json(obj, "gpu", &g.stages);
 }
 
@@ -908,10 +938,11 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
     let cpu_rate = cpu.as_ref().map(|c| work / c.stats.wall_s);
     let (host_solve, device_solve) = match a.solve {
         BenchSolveArg::Host => (true, false),
-        BenchSolveArg::Device => (false, true),
+        BenchSolveArg::Device | BenchSolveArg::Resident => (false, true),
         BenchSolveArg::Both => (true, true),
     };
-    let (adapter, f64_ok, gpu, dev) = match &gpu_exec {
+    let resident_solve = a.solve == BenchSolveArg::Resident;
+    let (adapter, f64_ok, gpu, dev, res) = match &gpu_exec {
         Ok((exec @ Executor::Gpu(ctx), _)) => {
             let r = if host_solve {
                 Some(
@@ -936,11 +967,21 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             } else {
                 None
             };
-            (ctx.describe(), ctx.is_f64(), r, d)
+            let s = if resident_solve {
+                Some(
+                    timed(&members, exec, newton, a.slots, SolveMode::Resident, false)
+                        .context("GPU batch, resident")?,
+                )
+            } else {
+                None
+            };
+            (ctx.describe(), ctx.is_f64(), r, d, s)
         }
-        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None),
-        Err(e) => (format!("none ({e})"), false, None, None),
+        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None, None),
+        Err(e) => (format!("none ({e})"), false, None, None, None),
     };
+    let res_rate = res.as_ref().map(|g| work / g.stats.wall_s);
+    let res_ratio = res_rate.zip(cpu_rate).map(|(g, c)| g / c);
     let dev_rate = dev.as_ref().map(|g| work / g.stats.wall_s);
     let dev_ratio = dev_rate.zip(cpu_rate).map(|(g, c)| g / c);
     let gpu_rate = gpu.as_ref().map(|g| work / g.stats.wall_s);
@@ -1000,6 +1041,19 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             });
             gpu_model_json(&mut o, d, &a);
             obj["device"] = o;
+        }
+        if let Some(d) = &res {
+            let mut o = serde_json::json!({
+                "solve": "resident",
+                "iterations_per_submission": cosserat::batch::resident_k(),
+                "element_steps_per_s": res_rate,
+                "rod_steps_per_s": rod_steps / d.stats.wall_s,
+                "ratio": res_ratio,
+                "members_device_solved": d.stats.device_members.0,
+                "members_host_solved": d.stats.device_members.1,
+            });
+            gpu_model_json(&mut o, d, &a);
+            obj["resident"] = o;
         }
         println!("{obj}");
         return Ok(ExitCode::SUCCESS);
@@ -1087,6 +1141,28 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         }
         _ if device_solve => println!("gpu, device solve: not run ({adapter})"),
         _ => {}
+    }
+    if let (Some(g), Some(rate)) = (&res, res_rate) {
+        let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
+        let ratio = res_ratio.map_or_else(String::new, |r| format!("; ratio resident/cpu {r:.2}"));
+        println!(
+            "gpu, resident ({adapter}, K = {}): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed{ratio}",
+            cosserat::batch::resident_k(), w.wall_s, rate, rod_steps / w.wall_s, g.iters, g.failed
+        );
+        let member_steps = rod_steps.max(1.0);
+        println!(
+            "resident: {:.2} host syncs per step, {:.0} host thread µs per member-step, {:.0} B per member-step over the bus; {} Newton solves in {} multi-iteration dispatches ({} device iterations, {} answered without a dispatch, {} mismatches)",
+            sv.dispatches as f64 / a.steps.max(1) as f64,
+            1e6 * (w.host_s * rayon::current_num_threads() as f64 + w.serve_thread_s) / member_steps,
+            (k.bytes_up + k.bytes_down) as f64 / member_steps,
+            sv.multi_solves,
+            sv.multi_dispatches,
+            sv.multi_iterations,
+            sv.multi_answers,
+            sv.multi_mismatches
+        );
+    } else if resident_solve {
+        println!("gpu, resident: not run ({adapter})");
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -1,0 +1,306 @@
+//! `--solve resident` ≡ the CPU path, member by member, with one host sync per Newton
+//! solve.
+//!
+//! Device-resident members with full Newton run up to K Newton iterations per submission:
+//! the device stops each member where the host's Newton loop stops (the same test on the
+//! same residuals) and the host reads the iterations back once. Checked here, on lavapipe:
+//!
+//! * a cantilever batch with seeded random kicks, stiffnesses, time steps and tip loads,
+//!   members that end early, fail (staggered cap, Newton cap), fall back to the monolithic
+//!   strategy on the CPU kernel for a step and finish, run on the CPU kernel (generalized-α)
+//!   or are solved on the host (point mass): every member ends as on the CPU path (status,
+//!   reason, steps, Newton iterations, states within `STATE_RTOL`) and exactly as with
+//!   `--solve device`; no iteration the host asked for was missing on the device;
+//! * EM (no dissipation scalars: one Newton solve per step): one host sync per step for the
+//!   whole batch; the inexact EDMC strategy (a consistent-scalar Newton solve, then one
+//!   frozen-scalar round from the scalars the host computes from its solution): two;
+//!   states as on the CPU path;
+//! * the paper's frame, 15 steps.
+//!
+//! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
+//! is set, in which case it fails.
+
+mod common;
+use common::gpu;
+use cosserat::batch::{
+    bench_members, run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
+};
+use cosserat::integrator::{NewtonVariant, Scheme, Strategy};
+use cosserat::model::{NodalLoad, Vec3};
+use cosserat::observe::record::RunStatus;
+use cosserat::table::TimeTable;
+
+/// The bound on final states against the CPU path with the same strategy and
+/// Newton variant.
+const STATE_RTOL: f64 = 1e-10;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// 14 cantilevers of 10 elements (EDMC-2 unless `scheme` says otherwise) with random
+/// kicks, stiffnesses, time steps and ramped tip loads on 0..9; 9 ends after 3 steps,
+/// 10 needs the monolithic fallback (its staggered cap is too low for its kick), 11 fails on
+/// its Newton cap, 12 is generalized-α (CPU kernel), 13 has a point mass (host solve).
+fn members(scheme: Option<Scheme>, strategy: Strategy) -> Vec<Member> {
+    let mut ms = bench_members(14, 10, 6).unwrap();
+    let mut rng = Rng(0x5e51_de7f);
+    for (i, m) in ms.iter_mut().enumerate() {
+        if let Some(s) = scheme {
+            m.params.scheme = s;
+        }
+        m.params.strategy = strategy;
+        if i < 9 {
+            let tip = m.model.n_nodes() - 1;
+            let mut v = || Vec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
+            let (force, moment) = (2.0 * v(), 0.5 * v());
+            m.model.loads.push(NodalLoad {
+                node: tip,
+                force,
+                moment,
+                table: TimeTable {
+                    times: vec![0.0, 0.1],
+                    values: vec![0.2, 1.0],
+                },
+            });
+        }
+        let kick = 0.5 + 1.5 * rng.next();
+        m.model.velocity0.iter_mut().for_each(|v| *v *= kick);
+        let stiff = 0.5 + rng.next();
+        for e in m.model.elements.iter_mut() {
+            e.props.c_gamma *= stiff;
+            e.props.c_omega *= stiff;
+        }
+        m.params.dt *= 0.5 + rng.next();
+        m.params.t_end = 6.0 * m.params.dt;
+        match i {
+            9 => m.params.t_end = 3.0 * m.params.dt,
+            10 => {
+                m.params.max_outer = 3;
+                m.params.fallback = true;
+                m.model.velocity0.iter_mut().for_each(|v| *v *= 4.0);
+            }
+            11 => {
+                m.params.max_iter = 2;
+                m.params.fallback = false;
+            }
+            12 => m.params.scheme = Scheme::GenAlpha { rho_inf: 0.8 },
+            13 => {
+                let tip = m.model.point_mass.len() - 1;
+                m.model.point_mass[tip] = 0.05;
+            }
+            _ => {}
+        }
+    }
+    ms
+}
+
+fn run(
+    ms: &[Member],
+    exec: &Executor,
+    newton: NewtonVariant,
+    solve: SolveMode,
+    workers: usize,
+) -> (Vec<MemberResult>, BatchStats) {
+    let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
+    let stats = run_members(
+        ms,
+        exec,
+        BatchOptions {
+            keep_history: true,
+            keep_state: true,
+            workers,
+            newton: Some(newton),
+            solve,
+            ..Default::default()
+        },
+        |r| {
+            let i = r.index;
+            assert!(out[i].is_none(), "member {i} reported twice");
+            out[i] = Some(r);
+        },
+    )
+    .unwrap();
+    let out = out
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| r.unwrap_or_else(|| panic!("member {i} never reported")))
+        .collect();
+    (out, stats)
+}
+
+fn rel(a: impl Iterator<Item = f64> + Clone, b: impl Iterator<Item = f64>) -> f64 {
+    let scale = a.clone().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    a.zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
+}
+
+/// The largest relative difference of final positions, directors, velocities and energy
+/// histories, after asserting equal status, reason, steps and Newton iterations.
+fn compare(tag: &str, a: &MemberResult, b: &MemberResult) -> f64 {
+    assert_eq!(
+        a.outcome.status, b.outcome.status,
+        "{tag}: {:?}",
+        b.outcome.reason
+    );
+    assert_eq!(a.outcome.reason, b.outcome.reason, "{tag}");
+    assert_eq!(a.outcome.steps, b.outcome.steps, "{tag}");
+    assert_eq!(
+        a.outcome.newton_iters_total, b.outcome.newton_iters_total,
+        "{tag}"
+    );
+    assert_eq!(a.outcome.fallback_steps, b.outcome.fallback_steps, "{tag}");
+    assert_eq!(a.history.len(), b.history.len(), "{tag}");
+    let (sa, sb) = (a.state.as_ref().unwrap(), b.state.as_ref().unwrap());
+    assert_eq!(sa.t, sb.t, "{tag}");
+    [
+        rel(
+            sa.r.iter().flat_map(|x| x.iter().copied()),
+            sb.r.iter().flat_map(|x| x.iter().copied()),
+        ),
+        rel(
+            sa.d.iter()
+                .flat_map(|d| d.iter().flat_map(|m| m.iter().copied())),
+            sb.d.iter()
+                .flat_map(|d| d.iter().flat_map(|m| m.iter().copied())),
+        ),
+        rel(
+            sa.v.iter().flat_map(|x| x.iter().copied()),
+            sb.v.iter().flat_map(|x| x.iter().copied()),
+        ),
+        rel(
+            a.history.iter().map(|h| h.total),
+            b.history.iter().map(|h| h.total),
+        ),
+    ]
+    .into_iter()
+    .fold(0.0, f64::max)
+}
+
+/// Resident against the CPU path (the host's `fresh` Newton: the GPU paths run `full` as
+/// `fresh`, docs/gpu.md) and against `--solve device`, which asks the device for the same
+/// iterations one dispatch at a time; `workers` slots.
+fn check_batch(
+    label: &str,
+    ms: &[Member],
+    exec: &Executor,
+    workers: usize,
+) -> (Vec<MemberResult>, BatchStats) {
+    let (cpu, _) = run(ms, &Executor::Cpu, NewtonVariant::Fresh, SolveMode::Host, 0);
+    let (dev, ds) = run(ms, exec, NewtonVariant::Full, SolveMode::Device, workers);
+    let (res, rs) = run(ms, exec, NewtonVariant::Full, SolveMode::Resident, workers);
+    assert_eq!(rs.device_members, ds.device_members, "{label}");
+    let sv = &rs.serve;
+    assert_eq!(sv.multi_mismatches, 0, "{label}");
+    assert!(
+        sv.multi_solves > 0 && sv.multi_answers > 0,
+        "{label}: {sv:?}"
+    );
+    let (mut worst_cpu, mut worst_dev) = (0.0f64, 0.0f64);
+    for ((c, d), r) in cpu.iter().zip(&dev).zip(&res) {
+        let i = c.index;
+        worst_cpu = worst_cpu.max(compare(&format!("{label}, member {i}, cpu"), c, r));
+        worst_dev = worst_dev.max(compare(&format!("{label}, member {i}, device"), d, r));
+    }
+    println!(
+        "{label}: resident vs CPU {worst_cpu:.3e}, vs device {worst_dev:.3e}; dispatches {} (device {}), {} Newton solves in {} multi-iteration dispatches, {} device iterations, {} answered without a dispatch",
+        sv.dispatches, ds.serve.dispatches, sv.multi_solves, sv.multi_dispatches, sv.multi_iterations, sv.multi_answers
+    );
+    assert!(
+        worst_cpu <= STATE_RTOL,
+        "{label}: {worst_cpu:.3e} from the CPU path"
+    );
+    // The same iterations on the same device kernels: identical.
+    assert_eq!(
+        worst_dev, 0.0,
+        "{label}: resident differs from --solve device"
+    );
+    assert!(
+        sv.dispatches < ds.serve.dispatches,
+        "{label}: {} dispatches, device {}",
+        sv.dispatches,
+        ds.serve.dispatches
+    );
+    (res, rs)
+}
+
+#[test]
+fn resident_staggered_batch_with_failures_and_fallbacks_ends_as_on_the_cpu_path() {
+    let Some(exec) = gpu() else { return };
+    let ms = members(None, Strategy::Staggered);
+    // 5 slots for 14 members: the queue streams through.
+    let (res, rs) = check_batch("EDMC-2 staggered", &ms, &exec, 5);
+    assert_eq!(rs.device_members, (12, 1));
+    // The mix exercises what it claims to: a member whose device step failed and that
+    // finished on the CPU (monolithic fallback, CPU kernel and host solve), two that fail.
+    assert_eq!(res[10].outcome.status, RunStatus::Completed);
+    assert!(res[10].outcome.fallback_steps > 0, "{:?}", res[10].outcome);
+    assert_eq!(res[11].outcome.status, RunStatus::Failed);
+    assert!(res[..9]
+        .iter()
+        .all(|r| r.outcome.status == RunStatus::Completed));
+}
+
+#[test]
+fn resident_em_batch_syncs_once_per_step() {
+    let Some(exec) = gpu() else { return };
+    let mut ms = members(Some(Scheme::Em), Strategy::Staggered);
+    // The device-covered members that complete 6 steps, one slot each: their steps line
+    // up.
+    ms.truncate(9);
+    let (res, rs) = check_batch("EM", &ms, &exec, ms.len());
+    let steps = res.iter().map(|r| r.outcome.steps).max().unwrap() as u64;
+    // One Newton solve per step (no scalars): one sync per step for the whole batch,
+    // plus one per Newton solve the device stopped short of the host's acceptance.
+    let extra = rs.serve.dispatches - rs.serve.multi_dispatches;
+    println!(
+        "EM: {} dispatches for {steps} steps ({} multi-iteration, {extra} single)",
+        rs.serve.dispatches, rs.serve.multi_dispatches
+    );
+    assert_eq!(rs.serve.multi_dispatches, steps);
+    assert_eq!(extra, 0);
+}
+
+#[test]
+fn resident_inexact_batch_syncs_once_per_step() {
+    let Some(exec) = gpu() else { return };
+    let mut ms = members(None, Strategy::Inexact);
+    ms.truncate(9);
+    let (res, rs) = check_batch("EDMC-2 inexact", &ms, &exec, ms.len());
+    let steps = res.iter().map(|r| r.outcome.steps).max().unwrap() as u64;
+    println!(
+        "inexact: {} dispatches for {steps} steps",
+        rs.serve.dispatches
+    );
+    // Two Newton solves per step (the consistent-scalar solve, then one frozen-scalar
+    // round from the scalars the host computes from its solution): one sync each.
+    assert_eq!(rs.serve.multi_solves, 2 * steps * ms.len() as u64);
+    assert_eq!(rs.serve.dispatches, 2 * steps);
+}
+
+#[test]
+fn resident_frame_matches_cpu() {
+    let Some(exec) = gpu() else { return };
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .expect("the built-in frame scene exists")
+        .toml;
+    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
+    let mut params = scene.params;
+    params.t_end = 15.0 * params.dt;
+    params.strategy = Strategy::Staggered;
+    let ms = vec![Member {
+        model: scene.model.clone(),
+        params,
+    }];
+    let (res, rs) = check_batch("frame", &ms, &exec, 1);
+    assert_eq!(rs.device_members, (1, 0), "the frame is covered");
+    assert_eq!(res[0].outcome.status, RunStatus::Completed);
+    assert_eq!(res[0].outcome.steps, 15);
+}
