@@ -17,6 +17,7 @@ use cosserat::integrator::run::RunOutcome;
 use cosserat::integrator::{Scheme, Simulation};
 use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scene::parse_scene;
+use cosserat::study::{from_rest, FromRestConfig, FromRestRow, Outcome};
 
 mod common;
 
@@ -113,4 +114,75 @@ fn wandering_newton_solves_stop_early_on_the_frame() {
     assert!(recs
         .windows(2)
         .all(|w| w[1].total <= w[0].total + 1e-12 * w[0].total));
+}
+
+/// The frame set flying from rest by force pulses (examples/scenes).
+const FRAME: &str = include_str!("../examples/scenes/frame_from_rest.toml");
+
+/// `study from-rest` on a small grid: the frame under EM and α_Γv at its own Δt (0.2)
+/// completes; at Δt = 0.8 Newton diverges (no solution near any predictor, residual
+/// O(1), measured 1.0–1.9) and the cell says so; with pulses five times stronger, an
+/// element's end triads turn past their limit at Δt = 0.05 (measured 2.02 rad at
+/// t = 1.05), the scheme's refusal. Every cell's class is the one its reason gives, and a
+/// failed cell stopped before the end.
+#[test]
+fn the_from_rest_map_classifies_each_cell() {
+    let scene = parse_scene(FRAME, "frame_from_rest.toml").unwrap();
+    let cfg = FromRestConfig {
+        rows: vec![
+            FromRestRow::parse("em", 0.0).unwrap(),
+            FromRestRow::parse("alpha_gv", 0.5).unwrap(),
+        ],
+        dts: vec![0.2, 0.8],
+        t_end: 10.0,
+        jobs: 2,
+    };
+    let fr = from_rest(&scene, &cfg).unwrap();
+    assert_eq!(fr.cells.len(), 4);
+    for c in &fr.cells {
+        eprintln!(
+            "{} dt={}: {:?} at t = {}",
+            c.row.key, c.dt, c.outcome, c.t_reached
+        );
+        let want = if c.dt == 0.2 {
+            Outcome::Completed
+        } else {
+            Outcome::NewtonDivergence
+        };
+        assert_eq!(c.outcome, want, "{} dt={}: {:?}", c.row.key, c.dt, c.reason);
+        assert_eq!(
+            c.outcome,
+            Outcome::classify(
+                if c.reason.is_some() {
+                    RunStatus::Failed
+                } else {
+                    RunStatus::Completed
+                },
+                c.reason.as_deref()
+            )
+        );
+        if c.outcome == Outcome::Completed {
+            assert!((c.t_reached - 10.0).abs() < 1e-9);
+            // Fixed steps: the map's default (the scene sets no cut-back).
+            assert_eq!(c.cutback_steps, 0);
+        } else {
+            assert!(c.t_reached < 10.0);
+        }
+    }
+    let strong = FRAME
+        .replace("force = [0, 0, -4]", "force = [0, 0, -20]")
+        .replace("force = [0, 0, 8]", "force = [0, 0, 40]")
+        .replace("force = [0, -4, 0]", "force = [0, -20, 0]");
+    let scene = parse_scene(&strong, "strong.toml").unwrap();
+    let cfg = FromRestConfig {
+        rows: vec![FromRestRow::parse("em", 0.0).unwrap()],
+        dts: vec![0.05],
+        t_end: 2.0,
+        jobs: 1,
+    };
+    let fr = from_rest(&scene, &cfg).unwrap();
+    let c = &fr.cells[0];
+    assert_eq!(c.outcome, Outcome::ElementTurn, "{:?}", c.reason);
+    assert!(c.outcome.is_scheme());
+    assert!(c.t_reached > 0.5 && c.t_reached < 2.0, "{}", c.t_reached);
 }
