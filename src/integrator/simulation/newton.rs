@@ -470,7 +470,9 @@ fn expect_accept(history: &[f64], tol: f64) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::{at_floor, expect_accept, may_be_accepted, stagnated, CHORD_PREDICT};
+    use super::{
+        at_floor, expect_accept, may_be_accepted, rose_from_start, stagnated, CHORD_PREDICT,
+    };
 
     const TOL: f64 = 1e-11;
 
