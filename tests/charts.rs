@@ -322,9 +322,10 @@ use std::collections::HashMap;
 use cosserat::observe::record::RunStatus;
 use cosserat::output::{plot_accelerations, plot_snapshots, Snapshot};
 use cosserat::study::{
-    asymptotic_fit, plot_damping, plot_stability, plot_work_precision, Damping, DampingConfig,
-    DampingRow, MemberResult, ModeKind, SchemeKind, SchemeSpec, Stability, StabilityConfig,
-    WorkPrecision, WorkPrecisionRow, PARAMETERS,
+    asymptotic_fit, plot_damping, plot_from_rest, plot_stability, plot_work_precision, Damping,
+    DampingConfig, DampingRow, FromRest, FromRestCell, FromRestConfig, FromRestRow, MemberResult,
+    ModeKind, Outcome, SchemeKind, SchemeSpec, Stability, StabilityConfig, WorkPrecision,
+    WorkPrecisionRow, PARAMETERS,
 };
 
 /// One SVG element: tag name, attributes, and the text up to the next tag (unescaped).
@@ -660,6 +661,80 @@ fn stability_chart_shows_each_scheme_panel_and_the_fixed_step_title() {
     keep(&png);
     // Completed cells are green, the 8 % cell red.
     let (counts, inked) = coverage(&png, &["#1A9850", "#D73027"]);
+    assert!(inked > 0.2, "{inked}");
+    assert!(counts.iter().all(|&n| n > 1000), "{counts:?}");
+}
+
+#[test]
+fn from_rest_chart_colours_each_outcome_and_counts_them() {
+    let rows = vec![
+        FromRestRow::parse("em", 0.0).unwrap(),
+        FromRestRow::parse("chi_nu", 0.5).unwrap(),
+    ];
+    let dts = vec![0.02, 0.05, 0.1];
+    let cell = |row: FromRestRow, dt: f64, outcome: Outcome, reached: f64| FromRestCell {
+        row,
+        dt,
+        t_end: 2.0,
+        t_reached: reached,
+        outcome,
+        reason: (outcome != Outcome::Completed).then(|| "why".to_string()),
+        newton_iters_total: 10,
+        cutback_steps: 0,
+        max_energy_growth: -1e-12,
+    };
+    let cells = vec![
+        cell(rows[0], 0.02, Outcome::Completed, 2.0),
+        cell(rows[0], 0.05, Outcome::Completed, 2.0),
+        cell(rows[0], 0.1, Outcome::ElementTurn, 1.5),
+        cell(rows[1], 0.02, Outcome::Completed, 2.0),
+        cell(rows[1], 0.05, Outcome::SolverStall, 0.2),
+        cell(rows[1], 0.1, Outcome::NewtonDivergence, 1.0),
+    ];
+    let fr = FromRest {
+        scene: "synthetic".into(),
+        config: FromRestConfig {
+            rows,
+            dts,
+            t_end: 2.0,
+            jobs: 1,
+        },
+        cutback: 0,
+        cells,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let svg_path = dir.path().join("fr.svg");
+    plot_from_rest(&svg_path, &fr).unwrap();
+    keep(&svg_path);
+    let els = elements(&std::fs::read_to_string(&svg_path).unwrap());
+    let text = texts(&els);
+    assert!(
+        text.iter().any(|t| t
+            == "synthetic: from-rest stability map, fixed step (no cut-back), t_end = 2"),
+        "{text:?}"
+    );
+    for want in [
+        "EM",
+        "EDMC-1 χ_ν = 0.5",
+        "completed: 3 of 6",
+        "scheme: element end triads turned past the limit: 1 of 6",
+        "scheme: energy growth refused: 0 of 6",
+        "solver stall (came close, did not converge): 1 of 6",
+        "Newton diverged (Δt beyond its reach): 1 of 6",
+        "75%",
+        "10%",
+        "50%",
+        "0.050",
+    ] {
+        assert!(text.iter().any(|t| t == want), "no text {want:?}: {text:?}");
+    }
+    assert_no_text_overlaps(&els);
+
+    let png = dir.path().join("fr.png");
+    plot_from_rest(&png, &fr).unwrap();
+    keep(&png);
+    // Completed green, the stall red, the turn orange, the divergence blue: each drawn.
+    let (counts, inked) = coverage(&png, &["#1A9850", "#D73027", "#FDAE61", "#4575B4"]);
     assert!(inked > 0.2, "{inked}");
     assert!(counts.iter().all(|&n| n > 1000), "{counts:?}");
 }

@@ -218,6 +218,38 @@ fn study_commands_write_csv_and_png() {
     // em: 1 row × 2 Δt; edmc2: 2 × 2; gen-alpha: 1 × 2.
     assert_eq!(csv.lines().count(), 1 + 2 + 4 + 2);
 
+    // The from-rest map: one row per parameter and Δt, each classified.
+    let out = dir.path().join("fr");
+    let st = cosserat()
+        .args([
+            "study",
+            "from-rest",
+            "frame",
+            "--params",
+            "em,chi_v",
+            "--dt-range",
+            "0.1,0.4,3",
+            "--t-end",
+            "0.8",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for f in ["from_rest.csv", "from_rest.png", "summary.json"] {
+        assert!(std::fs::metadata(out.join(f)).unwrap().len() > 100, "{f}");
+    }
+    assert!(out.join("failures.txt").exists());
+    let csv = std::fs::read_to_string(out.join("from_rest.csv")).unwrap();
+    assert!(csv.starts_with("param,value,dt,t_reached,t_end,class,scheme_limit,newton_iters_total,cutback_steps,max_energy_growth,reason\n"));
+    assert_eq!(csv.lines().count(), 1 + 2 * 3);
+    assert!(String::from_utf8_lossy(&st.stdout).contains("from-rest map, 6 cells"));
+
     // A bad scheme name is bad input (exit code 2).
     let st = cosserat()
         .args([
@@ -509,6 +541,18 @@ fn every_numeric_option_takes_negative_values_and_gives_its_own_error() {
         (
             &["study", "stability", "frame", "--newton-tol", "-1"],
             "--newton-tol: must be a finite number > 0 (got -1)",
+        ),
+        (
+            &["study", "from-rest", "frame", "--params", "em,alpha"],
+            "unknown parameter `alpha`",
+        ),
+        (
+            &["study", "from-rest", "frame", "--dt-range", "0.1,0.2,2.5"],
+            "--dt-range: COUNT must be a whole number from 1 to 1000 (got 2.5)",
+        ),
+        (
+            &["study", "from-rest", "frame", "--dt-range", "0.1,0.2"],
+            "--dt-range: expected MIN,MAX,COUNT (got 2 values)",
         ),
         // Echoed numbers stay short: shortest round-trip text, scientific when tiny.
         (

@@ -115,6 +115,11 @@ enum StudyCommand {
     /// Fraction of the run completed over a grid Δt × dissipation parameter per scheme:
     /// writes stability.csv and stability.png.
     Stability(StabilityArgs),
+    /// A scene loaded from rest under EM and each dissipation parameter alone, over a log
+    /// grid of Δt, with fixed steps: each cell completes or fails with its reason
+    /// classified as the scheme's (a limit its checks refuse) or a solver stall; writes
+    /// from_rest.csv and from_rest.png.
+    FromRest(FromRestArgs),
     /// The dissipation guide: modal damping ratio of the first axial and bending mode of
     /// a clamped rod under each dissipation parameter: writes damping.csv and damping.png.
     Damping(DampingArgs),
@@ -228,6 +233,30 @@ struct StabilityArgs {
     /// GPU adapter: first adapter whose name contains this (case-insensitive).
     #[arg(long)]
     adapter: Option<String>,
+}
+
+#[derive(clap::Args, Debug)]
+struct FromRestArgs {
+    #[command(flatten)]
+    common: StudyCommon,
+    /// Rows of the map: `em` and dissipation parameters, each alone at `--value`
+    /// (chi_gamma, chi_omega, chi_v, chi_nu: EDMC-1; alpha_gv, alpha_gn, alpha_ov,
+    /// alpha_on: EDMC-2).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "em,chi_gamma,chi_omega,chi_v,chi_nu,alpha_gv,alpha_gn,alpha_ov,alpha_on"
+    )]
+    params: Vec<String>,
+    /// Value of each dissipation parameter.
+    #[arg(long, default_value_t = 0.5)]
+    value: f64,
+    /// Time steps (default: `--dt-range`).
+    #[arg(long, value_delimiter = ',', conflicts_with = "dt_range")]
+    dts: Option<Vec<f64>>,
+    /// Log grid of time steps `MIN,MAX,COUNT` (default: the scene's Δt/4 to 4Δt, 9 values).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX,COUNT")]
+    dt_range: Option<Vec<f64>>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -553,6 +582,7 @@ fn main() -> ExitCode {
         Some(Command::Reproduce { out, quick, no_vtk }) => reproduce_command(&out, quick, !no_vtk),
         Some(Command::Study(StudyCommand::WorkPrecision(a))) => work_precision_command(&a),
         Some(Command::Study(StudyCommand::Stability(a))) => stability_command(&a),
+        Some(Command::Study(StudyCommand::FromRest(a))) => from_rest_command(&a),
         Some(Command::Study(StudyCommand::Damping(a))) => damping_command(&a),
         Some(Command::Sweep(a)) => cmds::sweep_command(a),
         Some(Command::Bench(a)) => cmds::bench_command(a),
@@ -1077,6 +1107,67 @@ fn damping_command(a: &DampingArgs) -> Result<ExitCode> {
         "{}: damping study; outputs in {}",
         scene.name,
         a.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn from_rest_command(a: &FromRestArgs) -> Result<ExitCode> {
+    // Every option is checked before the output directory is created.
+    let scene = study_scene(&a.common)?;
+    let rows = a
+        .params
+        .iter()
+        .map(|k| study::FromRestRow::parse(k, a.value))
+        .collect::<Result<Vec<_>, _>>()
+        .context("--params")?;
+    let dt0 = scene.params.dt;
+    let dts = match (&a.dts, &a.dt_range) {
+        (Some(d), _) => {
+            check_positive("--dts", d)?;
+            d.clone()
+        }
+        (None, Some(r)) => {
+            if r.len() != 3 {
+                bail!(
+                    "--dt-range: expected MIN,MAX,COUNT (got {} values)",
+                    r.len()
+                );
+            }
+            check_positive("--dt-range", &r[..2])?;
+            let n = r[2];
+            if !(n >= 1.0 && n.fract() == 0.0 && n <= 1000.0) {
+                bail!(
+                    "--dt-range: COUNT must be a whole number from 1 to 1000 (got {})",
+                    num(n)
+                );
+            }
+            study::log_grid(r[0], r[1], n as usize)
+        }
+        (None, None) => study::log_grid(dt0 / 4.0, 4.0 * dt0, 9),
+    };
+    let cfg = study::FromRestConfig {
+        rows,
+        dts,
+        t_end: a.common.t_end.unwrap_or(scene.params.t_end),
+        jobs: default_jobs(a.common.jobs),
+    };
+    cfg.check()?;
+    write_study_summary(&a.common, "from-rest", &scene, cfg.t_end, false)?;
+    let fr = study::from_rest(&scene, &cfg)?;
+    study::write_from_rest_csv(&a.common.out.join("from_rest.csv"), &fr)?;
+    study::plot_from_rest(&a.common.out.join("from_rest.png"), &fr)?;
+    study::write_failures(&a.common.out.join("failures.txt"), &fr.failures())?;
+    let counts = fr
+        .counts()
+        .iter()
+        .map(|(o, n)| format!("{} {n}", o.name()))
+        .collect::<Vec<_>>()
+        .join(", ");
+    println!(
+        "{}: from-rest map, {} cells: {counts}; outputs in {}",
+        scene.name,
+        fr.cells.len(),
+        a.common.out.display()
     );
     Ok(ExitCode::SUCCESS)
 }

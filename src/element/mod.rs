@@ -395,6 +395,23 @@ pub fn consistent_scalars(
     inc: &Increment,
     k: &StepConsts,
 ) -> (FrozenScalars, LocalScalars, Kinematics) {
+    consistent_scalars_near(data, st, eps_n, inc, k, f64::NAN)
+}
+
+/// [`consistent_scalars`] with the director factor on the branch of `c_nu_ref`, the
+/// factor the current iterate was solved with: where its equation has several roots (at
+/// a turning point of the director motion), the one nearest the reference
+/// ([`director_factor::solve_fixed_point_near`]), so that the scalars follow one branch
+/// from iterate to iterate instead of jumping between roots. `NaN`: no reference (as
+/// [`consistent_scalars`]).
+pub fn consistent_scalars_near(
+    data: &ElementData,
+    st: &ElementState,
+    eps_n: &Vector6<f64>,
+    inc: &Increment,
+    k: &StepConsts,
+    c_nu_ref: f64,
+) -> (FrozenScalars, LocalScalars, Kinematics) {
     let p = &data.props;
     let dt_h = k.dt / p.h;
     let mut c_nu = 0.0;
@@ -410,7 +427,7 @@ pub fn consistent_scalars(
         } else {
             f64::NEG_INFINITY
         };
-        c_nu = director_factor::solve_fixed_point(law, c_min);
+        c_nu = director_factor::solve_fixed_point_near(law, c_min, c_nu_ref);
     }
     let kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
     let mut loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);

@@ -553,6 +553,18 @@ pub fn consistent_scalars(
     inc: &PIncrement,
     k: &StepConsts,
 ) -> (FrozenScalars, LocalScalars, PKinematics) {
+    consistent_scalars_near(pd, st, eps_n, inc, k, f64::NAN)
+}
+
+/// Planar twin of [`super::consistent_scalars_near`].
+pub fn consistent_scalars_near(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    k: &StepConsts,
+    c_nu_ref: f64,
+) -> (FrozenScalars, LocalScalars, PKinematics) {
     let dt_h = k.dt / pd.h;
     let mut c_nu = 0.0;
     if k.scheme.director_dissipation() {
@@ -567,7 +579,7 @@ pub fn consistent_scalars(
         } else {
             f64::NEG_INFINITY
         };
-        c_nu = super::director_factor::solve_fixed_point(law, c_min);
+        c_nu = super::director_factor::solve_fixed_point_near(law, c_min, c_nu_ref);
     }
     let kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
     let mut loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);

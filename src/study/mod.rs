@@ -17,6 +17,10 @@
 //!   it got and the largest relative growth of `H − H_0 − W` (energy created beyond the
 //!   external work).
 //!
+//! * [`from_rest`]: a scene loaded from rest under EM and each dissipation parameter
+//!   alone, over a log grid of Δt; each failure classified as the scheme's or a solver
+//!   stall ([`Outcome`]).
+//!
 //! * [`damping`]: the dissipation guide, the modal damping ratio of the first axial and
 //!   bending mode of a clamped rod under each dissipation parameter.
 //!
@@ -24,6 +28,7 @@
 //! Δt and end time), run on `jobs` threads ([`parallel_map`]); nothing else is shared.
 
 mod damping;
+mod from_rest;
 mod plot;
 mod write;
 
@@ -31,10 +36,15 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 pub use damping::{damping, Damping, DampingConfig, DampingRow, ModeKind, Parameter, PARAMETERS};
-pub use plot::{plot_damping, plot_stability, plot_work_precision};
+pub use from_rest::{
+    default_rows, from_rest, log_grid, run_cell, FromRest, FromRestCell, FromRestConfig,
+    FromRestRow, Outcome, STALL_RESIDUAL,
+};
+pub use plot::{plot_damping, plot_from_rest, plot_stability, plot_work_precision};
 pub use write::{
-    write_damping_csv, write_failures, write_stability_csv, write_work_precision_csv,
-    DAMPING_COLUMNS, STABILITY_COLUMNS, WORK_PRECISION_COLUMNS,
+    write_damping_csv, write_failures, write_from_rest_csv, write_stability_csv,
+    write_work_precision_csv, DAMPING_COLUMNS, FROM_REST_COLUMNS, STABILITY_COLUMNS,
+    WORK_PRECISION_COLUMNS,
 };
 
 use crate::batch::{run_members, BatchOptions, Executor, Member};

@@ -1,6 +1,7 @@
 //! `work_precision.png` (log-log error against wall time, one line per scheme),
 //! `stability.png` (heat maps of the fraction of the run completed, one panel per scheme)
-//! and `damping.png` (modal damping ratio per dissipation parameter). Same embedded font as
+//! `from_rest.png` (the from-rest map: each cell coloured by its outcome) and
+//! `damping.png` (modal damping ratio per dissipation parameter). Same embedded font as
 //! the run charts; a path ending in `.svg` is drawn as SVG with the same layout.
 
 use std::path::Path;
@@ -10,8 +11,8 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{
-    Damping, ModeKind, OrderFit, SchemeKind, SchemeSpec, Stability, WorkPrecision, ORDER_AGREEMENT,
-    PARAMETERS,
+    Damping, FromRest, ModeKind, OrderFit, Outcome, SchemeKind, SchemeSpec, Stability,
+    WorkPrecision, ORDER_AGREEMENT, PARAMETERS,
 };
 use crate::observe::record::RunStatus;
 use crate::output::{ensure_font, num, OutputError, FONT};
@@ -832,5 +833,169 @@ fn draw_damping<DB: DrawingBackend>(
                 .map_err(e)?;
         }
     }
+    Ok(())
+}
+
+/// Colour of a from-rest outcome: green completed, the scheme's limits orange, purple and
+/// grey, Newton's divergence blue, a solver stall red.
+pub fn outcome_colour(o: Outcome) -> RGBColor {
+    match o {
+        Outcome::Completed => RGBColor(26, 152, 80),
+        Outcome::ElementTurn => RGBColor(253, 174, 97),
+        Outcome::EnergyGrowth => RGBColor(148, 103, 189),
+        Outcome::NonFinite => RGBColor(120, 120, 120),
+        Outcome::SolverStall => RGBColor(215, 48, 39),
+        Outcome::NewtonDivergence => RGBColor(69, 117, 180),
+    }
+}
+
+/// Width of the row-label column of the from-rest chart.
+const FR_LABEL_W: u32 = 230;
+
+/// Draws `from_rest.png`: one row per scheme (EM, each dissipation parameter alone), one
+/// column per Δt (log grid); each cell coloured by its [`Outcome`] (legend with the counts
+/// below), the percentage of the end time reached written in failed cells when the
+/// columns are wide enough. The title says whether the steps were fixed.
+pub fn plot_from_rest(path: &Path, fr: &FromRest) -> Result<(), OutputError> {
+    let ny = fr.config.rows.len().max(1) as u32;
+    let size = (1500, 60 + 44 * ny + 90 + 110);
+    render!(path, size, draw_from_rest(fr))
+}
+
+fn draw_from_rest<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    fr: &FromRest,
+) -> Result<(), String> {
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    root.fill(&WHITE).map_err(e)?;
+    let (w, h) = root.dim_in_pixel();
+    let (head, rest) = root.split_vertically(60);
+    let (body, foot) = rest.split_vertically(h - 60 - 110);
+    let steps = if fr.cutback == 0 {
+        "fixed step (no cut-back)".to_string()
+    } else {
+        format!("cut-back up to {} sub-steps", 1u64 << fr.cutback.min(20))
+    };
+    head.draw(&Text::new(
+        format!(
+            "{}: from-rest stability map, {steps}, t_end = {}",
+            fr.scene,
+            num(fr.config.t_end)
+        ),
+        (w as i32 / 2, 30),
+        (FONT, 26)
+            .into_font()
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Center, VPos::Center)),
+    ))
+    .map_err(e)?;
+    let rows = &fr.config.rows;
+    let dts = &fr.config.dts;
+    let (nx, ny) = (dts.len(), rows.len());
+    let mut chart = ChartBuilder::on(&body)
+        .margin(12)
+        .margin_right(30)
+        .x_label_area_size(60)
+        .y_label_area_size(FR_LABEL_W)
+        .build_cartesian_2d(0f64..nx as f64, 0f64..ny as f64)
+        .map_err(e)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_labels(0)
+        .y_labels(0)
+        .x_desc("time step Δt [s] (log grid)")
+        .axis_desc_style((FONT, 17))
+        .draw()
+        .map_err(e)?;
+    let tick = (FONT, 14).into_font().color(&BLACK);
+    // At most about 12 Δt labels: every k-th column.
+    let every = nx.div_ceil(12).max(1);
+    for (i, dt) in dts.iter().enumerate() {
+        if i % every != 0 && i + 1 != nx {
+            continue;
+        }
+        let (px, py) = chart.backend_coord(&(i as f64 + 0.5, 0.0));
+        root.draw(&Text::new(
+            format!("{dt:.3}"),
+            (px, py + 8),
+            tick.pos(Pos::new(HPos::Center, VPos::Top)),
+        ))
+        .map_err(e)?;
+    }
+    for (j, r) in rows.iter().enumerate() {
+        let (px, py) = chart.backend_coord(&(0.0, j as f64 + 0.5));
+        root.draw(&Text::new(
+            r.label(),
+            (px - 8, py),
+            (FONT, 15)
+                .into_font()
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Right, VPos::Center)),
+        ))
+        .map_err(e)?;
+    }
+    // Percentages in failed cells where a column is wide enough for "100%".
+    let wide = nx <= 20;
+    for c in &fr.cells {
+        let (Some(i), Some(j)) = (
+            dts.iter().position(|&d| d == c.dt),
+            rows.iter().position(|r| *r == c.row),
+        ) else {
+            continue;
+        };
+        let (x, y) = (i as f64, j as f64);
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(x, y), (x + 1.0, y + 1.0)],
+                outcome_colour(c.outcome).filled(),
+            )))
+            .map_err(e)?;
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(x, y), (x + 1.0, y + 1.0)],
+                WHITE.stroke_width(1),
+            )))
+            .map_err(e)?;
+        if wide && c.outcome != Outcome::Completed {
+            let style = (FONT, 13)
+                .into_font()
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Center, VPos::Center));
+            let pct = 100.0 * (c.t_reached / c.t_end).clamp(0.0, 1.0);
+            chart
+                .draw_series(std::iter::once(
+                    EmptyElement::at((x + 0.5, y + 0.5))
+                        + Text::new(format!("{pct:.0}%"), (0, 0), style),
+                ))
+                .map_err(e)?;
+        }
+    }
+    // Legend: one swatch per outcome with its count, in two columns.
+    let (_, fy) = foot.get_base_pixel();
+    let counts = fr.counts();
+    let total = fr.cells.len();
+    for (k, (o, n)) in counts.iter().enumerate() {
+        let (col, line) = ((k % 3) as i32, (k / 3) as i32);
+        let x0 = 40 + col * 480;
+        let y0 = fy + 16 + 28 * line;
+        root.draw(&Rectangle::new(
+            [(x0, y0 - 9), (x0 + 18, y0 + 9)],
+            outcome_colour(*o).filled(),
+        ))
+        .map_err(e)?;
+        root.draw(&Text::new(
+            format!("{}: {n} of {total}", o.label()),
+            (x0 + 26, y0),
+            left(16, &BLACK),
+        ))
+        .map_err(e)?;
+    }
+    root.draw(&Text::new(
+        "scheme: a step its checks refuse (a solution exists). Newton diverged: residual ≥ 1e-3 in every attempt. Stall: an attempt came close. Failed cells: % of t_end reached.",
+        (40, fy + 16 + 28 * 2 + 6),
+        left(15, &BLACK),
+    ))
+    .map_err(e)?;
     Ok(())
 }

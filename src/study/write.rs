@@ -1,9 +1,9 @@
-//! `work_precision.csv` and `stability.csv`.
+//! `work_precision.csv`, `stability.csv`, `from_rest.csv` and `damping.csv`.
 
 use std::io::Write;
 use std::path::Path;
 
-use super::{Damping, Stability, WorkPrecision};
+use super::{Damping, FromRest, Stability, WorkPrecision};
 use crate::observe::record::RunStatus;
 use crate::output::OutputError;
 
@@ -187,4 +187,46 @@ pub fn write_damping_csv(path: &Path, d: &Damping) -> Result<(), OutputError> {
         })
         .collect();
     write_lines(path, &DAMPING_COLUMNS, &lines)
+}
+
+/// Header of `from_rest.csv`: one row per cell; `class` is `completed`, a scheme's limit
+/// (`element_turn`, `energy_growth`, `non_finite`) or `solver_stall`
+/// ([`super::Outcome`]); `reason` the failure's text (quoted, empty when completed).
+pub const FROM_REST_COLUMNS: [&str; 11] = [
+    "param",
+    "value",
+    "dt",
+    "t_reached",
+    "t_end",
+    "class",
+    "scheme_limit",
+    "newton_iters_total",
+    "cutback_steps",
+    "max_energy_growth",
+    "reason",
+];
+
+/// Writes `from_rest.csv` (columns [`FROM_REST_COLUMNS`]).
+pub fn write_from_rest_csv(path: &Path, fr: &FromRest) -> Result<(), OutputError> {
+    let lines: Vec<String> = fr
+        .cells
+        .iter()
+        .map(|c| {
+            format!(
+                "{},{},{},{},{},{},{},{},{},{:e},\"{}\"",
+                c.row.key,
+                c.row.value,
+                c.dt,
+                c.t_reached,
+                c.t_end,
+                c.outcome.name(),
+                c.outcome.is_scheme(),
+                c.newton_iters_total,
+                c.cutback_steps,
+                c.max_energy_growth,
+                c.reason.as_deref().unwrap_or("").replace('"', "'")
+            )
+        })
+        .collect();
+    write_lines(path, &FROM_REST_COLUMNS, &lines)
 }

@@ -3,7 +3,7 @@
 //! dissipation identity misses its tolerance is refused, never accepted.
 
 use super::{Mode, Simulation};
-use crate::element::{consistent_scalars, kinematics, FrozenScalars};
+use crate::element::{consistent_scalars_near, kinematics, FrozenScalars};
 use crate::integrator::invariants::{invariants, Invariants};
 use crate::integrator::state::State;
 
@@ -28,7 +28,9 @@ impl Simulation {
             let st = self.state.element(&self.model, e);
             let eps_n = self.state.eps[e];
             let data = &self.data[e];
-            let (sc, loc, kin_c) = consistent_scalars(data, &st, &eps_n, &inc, &k);
+            // On the branch of the director factor the increment was solved with.
+            let (sc, loc, kin_c) =
+                consistent_scalars_near(data, &st, &eps_n, &inc, &k, self.frozen[e].c_nu);
             diss += data.props.h * loc.dissipation_density(&kin_c.inputs, data.props.a_rho);
             consistent.push(sc);
             // The frozen kinematics differ from the consistent ones only through c_ν

@@ -9,8 +9,8 @@ use std::time::Instant;
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::lanes::pack6;
 use crate::element::{
-    consistent_scalars, kinematics_core, monolithic_correction, residual_tangent_into, ElementData,
-    ElementEval, ElementState, FrozenScalars, Increment, NDOF,
+    consistent_scalars_near, kinematics_core, monolithic_correction, residual_tangent_into,
+    ElementData, ElementEval, ElementState, FrozenScalars, Increment, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
@@ -170,11 +170,14 @@ impl Simulation {
                     (s, kinematics_core(data, &st, &eps_n, &inc, s.c_nu, dt))
                 }
                 Mode::Consistent => {
-                    let (s, _, kin) = consistent_scalars(data, &st, &eps_n, &inc, &k);
+                    let (s, _, kin) =
+                        consistent_scalars_near(data, &st, &eps_n, &inc, &k, self.frozen[e].c_nu);
                     (s, kin)
                 }
             };
             residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
+            // The next iterate's director factor follows this one's branch.
+            self.frozen[e].c_nu = s.c_nu;
             if tangent
                 && mode == Mode::Consistent
                 && k.scheme.is_dissipative()

@@ -7,7 +7,7 @@
 //! and the free rows vanish, `ΔH = W_loads + W_sup − D` closes exactly.
 
 use super::{Mode, Simulation};
-use crate::element::{consistent_scalars, kinematics, residual_tangent, th_idx, u_idx};
+use crate::element::{consistent_scalars_near, kinematics, residual_tangent, th_idx, u_idx};
 use crate::integrator::dofs::NONE;
 use crate::integrator::links;
 use crate::model::Vec3;
@@ -42,7 +42,8 @@ impl Simulation {
                     (s, kinematics(data, &st, &eps_n, &inc, s.c_nu, dt))
                 }
                 Mode::Consistent => {
-                    let (s, _, kin) = consistent_scalars(data, &st, &eps_n, &inc, &k);
+                    let (s, _, kin) =
+                        consistent_scalars_near(data, &st, &eps_n, &inc, &k, self.frozen[e].c_nu);
                     (s, kin)
                 }
             };

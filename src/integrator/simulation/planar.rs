@@ -183,8 +183,9 @@ impl Simulation {
         for (e, pd) in pk.data.iter().enumerate() {
             let inc = PIncrement::from_local(&self.gather_planar(pk, e, q));
             let (st, eps_n) = &pk.states[e];
+            // On the branch of the director factor the increment was solved with.
             let (sc, loc, kin_c): (FrozenScalars, LocalScalars, _) =
-                planar::consistent_scalars(pd, st, eps_n, &inc, &k);
+                planar::consistent_scalars_near(pd, st, eps_n, &inc, &k, self.frozen[e].c_nu);
             diss += pd.h * loc.dissipation_density(&kin_c.inputs, pd.a_rho);
             consistent.push(sc);
             // The frozen kinematics differ from the consistent ones only through c_ν
@@ -312,7 +313,16 @@ impl Simulation {
                     (s, planar::kinematics_core(pd, st, eps_n, &inc, s.c_nu, dt))
                 }
                 Mode::Consistent => {
-                    let (s, _, kin) = planar::consistent_scalars(pd, st, eps_n, &inc, &k);
+                    let (s, _, kin) = planar::consistent_scalars_near(
+                        pd,
+                        st,
+                        eps_n,
+                        &inc,
+                        &k,
+                        self.frozen[e].c_nu,
+                    );
+                    // The next iterate's director factor follows this one's branch.
+                    self.frozen[e].c_nu = s.c_nu;
                     (s, kin)
                 }
             };

@@ -147,10 +147,16 @@ impl Simulation {
             residuals: vec![],
         };
         let (lambda0, inv0) = (self.state.lambda.clone(), self.inv);
+        // Each predictor starts from the step's scalars (a monolithic solve moves the
+        // director factors along its iterates).
+        let frozen0 = self.frozen.clone();
         self.step_start = true;
         let n_predictors = predictors.len();
         for (k, pred) in predictors.into_iter().enumerate() {
             self.last_predictor = k + 1 == n_predictors;
+            if k > 0 {
+                self.frozen.clone_from(&frozen0);
+            }
             let mut q = pred;
             let mut multipliers = links::MultiplierIteration::default();
             // Augmented-Lagrangian rounds (a single round without links): each round is a

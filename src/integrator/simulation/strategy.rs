@@ -59,6 +59,7 @@ impl Simulation {
             Ok(x) => Ok(x),
             Err(first) => {
                 q.copy_from_slice(&q0);
+                self.frozen.clone_from(&frozen0);
                 match self.solve_by(fallback, q, total_iters).await {
                     Ok(x) => {
                         self.fell_back = true;
