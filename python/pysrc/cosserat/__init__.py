@@ -65,6 +65,23 @@ class Table(_Columns):
     """The members of a sweep: one array (or list of str) per column of `members.csv`."""
 
 
+def _vec3(key: str, v) -> Optional[List[float]]:
+    """`v` as a list of 3 floats (None stays None)."""
+    if v is None:
+        return None
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != (3,):
+        raise ValueError(f"{key}: expected 3 numbers, got shape {a.shape}")
+    return a.tolist()
+
+
+def _at(at):
+    """A node index (int) or a reference position (list of 3 floats)."""
+    if isinstance(at, (int, np.integer)) and not isinstance(at, bool):
+        return int(at)
+    return _vec3("at", at)
+
+
 class Simulation(_Simulation):
     """One simulation of a scene, stepped from Python (see `cosserat._cosserat.Simulation`)."""
 
@@ -76,6 +93,39 @@ class Simulation(_Simulation):
     @velocities.setter
     def velocities(self, v) -> None:
         _Simulation.velocities.__set__(self, np.ascontiguousarray(v, dtype=np.float64))
+
+    def set_load(self, index: int, force=None, moment=None) -> None:
+        """Sets load `index` (see `loads`) to a constant force and/or moment [3] from the
+        current level on (a part not given keeps its current value)."""
+        _Simulation.set_load(self, int(index), _vec3("force", force), _vec3("moment", moment))
+
+    def add_load(self, at, force=None, moment=None) -> int:
+        """Adds a constant force and/or moment [3] at `at` (node index or reference
+        position) from the current level on; returns its index in `loads`."""
+        return _Simulation.add_load(self, _at(at), _vec3("force", force), _vec3("moment", moment))
+
+    def set_support(
+        self, at, position=None, rotation=None, velocity=None, angular_velocity=None
+    ) -> None:
+        """Moves the driven support at `at` (node index or reference position) from the
+        current level on: `position` [3] / `rotation` (rotation vector [3] or matrix
+        [3, 3]) are reached at the next level and held; `velocity` / `angular_velocity`
+        [3] hold until commanded again; a part not given keeps its command."""
+        if rotation is not None:
+            r = np.asarray(rotation, dtype=np.float64)
+            if r.shape not in ((3,), (3, 3)):
+                raise ValueError(
+                    f"rotation: expected a rotation vector [3] or matrix [3, 3], got shape {r.shape}"
+                )
+            rotation = r.tolist()
+        _Simulation.set_support(
+            self,
+            _at(at),
+            position=_vec3("position", position),
+            rotation=rotation,
+            velocity=_vec3("velocity", velocity),
+            angular_velocity=_vec3("angular_velocity", angular_velocity),
+        )
 
     @property
     def trajectory(self) -> Dict[str, np.ndarray]:
