@@ -1133,6 +1133,93 @@ fn _run_sweep<'py>(
     Ok(d)
 }
 
+/// Times the benchmark batch of `cosserat bench` (the benchmark cantilever as `rods` members of `elements` elements over `steps` steps, EDMC-2) on the CPU path
+/// and, where a GPU exists, the GPU path; the GIL is released while it runs. Returns the
+/// object `cosserat bench --json` prints, as a JSON string.
+#[pyfunction]
+#[pyo3(signature = (rods = 64, elements = 30, steps = 20, adapter = None, cpu_only = false, gpu_only = false, newton = "full", strategy = "auto", slots = 0, solve = "host", host_update = false))]
+#[allow(clippy::too_many_arguments)]
+fn _bench(
+    py: Python<'_>,
+    rods: i64,
+    elements: i64,
+    steps: i64,
+    adapter: Option<String>,
+    cpu_only: bool,
+    gpu_only: bool,
+    newton: &str,
+    strategy: &str,
+    slots: i64,
+    solve: &str,
+    host_update: bool,
+) -> PyResult<String> {
+    use cosserat::bench::{BenchError, BenchOptions, BenchSolve};
+    use cosserat::integrator::{NewtonVariant, Strategy};
+    let count = |key: &str, v: i64, min: i64| -> PyResult<usize> {
+        if v < min {
+            return Err(PyValueError::new_err(format!(
+                "{key}: must be an integer ≥ {min} (got {v})"
+            )));
+        }
+        Ok(v as usize)
+    };
+    if cpu_only && gpu_only {
+        return Err(PyValueError::new_err(
+            "cpu_only and gpu_only exclude each other",
+        ));
+    }
+    let opts = BenchOptions {
+        rods: count("rods", rods, 1)?,
+        elements: count("elements", elements, 1)?,
+        steps: count("steps", steps, 1)?,
+        adapter,
+        cpu_only,
+        gpu_only,
+        newton: match newton {
+            "full" => NewtonVariant::Full,
+            "fresh" => NewtonVariant::Fresh,
+            "modified" => NewtonVariant::Modified,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "newton: unknown variant `{other}` (expected full, fresh or modified)"
+                )))
+            }
+        },
+        strategy: match strategy {
+            "auto" => Strategy::Auto,
+            "staggered" => Strategy::Staggered,
+            "monolithic" => Strategy::Monolithic,
+            "inexact" => Strategy::Inexact,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "strategy: unknown strategy `{other}` (expected auto, staggered, monolithic or inexact)"
+                )))
+            }
+        },
+        slots: count("slots", slots, 0)?,
+        solve: match solve {
+            "host" => BenchSolve::Host,
+            "device" => BenchSolve::Device,
+            "both" => BenchSolve::Both,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "solve: unknown mode `{other}` (expected host, device or both)"
+                )))
+            }
+        },
+        host_update,
+    };
+    let run = py
+        .allow_threads(|| cosserat::bench::run(&opts))
+        .map_err(|e| match e {
+            BenchError::Option { .. } | BenchError::Limit(_) => {
+                PyValueError::new_err(e.to_string())
+            }
+            _ => PyRuntimeError::new_err(e.to_string()),
+        })?;
+    Ok(run.json().to_string())
+}
+
 /// Names of the built-in scenes.
 #[pyfunction]
 fn builtin_scenes() -> Vec<&'static str> {
@@ -1149,6 +1236,7 @@ fn _cosserat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Simulation>()?;
     m.add_function(wrap_pyfunction!(builtin_scenes, m)?)?;
     m.add_function(wrap_pyfunction!(_run_sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(_bench, m)?)?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -14,6 +14,7 @@ See docs/python.md for the whole API.
 from __future__ import annotations
 
 import csv
+import json
 import itertools
 import os
 import tempfile
@@ -23,7 +24,7 @@ import numpy as np
 
 from ._cosserat import Scene, SceneError, __version__, builtin_scenes
 from ._cosserat import Simulation as _Simulation
-from ._cosserat import _run_sweep
+from ._cosserat import _bench, _run_sweep
 
 __all__ = [
     "Scene",
@@ -32,6 +33,7 @@ __all__ = [
     "History",
     "Table",
     "sweep",
+    "bench",
     "read_members",
     "builtin_scenes",
     "__version__",
@@ -225,3 +227,40 @@ def sweep(
         f.write(_sweep_toml("base.toml", varied, mode))
     _run_sweep(spec, folder, backend=backend, adapter=adapter, resume=resume, histories=histories)
     return read_members(os.path.join(folder, "members.csv"))
+
+
+def bench(
+    rods: int = 64,
+    elements: int = 30,
+    steps: int = 20,
+    adapter: Optional[str] = None,
+    cpu_only: bool = False,
+    gpu_only: bool = False,
+    newton: str = "full",
+    strategy: str = "auto",
+    slots: int = 0,
+    solve: str = "host",
+    host_update: bool = False,
+) -> Dict[str, Any]:
+    """Times the batch benchmark of `cosserat bench`: the benchmark cantilever as `rods`
+    members of `elements` elements over `steps` EDMC-2 steps, on the CPU path and (unless
+    `cpu_only`, where a GPU exists) the GPU path. The options are the command's
+    (`newton`: full, fresh, modified; `strategy`: auto, staggered, monolithic, inexact;
+    `solve`: host, device, both). Returns the dict `cosserat bench --json` prints
+    (`cpu_element_steps_per_s`, `gpu_element_steps_per_s`, `ratio`, `adapter`, the stage
+    timers, ...). The GIL is released while it runs."""
+    return json.loads(
+        _bench(
+            rods=rods,
+            elements=elements,
+            steps=steps,
+            adapter=adapter,
+            cpu_only=cpu_only,
+            gpu_only=gpu_only,
+            newton=newton,
+            strategy=strategy,
+            slots=slots,
+            solve=solve,
+            host_update=host_update,
+        )
+    )

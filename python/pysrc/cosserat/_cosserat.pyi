@@ -128,3 +128,16 @@ def _run_sweep(
     resume: bool = False,
     histories: bool = False,
 ) -> Dict[str, Any]: ...
+def _bench(
+    rods: int = 64,
+    elements: int = 30,
+    steps: int = 20,
+    adapter: Optional[str] = None,
+    cpu_only: bool = False,
+    gpu_only: bool = False,
+    newton: str = "full",
+    strategy: str = "auto",
+    slots: int = 0,
+    solve: str = "host",
+    host_update: bool = False,
+) -> str: ...
