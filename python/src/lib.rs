@@ -666,7 +666,7 @@ impl Simulation {
         }
         let start = Instant::now();
         let bar = progress.then(|| {
-            cosserat::output::Progress::new(
+            cosserat::output::Progress::with_lines(
                 target.saturating_sub(self.log.step()) as u64,
                 &self.scene_name,
             )
@@ -1086,10 +1086,14 @@ impl Simulation {
 }
 
 /// Runs the sweep file `sweep` into the folder `out` as `cosserat sweep` does (same files,
-/// resume and streaming guarantees); the GIL is released while it runs. Returns the
-/// summary as a dict; the members are in `out/members.csv`.
+/// resume and streaming guarantees); the GIL is released while it runs. Ctrl-C stops it
+/// cleanly: no further member starts, the members under way finish and are recorded, then
+/// KeyboardInterrupt is raised (`resume=True` runs the rest). `progress=True` shows a bar
+/// on stderr (plain lines when stderr is not a terminal). Returns the summary as a dict;
+/// the members are in `out/members.csv`.
 #[pyfunction]
-#[pyo3(signature = (sweep, out, backend = "auto", adapter = None, resume = false, histories = false))]
+#[pyo3(signature = (sweep, out, backend = "auto", adapter = None, resume = false, histories = false, progress = false))]
+#[allow(clippy::too_many_arguments)]
 fn _run_sweep<'py>(
     py: Python<'py>,
     sweep: PathBuf,
@@ -1098,7 +1102,9 @@ fn _run_sweep<'py>(
     adapter: Option<&str>,
     resume: bool,
     histories: bool,
+    progress: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
+    use std::sync::atomic::{AtomicBool, Ordering};
     let choice = backend_choice(backend)?;
     let spec = cosserat::sweep::load_sweep(&sweep).map_err(|e| {
         let err = SceneError::new_err(e.to_string());
@@ -1118,9 +1124,48 @@ fn _run_sweep<'py>(
         ..Default::default()
     };
     let described = exec.describe();
-    let summary = py
-        .allow_threads(|| cosserat::sweep::run_sweep(&spec, &exec, &out, &opts, |_| {}))
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let stop = AtomicBool::new(false);
+    let bar = progress.then(|| cosserat::output::Progress::with_lines(spec.len() as u64, "sweep"));
+    let (result, interrupt) = py.allow_threads(|| {
+        std::thread::scope(|s| {
+            let worker = s.spawn(|| {
+                let (mut done, mut failed, mut rejected) = (0, 0, 0);
+                cosserat::sweep::run_sweep_until(&spec, &exec, &out, &opts, Some(&stop), |row| {
+                    match row.status {
+                        cosserat::sweep::MemberStatus::Completed => done += 1,
+                        cosserat::sweep::MemberStatus::Failed => failed += 1,
+                        cosserat::sweep::MemberStatus::Rejected => rejected += 1,
+                    }
+                    if let Some(b) = &bar {
+                        b.advance(&format!(
+                            "completed {done}, failed {failed}, rejected {rejected}"
+                        ));
+                    }
+                })
+            });
+            let mut interrupt: Option<PyErr> = None;
+            while !worker.is_finished() {
+                std::thread::sleep(SIGNAL_CHECK);
+                if interrupt.is_none() {
+                    if let Err(e) = Python::with_gil(|py| py.check_signals()) {
+                        stop.store(true, Ordering::SeqCst);
+                        interrupt = Some(e);
+                    }
+                }
+            }
+            let result = worker
+                .join()
+                .unwrap_or_else(|p| std::panic::resume_unwind(p));
+            (result, interrupt)
+        })
+    });
+    if let Some(b) = &bar {
+        b.finish();
+    }
+    let summary = result.map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    if let Some(e) = interrupt {
+        return Err(e);
+    }
     let d = PyDict::new(py);
     d.set_item("members", summary.members)?;
     d.set_item("skipped", summary.skipped)?;
@@ -1128,6 +1173,7 @@ fn _run_sweep<'py>(
     d.set_item("failed", summary.failed)?;
     d.set_item("rejected", summary.rejected)?;
     d.set_item("wall_s", summary.wall_s)?;
+    d.set_item("stopped", summary.stopped)?;
     d.set_item("backend", described)?;
     d.set_item("note", note)?;
     Ok(d)

@@ -192,6 +192,7 @@ def sweep(
     resume: bool = False,
     adapter: Optional[str] = None,
     histories: bool = False,
+    progress: bool = False,
 ) -> Table:
     """Runs an ensemble of `scene` with the values of `params` ({key path: values}) written
     in, as `cosserat sweep` does: `mode="grid"` (Cartesian product, the first key varying
@@ -199,7 +200,11 @@ def sweep(
     `"auto"`) into the folder `out` (a temporary one when None) with the same files,
     resume and streaming guarantees as the command; returns the rows of `members.csv`
     as a Table (dict of arrays; `to_pandas()`). Values set on `scene` with `Scene.set`
-    are varied as single-valued keys ahead of `params`.
+    are varied as single-valued keys ahead of `params`. `progress=True` shows a bar on
+    stderr (plain lines when stderr is not a terminal). Ctrl-C stops the sweep cleanly:
+    no further member starts, those under way finish and are recorded in `out`, then
+    KeyboardInterrupt is raised; `sweep(..., out=the same folder, resume=True)` runs the
+    rest.
     """
     if mode not in ("grid", "list"):
         raise ValueError(f"mode: expected 'grid' or 'list', got {mode!r}")
@@ -225,7 +230,21 @@ def sweep(
     spec = os.path.join(folder, "sweep.toml")
     with open(spec, "w") as f:
         f.write(_sweep_toml("base.toml", varied, mode))
-    _run_sweep(spec, folder, backend=backend, adapter=adapter, resume=resume, histories=histories)
+    try:
+        _run_sweep(
+            spec,
+            folder,
+            backend=backend,
+            adapter=adapter,
+            resume=resume,
+            histories=histories,
+            progress=progress,
+        )
+    except KeyboardInterrupt as e:
+        raise KeyboardInterrupt(
+            f"sweep interrupted: the members finished so far are in {folder}/members.csv; "
+            "sweep(..., out=that folder, resume=True) runs the rest"
+        ) from e
     return read_members(os.path.join(folder, "members.csv"))
 
 

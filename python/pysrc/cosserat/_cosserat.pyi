@@ -127,6 +127,7 @@ def _run_sweep(
     adapter: Optional[str] = None,
     resume: bool = False,
     histories: bool = False,
+    progress: bool = False,
 ) -> Dict[str, Any]: ...
 def _bench(
     rods: int = 64,
