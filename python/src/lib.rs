@@ -1179,6 +1179,51 @@ fn _run_sweep<'py>(
     Ok(d)
 }
 
+/// Runs `scene` into the folder `out` as `cosserat run SCENE --out OUT` does (the scene's
+/// own integrator settings; `history.csv`, `summary.json`, the charts), in process, the
+/// GIL released. `output_dt` keeps `trajectory.npz` frames at that spacing (`--output-dt`);
+/// `cosseratbench=True` also writes the suite's layout into `out/cosseratbench/`
+/// (`--cosseratbench`, with `scenario_digest` and `experiment` in its `result.json`).
+/// Returns `summary.json`'s object as a JSON string.
+#[pyfunction]
+#[pyo3(signature = (scene, out, output_dt = None, cosseratbench = false, scenario_digest = None, experiment = None))]
+fn _run_to_dir(
+    py: Python<'_>,
+    scene: &Scene,
+    out: PathBuf,
+    output_dt: Option<f64>,
+    cosseratbench: bool,
+    scenario_digest: Option<String>,
+    experiment: Option<String>,
+) -> PyResult<String> {
+    use cosserat::output::{CosseratBenchOptions, OutputTimes};
+    let s = &scene.scene;
+    let params = s.params;
+    let every = s.output_every.max(1);
+    let trajectory = match output_dt {
+        Some(dt) => Some(
+            OutputTimes::from_dt(dt, params.dt)
+                .map_err(|e| PyValueError::new_err(format!("output_dt: {e}")))?,
+        ),
+        None => cosseratbench.then_some(OutputTimes::Every(every)),
+    };
+    let opts = cosserat::driver::RunOptions {
+        every,
+        label: s.name.clone(),
+        trajectory,
+        cosseratbench: cosseratbench.then(|| CosseratBenchOptions {
+            scenario_digest,
+            experiment,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let result = py
+        .allow_threads(|| cosserat::driver::run_to_dir(s, params, &out, &opts))
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    serde_json::to_string(&result.summary).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+}
+
 /// Times the benchmark batch of `cosserat bench` (the benchmark cantilever as `rods` members of `elements` elements over `steps` steps, EDMC-2) on the CPU path
 /// and, where a GPU exists, the GPU path; the GIL is released while it runs. Returns the
 /// object `cosserat bench --json` prints, as a JSON string.
@@ -1283,6 +1328,7 @@ fn _cosserat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(builtin_scenes, m)?)?;
     m.add_function(wrap_pyfunction!(_run_sweep, m)?)?;
     m.add_function(wrap_pyfunction!(_bench, m)?)?;
+    m.add_function(wrap_pyfunction!(_run_to_dir, m)?)?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
