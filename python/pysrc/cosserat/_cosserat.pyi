@@ -142,3 +142,11 @@ def _bench(
     solve: str = "host",
     host_update: bool = False,
 ) -> str: ...
+def _run_to_dir(
+    scene: Scene,
+    out: Union[str, PathLike[str]],
+    output_dt: Optional[float] = None,
+    cosseratbench: bool = False,
+    scenario_digest: Optional[str] = None,
+    experiment: Optional[str] = None,
+) -> str: ...
