@@ -379,7 +379,7 @@ fn rotation_of(r: &Bound<'_, PyAny>) -> PyResult<cosserat::model::Mat3> {
     if let Ok(v) = r.extract::<[f64; 3]>() {
         let phi = cosserat::model::Vec3::from(v);
         let a = phi.norm();
-        if !(a < std::f64::consts::PI) {
+        if a.is_nan() || a >= std::f64::consts::PI {
             return Err(PyValueError::new_err(format!(
                 "rotation: a rotation vector shorter than π (a half turn) is expected, got |φ| = {a}"
             )));
