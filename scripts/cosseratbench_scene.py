@@ -6,227 +6,32 @@ prints `DIGEST OUTPUT_DT` (the suite's scenario digest, and the spacing of its f
 for `cosserat run SCENE.toml --output-dt OUTPUT_DT --cosseratbench --scenario-digest DIGEST`.
 Used by scripts/cosseratbench.sh; needs the suite installed (cosseratbench 0.3).
 
-The translation is the one docs/scenes.md offers a user: each rod's stress-free reference
-is straight (the suite's rods are), along its first element, with `d1` its `normal`; the
-start shape, pre-stretch included, goes to `[rod.initial] positions`; supports, end loads,
-gravity, obstacles and contact map key for key; EM throughout. Quasi-static experiments
-(the suite lets a solver add dissipation to reach equilibrium) get drag `2 ω ρA`, ω the
-suite's slowest frequency, and Kelvin-Voigt damping η = Δt/2. Contact stiffness is
-cosserat's default; friction against obstacles uses the elastic-stick law
-(`friction_law = "stick"`, tangential stiffness the contact stiffness), the one
-docs/scenes.md offers for a load that must hold; FRICTION_LAW=regularized in the
-environment writes the regularized law at its default slip speed instead.
-
-A driven sliding end (twist) is a driven `[[clamp]]` with `slide` along a coordinate axis.
+The translation is the Python package's (`cosserat.cosseratbench.scene_toml`, whose
+header describes it), loaded from python/pysrc without the compiled extension; the
+package's `CosseratSolver` runs the same scene in process (`cosseratbench run EXPERIMENT
+-s cosserat`).
 """
 
 from __future__ import annotations
 
-import math
-import os
+import importlib.util
 import sys
+from pathlib import Path
 
-import numpy as np
 from cosseratbench import registry
 from cosseratbench.provenance import scenario_digest
-from cosseratbench.scenario import Cylinder, End, EndCondition
 
-# Time step as a fraction of the suite's frame spacing: the settings a user picks from
-# docs/scenes.md (a step that resolves the motion asked about, larger for quasi-static).
-STEPS_PER_FRAME = {
-    "cantilever": 1,
-    "catenary": 1,
-    "pendulum": 20,
-    "capstan": 20,
-    "crossing": 20,
-    "twist": 5,
-    "pile": 20,
-}
-
-
-def vec(v) -> str:
-    return "[" + ", ".join(repr(float(x)) for x in v) + "]"
-
-
-def node_rotations(chords, normal, t0, d1):
-    """Rotation vectors carrying the reference triad (d1, t0 × d1, t0) to each node's
-    initial triad: tangent the bisector of its chords (the end chord at an end), d1 the
-    suite's `normal` at the first node, carried along by parallel transport."""
-    tangents = np.vstack([chords[:1], chords[:-1] + chords[1:], chords[-1:]])
-    tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
-    ref = np.column_stack([d1, np.cross(t0, d1), t0])
-    a = normal - (normal @ tangents[0]) * tangents[0]
-    a /= np.linalg.norm(a)
-    out = []
-    for i, t in enumerate(tangents):
-        if i > 0:
-            prev = tangents[i - 1]
-            axis = np.cross(prev, t)
-            sin, cos = np.linalg.norm(axis), prev @ t
-            if sin > 1e-14:
-                axis /= sin
-                a = a * cos + np.cross(axis, a) * sin + axis * (axis @ a) * (1.0 - cos)
-            a = a - (a @ t) * t
-            a /= np.linalg.norm(a)
-        rot = np.column_stack([a, np.cross(t, a), t]) @ ref.T
-        w = 0.5 * np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]])
-        angle = math.atan2(np.linalg.norm(w), 0.5 * (np.trace(rot) - 1.0))
-        if angle > 3.0:
-            raise NotImplementedError("a node turned about π from the rod's mean direction")
-        sin = np.linalg.norm(w)
-        out.append(w * (angle / sin) if sin > 1e-300 else w)
-    return out
-
-
-def motion_table(motion):
-    """(displacement, rotation, factors) with the motion = factor × vector, or None."""
-    times = np.asarray(motion.times, float)
-    d = np.asarray(motion.displacement, float)
-    r = np.asarray(motion.rotation, float)
-    found = []
-    for a in (d, r):
-        peak = a[np.argmax(np.linalg.norm(a, axis=1))]
-        scale = float(peak @ peak)
-        if scale == 0.0:
-            found.append((np.zeros(3), None))
-            continue
-        f = a @ peak / scale
-        if np.abs(a - np.outer(f, peak)).max() > 1e-12 * math.sqrt(scale):
-            return None
-        found.append((peak, f))
-    (dv, fd), (rv, fr) = found
-    if fd is not None and fr is not None and np.abs(fd - fr).max() > 1e-12:
-        return None
-    return dv, rv, fd if fd is not None else fr, times
+_path = Path(__file__).resolve().parents[1] / "python" / "pysrc" / "cosserat" / "cosseratbench.py"
+_spec = importlib.util.spec_from_file_location("cosserat_cosseratbench", _path)
+adapter = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(adapter)
 
 
 def scene(name: str) -> tuple[str, float, str]:
     experiment = registry.load_experiment(name)
     sc = experiment.scenario
-    n = experiment.n_elements
-    output_dt = sc.duration / (experiment.n_frames - 1)
-    dt = output_dt / STEPS_PER_FRAME.get(name, 10)
-    out = [
-        f'name = "cb_{name}"',
-        f'description = "cosseratbench {name}, default variant, {n} elements per rod"',
-        f"gravity = {vec(sc.gravity)}",
-        "",
-    ]
-    omega = sc.slowest_frequency()
-    supports, loads = [], []
-    for i, rod in enumerate(sc.rods):
-        m = rod.material
-        nodes = rod.nodes(n)
-        chords = np.diff(nodes, axis=0)
-        chords /= np.linalg.norm(chords, axis=1, keepdims=True)
-        # The straight reference along the rod's mean direction, so that no node turns
-        # far from it (a rope draped over a drum turns π from end to end).
-        t0 = chords.mean(axis=0)
-        t0 = t0 / np.linalg.norm(t0) if np.linalg.norm(t0) > 1e-6 else chords[0]
-        start = nodes[0]
-        end = start + rod.length * t0
-        normal = np.asarray(rod.normal, float)
-        d1 = normal - (normal @ t0) * t0
-        d1 /= np.linalg.norm(d1)
-        area, second = rod.area, rod.second_moment_of_area
-        out += [
-            f"[material.m{i}]",
-            f"E = {m.youngs_modulus!r}",
-            f"G = {m.shear_modulus!r}",
-            f"density = {m.density!r}",
-        ]
-        if sc.quasi_static:
-            out.append(f"damping = {dt / 2!r}")
-        out += [
-            "",
-            f"[section.s{i}]",
-            f"A = {area!r}",
-            f"I11 = {second!r}",
-            f"I22 = {second!r}",
-            f"J = {2 * second!r}",
-            "",
-            "[[rod]]",
-            f'name = "r{i}"',
-            f'material = "m{i}"',
-            f'section = "s{i}"',
-            f"points = [{vec(start)}, {vec(end)}]",
-            f"elements = {n}",
-            f"d1 = {vec(d1)}",
-        ]
-        if sc.quasi_static:
-            out.append(f"drag = {2 * omega * m.density * area!r}")
-        out += ["", "[rod.initial]", "positions = [", *(f"  {vec(p)}," for p in nodes), "]"]
-        rotations = node_rotations(chords, normal, t0, d1)
-        out += ["rotations = [", *(f"  {vec(r)}," for r in rotations), "]", ""]
-
-        at = {End.START: start, End.END: end}
-        ends = {e: rod.condition(e) for e in End}
-        motions = {e: rod.motion(e) for e in End}
-        slide_on, drive_on = {}, {}
-        for e, mo in motions.items():
-            if mo is None:
-                continue
-            moving = np.abs(np.asarray(mo.displacement)).max() > 0 or np.abs(
-                np.asarray(mo.rotation)
-            ).max() > 0
-            if mo.slides_along is None:
-                drive_on[e] = mo
-            elif not moving:
-                slide_on[e] = mo.axis
-            elif np.count_nonzero(mo.axis) == 1:
-                # A coordinate slide can be driven across its axis and turned about it
-                # (the suite allows no other motion of a sliding end).
-                slide_on[e], drive_on[e] = mo.axis, mo
-            else:
-                raise NotImplementedError("a clamp that slides and is driven")
-        for e in End:
-            c = ends[e]
-            if c is EndCondition.FREE:
-                continue
-            block = ["[[clamp]]" if c is EndCondition.CLAMPED else "[[pin]]", f"at = {vec(at[e])}"]
-            if e in slide_on:
-                block.append(f"slide = {vec(slide_on[e])}")
-            if e in drive_on:
-                table = motion_table(drive_on[e])
-                if table is None:
-                    raise NotImplementedError("a motion that is not one vector times a factor")
-                dv, rv, f, times = table
-                if dv.any():
-                    block.append(f"displacement = {vec(dv)}")
-                if rv.any():
-                    block.append(f"rotation = {vec(rv)}")
-                block += [f"time = {vec(times)}", f"factor = {vec(f)}"]
-            supports += block + [""]
-        for load in rod.loads:
-            loads += ["[[load]]", f"at = {vec(at[load.at])}", f"force = {vec(load.force)}", ""]
-    out += supports + loads
-    for ob in sc.obstacles:
-        mu = max([ob.friction] + [r.friction for r in sc.rods])
-        if isinstance(ob, Cylinder):
-            out += ["[[obstacle]]", 'kind = "cylinder"', f"point = {vec(ob.center)}",
-                    f"axis = {vec(ob.axis)}", f"radius = {ob.radius!r}"]
-        else:
-            out += ["[[obstacle]]", 'kind = "plane"', f"point = {vec(ob.point)}",
-                    f"normal = {vec(ob.normal)}"]
-        if mu > 0:
-            out.append(f"friction = {mu!r}")
-            law = os.environ.get("FRICTION_LAW", "stick")
-            if law != "regularized":
-                out.append(f"friction_law = {law!r}".replace("'", '"'))
-        out.append("")
-    k = len(sc.rods)
-    pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]
-    if sc.self_contact:
-        pairs += [(i, i) for i in range(k)]
-    for i, j in pairs:
-        mu = max(sc.rods[i].friction, sc.rods[j].friction)
-        rods = f'["r{i}"]' if i == j else f'["r{i}", "r{j}"]'
-        out += ["[[contact]]", f"rods = {rods}"]
-        if mu > 0:
-            out.append(f"friction = {mu!r}")
-        out.append("")
-    out += ["[integrator]", 'scheme = "em"', f"dt = {dt!r}", f"t_end = {sc.duration!r}", ""]
-    return "\n".join(out), output_dt, scenario_digest(sc)
+    text, output_dt = adapter.scene_toml(sc, experiment.n_elements, experiment.n_frames, name=name)
+    return text, output_dt, scenario_digest(sc)
 
 
 def main() -> None:

@@ -30,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod batch;
+pub mod bench;
 pub mod driver;
 pub mod element;
 pub mod gpu;

@@ -5,7 +5,9 @@
 //! to the CPU with a note when none does), `--backend gpu` without one exits with code 2;
 //! a member whose scene rejects its values is a `rejected` row (the first included) with
 //! empty cells; a refused sweep changes nothing in its folder and a fresh one removes the
-//! old `sweep.json` before its first row; a missing adapter is named (`sweep`, `bench`).
+//! old `sweep.json` before its first row; a missing adapter is named (`sweep`, `bench`);
+//! a sweep stopped from another thread records the members under way, no more, and
+//! `resume` completes it with the rows of an uninterrupted sweep.
 
 mod common;
 
@@ -14,7 +16,8 @@ use std::process::Command;
 
 use cosserat::batch::Executor;
 use cosserat::sweep::{
-    load_sweep, merge_shards, run_sweep, MemberStatus, Shard, SweepOptions, CSV_COLUMNS,
+    load_sweep, merge_shards, run_sweep, run_sweep_until, MemberStatus, Shard, SweepOptions,
+    CSV_COLUMNS,
 };
 
 fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
@@ -58,6 +61,76 @@ fn bad_sweep_files_name_file_line_key_and_reason() {
             "for\n{text}\nwant `{want}`\ngot  `{got}`"
         );
     }
+}
+
+#[test]
+fn a_stopped_sweep_keeps_its_rows_and_resume_completes_it() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let dir = tempfile::tempdir().unwrap();
+    let text = "base = \"frame\"\n\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9]\n\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [0.2]\n";
+    let p = write(dir.path(), "g.toml", text);
+    let spec = load_sweep(&p).unwrap();
+    let rows = |out: &Path| -> Vec<String> {
+        let csv = std::fs::read_to_string(out.join("members.csv")).unwrap();
+        // Every cell but wall_s (column 7).
+        let mut r: Vec<String> = csv
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let mut c: Vec<&str> = l.split(',').collect();
+                c[7] = "";
+                c.join(",")
+            })
+            .collect();
+        r.sort_by_key(|l| l.split(',').next().unwrap().parse::<usize>().unwrap());
+        r
+    };
+    let whole = dir.path().join("whole");
+    run_sweep(
+        &spec,
+        &Executor::Cpu,
+        &whole,
+        &SweepOptions::default(),
+        |_| {},
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let stop = AtomicBool::new(false);
+    let mut seen = 0;
+    let s = run_sweep_until(
+        &spec,
+        &Executor::Cpu,
+        &out,
+        &SweepOptions::default(),
+        Some(&stop),
+        |_| {
+            seen += 1;
+            stop.store(true, Ordering::SeqCst);
+        },
+    )
+    .unwrap();
+    // The first group (twice the worker threads) ran, no more.
+    let group = 2 * rayon::current_num_threads();
+    assert!(s.stopped);
+    assert_eq!(s.completed, group.min(10));
+    assert_eq!(seen, s.completed);
+    assert!(out.join("sweep.json").exists());
+    if group < 10 {
+        let s = run_sweep(
+            &spec,
+            &Executor::Cpu,
+            &out,
+            &SweepOptions {
+                resume: true,
+                ..Default::default()
+            },
+            |_| {},
+        )
+        .unwrap();
+        assert!(!s.stopped);
+        assert_eq!((s.skipped, s.completed), (group, 10 - group));
+    }
+    assert_eq!(rows(&out), rows(&whole));
 }
 
 #[test]

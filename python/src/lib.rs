@@ -325,6 +325,88 @@ fn backend_choice(backend: &str) -> PyResult<BackendChoice> {
     }
 }
 
+/// The node `at` names: an index, or a reference position (a node of the mesh within the
+/// scene's merge tolerance, 1e-9 × the model size, as a scene's `at`).
+fn node_of(model: &cosserat::model::Model, at: &Bound<'_, PyAny>, key: &str) -> PyResult<usize> {
+    let n = model.n_nodes();
+    if let Ok(i) = at.extract::<i64>() {
+        return usize::try_from(i).ok().filter(|&i| i < n).ok_or_else(|| {
+            PyValueError::new_err(format!("{key}: node {i}: no such node (the model has {n})"))
+        });
+    }
+    let p: [f64; 3] = at.extract().map_err(|_| {
+        PyValueError::new_err(format!(
+            "{key}: expected a node index or a position [x, y, z], got {}",
+            at.repr()
+                .map_or_else(|_| "?".to_string(), |r| r.to_string())
+        ))
+    })?;
+    let p = cosserat::model::Vec3::from(p);
+    let (lo, hi) = model.nodes.iter().fold(
+        (
+            cosserat::model::Vec3::repeat(f64::INFINITY),
+            cosserat::model::Vec3::repeat(f64::NEG_INFINITY),
+        ),
+        |(lo, hi), x| (lo.inf(x), hi.sup(x)),
+    );
+    let tol = 1e-9 * (hi - lo).norm();
+    let nearest = model
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(a, x)| (a, (x - p).norm()))
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    match nearest {
+        Some((a, d)) if d <= tol => Ok(a),
+        Some((a, d)) => Err(PyValueError::new_err(format!(
+            "{key}: {:?} is not a node (nearest node {a} at {:?}, distance {d:e})",
+            p.as_slice(),
+            model.nodes[a].as_slice()
+        ))),
+        None => Err(PyValueError::new_err(format!(
+            "{key}: the model has no nodes"
+        ))),
+    }
+}
+
+fn vec3_of(v: Option<[f64; 3]>) -> Option<cosserat::model::Vec3> {
+    v.map(cosserat::model::Vec3::from)
+}
+
+/// A rotation given as a rotation vector (axis × angle, less than a half turn) or a
+/// rotation matrix.
+fn rotation_of(r: &Bound<'_, PyAny>) -> PyResult<cosserat::model::Mat3> {
+    if let Ok(v) = r.extract::<[f64; 3]>() {
+        let phi = cosserat::model::Vec3::from(v);
+        let a = phi.norm();
+        if a.is_nan() || a >= std::f64::consts::PI {
+            return Err(PyValueError::new_err(format!(
+                "rotation: a rotation vector shorter than π (a half turn) is expected, got |φ| = {a}"
+            )));
+        }
+        let theta = if a > 0.0 {
+            phi * (2.0 * (0.5 * a).tan() / a)
+        } else {
+            phi
+        };
+        return Ok(cosserat::math::cay(&theta));
+    }
+    let m: [[f64; 3]; 3] = r.extract().map_err(|_| {
+        PyValueError::new_err(
+            "rotation: expected a rotation vector [3] or a rotation matrix [3, 3]",
+        )
+    })?;
+    Ok(cosserat::model::Mat3::from_fn(|i, j| m[i][j]))
+}
+
+fn vec_array<'py>(py: Python<'py>, v: &cosserat::model::Vec3) -> Bound<'py, numpy::PyArray1<f64>> {
+    Array1::from_vec(v.as_slice().to_vec()).into_pyarray(py)
+}
+
+fn mat_array<'py>(py: Python<'py>, m: &cosserat::model::Mat3) -> Bound<'py, numpy::PyArray2<f64>> {
+    Array2::from_shape_fn((3, 3), |(i, j)| m[(i, j)]).into_pyarray(py)
+}
+
 /// How the last `run` ended, or `"ready"` before any.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Status {
@@ -457,8 +539,11 @@ impl Simulation {
     /// `t_end` override the scene's integrator settings as `cosserat run` does; `backend`
     /// is where the element kernel runs (`cpu`, `gpu`, `auto`), `adapter` picks a GPU by
     /// name. `trajectory=True` keeps the state of every recorded step (`_trajectory`).
+    /// `controlled` lists the fixed clamps and pins (node indices or reference positions)
+    /// a controller moves with `set_support` (the scene's moving supports can be moved
+    /// without it).
     #[new]
-    #[pyo3(signature = (scene, scheme = None, alpha = None, rho_inf = None, dt = None, t_end = None, backend = "cpu", adapter = None, trajectory = false))]
+    #[pyo3(signature = (scene, scheme = None, alpha = None, rho_inf = None, dt = None, t_end = None, backend = "cpu", adapter = None, trajectory = false, controlled = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scene: &Scene,
@@ -470,17 +555,29 @@ impl Simulation {
         backend: &str,
         adapter: Option<&str>,
         trajectory: bool,
+        controlled: Option<Vec<Bound<'_, PyAny>>>,
     ) -> PyResult<Self> {
         let s = &scene.scene;
         let params = resolve_params(s, scheme, alpha, rho_inf, dt, t_end)?;
         let choice = backend_choice(backend)?;
-        let mut sim =
-            cosserat::integrator::Simulation::new(s.model.clone(), params).map_err(|e| {
-                PyValueError::new_err(format!(
-                    "{}: (model): cannot set up the linear solver for this scene: {e}",
-                    s.source
-                ))
-            })?;
+        let mut model = s.model.clone();
+        for at in controlled.iter().flatten() {
+            let node = node_of(&model, at, "controlled")?;
+            if matches!(params.scheme, Scheme::GenAlpha { .. }) {
+                return Err(PyValueError::new_err(
+                    "controlled: gen-alpha does not support moving supports; use em, edmc1, edmc2 or midpoint",
+                ));
+            }
+            model
+                .control_support(node)
+                .map_err(|e| PyValueError::new_err(format!("controlled: {e}")))?;
+        }
+        let mut sim = cosserat::integrator::Simulation::new(model, params).map_err(|e| {
+            PyValueError::new_err(format!(
+                "{}: (model): cannot set up the linear solver for this scene: {e}",
+                s.source
+            ))
+        })?;
         let mut gpu = None;
         if choice != BackendChoice::Cpu {
             let (exec, _note) = Executor::resolve(choice, adapter)
@@ -569,7 +666,7 @@ impl Simulation {
         }
         let start = Instant::now();
         let bar = progress.then(|| {
-            cosserat::output::Progress::new(
+            cosserat::output::Progress::with_lines(
                 target.saturating_sub(self.log.step()) as u64,
                 &self.scene_name,
             )
@@ -754,6 +851,125 @@ impl Simulation {
             .into_pyarray(py)
     }
 
+    /// The nodal loads (`[[load]]` in scene order, then those added with `add_load`),
+    /// each a dict `{"index", "node", "force", "moment"}` with the values at the current
+    /// level (float64 [3] arrays).
+    #[getter]
+    fn loads<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let t = self.sim.state().t;
+        let out = PyList::empty(py);
+        for (i, l) in self.sim.model().loads.iter().enumerate() {
+            let s = l.table.eval(t);
+            let d = PyDict::new(py);
+            d.set_item("index", i)?;
+            d.set_item("node", l.node)?;
+            d.set_item("force", vec_array(py, &(l.force * s)))?;
+            d.set_item("moment", vec_array(py, &(l.moment * s)))?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
+    /// Sets load `index` (see `loads`) to a constant force and/or moment from the current
+    /// level on: the next steps apply it (at mid-step, like every load) until it is set
+    /// again; a part not given keeps its current value. Its work is in `work_total`.
+    #[pyo3(signature = (index, force = None, moment = None))]
+    fn set_load(
+        &mut self,
+        index: usize,
+        force: Option<[f64; 3]>,
+        moment: Option<[f64; 3]>,
+    ) -> PyResult<()> {
+        self.sim
+            .set_load(index, vec3_of(force), vec3_of(moment))
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
+    /// Adds a constant nodal force and/or moment at `at` (a node index or a node's
+    /// reference position) from the current level on; returns its index in `loads`.
+    #[pyo3(signature = (at, force = None, moment = None))]
+    fn add_load(
+        &mut self,
+        at: &Bound<'_, PyAny>,
+        force: Option<[f64; 3]>,
+        moment: Option<[f64; 3]>,
+    ) -> PyResult<usize> {
+        let node = node_of(self.sim.model(), at, "at")?;
+        let z = cosserat::model::Vec3::zeros();
+        self.sim
+            .add_load(
+                node,
+                vec3_of(force).unwrap_or(z),
+                vec3_of(moment).unwrap_or(z),
+            )
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
+    /// The supported nodes, each a dict `{"node", "kind"` (`clamp` or `pin`), `"position"`
+    /// [3], `"rotation"` [3, 3] (the node's rotation: its directors are this times the
+    /// reference triads), `"driven"` (a moving support of the scene or one named in
+    /// `controlled=`: `set_support` can move it)`}`.
+    #[getter]
+    fn supports<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let m = self.sim.model();
+        let out = PyList::empty(py);
+        for (a, s) in m.supports.iter().enumerate() {
+            if !(s.translation || s.rotation) {
+                continue;
+            }
+            let d = PyDict::new(py);
+            d.set_item("node", a)?;
+            d.set_item("kind", if s.rotation { "clamp" } else { "pin" })?;
+            d.set_item("position", vec_array(py, &self.sim.state().r[a]))?;
+            d.set_item("rotation", mat_array(py, &self.sim.node_rotation(a)))?;
+            d.set_item("driven", m.drives.iter().any(|dr| dr.node == a))?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
+    /// Moves the driven support at `at` (a node index or a node's reference position;
+    /// see `supports`) from the current level on: `position` [3] and/or `rotation` (a
+    /// rotation vector [3] or matrix [3, 3]) are reached at the next level and then held;
+    /// `velocity` [3] (m/s) and/or `angular_velocity` [3] (rad/s, spatial) hold until
+    /// commanded again. A part not given keeps its current command (at first, the
+    /// scene's motion). The support's work is in `work_total` (`support_work` per step).
+    #[pyo3(signature = (at, position = None, rotation = None, velocity = None, angular_velocity = None))]
+    fn set_support(
+        &mut self,
+        at: &Bound<'_, PyAny>,
+        position: Option<[f64; 3]>,
+        rotation: Option<Bound<'_, PyAny>>,
+        velocity: Option<[f64; 3]>,
+        angular_velocity: Option<[f64; 3]>,
+    ) -> PyResult<()> {
+        use cosserat::integrator::{RotationCommand, TranslationCommand};
+        let node = node_of(self.sim.model(), at, "at")?;
+        if position.is_some() && velocity.is_some() {
+            return Err(PyValueError::new_err(
+                "set_support: give a position or a velocity, not both",
+            ));
+        }
+        if rotation.is_some() && angular_velocity.is_some() {
+            return Err(PyValueError::new_err(
+                "set_support: give a rotation or an angular velocity, not both",
+            ));
+        }
+        let translation = match (vec3_of(position), vec3_of(velocity)) {
+            (Some(p), _) => Some(TranslationCommand::Position(p)),
+            (_, Some(v)) => Some(TranslationCommand::Velocity(v)),
+            _ => None,
+        };
+        let rot = match (rotation, vec3_of(angular_velocity)) {
+            (Some(r), _) => Some(RotationCommand::Rotation(rotation_of(&r)?)),
+            (_, Some(w)) => Some(RotationCommand::AngularVelocity(w)),
+            _ => None,
+        };
+        self.sim
+            .set_support_motion(node, translation, rot)
+            .map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
     /// Kinetic, potential and total energy of the current level, as a dict.
     #[getter]
     fn energy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -870,10 +1086,14 @@ impl Simulation {
 }
 
 /// Runs the sweep file `sweep` into the folder `out` as `cosserat sweep` does (same files,
-/// resume and streaming guarantees); the GIL is released while it runs. Returns the
-/// summary as a dict; the members are in `out/members.csv`.
+/// resume and streaming guarantees); the GIL is released while it runs. Ctrl-C stops it
+/// cleanly: no further member starts, the members under way finish and are recorded, then
+/// KeyboardInterrupt is raised (`resume=True` runs the rest). `progress=True` shows a bar
+/// on stderr (plain lines when stderr is not a terminal). Returns the summary as a dict;
+/// the members are in `out/members.csv`.
 #[pyfunction]
-#[pyo3(signature = (sweep, out, backend = "auto", adapter = None, resume = false, histories = false))]
+#[pyo3(signature = (sweep, out, backend = "auto", adapter = None, resume = false, histories = false, progress = false))]
+#[allow(clippy::too_many_arguments)]
 fn _run_sweep<'py>(
     py: Python<'py>,
     sweep: PathBuf,
@@ -882,7 +1102,9 @@ fn _run_sweep<'py>(
     adapter: Option<&str>,
     resume: bool,
     histories: bool,
+    progress: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
+    use std::sync::atomic::{AtomicBool, Ordering};
     let choice = backend_choice(backend)?;
     let spec = cosserat::sweep::load_sweep(&sweep).map_err(|e| {
         let err = SceneError::new_err(e.to_string());
@@ -902,9 +1124,48 @@ fn _run_sweep<'py>(
         ..Default::default()
     };
     let described = exec.describe();
-    let summary = py
-        .allow_threads(|| cosserat::sweep::run_sweep(&spec, &exec, &out, &opts, |_| {}))
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    let stop = AtomicBool::new(false);
+    let bar = progress.then(|| cosserat::output::Progress::with_lines(spec.len() as u64, "sweep"));
+    let (result, interrupt) = py.allow_threads(|| {
+        std::thread::scope(|s| {
+            let worker = s.spawn(|| {
+                let (mut done, mut failed, mut rejected) = (0, 0, 0);
+                cosserat::sweep::run_sweep_until(&spec, &exec, &out, &opts, Some(&stop), |row| {
+                    match row.status {
+                        cosserat::sweep::MemberStatus::Completed => done += 1,
+                        cosserat::sweep::MemberStatus::Failed => failed += 1,
+                        cosserat::sweep::MemberStatus::Rejected => rejected += 1,
+                    }
+                    if let Some(b) = &bar {
+                        b.advance(&format!(
+                            "completed {done}, failed {failed}, rejected {rejected}"
+                        ));
+                    }
+                })
+            });
+            let mut interrupt: Option<PyErr> = None;
+            while !worker.is_finished() {
+                std::thread::sleep(SIGNAL_CHECK);
+                if interrupt.is_none() {
+                    if let Err(e) = Python::with_gil(|py| py.check_signals()) {
+                        stop.store(true, Ordering::SeqCst);
+                        interrupt = Some(e);
+                    }
+                }
+            }
+            let result = worker
+                .join()
+                .unwrap_or_else(|p| std::panic::resume_unwind(p));
+            (result, interrupt)
+        })
+    });
+    if let Some(b) = &bar {
+        b.finish();
+    }
+    let summary = result.map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    if let Some(e) = interrupt {
+        return Err(e);
+    }
     let d = PyDict::new(py);
     d.set_item("members", summary.members)?;
     d.set_item("skipped", summary.skipped)?;
@@ -912,9 +1173,143 @@ fn _run_sweep<'py>(
     d.set_item("failed", summary.failed)?;
     d.set_item("rejected", summary.rejected)?;
     d.set_item("wall_s", summary.wall_s)?;
+    d.set_item("stopped", summary.stopped)?;
     d.set_item("backend", described)?;
     d.set_item("note", note)?;
     Ok(d)
+}
+
+/// Runs `scene` into the folder `out` as `cosserat run SCENE --out OUT` does (the scene's
+/// own integrator settings; `history.csv`, `summary.json`, the charts), in process, the
+/// GIL released. `output_dt` keeps `trajectory.npz` frames at that spacing (`--output-dt`);
+/// `cosseratbench=True` also writes the suite's layout into `out/cosseratbench/`
+/// (`--cosseratbench`, with `scenario_digest` and `experiment` in its `result.json`).
+/// Returns `summary.json`'s object as a JSON string.
+#[pyfunction]
+#[pyo3(signature = (scene, out, output_dt = None, cosseratbench = false, scenario_digest = None, experiment = None))]
+fn _run_to_dir(
+    py: Python<'_>,
+    scene: &Scene,
+    out: PathBuf,
+    output_dt: Option<f64>,
+    cosseratbench: bool,
+    scenario_digest: Option<String>,
+    experiment: Option<String>,
+) -> PyResult<String> {
+    use cosserat::output::{CosseratBenchOptions, OutputTimes};
+    let s = &scene.scene;
+    let params = s.params;
+    let every = s.output_every.max(1);
+    let trajectory = match output_dt {
+        Some(dt) => Some(
+            OutputTimes::from_dt(dt, params.dt)
+                .map_err(|e| PyValueError::new_err(format!("output_dt: {e}")))?,
+        ),
+        None => cosseratbench.then_some(OutputTimes::Every(every)),
+    };
+    let opts = cosserat::driver::RunOptions {
+        every,
+        label: s.name.clone(),
+        trajectory,
+        cosseratbench: cosseratbench.then(|| CosseratBenchOptions {
+            scenario_digest,
+            experiment,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let result = py
+        .allow_threads(|| cosserat::driver::run_to_dir(s, params, &out, &opts))
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    serde_json::to_string(&result.summary).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+}
+
+/// Times the benchmark batch of `cosserat bench` (the benchmark cantilever as `rods` members of `elements` elements over `steps` steps, EDMC-2) on the CPU path
+/// and, where a GPU exists, the GPU path; the GIL is released while it runs. Returns the
+/// object `cosserat bench --json` prints, as a JSON string.
+#[pyfunction]
+#[pyo3(signature = (rods = 64, elements = 30, steps = 20, adapter = None, cpu_only = false, gpu_only = false, newton = "full", strategy = "auto", slots = 0, solve = "host", host_update = false))]
+#[allow(clippy::too_many_arguments)]
+fn _bench(
+    py: Python<'_>,
+    rods: i64,
+    elements: i64,
+    steps: i64,
+    adapter: Option<String>,
+    cpu_only: bool,
+    gpu_only: bool,
+    newton: &str,
+    strategy: &str,
+    slots: i64,
+    solve: &str,
+    host_update: bool,
+) -> PyResult<String> {
+    use cosserat::bench::{BenchError, BenchOptions, BenchSolve};
+    use cosserat::integrator::{NewtonVariant, Strategy};
+    let count = |key: &str, v: i64, min: i64| -> PyResult<usize> {
+        if v < min {
+            return Err(PyValueError::new_err(format!(
+                "{key}: must be an integer ≥ {min} (got {v})"
+            )));
+        }
+        Ok(v as usize)
+    };
+    if cpu_only && gpu_only {
+        return Err(PyValueError::new_err(
+            "cpu_only and gpu_only exclude each other",
+        ));
+    }
+    let opts = BenchOptions {
+        rods: count("rods", rods, 1)?,
+        elements: count("elements", elements, 1)?,
+        steps: count("steps", steps, 1)?,
+        adapter,
+        cpu_only,
+        gpu_only,
+        newton: match newton {
+            "full" => NewtonVariant::Full,
+            "fresh" => NewtonVariant::Fresh,
+            "modified" => NewtonVariant::Modified,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "newton: unknown variant `{other}` (expected full, fresh or modified)"
+                )))
+            }
+        },
+        strategy: match strategy {
+            "auto" => Strategy::Auto,
+            "staggered" => Strategy::Staggered,
+            "monolithic" => Strategy::Monolithic,
+            "inexact" => Strategy::Inexact,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "strategy: unknown strategy `{other}` (expected auto, staggered, monolithic or inexact)"
+                )))
+            }
+        },
+        slots: count("slots", slots, 0)?,
+        solve: match solve {
+            "host" => BenchSolve::Host,
+            "device" => BenchSolve::Device,
+            "both" => BenchSolve::Both,
+            "resident" => BenchSolve::Resident,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "solve: unknown mode `{other}` (expected host, device, both or resident)"
+                )))
+            }
+        },
+        host_update,
+    };
+    let run = py
+        .allow_threads(|| cosserat::bench::run(&opts))
+        .map_err(|e| match e {
+            BenchError::Option { .. } | BenchError::Limit(_) => {
+                PyValueError::new_err(e.to_string())
+            }
+            _ => PyRuntimeError::new_err(e.to_string()),
+        })?;
+    Ok(run.json().to_string())
 }
 
 /// Names of the built-in scenes.
@@ -933,6 +1328,8 @@ fn _cosserat(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Simulation>()?;
     m.add_function(wrap_pyfunction!(builtin_scenes, m)?)?;
     m.add_function(wrap_pyfunction!(_run_sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(_bench, m)?)?;
+    m.add_function(wrap_pyfunction!(_run_to_dir, m)?)?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -18,4 +18,4 @@ pub mod state;
 
 pub use params::{IntegratorParams, NewtonVariant, Scheme, Strategy};
 pub use report::{SolveTimers, StepFailure, StepReport};
-pub use simulation::Simulation;
+pub use simulation::{ControlError, RotationCommand, Simulation, TranslationCommand};

@@ -1,7 +1,8 @@
-//! A progress bar for the time loop, drawn on stderr only when stderr is a terminal.
+//! A progress bar for the time loop, drawn on stderr only when stderr is a terminal (or,
+//! [`Progress::with_lines`], plain lines on stderr when it is not).
 
 use std::io::IsTerminal;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressFinish, ProgressStyle};
 
@@ -15,6 +16,40 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressFinish, ProgressStyle};
 pub struct Progress {
     bar: ProgressBar,
     finished: AtomicBool,
+    /// Plain lines instead of a hidden bar ([`Self::with_lines`] without a terminal).
+    lines: Option<Lines>,
+}
+
+/// The state of line progress: the label, the total, the position and the position at
+/// which the next line is printed.
+#[derive(Debug)]
+struct Lines {
+    label: String,
+    len: u64,
+    pos: AtomicU64,
+    printed: AtomicU64,
+}
+
+impl Lines {
+    /// Counts one unit; prints `label: pos/len  msg` at every tenth of the way and at the
+    /// end.
+    fn inc(&self, msg: impl FnOnce() -> String) {
+        let pos = self.pos.fetch_add(1, Ordering::SeqCst) + 1;
+        let tenth = (self.len / 10).max(1);
+        let last = self.printed.load(Ordering::SeqCst);
+        if pos >= last + tenth || pos == self.len {
+            self.printed.store(pos, Ordering::SeqCst);
+            eprintln!("{}: {pos}/{}  {}", self.label, self.len, msg());
+        }
+    }
+
+    /// The closing line of a loop that stopped before its end.
+    fn finish(&self) {
+        let pos = self.pos.load(Ordering::SeqCst);
+        if pos < self.len {
+            eprintln!("{}: stopped at {pos}/{}", self.label, self.len);
+        }
+    }
 }
 
 impl Progress {
@@ -38,11 +73,43 @@ impl Progress {
         Self {
             bar,
             finished: AtomicBool::new(false),
+            lines: None,
         }
+    }
+
+    /// Like [`Self::new`], but where stderr is not a terminal (a log file, captured
+    /// output) it prints a plain line `label: k/N  message` on stderr at every tenth of
+    /// the way and at the end (and `label: stopped at k/N` if the loop ends early).
+    pub fn with_lines(steps: u64, label: &str) -> Self {
+        let mut p = Self::new(steps, label);
+        if p.bar.is_hidden() {
+            p.lines = Some(Lines {
+                label: label.to_string(),
+                len: steps,
+                pos: AtomicU64::new(0),
+                printed: AtomicU64::new(0),
+            });
+        }
+        p
+    }
+
+    /// Records one finished unit of work (a sweep member, …) with a message.
+    pub fn advance(&self, msg: &str) {
+        if let Some(l) = &self.lines {
+            l.inc(|| msg.to_string());
+        }
+        if self.bar.is_hidden() {
+            return;
+        }
+        self.bar.set_message(msg.to_string());
+        self.bar.inc(1);
     }
 
     /// Records one finished step that reached time `t` after `newton_iters` iterations.
     pub fn step(&self, t: f64, newton_iters: usize) {
+        if let Some(l) = &self.lines {
+            l.inc(|| format!("t = {}  newton {newton_iters:>2}", fmt_time(t)));
+        }
         if self.bar.is_hidden() {
             return;
         }
@@ -56,6 +123,9 @@ impl Progress {
     pub fn finish(&self) {
         if self.finished.swap(true, Ordering::SeqCst) {
             return;
+        }
+        if let Some(l) = &self.lines {
+            l.finish();
         }
         self.bar.abandon();
         if !self.bar.is_hidden() {

@@ -40,8 +40,8 @@ use crate::math::rng::Rng;
 use crate::scene::set::{parse_key, Step};
 use crate::scene::{builtin_scenes, parse_scene, Scene, SceneError};
 pub use run::{
-    run_sweep, MemberRow, MemberStatus, SweepOptions, SweepSummary, CSV_COLUMNS, IDENTITY_FILE,
-    LOCK_FILE,
+    run_sweep, run_sweep_until, MemberRow, MemberStatus, SweepOptions, SweepSummary, CSV_COLUMNS,
+    IDENTITY_FILE, LOCK_FILE,
 };
 pub use shard::{check_shard_folder, merge_shards, merge_shards_from, MergeSummary, Shard};
 

@@ -138,6 +138,9 @@ pub struct SweepSummary {
     pub wall_s: f64,
     /// GPU stage timers (zero on the CPU).
     pub gpu: KernelTimers,
+    /// The sweep was stopped ([`run_sweep_until`]) before every member ran; the members
+    /// recorded so far are kept and `resume` runs the others.
+    pub stopped: bool,
 }
 
 /// Shortest round-trip text of a number, in exponent form outside [1e-3, 1e6); a
@@ -623,6 +626,24 @@ pub fn run_sweep(
     exec: &Executor,
     out: &Path,
     opts: &SweepOptions,
+    on_row: impl FnMut(&MemberRow),
+) -> Result<SweepSummary, SweepError> {
+    run_sweep_until(spec, exec, out, opts, None, on_row)
+}
+
+/// [`run_sweep`] that can be stopped from another thread: once `stop` is set, no further
+/// member starts; the members under way finish and are recorded (on the CPU path the
+/// members run in groups of twice the worker threads, on the GPU path in groups of its
+/// slots, and `stop` is looked at between groups), `sweep.json` is written for what ran
+/// and the summary says [`SweepSummary::stopped`]. The folder is then what a killed sweep
+/// leaves, with no torn row: `resume` runs the remaining members. `None` runs them all
+/// at once, as [`run_sweep`].
+pub fn run_sweep_until(
+    spec: &SweepSpec,
+    exec: &Executor,
+    out: &Path,
+    opts: &SweepOptions,
+    stop: Option<&std::sync::atomic::AtomicBool>,
     mut on_row: impl FnMut(&MemberRow),
 ) -> Result<SweepSummary, SweepError> {
     let start = std::time::Instant::now();
@@ -747,67 +768,93 @@ pub fn run_sweep(
         },
     };
     let mut write_err: Option<SweepError> = None;
-    let stats = run_members(
-        &members,
-        exec,
-        BatchOptions {
-            keep_history: opts.histories,
-            workers: opts.workers,
-            newton: opts.newton,
-            fallback: opts.fallback,
-            cutback: opts.cutback,
-            solve: opts.solve,
-            ..Default::default()
+    let group = match (stop, exec) {
+        (None, _) => members.len().max(1),
+        (Some(_), Executor::Cpu) => 2 * rayon::current_num_threads().max(1),
+        (Some(_), Executor::Gpu(_)) => match opts.workers {
+            0 => crate::batch::DEFAULT_GPU_SLOTS,
+            w => w,
         },
-        |r: MemberResult| {
-            if write_err.is_some() {
-                return;
-            }
-            if let Err(e) = rows.begin(&mut on_row) {
-                write_err = Some(e);
-                return;
-            }
-            let id = ids[r.index];
-            let o = &r.outcome;
-            let row = MemberRow {
-                member: id,
-                status: o.status.into(),
-                t_reached: o.t_reached,
-                final_total: o.energy_final,
-                max_rel_dl: o.max_rel_dl,
-                max_rel_dj: o.max_rel_dj,
-                newton_iters_total: o.newton_iters_total,
-                wall_s: o.wall_s,
-                values: spec.values[id].clone(),
-                reason: o.reason.clone(),
-            };
-            // Every file of a member is complete before its row says it is done.
-            if opts.histories {
-                let dir = match crate::paths::join_under(out, format!("member_{id}")) {
-                    Ok(d) => d,
-                    Err(e) => {
+    };
+    let mut stats = crate::batch::BatchStats::default();
+    let mut first = 0;
+    loop {
+        if stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::SeqCst)) {
+            rows.summary.stopped = true;
+            break;
+        }
+        let last = (first + group).min(members.len());
+        let part = run_members(
+            &members[first..last],
+            exec,
+            BatchOptions {
+                keep_history: opts.histories,
+                workers: opts.workers,
+                newton: opts.newton,
+                fallback: opts.fallback,
+                cutback: opts.cutback,
+                solve: opts.solve,
+                ..Default::default()
+            },
+            |r: MemberResult| {
+                if write_err.is_some() {
+                    return;
+                }
+                if let Err(e) = rows.begin(&mut on_row) {
+                    write_err = Some(e);
+                    return;
+                }
+                let id = ids[first + r.index];
+                let o = &r.outcome;
+                let row = MemberRow {
+                    member: id,
+                    status: o.status.into(),
+                    t_reached: o.t_reached,
+                    final_total: o.energy_final,
+                    max_rel_dl: o.max_rel_dl,
+                    max_rel_dj: o.max_rel_dj,
+                    newton_iters_total: o.newton_iters_total,
+                    wall_s: o.wall_s,
+                    values: spec.values[id].clone(),
+                    reason: o.reason.clone(),
+                };
+                // Every file of a member is complete before its row says it is done.
+                if opts.histories {
+                    let dir = match crate::paths::join_under(out, format!("member_{id}")) {
+                        Ok(d) => d,
+                        Err(e) => {
+                            write_err = Some(SweepError::Output {
+                                context: e.to_string(),
+                                error: std::io::Error::other("path outside the output folder"),
+                            });
+                            return;
+                        }
+                    };
+                    if let Err(e) = write_history(&dir, &r.history) {
                         write_err = Some(SweepError::Output {
-                            context: e.to_string(),
-                            error: std::io::Error::other("path outside the output folder"),
+                            context: format!("cannot write {}", dir.join("history.csv").display()),
+                            error: std::io::Error::other(e),
                         });
                         return;
                     }
-                };
-                if let Err(e) = write_history(&dir, &r.history) {
-                    write_err = Some(SweepError::Output {
-                        context: format!("cannot write {}", dir.join("history.csv").display()),
-                        error: std::io::Error::other(e),
-                    });
-                    return;
                 }
-            }
-            if let Err(e) = rows.write(&row, &mut on_row) {
-                write_err = Some(e);
-            }
-        },
-    )?;
-    if let Some(e) = write_err {
-        return Err(e);
+                if let Err(e) = rows.write(&row, &mut on_row) {
+                    write_err = Some(e);
+                }
+            },
+        )?;
+        if first == 0 {
+            stats = part;
+        } else {
+            add_kernel_timers(&mut stats.gpu, &part.gpu);
+        }
+        if let Some(e) = write_err {
+            return Err(e);
+        }
+        first = last;
+        if first >= members.len() {
+            break;
+        }
     }
     rows.begin(&mut on_row)?;
     let mut summary = rows.summary;
@@ -840,6 +887,20 @@ pub fn run_sweep(
     write_atomic(&json_path, &format!("{info:#}\n"))
         .map_err(ctx(format!("cannot write {}", json_path.display())))?;
     Ok(summary)
+}
+
+/// Adds the kernel timers of a later group of members to `total`.
+fn add_kernel_timers(total: &mut KernelTimers, t: &KernelTimers) {
+    total.upload_s += t.upload_s;
+    total.kernel_s += t.kernel_s;
+    total.readback_s += t.readback_s;
+    total.unpack_s += t.unpack_s;
+    total.dispatches += t.dispatches;
+    total.bytes_up += t.bytes_up;
+    total.bytes_down += t.bytes_down;
+    total.copies += t.copies;
+    total.readback_copies += t.readback_copies;
+    total.tangent_elements += t.tangent_elements;
 }
 
 /// What a sweep's rows file begins with: the header, after the identity line

@@ -14,6 +14,7 @@ See docs/python.md for the whole API.
 from __future__ import annotations
 
 import csv
+import json
 import itertools
 import os
 import tempfile
@@ -23,7 +24,7 @@ import numpy as np
 
 from ._cosserat import Scene, SceneError, __version__, builtin_scenes
 from ._cosserat import Simulation as _Simulation
-from ._cosserat import _run_sweep
+from ._cosserat import _bench, _run_sweep
 
 __all__ = [
     "Scene",
@@ -32,6 +33,7 @@ __all__ = [
     "History",
     "Table",
     "sweep",
+    "bench",
     "read_members",
     "builtin_scenes",
     "__version__",
@@ -65,6 +67,23 @@ class Table(_Columns):
     """The members of a sweep: one array (or list of str) per column of `members.csv`."""
 
 
+def _vec3(key: str, v) -> Optional[List[float]]:
+    """`v` as a list of 3 floats (None stays None)."""
+    if v is None:
+        return None
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != (3,):
+        raise ValueError(f"{key}: expected 3 numbers, got shape {a.shape}")
+    return a.tolist()
+
+
+def _at(at):
+    """A node index (int) or a reference position (list of 3 floats)."""
+    if isinstance(at, (int, np.integer)) and not isinstance(at, bool):
+        return int(at)
+    return _vec3("at", at)
+
+
 class Simulation(_Simulation):
     """One simulation of a scene, stepped from Python (see `cosserat._cosserat.Simulation`)."""
 
@@ -76,6 +95,39 @@ class Simulation(_Simulation):
     @velocities.setter
     def velocities(self, v) -> None:
         _Simulation.velocities.__set__(self, np.ascontiguousarray(v, dtype=np.float64))
+
+    def set_load(self, index: int, force=None, moment=None) -> None:
+        """Sets load `index` (see `loads`) to a constant force and/or moment [3] from the
+        current level on (a part not given keeps its current value)."""
+        _Simulation.set_load(self, int(index), _vec3("force", force), _vec3("moment", moment))
+
+    def add_load(self, at, force=None, moment=None) -> int:
+        """Adds a constant force and/or moment [3] at `at` (node index or reference
+        position) from the current level on; returns its index in `loads`."""
+        return _Simulation.add_load(self, _at(at), _vec3("force", force), _vec3("moment", moment))
+
+    def set_support(
+        self, at, position=None, rotation=None, velocity=None, angular_velocity=None
+    ) -> None:
+        """Moves the driven support at `at` (node index or reference position) from the
+        current level on: `position` [3] / `rotation` (rotation vector [3] or matrix
+        [3, 3]) are reached at the next level and held; `velocity` / `angular_velocity`
+        [3] hold until commanded again; a part not given keeps its command."""
+        if rotation is not None:
+            r = np.asarray(rotation, dtype=np.float64)
+            if r.shape not in ((3,), (3, 3)):
+                raise ValueError(
+                    f"rotation: expected a rotation vector [3] or matrix [3, 3], got shape {r.shape}"
+                )
+            rotation = r.tolist()
+        _Simulation.set_support(
+            self,
+            _at(at),
+            position=_vec3("position", position),
+            rotation=rotation,
+            velocity=_vec3("velocity", velocity),
+            angular_velocity=_vec3("angular_velocity", angular_velocity),
+        )
 
     @property
     def trajectory(self) -> Dict[str, np.ndarray]:
@@ -140,6 +192,7 @@ def sweep(
     resume: bool = False,
     adapter: Optional[str] = None,
     histories: bool = False,
+    progress: bool = False,
 ) -> Table:
     """Runs an ensemble of `scene` with the values of `params` ({key path: values}) written
     in, as `cosserat sweep` does: `mode="grid"` (Cartesian product, the first key varying
@@ -147,7 +200,11 @@ def sweep(
     `"auto"`) into the folder `out` (a temporary one when None) with the same files,
     resume and streaming guarantees as the command; returns the rows of `members.csv`
     as a Table (dict of arrays; `to_pandas()`). Values set on `scene` with `Scene.set`
-    are varied as single-valued keys ahead of `params`.
+    are varied as single-valued keys ahead of `params`. `progress=True` shows a bar on
+    stderr (plain lines when stderr is not a terminal). Ctrl-C stops the sweep cleanly:
+    no further member starts, those under way finish and are recorded in `out`, then
+    KeyboardInterrupt is raised; `sweep(..., out=the same folder, resume=True)` runs the
+    rest.
     """
     if mode not in ("grid", "list"):
         raise ValueError(f"mode: expected 'grid' or 'list', got {mode!r}")
@@ -173,5 +230,56 @@ def sweep(
     spec = os.path.join(folder, "sweep.toml")
     with open(spec, "w") as f:
         f.write(_sweep_toml("base.toml", varied, mode))
-    _run_sweep(spec, folder, backend=backend, adapter=adapter, resume=resume, histories=histories)
+    try:
+        _run_sweep(
+            spec,
+            folder,
+            backend=backend,
+            adapter=adapter,
+            resume=resume,
+            histories=histories,
+            progress=progress,
+        )
+    except KeyboardInterrupt as e:
+        raise KeyboardInterrupt(
+            f"sweep interrupted: the members finished so far are in {folder}/members.csv; "
+            "sweep(..., out=that folder, resume=True) runs the rest"
+        ) from e
     return read_members(os.path.join(folder, "members.csv"))
+
+
+def bench(
+    rods: int = 64,
+    elements: int = 30,
+    steps: int = 20,
+    adapter: Optional[str] = None,
+    cpu_only: bool = False,
+    gpu_only: bool = False,
+    newton: str = "full",
+    strategy: str = "auto",
+    slots: int = 0,
+    solve: str = "host",
+    host_update: bool = False,
+) -> Dict[str, Any]:
+    """Times the batch benchmark of `cosserat bench`: the benchmark cantilever as `rods`
+    members of `elements` elements over `steps` EDMC-2 steps, on the CPU path and (unless
+    `cpu_only`, where a GPU exists) the GPU path. The options are the command's
+    (`newton`: full, fresh, modified; `strategy`: auto, staggered, monolithic, inexact;
+    `solve`: host, device, both). Returns the dict `cosserat bench --json` prints
+    (`cpu_element_steps_per_s`, `gpu_element_steps_per_s`, `ratio`, `adapter`, the stage
+    timers, ...). The GIL is released while it runs."""
+    return json.loads(
+        _bench(
+            rods=rods,
+            elements=elements,
+            steps=steps,
+            adapter=adapter,
+            cpu_only=cpu_only,
+            gpu_only=gpu_only,
+            newton=newton,
+            strategy=strategy,
+            slots=slots,
+            solve=solve,
+            host_update=host_update,
+        )
+    )

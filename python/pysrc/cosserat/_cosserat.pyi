@@ -1,7 +1,7 @@
 """Type stubs of the compiled extension `cosserat._cosserat`."""
 
 from os import PathLike
-from typing import Any, Callable, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -58,6 +58,7 @@ class Simulation:
         backend: str = "cpu",
         adapter: Optional[str] = None,
         trajectory: bool = False,
+        controlled: Optional[Sequence[Union[int, Sequence[float]]]] = None,
     ) -> None: ...
     def step(self) -> bool: ...
     def run(
@@ -88,6 +89,30 @@ class Simulation:
     @property
     def energy(self) -> Dict[str, float]: ...
     @property
+    def loads(self) -> List[Dict[str, Any]]: ...
+    def set_load(
+        self,
+        index: int,
+        force: Optional[npt.ArrayLike] = None,
+        moment: Optional[npt.ArrayLike] = None,
+    ) -> None: ...
+    def add_load(
+        self,
+        at: Union[int, npt.ArrayLike],
+        force: Optional[npt.ArrayLike] = None,
+        moment: Optional[npt.ArrayLike] = None,
+    ) -> int: ...
+    @property
+    def supports(self) -> List[Dict[str, Any]]: ...
+    def set_support(
+        self,
+        at: Union[int, npt.ArrayLike],
+        position: Optional[npt.ArrayLike] = None,
+        rotation: Optional[npt.ArrayLike] = None,
+        velocity: Optional[npt.ArrayLike] = None,
+        angular_velocity: Optional[npt.ArrayLike] = None,
+    ) -> None: ...
+    @property
     def summary(self) -> Dict[str, Any]: ...
     @property
     def trajectory(self) -> Dict[str, npt.NDArray[Any]]: ...
@@ -102,4 +127,26 @@ def _run_sweep(
     adapter: Optional[str] = None,
     resume: bool = False,
     histories: bool = False,
+    progress: bool = False,
 ) -> Dict[str, Any]: ...
+def _bench(
+    rods: int = 64,
+    elements: int = 30,
+    steps: int = 20,
+    adapter: Optional[str] = None,
+    cpu_only: bool = False,
+    gpu_only: bool = False,
+    newton: str = "full",
+    strategy: str = "auto",
+    slots: int = 0,
+    solve: str = "host",
+    host_update: bool = False,
+) -> str: ...
+def _run_to_dir(
+    scene: Scene,
+    out: Union[str, PathLike[str]],
+    output_dt: Optional[float] = None,
+    cosseratbench: bool = False,
+    scenario_digest: Optional[str] = None,
+    experiment: Optional[str] = None,
+) -> str: ...

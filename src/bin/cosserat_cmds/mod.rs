@@ -9,12 +9,8 @@ use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use cosserat::batch::{
-    bench_members, run_members, BackendChoice, BatchOptions, BatchStats, Executor, GpuBatcher,
-    SolveMode,
-};
+use cosserat::batch::{BackendChoice, Executor, GpuBatcher, SolveMode};
 use cosserat::integrator::{NewtonVariant, Simulation, SolveTimers, Strategy};
-use cosserat::observe::record::RunStatus;
 use cosserat::sweep::slurm::{self, JobSpec};
 use cosserat::sweep::{
     check_shard_folder, load_sweep, merge_shards_from, run_sweep, MemberStatus, Shard, SweepOptions,
@@ -102,11 +98,6 @@ impl StrategyArg {
             StrategyArg::Monolithic => Strategy::Monolithic,
             StrategyArg::Inexact => Strategy::Inexact,
         }
-    }
-
-    /// The name the JSON reports.
-    pub fn name(self) -> &'static str {
-        self.strategy().name()
     }
 }
 
@@ -722,64 +713,6 @@ pub enum BenchSolveArg {
     Resident,
 }
 
-/// One timed batch: its stats, Newton iterations, failed members, the members' summed
-/// Newton stage timers and the process's peak resident memory after it.
-struct Timed {
-    stats: BatchStats,
-    iters: usize,
-    failed: usize,
-    stages: SolveTimers,
-    peak_rss: Option<u64>,
-}
-
-fn timed(
-    members: &[cosserat::batch::Member],
-    exec: &Executor,
-    newton: NewtonVariant,
-    slots: usize,
-    solve: SolveMode,
-    host_update: bool,
-) -> Result<Timed> {
-    let (mut iters, mut failed) = (0usize, 0usize);
-    let mut stages = SolveTimers::default();
-    let opts = BatchOptions {
-        newton: Some(newton),
-        workers: slots,
-        solve,
-        host_update,
-        ..Default::default()
-    };
-    let stats = run_members(members, exec, opts, |r| {
-        iters += r.outcome.newton_iters_total;
-        stages.add(&r.outcome.timers);
-        if r.outcome.status == RunStatus::Failed {
-            if failed == 0 {
-                eprintln!(
-                    "member {} failed: {}",
-                    r.index,
-                    r.outcome.reason.as_deref().unwrap_or("")
-                );
-            }
-            failed += 1;
-        }
-    })?;
-    Ok(Timed {
-        stats,
-        iters,
-        failed,
-        stages,
-        peak_rss: peak_rss_bytes(),
-    })
-}
-
-/// The process's peak resident set size (Linux `VmHWM`), if known.
-fn peak_rss_bytes() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
 /// `assembly …, factor …, solve …` of summed stage timers (thread-seconds).
 fn stages_line(t: &SolveTimers) -> String {
     format!(
@@ -788,274 +721,79 @@ fn stages_line(t: &SolveTimers) -> String {
     )
 }
 
-/// The stage timers as JSON fields prefixed with `p`.
-fn stages_json(obj: &mut serde_json::Value, p: &str, t: &SolveTimers) {
-    obj[format!("{p}_assemble_s")] = t.assemble_s.into();
-    obj[format!("{p}_evaluate_wait_s")] = t.evaluate_wait_s.into();
-    obj[format!("{p}_factor_s")] = t.factor_s.into();
-    obj[format!("{p}_solve_s")] = t.solve_s.into();
-    obj[format!("{p}_factorizations")] = t.factorizations.into();
-    obj[format!("{p}_solves")] = t.solves.into();
-    obj[format!("{p}_chord_corrections")] = t.chord_corrections.into();
-    obj[format!("{p}_stagnation_stops")] = t.stagnation_stops.into();
-    obj[format!("{p}_factor_us_each")] =
-        (1e6 * t.factor_s / (t.factorizations.max(1) as f64)).into();
-    obj[format!("{p}_solve_us_each")] = (1e6 * t.solve_s / (t.solves.max(1) as f64)).into();
-}
-
-/// The inputs of the batch throughput model (docs/gpu.md, "Throughput model") measured on
-/// a GPU batch: per element evaluation, per member poll, per dispatch.
-fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, a: &BenchArgs) {
-    let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
-    let evals = sv.element_evals.max(1) as f64;
-    let threads = rayon::current_num_threads() as f64;
-    let member_steps = (a.rods * a.steps) as f64;
-    obj["gpu_wall_s"] = w.wall_s.into();
-    obj["gpu_newton_iters"] = g.iters.into();
-    obj["gpu_failed"] = g.failed.into();
-    obj["gpu_setup_s"] = w.setup_s.into();
-    obj["gpu_admit_s"] = w.admit_s.into();
-    obj["gpu_slots"] = w.slots.into();
-    obj["gpu_upload_s"] = k.upload_s.into();
-    obj["gpu_kernel_s"] = k.kernel_s.into();
-    obj["gpu_readback_s"] = k.readback_s.into();
-    obj["gpu_unpack_s"] = k.unpack_s.into();
-    obj["gpu_pack_s"] = sv.pack_s.into();
-    obj["gpu_host_member_phase_s"] = w.host_s.into();
-    obj["gpu_dispatches"] = k.dispatches.into();
-    obj["gpu_batch_iterations"] = w.iterations.into();
-    obj["gpu_bytes_up"] = k.bytes_up.into();
-    obj["gpu_bytes_down"] = k.bytes_down.into();
-    obj["gpu_copies"] = k.copies.into();
-    obj["gpu_readback_copies"] = k.readback_copies.into();
-    obj["gpu_requests"] = sv.requests.into();
-    obj["gpu_tangent_requests"] = sv.tangent_requests.into();
-    obj["gpu_element_evals"] = sv.element_evals.into();
-    obj["gpu_element_tangent_evals"] = sv.element_tangent_evals.into();
-    // Model inputs.
-    obj["model_copies_per_dispatch"] = (k.copies as f64 / k.dispatches.max(1) as f64).into();
-    obj["model_readback_copies_per_dispatch"] =
-        (k.readback_copies as f64 / k.dispatches.max(1) as f64).into();
-    obj["model_kernel_us_per_element_eval"] = (1e6 * k.kernel_s / evals).into();
-    obj["model_tangent_fraction"] = (sv.element_tangent_evals as f64 / evals).into();
-    obj["model_bytes_up_per_element_eval"] = (k.bytes_up as f64 / evals).into();
-    obj["model_bytes_down_per_element_eval"] = (k.bytes_down as f64 / evals).into();
-    let reqs = sv.requests.max(1) as f64;
-    obj["model_bytes_up_per_member_iteration"] = (k.bytes_up as f64 / reqs).into();
-    obj["model_bytes_down_per_member_iteration"] = (k.bytes_down as f64 / reqs).into();
-    obj["model_evals_per_member_step"] = (sv.requests as f64 / member_steps).into();
-    obj["model_dispatches_per_step"] = (k.dispatches as f64 / a.steps.max(1) as f64).into();
-    obj["model_host_thread_us_per_member_poll"] =
-        (1e6 * w.host_s * threads / (w.polls.max(1) as f64)).into();
-    obj["model_serve_thread_us_per_dispatch"] =
-        (1e6 * w.serve_thread_s / (k.dispatches.max(1) as f64)).into();
-    obj["model_serve_thread_us_per_request"] =
-        (1e6 * w.serve_thread_s / (sv.requests.max(1) as f64)).into();
-    obj["model_pack_us_per_request"] = (1e6 * sv.pack_s / (sv.requests.max(1) as f64)).into();
-    obj["model_unpack_us_per_request"] = (1e6 * k.unpack_s / (sv.requests.max(1) as f64)).into();
-    obj["model_dispatch_overhead_us"] =
-        (1e6 * (k.upload_s + k.readback_s) / (k.dispatches.max(1) as f64)).into();
-    obj["model_host_own_assemble_us_per_eval"] =
-        (1e6 * g.stages.assemble_s / (sv.requests.max(1) as f64)).into();
-    obj["gpu_peak_rss_bytes"] = g.peak_rss.into();
-    // The whole-step figures (docs/gpu.md, "Whole step on the device").
-    obj["host_syncs"] = sv.dispatches.into();
-    obj["host_syncs_per_step"] = (sv.dispatches as f64 / a.steps.max(1) as f64).into();
-    obj["host_thread_us_per_member_step"] =
-        (1e6 * (w.host_s * threads + w.serve_thread_s) / member_steps).into();
-    obj["bus_bytes_per_member_step"] = ((k.bytes_up + k.bytes_down) as f64 / member_steps).into();
-    obj["bus_bytes_up_per_member_step"] = (k.bytes_up as f64 / member_steps).into();
-    obj["bus_bytes_down_per_member_step"] = (k.bytes_down as f64 / member_steps).into();
-    obj["device_pass_s"] = k.kernel_s.into();
-    obj["gpu_wall_over_device_pass"] = ((w.wall_s - w.setup_s) / k.kernel_s.max(1e-12)).into();
-    obj["multi_dispatches"] = sv.multi_dispatches.into();
-    obj["multi_solves"] = sv.multi_solves.into();
-    obj["multi_iterations"] = sv.multi_iterations.into();
-    obj["multi_answers"] = sv.multi_answers.into();
-    obj["multi_bytes_down_per_solve"] =
-        (sv.multi_bytes_down as f64 / sv.multi_solves.max(1) as f64).into();
-    obj["multi_mismatches"] = sv.multi_mismatches.into();
-    stages_json(obj, "gpu", &g.stages);
-}
-
 /// `cosserat bench`: the same batch on the CPU path and on the GPU path.
 pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
-    use cosserat::scene::limits;
-    if a.elements > limits::MAX_SCENE_ELEMENTS {
-        bail!(
-            "--elements: {} elements per rod, above the limit of {} for one scene",
-            a.elements,
-            limits::MAX_SCENE_ELEMENTS
-        );
-    }
-    if a.rods as u64 > limits::MAX_MEMBERS {
-        bail!(
-            "--rods: {} rods, above the limit of {} members per batch",
-            a.rods,
-            limits::MAX_MEMBERS
-        );
-    }
-    limits::check_memory("bench", a.rods as u64, a.elements as u64)
-        .context("--rods × --elements")?;
-    let mut members =
-        bench_members(a.rods, a.elements, a.steps).context("bench: the benchmark cantilever")?;
-    for m in &mut members {
-        m.params.strategy = a.strategy.strategy();
-    }
-    let work = (a.rods * a.elements * a.steps) as f64;
-    let rod_steps = (a.rods * a.steps) as f64;
+    use cosserat::bench::{BenchError, BenchOptions, BenchSolve};
     let newton = if a.modified_newton {
         NewtonArg::Modified
     } else {
         a.newton
     }
     .variant();
+    let opts = BenchOptions {
+        rods: a.rods,
+        elements: a.elements,
+        steps: a.steps,
+        adapter: a.adapter.clone(),
+        cpu_only: a.cpu_only,
+        gpu_only: a.gpu_only,
+        newton,
+        strategy: a.strategy.strategy(),
+        slots: a.slots,
+        solve: match a.solve {
+            BenchSolveArg::Host => BenchSolve::Host,
+            BenchSolveArg::Device => BenchSolve::Device,
+            BenchSolveArg::Both => BenchSolve::Both,
+            BenchSolveArg::Resident => BenchSolve::Resident,
+        },
+        host_update: a.host_update,
+    };
     // The GPU first: `--gpu-only`, or an `--adapter` named, that finds no GPU runs nothing
     // (exit 2, before the CPU path's time is spent).
-    let gpu_exec = if a.cpu_only {
-        Ok((Executor::Cpu, None))
-    } else {
-        Executor::resolve(BackendChoice::Gpu, a.adapter.as_deref())
-    };
-    let gpu_exec = match gpu_exec {
-        Err(e) if a.adapter.is_some() => return Err(adapter_error(e)),
-        Err(e) if a.gpu_only => bail!("--gpu-only: no GPU to time: {e}"),
-        other => other,
-    };
-    let rss0 = peak_rss_bytes();
-    let cpu = if a.gpu_only {
-        None
-    } else {
-        Some(timed(
-            &members,
-            &Executor::Cpu,
-            newton,
-            a.slots,
-            SolveMode::Host,
-            false,
-        )?)
-    };
-    let cpu_rate = cpu.as_ref().map(|c| work / c.stats.wall_s);
-    let (host_solve, device_solve) = match a.solve {
-        BenchSolveArg::Host => (true, false),
-        BenchSolveArg::Device | BenchSolveArg::Resident => (false, true),
-        BenchSolveArg::Both => (true, true),
-    };
-    let resident_solve = a.solve == BenchSolveArg::Resident;
-    let (adapter, f64_ok, gpu, dev, res) = match &gpu_exec {
-        Ok((exec @ Executor::Gpu(ctx), _)) => {
-            let r = if host_solve {
-                Some(
-                    timed(&members, exec, newton, a.slots, SolveMode::Host, false)
-                        .context("GPU batch")?,
-                )
-            } else {
-                None
-            };
-            let d = if device_solve {
-                Some(
-                    timed(
-                        &members,
-                        exec,
-                        newton,
-                        a.slots,
-                        SolveMode::Device,
-                        a.host_update,
-                    )
-                    .context("GPU batch, device solve")?,
-                )
-            } else {
-                None
-            };
-            let s = if resident_solve {
-                Some(
-                    timed(&members, exec, newton, a.slots, SolveMode::Resident, false)
-                        .context("GPU batch, resident")?,
-                )
-            } else {
-                None
-            };
-            (ctx.describe(), ctx.is_f64(), r, d, s)
+    let run = match cosserat::bench::run(&opts) {
+        Ok(r) => r,
+        Err(BenchError::Option { key, reason }) => bail!("--{key}: {reason}"),
+        Err(BenchError::Limit(e)) => {
+            return Err(anyhow::Error::from(e).context("--rods × --elements"))
         }
-        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None, None),
-        Err(e) => (format!("none ({e})"), false, None, None, None),
+        Err(BenchError::Scene(e)) => {
+            return Err(anyhow::Error::from(e).context("bench: the benchmark cantilever"))
+        }
+        Err(BenchError::NoGpu(e)) if a.adapter.is_some() => return Err(adapter_error(e)),
+        Err(BenchError::NoGpu(e)) => bail!("--gpu-only: no GPU to time: {e}"),
+        Err(BenchError::Batch {
+            what: "CPU batch",
+            error,
+        }) => return Err(error.into()),
+        Err(BenchError::Batch { what, error }) => {
+            return Err(anyhow::Error::from(error).context(what))
+        }
     };
-    let res_rate = res.as_ref().map(|g| work / g.stats.wall_s);
-    let res_ratio = res_rate.zip(cpu_rate).map(|(g, c)| g / c);
-    let dev_rate = dev.as_ref().map(|g| work / g.stats.wall_s);
-    let dev_ratio = dev_rate.zip(cpu_rate).map(|(g, c)| g / c);
-    let gpu_rate = gpu.as_ref().map(|g| work / g.stats.wall_s);
+    for t in [&run.cpu, &run.gpu, &run.device, &run.resident]
+        .into_iter()
+        .flatten()
+    {
+        if let Some((i, reason)) = &t.first_failure {
+            eprintln!("member {i} failed: {reason}");
+        }
+    }
+    let (cpu, gpu, dev, adapter) = (&run.cpu, &run.gpu, &run.device, &run.adapter);
+    let rod_steps = (a.rods * a.steps) as f64;
+    let (cpu_rate, gpu_rate, dev_rate) = (run.cpu_rate(), run.gpu_rate(), run.device_rate());
     let ratio = gpu_rate.zip(cpu_rate).map(|(g, c)| g / c);
+    let dev_ratio = dev_rate.zip(cpu_rate).map(|(g, c)| g / c);
+    let (host_solve, device_solve) = match opts.solve {
+        BenchSolve::Host => (true, false),
+        BenchSolve::Device => (false, true),
+        BenchSolve::Both => (true, true),
+        BenchSolve::Resident => (false, true),
+    };
+    let resident_solve = opts.solve == BenchSolve::Resident;
+    let res = &run.resident;
+    let res_rate = run.resident_rate();
+    let res_ratio = res_rate.zip(cpu_rate).map(|(g, c)| g / c);
     if a.json {
-        let mut obj = serde_json::json!({
-            "rods": a.rods,
-            "elements": a.elements,
-            "steps": a.steps,
-            "newton": newton.name(),
-            "strategy": a.strategy.name(),
-            "cpu_strategy": cpu.as_ref().map(|_| a.strategy.strategy().resolve(false).name()),
-            "gpu_strategy": (gpu.is_some() || dev.is_some())
-                .then(|| a.strategy.strategy().resolve(true).name()),
-            "cpu_element_steps_per_s": cpu_rate,
-            "gpu_element_steps_per_s": gpu_rate,
-            "cpu_rod_steps_per_s": cpu.as_ref().map(|c| rod_steps / c.stats.wall_s),
-            "gpu_rod_steps_per_s": gpu.as_ref().map(|g| rod_steps / g.stats.wall_s),
-            "ratio": ratio,
-            "adapter": adapter,
-            "f64": f64_ok,
-            "cpu_threads": rayon::current_num_threads(),
-            "peak_rss_bytes_before": rss0,
-        });
-        if let Some(c) = &cpu {
-            obj["cpu_wall_s"] = c.stats.wall_s.into();
-            obj["cpu_newton_iters"] = c.iters.into();
-            obj["cpu_failed"] = c.failed.into();
-            obj["cpu_peak_rss_bytes"] = c.peak_rss.into();
-            obj["cpu_thread_us_per_member_iteration"] =
-                (1e6 * c.stats.wall_s * rayon::current_num_threads() as f64
-                    / (c.iters.max(1) as f64))
-                    .into();
-            obj["cpu_thread_us_per_member_step"] =
-                (1e6 * c.stats.wall_s * rayon::current_num_threads() as f64 / rod_steps).into();
-            stages_json(&mut obj, "cpu", &c.stages);
-        }
-        if let Some(g) = &gpu {
-            gpu_model_json(&mut obj, g, &a);
-        }
-        if let Some(d) = &dev {
-            let mut o = serde_json::json!({
-                "solve": "device",
-                "element_steps_per_s": dev_rate,
-                "rod_steps_per_s": rod_steps / d.stats.wall_s,
-                "ratio": dev_ratio,
-                "members_device_solved": d.stats.device_members.0,
-                "members_host_solved": d.stats.device_members.1,
-                "host_update": a.host_update,
-                "resident_iterations": d.stats.serve.resident_iterations,
-                "resident_bytes_down_per_iteration": d.stats.serve.resident_bytes_down as f64
-                    / d.stats.serve.resident_iterations.max(1) as f64,
-                "fetches": d.stats.serve.fetches,
-                "iterates_sent": d.stats.serve.iterates_sent,
-                "fetch_bytes_down_each": d.stats.serve.fetch_bytes_down as f64
-                    / (d.stats.serve.fetches + d.stats.serve.iterates_sent).max(1) as f64,
-            });
-            gpu_model_json(&mut o, d, &a);
-            obj["device"] = o;
-        }
-        if let Some(d) = &res {
-            let mut o = serde_json::json!({
-                "solve": "resident",
-                "iterations_per_submission": cosserat::batch::resident_k(),
-                "element_steps_per_s": res_rate,
-                "rod_steps_per_s": rod_steps / d.stats.wall_s,
-                "ratio": res_ratio,
-                "members_device_solved": d.stats.device_members.0,
-                "members_host_solved": d.stats.device_members.1,
-            });
-            gpu_model_json(&mut o, d, &a);
-            obj["resident"] = o;
-        }
-        println!("{obj}");
+        println!("{}", run.json());
         return Ok(ExitCode::SUCCESS);
     }
     println!(
@@ -1066,7 +804,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         newton.name(),
         strategy_label(a.strategy.strategy()),
     );
-    if let (Some(c), Some(rate)) = (&cpu, cpu_rate) {
+    if let (Some(c), Some(rate)) = (cpu, cpu_rate) {
         println!(
             "cpu ({} threads): {:.3} s, {:.0} rod·element·steps/s ({:.0} rod-steps/s), {} Newton iterations, {} failed",
             rayon::current_num_threads(),
@@ -1078,7 +816,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         );
         println!("cpu stages: {}", stages_line(&c.stages));
     }
-    match (&gpu, gpu_rate) {
+    match (gpu, gpu_rate) {
         (Some(g), Some(rate)) => {
             let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
             let ratio = ratio.map_or_else(String::new, |r| format!("; ratio gpu/cpu {r:.2}"));
@@ -1106,7 +844,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         _ if host_solve => println!("gpu: not run ({adapter})"),
         _ => {}
     }
-    match (&dev, dev_rate) {
+    match (dev, dev_rate) {
         (Some(g), Some(rate)) => {
             let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
             let ratio =

@@ -21,6 +21,7 @@
 mod accept;
 mod assemble;
 mod contact;
+mod control;
 mod drag;
 mod drive;
 mod follower;
@@ -33,6 +34,8 @@ mod step;
 mod strategy;
 
 use std::sync::Arc;
+
+pub use control::{ControlError, RotationCommand, TranslationCommand};
 
 use crate::element::{
     g_idx, th_idx, u_idx, ElementData, FrozenScalars, Increment, StepConsts, NDOF,
@@ -147,6 +150,9 @@ pub struct Simulation {
     /// Prescribed increment `(u, θ)` of every node over the coming step (nonzero only at
     /// driven supports; [`Model::drives`]).
     prescribed: Vec<[Vec3; 2]>,
+    /// Motions commanded between steps for driven supports ([`control`]), replacing
+    /// their scene motion in `prescribed`.
+    commands: Vec<control::NodeCommand>,
     /// The generalized-α baseline's own state and Newton machinery (only for
     /// [`Scheme::GenAlpha`], which steps through it instead of the element kernel's
     /// mid-point residual).
@@ -249,6 +255,7 @@ impl Simulation {
             force: vec![Vec3::zeros(); nn],
             moment: vec![Vec3::zeros(); nn],
             prescribed: vec![[Vec3::zeros(); 2]; nn],
+            commands: Vec::new(),
             model,
             params,
             data_lanes: Self::lane_groups(&data),

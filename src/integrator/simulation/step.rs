@@ -303,5 +303,6 @@ impl Simulation {
             let (u, th) = d.increment(t, t + self.params.dt);
             self.prescribed[d.node] = [u, th];
         }
+        self.commanded_increments(t, self.params.dt);
     }
 }
