@@ -192,7 +192,7 @@ impl Simulation {
             // device-resident path, where the device holds the iterate.)
             if !undo && !resident && it > 0 && !last_kept {
                 if let Some(&prev) = history.last() {
-                    if !(res < prev) && !accepted(res, &history) {
+                    if (res >= prev || res.is_nan()) && !accepted(res, &history) {
                         res = self
                             .line_search(q, &q_prev, mode, !reuse, (prev, res), &mut r)
                             .await;
