@@ -105,6 +105,7 @@ impl Simulation {
             ..Resident::default()
         };
         self.residual_work = None;
+        let frictional = self.model.obstacles.iter().any(|o| o.friction > 0.0);
         for it in 0..=self.params.max_iter {
             // Modified Newton keeps the factorized tangent of this mode (from an earlier
             // iteration, outer round or step) and evaluates the residual only.
@@ -190,7 +191,9 @@ impl Simulation {
             // convergence test's scaled norm) is shortened by halving ([`LINE_SEARCH_TRIALS`]);
             // every correction that reduces it is taken whole, as before. (Not on the
             // device-resident path, where the device holds the iterate.)
-            if !undo && !resident && it > 0 && !last_kept {
+            // Only in scenes with friction against obstacles (stick–slip): elsewhere a
+            // solve that wanders is left to the stagnation stop, the fallback and cut-back.
+            if !undo && !resident && it > 0 && !last_kept && frictional {
                 if let Some(&prev) = history.last() {
                     if (res >= prev || res.is_nan()) && !accepted(res, &history) {
                         res = self
