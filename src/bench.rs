@@ -335,6 +335,8 @@ fn stages_json(obj: &mut serde_json::Value, p: &str, t: &SolveTimers) {
     obj[format!("{p}_solves")] = t.solves.into();
     obj[format!("{p}_chord_corrections")] = t.chord_corrections.into();
     obj[format!("{p}_stagnation_stops")] = t.stagnation_stops.into();
+    obj[format!("{p}_line_searches")] = t.line_searches.into();
+    obj[format!("{p}_line_search_evaluations")] = t.line_search_evaluations.into();
     obj[format!("{p}_factor_us_each")] =
         (1e6 * t.factor_s / (t.factorizations.max(1) as f64)).into();
     obj[format!("{p}_solve_us_each")] = (1e6 * t.solve_s / (t.solves.max(1) as f64)).into();

@@ -105,7 +105,8 @@ fn friction_only_takes_energy_out_and_closes_the_balance() {
     });
     // A scene with friction cuts failed steps back by default (cutback 6)...
     assert_eq!(parse_scene(&text, "b.toml").unwrap().params.cutback, 6);
-    // ... which this run needs: without it Newton fails at a stick–slip transition.
+    // ... which this run no longer needs: Newton's line search carries it through the
+    // stick–slip transitions at the full step.
     let off = text.replace("t_end = 0.6", "t_end = 0.6\ncutback = 0");
     let s = parse_scene(&off, "b.toml").unwrap();
     assert_eq!(s.params.cutback, 0);
@@ -114,14 +115,9 @@ fn friction_only_takes_energy_out_and_closes_the_balance() {
         Ok::<(), ()>(())
     })
     .unwrap();
-    assert_eq!(out.status, RunStatus::Failed);
-    assert!(
-        out.reason
-            .as_deref()
-            .is_some_and(|r| r.contains("Newton did not converge")),
-        "{:?}",
-        out.reason
-    );
+    assert_eq!(out.status, RunStatus::Completed, "{:?}", out.reason);
+    assert_eq!(out.cutback_steps, 0);
+    assert!(sim.solve_timers().line_searches > 0);
     let (recs, deepest, _, sim) = drop(&text, None);
     let friction: f64 = recs.iter().map(|r| r.friction).sum();
     let d_total = recs.last().unwrap().dissipation_total;

@@ -904,6 +904,12 @@ fn print_summary(s: &RunSummary, out: &Path) {
             s.cutback_steps, s.steps, s.params.cutback
         );
     }
+    if s.timers.line_searches > 0 {
+        println!(
+            "{} Newton corrections that did not reduce the residual were shortened by a line search ({} evaluations).",
+            s.timers.line_searches, s.timers.line_search_evaluations
+        );
+    }
 }
 
 fn default_jobs(jobs: Option<usize>) -> usize {

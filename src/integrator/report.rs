@@ -81,6 +81,12 @@ pub struct SolveTimers {
     /// Newton solves stopped because their residual had not decreased for several
     /// iterations (the step moved on to its next predictor or its fallback strategy).
     pub stagnation_stops: u64,
+    /// Newton corrections that did not reduce the residual and were backtracked (a line
+    /// search) …
+    pub line_searches: u64,
+    /// … and the residual evaluations those line searches took (one per trial, one more
+    /// where no trial was accepted and the full correction was taken after all).
+    pub line_search_evaluations: u64,
 }
 
 impl SolveTimers {
@@ -96,6 +102,8 @@ impl SolveTimers {
         self.tangent_skip_misses += o.tangent_skip_misses;
         self.chord_corrections += o.chord_corrections;
         self.stagnation_stops += o.stagnation_stops;
+        self.line_searches += o.line_searches;
+        self.line_search_evaluations += o.line_search_evaluations;
     }
 }
 

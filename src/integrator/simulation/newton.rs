@@ -105,6 +105,7 @@ impl Simulation {
             ..Resident::default()
         };
         self.residual_work = None;
+        let frictional = self.model.obstacles.iter().any(|o| o.friction > 0.0);
         for it in 0..=self.params.max_iter {
             // Modified Newton keeps the factorized tangent of this mode (from an earlier
             // iteration, outer round or step) and evaluates the residual only.
@@ -184,6 +185,21 @@ impl Simulation {
                 } else {
                     self.timers.tangent_skip_misses += 1;
                     res = self.timed_assemble(q, mode, true, &mut r).await;
+                }
+            }
+            // A fresh-tangent correction that did not reduce the merit ½·res² (the
+            // convergence test's scaled norm) is shortened by halving ([`LINE_SEARCH_TRIALS`]);
+            // every correction that reduces it is taken whole, as before. (Not on the
+            // device-resident path, where the device holds the iterate.)
+            // Only in scenes with friction against obstacles (stick–slip): elsewhere a
+            // solve that wanders is left to the stagnation stop, the fallback and cut-back.
+            if !undo && !resident && it > 0 && !last_kept && frictional {
+                if let Some(&prev) = history.last() {
+                    if (res >= prev || res.is_nan()) && !accepted(res, &history) {
+                        res = self
+                            .line_search(q, &q_prev, mode, !reuse, (prev, res), &mut r)
+                            .await;
+                    }
                 }
             }
             let mut fresh = !reuse;
@@ -334,6 +350,42 @@ impl Simulation {
         })
     }
 
+    /// Backtracking on the correction `q − q_prev` that raised the relative residual from
+    /// `r0` to `r1`: halves it until the merit ½·res² meets Armijo's condition
+    /// `res² ≤ (1 − 2cα)·r0²` ([`ARMIJO`]), one evaluation (with the tangent where
+    /// `tangent`) per trial. Leaves `q` and `r` at the accepted trial and returns its
+    /// residual; if none is accepted, at the full correction again (re-evaluated), `r1`.
+    async fn line_search(
+        &mut self,
+        q: &mut [f64],
+        q_prev: &[f64],
+        mode: Mode,
+        tangent: bool,
+        (r0, r1): (f64, f64),
+        r: &mut [f64],
+    ) -> f64 {
+        let full = q.to_vec();
+        self.timers.line_searches += 1;
+        let mut alpha = 1.0;
+        for _ in 0..LINE_SEARCH_TRIALS {
+            alpha *= 0.5;
+            for ((qi, &p), &f) in q.iter_mut().zip(q_prev).zip(&full) {
+                *qi = p + alpha * (f - p);
+            }
+            self.timers.line_search_evaluations += 1;
+            let res = self.timed_assemble(q, mode, tangent, r).await;
+            if res * res <= (1.0 - 2.0 * ARMIJO * alpha) * r0 * r0 {
+                return res;
+            }
+        }
+        q.copy_from_slice(&full);
+        self.timers.line_search_evaluations += 1;
+        let res = self.timed_assemble(q, mode, tangent, r).await;
+        // (The same iterate, the same evaluation: the same residual.)
+        debug_assert!(res.to_bits() == r1.to_bits() || !r1.is_finite());
+        res
+    }
+
     /// [`Self::assemble`] with its own time (not the wait for an evaluator) counted as
     /// assembly. Returns the relative residual.
     async fn timed_assemble(&mut self, q: &[f64], mode: Mode, tangent: bool, r: &mut [f64]) -> f64 {
@@ -344,6 +396,14 @@ impl Simulation {
         res
     }
 }
+
+/// Line search: how many halvings of a correction that did not reduce the residual are
+/// tried (each one evaluation) before the full correction is taken after all.
+const LINE_SEARCH_TRIALS: usize = 4;
+
+/// Armijo's sufficient-decrease constant `c` for the merit ½·res² along the Newton
+/// correction (whose directional derivative there is −res²).
+const ARMIJO: f64 = 1e-4;
 
 /// A Newton solve that has somewhere to move on to (the step's next predictor, or the
 /// fallback strategy) stops once its residual has stayed at or above its best earlier value for this many
