@@ -552,7 +552,7 @@ fn summarize(scene: &Scene, sim: &Simulation, o: &RunOutcome) -> RunSummary {
             .is_dissipative()
             .then(|| sim.strategy().name().into()),
         linear_solver: sim.linear_solver().0.to_string(),
-        solve: if sim.device_solve() { "device" } else { "host" }.into(),
+        solve: sim.solve_label().into(),
         linear_solver_fallbacks: sim.linear_solver().1,
         timers: o.timers,
     }

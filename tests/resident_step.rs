@@ -304,3 +304,40 @@ fn resident_frame_matches_cpu() {
     assert_eq!(res[0].outcome.status, RunStatus::Completed);
     assert_eq!(res[0].outcome.steps, 15);
 }
+
+/// `run --solve resident` records where its Newton systems were solved: `resident` in
+/// summary.json, with the same history as `--solve device` (the same solves).
+#[test]
+fn run_records_the_resident_solve() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mut outs = vec![];
+    for solve in ["device", "resident"] {
+        let out = dir.path().join(solve);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+            .args([
+                "run",
+                "frame",
+                "--backend",
+                "gpu",
+                "--solve",
+                solve,
+                "--t-end",
+                "2",
+            ])
+            .arg("--out")
+            .arg(&out)
+            .env("NODEVICE_SELECT", "1")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(s["solve"], solve);
+        outs.push(std::fs::read_to_string(out.join("history.csv")).unwrap());
+    }
+    assert_eq!(outs[0], outs[1]);
+}

@@ -385,6 +385,7 @@ impl GpuEvaluator {
         self.multi[slot] = None;
         sim.set_device_solve(on);
         sim.set_device_resident(on && self.resident);
+        sim.set_multi_iteration(self.multi_tol[slot].is_some());
         self.assembler.set_device_owned(slot, on && self.resident);
         on
     }

@@ -208,6 +208,9 @@ pub struct Simulation {
     /// corrections; only the relative residual comes back per iteration
     /// ([`Self::set_device_resident`]).
     device_resident: bool,
+    /// `--solve resident`: the device runs several Newton iterations per submission for
+    /// this member ([`Self::set_multi_iteration`]); recorded in `summary.json`.
+    multi_iteration: bool,
     /// Device-resident Newton is in progress (set by `newton` for the duration of a solve).
     resident_now: bool,
     /// Device-resident Newton: what the next evaluation asks of the device (upload the
@@ -296,6 +299,7 @@ impl Simulation {
             device_solve: false,
             device_x: None,
             device_resident: false,
+            multi_iteration: false,
             resident_now: false,
             resident_next: Default::default(),
             resident_scale: [0.0; 3],
@@ -497,6 +501,22 @@ impl Simulation {
     /// Whether the device keeps this simulation's Newton iterates.
     pub fn device_resident(&self) -> bool {
         self.device_resident && self.device_solve
+    }
+
+    /// Marks this simulation as solved with several device Newton iterations per
+    /// submission (`--solve resident`, set by the batch evaluator that runs it so).
+    pub fn set_multi_iteration(&mut self, on: bool) {
+        self.multi_iteration = on;
+    }
+
+    /// Where its Newton systems are solved, as `summary.json` records it: `host`,
+    /// `device`, or `resident` (device, several iterations per submission).
+    pub fn solve_label(&self) -> &'static str {
+        match (self.device_solve, self.multi_iteration) {
+            (false, _) => "host",
+            (true, false) => "device",
+            (true, true) => "resident",
+        }
     }
 
     fn attach(&mut self, backend: Backend) -> bool {
