@@ -25,6 +25,8 @@ alias Tri = array<V3, 3>;
 
 // Substituted together with `Real` for f32.
 const TINY: Real = 1e-300;
+// Stands for infinity: no finite factor reaches it (1e30 in f32).
+const HUGE: Real = 1e300;
 const CNU_TOL: Real = 1e-15;
 
 // ---- element constants (binding 0), NE fields ----
@@ -426,13 +428,94 @@ fn solve_cnu(st: St, x: array<Real, 18>, dt: Real) -> Real {
     return 0.5 * (a + b);
 }
 
-fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real) -> Consistent {
+// Illinois regula falsi on g(c) = F(c) − c over a bracket with g(a) ≥ 0 ≥ g(b) (either
+// order of a, b): twin of element::director_factor::illinois.
+fn cnu_illinois(st: St, x: array<Real, 18>, dt: Real, a0: Real, ga0: Real, b0: Real, gb0: Real) -> Real {
+    var a = a0;
+    var ga = ga0;
+    var b = b0;
+    var gb = gb0;
+    var side = 0i;
+    for (var it = 0u; it < 200u; it++) {
+        var xc: Real;
+        if ga - gb > 0.0 { xc = (a * (-gb) + b * ga) / (ga - gb); } else { xc = 0.5 * (a + b); }
+        let gx = cnu_law(st, x, xc, dt) - xc;
+        if abs(gx) <= cnu_tol(xc) || abs(b - a) <= cnu_tol(xc) { return xc; }
+        if gx > 0.0 {
+            a = xc;
+            ga = gx;
+            if side == 1i { gb *= 0.5; }
+            side = 1i;
+        } else {
+            b = xc;
+            gb = gx;
+            if side == -1i { ga *= 0.5; }
+            side = -1i;
+        }
+    }
+    return 0.5 * (a + b);
+}
+
+// The root of c = F(c) nearest c_ref, the factor the iterate was solved with: twin of
+// element::director_factor::solve_fixed_point_near (successive iterates stay on one branch
+// where the equation has several roots).
+fn solve_cnu_near(st: St, x: array<Real, 18>, dt: Real, c_ref: Real) -> Real {
+    let c0 = solve_cnu(st, x, dt);
+    let ksum = kappa(0u) + kappa(1u);
+    var c_min: Real = -HUGE;
+    if ksum > 0.0 { c_min = -1.0 / ksum; }
+    let d = abs(c0 - c_ref);
+    // `c_ref == c_ref` is false for NaN; |c_ref| < HUGE stands for finiteness.
+    if !(c_ref == c_ref && abs(c_ref) < HUGE && c_ref > c_min) || d <= 1e-12 * (1.0 + abs(c0)) {
+        return c0;
+    }
+    let gr = cnu_law(st, x, c_ref, dt) - c_ref;
+    if abs(gr) <= cnu_tol(c_ref) { return c_ref; }
+    var delta = d / 8.0;
+    var up_prev = c_ref;
+    var lo_prev = c_ref;
+    var lo = c_ref;
+    for (var k = 0u; k < 64u && delta < d; k++) {
+        let up = c_ref + delta;
+        let gu = cnu_law(st, x, up, dt) - up;
+        if c_ref - delta > c_min { lo = c_ref - delta; } else { lo = 0.5 * (lo + c_min); }
+        let gl = cnu_law(st, x, lo, dt) - lo;
+        var found = false;
+        var near: Real = 0.0;
+        var far: Real = 0.0;
+        var gfar: Real = 0.0;
+        if (gu > 0.0) != (gr > 0.0) {
+            found = true;
+            near = up_prev;
+            far = up;
+            gfar = gu;
+        } else if (gl > 0.0) != (gr > 0.0) {
+            found = true;
+            near = lo_prev;
+            far = lo;
+            gfar = gl;
+        }
+        if found {
+            let gnear = cnu_law(st, x, near, dt) - near;
+            if gnear >= 0.0 {
+                return cnu_illinois(st, x, dt, near, gnear, far, gfar);
+            }
+            return cnu_illinois(st, x, dt, far, gfar, near, gnear);
+        }
+        up_prev = up;
+        lo_prev = lo;
+        delta *= 2.0;
+    }
+    return c0;
+}
+
+fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real, c_ref: Real) -> Consistent {
     let h = ld_e(E_H);
     let a_rho = ld_e(E_ARHO);
     let dt_h = dt / h;
     var c_nu: Real = 0.0;
     if ld_e(E_DIRDISS) != 0.0 {
-        c_nu = solve_cnu(st, x, dt);
+        c_nu = solve_cnu_near(st, x, dt, c_ref);
     }
     let kin = kinematics(st, x, c_nu, dt);
     let loc = local_scalars(kin.inputs, a_rho, dt_h);
@@ -623,7 +706,7 @@ fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var i = 0u; i < 18u; i++) { x[i] = ld_i(I_X + i); }
     let keep = prm.want_tangent != 0u;
     if prm.mode == 1u || ld_i(I_ACTIVE) == 2.0 {
-        let c = consistent_scalars(st, x, dt);
+        let c = consistent_scalars(st, x, dt, ld_i(I_S + 3u));
         residual(st, c.kin, c.s, dt, keep);
     } else {
         let s = array<Real, 4>(ld_i(I_S), ld_i(I_S + 1u), ld_i(I_S + 2u), ld_i(I_S + 3u));

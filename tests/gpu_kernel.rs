@@ -18,9 +18,9 @@ mod common;
 use cosserat::element::scalar_gradient::{residual_scalar_derivatives, scalar_gradient};
 use cosserat::element::strain::Config;
 use cosserat::element::{
-    consistent_scalars, kinematics, kinematics_at, monolithic_correction, residual_tangent,
-    strains6, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars, Increment,
-    StepConsts, NDOF,
+    consistent_scalars, consistent_scalars_near, kinematics, kinematics_at, monolithic_correction,
+    residual_tangent, strains6, ElemVec, ElementData, ElementEval, ElementState, FrozenScalars,
+    Increment, StepConsts, NDOF,
 };
 use cosserat::gpu::kernel::{KernelMode, ELEMENT_WGSL};
 use cosserat::gpu::{gpu_required, layout, ElementKernel, GpuContext, Precision};
@@ -220,7 +220,10 @@ fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
                 kinematics(&c.data, &c.st, &c.eps_n, &c.inc, c.s.c_nu, c.k.dt),
             ),
             KernelMode::Consistent => {
-                let (s, _, kin) = consistent_scalars(&c.data, &c.st, &c.eps_n, &c.inc, &c.k);
+                // The kernel follows the branch of the uploaded (frozen) c_ν, as the CPU
+                // path does with its frozen scalars.
+                let (s, _, kin) =
+                    consistent_scalars_near(&c.data, &c.st, &c.eps_n, &c.inc, &c.k, c.s.c_nu);
                 (s, kin)
             }
         };

@@ -38,7 +38,7 @@ pub(crate) const CACHE_KEYED: [&str; 7] = [
     COMPACT_WGSL,
 ];
 
-/// `src` for precision `p` (the f32 variant rewrites `Real` and, where present, the two
+/// `src` for precision `p` (the f32 variant rewrites `Real` and, where present, the
 /// element-kernel constants that do not fit an f32).
 pub(crate) fn shader_precision(src: &str, p: Precision) -> String {
     match p {
@@ -46,6 +46,7 @@ pub(crate) fn shader_precision(src: &str, p: Precision) -> String {
         Precision::F32 => src
             .replace("alias Real = f64;", "alias Real = f32;")
             .replace("const TINY: Real = 1e-300;", "const TINY: Real = 1e-30;")
+            .replace("const HUGE: Real = 1e300;", "const HUGE: Real = 1e30;")
             .replace(
                 "const CNU_TOL: Real = 1e-15;",
                 "const CNU_TOL: Real = 1e-7;",
