@@ -442,17 +442,29 @@ fn restore_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
+// The row scales of member m's relative residual (per unknown kind: u, θ, g), the
+// device's assembled maxima against the host's, floored.
+fn member_scales(m: u32) -> array<Real, 3> {
+    let sc = m * prm.rpm + 9u * prm.npn;
+    var s: array<Real, 3>;
+    for (var k = 0u; k < 3u; k++) {
+        s[k] = max(max(sys[sc + k], host_scale[3u * m + k]), 1e-300);
+    }
+    return s;
+}
+
+// Row r of node i of member m's residual: the assembled row plus the host's nodal terms.
+fn row_residual(m: u32, i: u32, r: u32) -> Real {
+    return sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
+}
+
 @compute @workgroup_size(64)
 fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let m = gid.x;
     if m >= prm.n_member { return; }
     let n = member_n[m];
     if n == 0u || (ops[m] & 4u) == 0u { return; }
-    let sc = m * prm.rpm + 9u * prm.npn;
-    var s: array<Real, 3>;
-    for (var k = 0u; k < 3u; k++) {
-        s[k] = max(max(sys[sc + k], host_scale[3u * m + k]), 1e-300);
-    }
+    let s = member_scales(m);
     var worst: Real = 0.0;
     var finite = true;
     var work: Real = 0.0;
@@ -460,7 +472,7 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let mi = mask[m * prm.npn + i];
         for (var r = 0u; r < 9u; r++) {
             if ((mi >> r) & 1u) == 0u { continue; }
-            let v = sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
+            let v = row_residual(m, i, r);
             let rel = abs(v) / s[r / 3u];
             finite = finite && is_finite(rel);
             worst = max(worst, rel);
@@ -580,17 +592,13 @@ fn spec_check_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if m >= prm.n_member { return; }
     let n = member_n[m];
     if n == 0u || (ops[m] & 16u) == 0u { return; }
-    let sc = m * prm.rpm + 9u * prm.npn;
-    var s: array<Real, 3>;
-    for (var k = 0u; k < 3u; k++) {
-        s[k] = max(max(sys[sc + k], host_scale[3u * m + k]), 1e-300);
-    }
+    let s = member_scales(m);
     var worst: Real = 0.0;
     for (var i = 0u; i < n; i++) {
         let mi = mask[m * prm.npn + i];
         for (var r = 0u; r < 9u; r++) {
             if ((mi >> r) & 1u) == 0u { continue; }
-            let v = sys[m * prm.rpm + 9u * i + r] + extra[9u * (m * prm.npn + i) + r];
+            let v = row_residual(m, i, r);
             let rel = abs(v) / s[r / 3u];
             if !is_finite(rel) { return; }
             worst = max(worst, rel);

@@ -407,25 +407,7 @@ fn solve_cnu(st: St, x: array<Real, 18>, dt: Real) -> Real {
         }
     }
     if !(ga >= 0.0 && gb <= 0.0) { return c; }
-    var side = 0i;
-    for (var it = 0u; it < 200u; it++) {
-        var xc: Real;
-        if ga - gb > 0.0 { xc = (a * (-gb) + b * ga) / (ga - gb); } else { xc = 0.5 * (a + b); }
-        let gx = cnu_law(st, x, xc, dt) - xc;
-        if abs(gx) <= cnu_tol(xc) || abs(b - a) <= cnu_tol(xc) { return xc; }
-        if gx > 0.0 {
-            a = xc;
-            ga = gx;
-            if side == 1i { gb *= 0.5; }
-            side = 1i;
-        } else {
-            b = xc;
-            gb = gx;
-            if side == -1i { ga *= 0.5; }
-            side = -1i;
-        }
-    }
-    return 0.5 * (a + b);
+    return cnu_illinois(st, x, dt, a, ga, b, gb);
 }
 
 // Illinois regula falsi on g(c) = F(c) − c over a bracket with g(a) ≥ 0 ≥ g(b) (either

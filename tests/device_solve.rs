@@ -25,7 +25,9 @@
 //! is set, in which case it fails.
 
 mod common;
+
 use common::gpu;
+use common::{rel, Rng};
 use cosserat::batch::{
     bench_members, run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
 };
@@ -43,16 +45,6 @@ const STATE_RTOL: f64 = 6e-11;
 /// fresh Newton) and modified Newton since its members carry tip loads (2026-11-27;
 /// 1.17e-12 against the host's full Newton before it took chord corrections).
 const MEMBER_RTOL: f64 = 1e-11;
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// 14 members of 10 elements: 0..9 random, 9 ends after 3 steps, 10 fails on its
 /// staggered cap, 11 fails on its Newton cap, 12 is generalized-α, 13 has a point mass.
@@ -159,11 +151,6 @@ fn run_with(
         .map(|(i, r)| r.unwrap_or_else(|| panic!("member {i} never reported")))
         .collect();
     (out, stats)
-}
-
-fn rel(a: impl Iterator<Item = f64> + Clone, b: impl Iterator<Item = f64>) -> f64 {
-    let scale = a.clone().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
-    a.zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
 }
 
 #[test]

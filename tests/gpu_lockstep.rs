@@ -14,7 +14,9 @@
 //! is set, in which case it fails.
 
 mod common;
+
 use common::gpu;
+use common::rel;
 use cosserat::batch::{bench_members, run_members, BatchOptions, Executor, Member, MemberResult};
 use cosserat::integrator::{NewtonVariant, Scheme, Strategy};
 use cosserat::observe::record::RunStatus;
@@ -77,11 +79,6 @@ fn run(ms: &[Member], exec: &Executor, newton: NewtonVariant, slots: usize) -> V
 }
 
 /// `max |a − b| / max(|a|, 1e-300)` over the flattened values.
-fn rel(a: impl Iterator<Item = f64> + Clone, b: impl Iterator<Item = f64>) -> f64 {
-    let scale = a.clone().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
-    a.zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
-}
-
 #[test]
 fn lockstep_gpu_batch_matches_cpu_member_by_member() {
     let Some(exec) = gpu() else { return };

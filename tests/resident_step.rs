@@ -21,7 +21,9 @@
 //! is set, in which case it fails.
 
 mod common;
+
 use common::gpu;
+use common::{rel, Rng};
 use cosserat::batch::{
     bench_members, run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
 };
@@ -30,19 +32,9 @@ use cosserat::model::{NodalLoad, Vec3};
 use cosserat::observe::record::RunStatus;
 use cosserat::table::TimeTable;
 
-/// The bound on final states against the CPU path with the same strategy and
+/// The bound on final states against the CPU path with the same strategy and
 /// Newton variant.
 const STATE_RTOL: f64 = 1e-10;
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// 14 cantilevers of 10 elements (EDMC-2 unless `scheme` says otherwise) with random
 /// kicks, stiffnesses, time steps and ramped tip loads on 0..9; 9 ends after 3 steps,
@@ -133,11 +125,6 @@ fn run(
         .map(|(i, r)| r.unwrap_or_else(|| panic!("member {i} never reported")))
         .collect();
     (out, stats)
-}
-
-fn rel(a: impl Iterator<Item = f64> + Clone, b: impl Iterator<Item = f64>) -> f64 {
-    let scale = a.clone().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
-    a.zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
 }
 
 /// The largest relative difference of final positions, directors, velocities and energy

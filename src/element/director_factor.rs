@@ -79,35 +79,7 @@ pub fn solve_fixed_point(mut f: impl FnMut(f64) -> f64, c_min: f64) -> f64 {
         // No sign change found: keep the last fixed-point value.
         return c;
     }
-    // Illinois regula falsi: g(a) ≥ 0 ≥ g(b).
-    let mut side = 0i8;
-    for _ in 0..200 {
-        let x = if ga - gb > 0.0 {
-            (a * (-gb) + b * ga) / (ga - gb)
-        } else {
-            0.5 * (a + b)
-        };
-        let gx = g(x);
-        if gx.abs() <= tol(x) || (b - a).abs() <= tol(x) {
-            return x;
-        }
-        if gx > 0.0 {
-            a = x;
-            ga = gx;
-            if side == 1 {
-                gb *= 0.5;
-            }
-            side = 1;
-        } else {
-            b = x;
-            gb = gx;
-            if side == -1 {
-                ga *= 0.5;
-            }
-            side = -1;
-        }
-    }
-    0.5 * (a + b)
+    illinois(g, a, ga, b, gb)
 }
 
 /// The root of `c = f(c)` nearest `c_ref` (the director factor the current iterate was

@@ -350,3 +350,23 @@ pub mod scene_text {
         )
     }
 }
+
+/// A xorshift generator for reproducible random test inputs, uniform on [0, 1).
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// The next number, uniform on [0, 1).
+    #[allow(clippy::should_implement_trait)]
+    pub fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Largest difference of `b` from `a`, relative to the largest |a|.
+pub fn rel(a: impl Iterator<Item = f64> + Clone, b: impl Iterator<Item = f64>) -> f64 {
+    let scale = a.clone().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    a.zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
+}
