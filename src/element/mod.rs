@@ -77,8 +77,8 @@ pub struct ElementData<T: Lane = f64> {
     pub props: ElementProps<T>,
     /// Raw strains `(Γ°, Ω°)` of the reference configuration.
     pub eps0: Vector6<T>,
-    /// Whether the directors of each end node move: its rotation is free (not clamped)
-    /// or driven by a time table. Such an end takes its share of the director
+    /// Whether the directors of each end node move: its rotation is free (not clamped),
+    /// driven by a time table, or free about a sliding clamp's axis (`spin`). Such an end takes its share of the director
     /// dissipation ([`ElementData::kappa`]).
     pub rot_free: [T::Flag; 2],
 }
@@ -102,11 +102,15 @@ impl ElementData {
     /// The constant data of every element of `model`, in element order: section
     /// constants, reference strains of the reference configuration, end rotations free.
     pub fn for_model(model: &crate::model::Model) -> Vec<ElementData> {
-        // A clamp turned by a time table: its directors move (prescribed), and their
-        // velocities take the director dissipation like a free end's.
+        // A clamp turned by a time table, or spinning about its sliding axis: its
+        // directors move (prescribed, or free about the axis), and their velocities take
+        // the director dissipation like a free end's.
         let mut turned = vec![false; model.n_nodes()];
         for d in &model.drives {
             turned[d.node] |= d.rotation != crate::model::Vec3::zeros();
+        }
+        for s in &model.slides {
+            turned[s.node] |= s.spin;
         }
         let moves = |a: usize| !model.supports[a].rotation || turned[a];
         model

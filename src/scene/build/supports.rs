@@ -100,12 +100,6 @@ fn slide(
             "gen-alpha does not support sliding clamps; use em, edmc1, edmc2 or midpoint",
         ));
     }
-    if spin && params.scheme.director_dissipation() {
-        return Err(cx.err(
-            &path.key("spin"),
-            "a spinning sliding clamp is not supported with director dissipation (chi_nu, alpha_gn, alpha_on)",
-        ));
-    }
     Ok(Some(Slide { node, axis, spin }))
 }
 
