@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::driver::{run_to_dir, DriverError, RunOptions, RunResult};
+use crate::integrator::record::RunSummary;
 use crate::integrator::{IntegratorParams, Scheme, Strategy};
 use crate::observe::record::{RunStatus, StepRecord};
 use crate::output::{plot_comparison, LabelledHistory, OutputError};
@@ -291,6 +292,37 @@ pub fn max_unloaded_energy_growth(records: &[StepRecord]) -> f64 {
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
+/// The report's `cut-back steps` cell of a run: how many of its steps were cut back into
+/// sub-steps, `0 (off)` where cut-back was off (every step at the run's Δt, as the paper's).
+pub fn cutback_cell(sm: &RunSummary) -> String {
+    if sm.params.cutback == 0 {
+        format!("{} (off)", sm.cutback_steps)
+    } else {
+        sm.cutback_steps.to_string()
+    }
+}
+
+/// The report header's sentence on cut-back: off in every run (fixed steps, as the paper's),
+/// or the largest setting, with how many steps were cut back in all.
+fn cutback_note(done: &[Finished]) -> String {
+    let most = done
+        .iter()
+        .map(|f| f.result.summary.params.cutback)
+        .max()
+        .unwrap_or(0);
+    let cut: usize = done.iter().map(|f| f.result.summary.cutback_steps).sum();
+    if most == 0 {
+        "Fixed steps, as the paper's: no step is cut back (`cutback = 0`), so a step Newton \
+         cannot solve ends its run; the table's `cut-back steps` column records it per run."
+            .into()
+    } else {
+        format!(
+            "A failed step is redone in up to 2^{most} sub-steps (`cutback`); {cut} steps were \
+             cut back in all, per run in the table's `cut-back steps` column."
+        )
+    }
+}
+
 fn write_report(
     out: &Path,
     quick: bool,
@@ -309,14 +341,15 @@ fn write_report(
          iterations per solve, predictor = previous increment then zero; EDMC-2 by the paper's \
          staggered loop (without the fallback that `cosserat run` applies by default) and, for the mechanisms, also by the monolithic Newton (\"monolithic\"); rigid links by the augmented Lagrangian (|g| ≤ 1e-10, at most 50 rounds per step). \
          Nothing is tuned per scheme. Geometry the paper does not give is reconstructed as DESIGN §6 \
-         says (see the comments in `scenes/*.toml`).{}\n",
+         says (see the comments in `scenes/*.toml`). {}{}\n",
+        cutback_note(done),
         if quick { " **Quick mode**: the arch stops at t = 1200 and the mechanisms at t = 6 with Δt = 0.05 only." } else { "" }
     );
     let _ = writeln!(s, "## Runs\n");
-    let _ = writeln!(s, "| scene | scheme | α | Δt | status | t_reached | max rel. ΔL/step | max rel. ΔJ/step | H₀ | H_end | W (external work) | D = W − ΔH | max ΔH/H per unloaded step | max \\|g\\| | Newton its | wall [s] | folder |");
+    let _ = writeln!(s, "| scene | scheme | α | Δt | status | t_reached | max rel. ΔL/step | max rel. ΔJ/step | H₀ | H_end | W (external work) | D = W − ΔH | max ΔH/H per unloaded step | max \\|g\\| | Newton its | cut-back steps | wall [s] | folder |");
     let _ = writeln!(
         s,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for f in done {
         let sm = &f.result.summary;
@@ -335,7 +368,7 @@ fn write_report(
         let work: f64 = f.result.records.iter().map(|r| r.external_work).sum();
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {:.4} | {} | {} | {:.6e} | {:.6e} | {:.6e} | {:.3e} | {:+.1e} | {:.1e} | {} | {:.2} | [{}]({}/{}/) |",
+            "| {} | {} | {} | {} | {} | {:.4} | {} | {} | {:.6e} | {:.6e} | {:.6e} | {:.3e} | {:+.1e} | {:.1e} | {} | {} | {:.2} | [{}]({}/{}/) |",
             f.run.scene,
             run_label(&f.run),
             fmt_num(f.run.alpha()),
@@ -351,6 +384,7 @@ fn write_report(
             max_unloaded_energy_growth(&f.result.records),
             sm.max_link_g,
             sm.newton_iters_total,
+            cutback_cell(sm),
             sm.wall_s,
             f.run.folder,
             f.run.scene,
@@ -402,9 +436,13 @@ fn write_report(
                 .map(|r| r.newton_iters)
                 .max()
                 .unwrap_or(0);
+            let cut = match sm.cutback_steps {
+                0 => String::new(),
+                n => format!(" {n} of its steps were cut back into sub-steps."),
+            };
             let _ = writeln!(
                 s,
-                "- {} at Δt = {}: {what}; H {:.6e} → {:.6e}; peak ‖a‖ = {:.3e}; most Newton iterations in one step: {max_it}.",
+                "- {} at Δt = {}: {what}; H {:.6e} → {:.6e}; peak ‖a‖ = {:.3e}; most Newton iterations in one step: {max_it}.{cut}",
                 run_label(&f.run),
                 fmt_num(f.run.dt),
                 sm.energy_initial,

@@ -1,6 +1,7 @@
 //! `cosserat reproduce --quick`: every run gets its folder with the run files, snapshots
 //! and VTK; the comparison figures and REPORT.md are written; the report has one row per
-//! run with the documented columns and embeds figures that exist.
+//! run with the documented columns and embeds figures that exist, and records each run's
+//! cut-back steps as its summary.json does.
 use std::process::Command;
 
 #[test]
@@ -73,6 +74,7 @@ fn reproduce_quick_writes_every_run_figures_vtk_and_report() {
         "max rel. ΔJ/step",
         "D = W − ΔH",
         "max \\|g\\|",
+        "cut-back steps",
     ] {
         assert!(report.contains(col), "REPORT.md lacks column {col}");
     }
@@ -81,6 +83,36 @@ fn reproduce_quick_writes_every_run_figures_vtk_and_report() {
         .filter(|l| l.starts_with("| ") && !l.starts_with("| scene"))
         .count();
     assert_eq!(rows, runs.len(), "one row per run");
+    // Whether any step was cut back: each row's cell is its summary.json's count, marked
+    // `(off)` where cut-back was off (the paper's fixed steps), and the header says so.
+    let header: Vec<&str> = report
+        .lines()
+        .find(|l| l.starts_with("| scene"))
+        .unwrap()
+        .split(" | ")
+        .collect();
+    let col = header.iter().position(|c| *c == "cut-back steps").unwrap();
+    for r in &runs {
+        let link = format!("]({}/{}/)", r.scene, r.folder);
+        let row = report.lines().find(|l| l.contains(&link)).unwrap();
+        let cell = row.split(" | ").nth(col).unwrap();
+        let sm: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join(r.scene).join(&r.folder).join("summary.json"))
+                .unwrap(),
+        )
+        .unwrap();
+        let n = sm["cutback_steps"].as_u64().unwrap();
+        let want = if sm["params"]["cutback"].as_u64().unwrap() == 0 {
+            format!("{n} (off)")
+        } else {
+            n.to_string()
+        };
+        assert_eq!(cell, want, "{link}: cut-back steps");
+    }
+    assert!(
+        report.contains("no step is cut back (`cutback = 0`)"),
+        "the header states the cut-back setting"
+    );
     // Every embedded figure exists.
     for part in report.split("](").skip(1) {
         let target = part.split(')').next().unwrap();
