@@ -281,7 +281,6 @@ fn planar_element(
         eps0: Vector3::zeros(),
         damping,
         rot_free: free,
-        measure: Default::default(),
         kappa,
         map: PlanarMap {
             axes: [0, 1],

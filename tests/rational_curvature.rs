@@ -364,12 +364,12 @@ fn one_element_bent_by_delta_stores_half_ei_f_squared_over_h() {
 /// The key's errors name the file, the key and the reason.
 #[test]
 fn bad_uses_of_the_key_are_named() {
-    let err = |extra: &str, integrator: &str| {
-        parse_scene(&scene(4, extra, integrator), "bad.toml")
-            .err()
-            .expect("must be refused")
-            .to_string()
-    };
+    let err =
+        |extra: &str, integrator: &str| match parse_scene(&scene(4, extra, integrator), "bad.toml")
+        {
+            Ok(_) => panic!("must be refused: {extra}"),
+            Err(e) => e.to_string(),
+        };
     let e = err("curvature_measure = \"exact\"\n", EM);
     assert!(
         e.contains("bad.toml") && e.contains("curvature_measure") && e.contains("`exact`"),
