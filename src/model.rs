@@ -202,6 +202,31 @@ impl Link {
     }
 }
 
+/// How a rod's elements measure their curvature and twist `Ω` from the relative turn of
+/// their end triads (`[[rod]] curvature_measure`; docs/theory.md §2). For end triads
+/// turned `δ` apart about a unit axis `e`, an element of length `h` has `Ω = f(δ) e / h`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CurvatureMeasure {
+    /// `f(δ) = sin δ`: bilinear in the directors (the default). Its moment peaks at
+    /// δ = π/4 and its energy is short by `1 − (sin δ/δ)² ≈ δ²/3`.
+    #[default]
+    Sine,
+    /// `f(δ) = 3 sin δ / (2 + cos δ)`: the sine measure divided by the objective scalar
+    /// `n = (2 + cos δ)/3 = ½ + ⅙ Σ_i d_i⁰·d_i¹`. Its moment peaks at δ = 1.42 rad and its
+    /// energy is short by `δ⁴/90`. EM on the CPU 3D kernel only.
+    Rational,
+}
+
+impl CurvatureMeasure {
+    /// The scene-file name (`"sine"`, `"rational"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            CurvatureMeasure::Sine => "sine",
+            CurvatureMeasure::Rational => "rational",
+        }
+    }
+}
+
 /// A rod as the scene declared it (for reports and output grouping).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RodInfo {
@@ -209,6 +234,8 @@ pub struct RodInfo {
     pub name: String,
     /// Elements of this rod, in order along the rod.
     pub elements: std::ops::Range<usize>,
+    /// How the rod's elements measure curvature and twist.
+    pub curvature_measure: CurvatureMeasure,
 }
 
 /// The whole discretized problem.
@@ -359,6 +386,20 @@ impl Model {
         self.elements.iter().any(|e| e.props.drag != 0.0)
     }
 
+    /// The curvature measure of element `e` (its rod's).
+    pub fn curvature_measure(&self, e: usize) -> CurvatureMeasure {
+        self.rods
+            .get(self.elements[e].rod)
+            .map_or(CurvatureMeasure::Sine, |r| r.curvature_measure)
+    }
+
+    /// The first rod (index) with the rational curvature measure, if any.
+    pub fn rational_curvature_rod(&self) -> Option<usize> {
+        self.rods
+            .iter()
+            .position(|r| r.curvature_measure == CurvatureMeasure::Rational)
+    }
+
     /// The first scene feature the GPU batch path does not implement, by name (`None`:
     /// the model runs there). The kernels evaluate the elements from per-node
     /// increments, which carry the prescribed motion of driven supports as well as the
@@ -369,6 +410,11 @@ impl Model {
         }
         if !self.rod_contacts.is_empty() {
             return Some("contact between rods ([[contact]])");
+        }
+        if self.rational_curvature_rod().is_some() {
+            return Some(
+                "the rational curvature measure ([[rod]] curvature_measure = \"rational\")",
+            );
         }
         None
     }

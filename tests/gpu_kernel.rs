@@ -90,6 +90,7 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
         eps0: strains6(&ref_cfg, h),
         props,
         rot_free,
+        measure: Default::default(),
     };
     // Current state: moved, rotated and slightly non-orthonormal triads.
     let distort = |rng: &mut Rng| Mat3::identity() + Mat3::from_fn(|_, _| rng.sym(1e-3));

@@ -50,6 +50,7 @@ fn element(rng: &mut Rng, free: [bool; 2], damping: f64) -> (ElementData, Elemen
         eps0: strains6(&reference, h),
         props,
         rot_free: free,
+        measure: Default::default(),
     };
     // Moved, rotated, slightly non-orthonormal triads.
     let mut distort = || Mat3::identity() + Mat3::from_fn(|_, _| 1e-3 * rng.symmetric());

@@ -755,6 +755,16 @@ fn resolve_params(scene: &Scene, a: &RunArgs) -> Result<IntegratorParams> {
             scene.source
         );
     }
+    if let Some(r) = scene.model.rational_curvature_rod() {
+        if p.scheme != Scheme::Em {
+            bail!(
+                "{}: rod `{}`: curvature_measure = \"rational\" runs with scheme em only (got {}); use --scheme em",
+                scene.source,
+                scene.model.rods[r].name,
+                p.scheme.name()
+            );
+        }
+    }
     if let Some(s) = a.strategy {
         p.strategy = s.strategy();
     }

@@ -37,6 +37,8 @@ impl ElementData<F64x4> {
             },
             eps0: pack6(&d.map(|x| x.eps0)),
             rot_free: [0, 1].map(|l| d.map(|x| x.rot_free[l])),
+            // (The rational measure has no lane kernel: such elements never come here.)
+            measure: d[0].measure,
         }
     }
 }

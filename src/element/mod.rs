@@ -27,6 +27,7 @@ pub mod director_factor;
 pub mod dissipation;
 pub mod lanes;
 pub mod planar;
+pub mod rational;
 pub mod scalar_gradient;
 pub mod strain;
 
@@ -34,7 +35,7 @@ use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3, Vector6};
 
 use crate::math::lane::{identity3, zeros, Lane};
 use crate::math::{cay_with_factor, hat, hat_mul, mul_hat};
-use crate::model::{ElementProps, Mat3, Vec3};
+use crate::model::{CurvatureMeasure, ElementProps, Mat3, Vec3};
 use crate::scheme::Scheme;
 pub use crate::scheme::StressRule;
 use dissipation::{local_scalars, LocalInputs, LocalScalars};
@@ -81,6 +82,9 @@ pub struct ElementData<T: Lane = f64> {
     /// driven by a time table, or free about a sliding clamp's axis (`spin`). Such an end takes its share of the director
     /// dissipation ([`ElementData::kappa`]).
     pub rot_free: [T::Flag; 2],
+    /// How the element measures curvature and twist (the rational measure runs on the
+    /// `f64` kernel only: [`rational`]).
+    pub measure: CurvatureMeasure,
 }
 
 impl<T: Lane> ElementData<T> {
@@ -95,6 +99,15 @@ impl<T: Lane> ElementData<T> {
             T::choose(f0, T::choose(f1, one, one_half), zero),
             T::choose(f1, T::choose(f0, one, one_half), zero),
         ]
+    }
+
+    /// Raw strains `(Γ, Ω)` of a configuration with this element's curvature measure.
+    #[inline]
+    pub fn strains(&self, cfg: &Config<T>) -> Vector6<T> {
+        match self.measure {
+            CurvatureMeasure::Sine => strains6(cfg, self.props.h),
+            CurvatureMeasure::Rational => rational::rational_strains(cfg, self.props.h),
+        }
     }
 }
 
@@ -123,7 +136,11 @@ impl ElementData {
                     d: e.ref_triad,
                 };
                 // Raw reference strains plus the rod's intrinsic curvature and twist.
-                let mut eps0 = strains6(&cfg, e.props.h);
+                let measure = model.curvature_measure(ie);
+                let mut eps0 = match measure {
+                    CurvatureMeasure::Sine => strains6(&cfg, e.props.h),
+                    CurvatureMeasure::Rational => rational::rational_strains(&cfg, e.props.h),
+                };
                 let k = model.intrinsic_curvature(ie);
                 for c in 0..3 {
                     eps0[3 + c] += k[c];
@@ -132,6 +149,7 @@ impl ElementData {
                     props: e.props.clone(),
                     eps0,
                     rot_free: [moves(e.nodes[0]), moves(e.nodes[1])],
+                    measure,
                 }
             })
             .collect()
@@ -334,7 +352,6 @@ pub fn kinematics_at<T: Lane>(
     phi: impl FnOnce(T) -> T,
     dt: f64,
 ) -> Kinematics<T> {
-    let p = &data.props;
     let two = T::splat(2.0);
     let (rot0, amat0) = cay_with_factor(&inc.theta[0]);
     let (rot1, amat1) = cay_with_factor(&inc.theta[1]);
@@ -344,7 +361,7 @@ pub fn kinematics_at<T: Lane>(
         d: [rot[0] * st.cfg.d[0], rot[1] * st.cfg.d[1]],
     };
     let mid = st.cfg.mean(&cfg1);
-    let eps1 = strains6(&cfg1, p.h);
+    let eps1 = data.strains(&cfg1);
     let inv_dt = T::splat(1.0 / dt);
     let v1 = [
         inc.u[0] * two * inv_dt - st.v[0] - inc.g[0] * two,
@@ -484,7 +501,7 @@ fn constitutive<T: Lane>(
 /// Weight of the gross stress forces in the residual scale: with it, the default Newton
 /// tolerance `1e-11` sits about 10× above the f64 round-off floor (`~1e-16` of the gross
 /// forces) instead of below it.
-const GROSS_WEIGHT: f64 = 1e-4;
+pub(crate) const GROSS_WEIGHT: f64 = 1e-4;
 
 /// Round-off floor of the stress forces on the eight fields: `GROSS_WEIGHT · h |B|ᵀ |C|
 /// (|ε| + |ε0|)`, with `ε` the strains the stresses are computed from. In f64 the forces
@@ -630,8 +647,32 @@ pub fn residual_tangent(
     want_tangent: bool,
 ) -> ElementEval {
     let mut out = ElementEval::zeros();
-    residual_tangent_into(data, st, kin, s, k, trans_diss, want_tangent, &mut out);
+    residual_tangent_measured_into(data, st, kin, s, k, trans_diss, want_tangent, &mut out);
     out
+}
+
+/// [`residual_tangent_into`] for one element with either curvature measure (the rational
+/// one through [`rational::residual_tangent_into`]).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub fn residual_tangent_measured_into(
+    data: &ElementData,
+    st: &ElementState,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+    trans_diss: bool,
+    want_tangent: bool,
+    out: &mut ElementEval,
+) {
+    match data.measure {
+        CurvatureMeasure::Sine => {
+            residual_tangent_into(data, st, kin, s, k, trans_diss, want_tangent, out)
+        }
+        CurvatureMeasure::Rational => {
+            rational::residual_tangent_into(data, st, kin, s, k, trans_diss, want_tangent, out)
+        }
+    }
 }
 
 /// [`residual_tangent`] into a caller's buffer (the assembly loop reuses one): `out.r`

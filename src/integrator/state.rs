@@ -3,7 +3,7 @@
 use nalgebra::Vector6;
 
 use crate::element::strain::Config;
-use crate::element::{strains6, ElementData, ElementState};
+use crate::element::{ElementData, ElementState};
 use crate::model::{Mat3, Model, Vec3};
 use crate::obstacle::Anchor;
 
@@ -95,7 +95,7 @@ impl State {
     /// Raw strains `(Γ, Ω)` of every element of this state.
     pub fn strains(&self, model: &Model, data: &[ElementData]) -> Vec<Vector6<f64>> {
         (0..model.elements.len())
-            .map(|e| strains6(&self.config(model, e), data[e].props.h))
+            .map(|e| data[e].strains(&self.config(model, e)))
             .collect()
     }
 

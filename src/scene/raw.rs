@@ -135,6 +135,7 @@ pub(crate) struct RawRod {
     pub elements: Option<toml::Value>,
     pub d1: Option<Vec<f64>>,
     pub curvature: Option<Vec<f64>>,
+    pub curvature_measure: Option<String>,
     pub drag: Option<f64>,
     pub initial: Option<RawInitialShape>,
 }

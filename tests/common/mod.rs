@@ -96,6 +96,7 @@ pub fn polylines(rods: &[(Vec<Vec3>, usize, Vec3)], mat: (f64, f64, f64, f64, f6
         infos.push(RodInfo {
             name: format!("rod{ri}"),
             elements: start..elements.len(),
+            curvature_measure: Default::default(),
         });
     }
     let n = nodes.len();

@@ -10,7 +10,8 @@ use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::lanes::pack6;
 use crate::element::{
     consistent_scalars_near, kinematics_core, monolithic_correction, residual_tangent_into,
-    ElementData, ElementEval, ElementState, FrozenScalars, Increment, NDOF,
+    residual_tangent_measured_into, ElementData, ElementEval, ElementState, FrozenScalars,
+    Increment, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
@@ -175,7 +176,16 @@ impl Simulation {
                     (s, kin)
                 }
             };
-            residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
+            residual_tangent_measured_into(
+                data,
+                &st,
+                &kin,
+                &s,
+                &k,
+                self.trans_diss,
+                tangent,
+                &mut ev,
+            );
             // The next iterate's director factor follows this one's branch.
             self.frozen[e].c_nu = s.c_nu;
             if tangent
@@ -225,7 +235,8 @@ impl Simulation {
     /// call") and off elsewhere. Either way every result is the same bit for bit
     /// (`tests/lanes.rs` runs scenes both ways); off serves comparisons and tests.
     pub fn set_lanes(&mut self, on: bool) {
-        self.lanes = on;
+        // The rational curvature measure has no lane kernel: such models go one by one.
+        self.lanes = on && self.model.rational_curvature_rod().is_none();
     }
 
     /// The frozen-scalar elements `0..4⌊n/4⌋` through the kernel by groups of four, one

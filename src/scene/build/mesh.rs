@@ -322,6 +322,7 @@ fn mesh(
         rods.push(RodInfo {
             name: plan.name.clone(),
             elements: first..elements.len(),
+            curvature_measure: plan.curvature_measure,
         });
     }
     Ok((elements, rods))

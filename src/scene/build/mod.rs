@@ -37,7 +37,7 @@ use super::raw::RawScene;
 use super::span::{Doc, KeyPath};
 use super::{limits, Scene};
 use crate::integrator::params::Scheme;
-use crate::model::{Model, Vec3};
+use crate::model::{CurvatureMeasure, Model, Vec3};
 
 /// Validates `raw` and builds the scene.
 pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
@@ -89,6 +89,27 @@ pub(crate) fn build(raw: RawScene, doc: &Doc<'_>, file: &str) -> Result<Scene> {
     let (mut params, output_every) = integrator(&cx, &ip, raw_int)?;
 
     let plans = rods::plan_rods(&cx, &raw.rod, &materials, &sections)?;
+    if let Some(i) = plans
+        .iter()
+        .position(|p| p.curvature_measure == CurvatureMeasure::Rational)
+    {
+        let path = root.key("rod").idx(i).key("curvature_measure");
+        if params.scheme != Scheme::Em {
+            return Err(cx.err(
+                &path,
+                format!(
+                    "the rational curvature measure runs with scheme em only (got {}); use em or curvature_measure = \"sine\"",
+                    params.scheme.name()
+                ),
+            ));
+        }
+        if raw.planar.is_some() {
+            return Err(cx.err(
+                &path,
+                "the rational curvature measure has no planar kernel; remove [planar] or use curvature_measure = \"sine\"",
+            ));
+        }
+    }
     let (nodes, elements, rods) = mesh::mesh_rods(&cx, &plans, &materials, &sections)?;
 
     let Supports {

@@ -6,7 +6,7 @@ use std::collections::{BTreeMap, HashMap};
 use nalgebra::Matrix2;
 
 use super::check::{Ctx, Result, MAX_COORDINATE};
-use crate::model::Vec3;
+use crate::model::{CurvatureMeasure, Vec3};
 use crate::scene::fmt_num;
 use crate::scene::limits;
 use crate::scene::raw::{RawMaterial, RawRod, RawSection};
@@ -176,6 +176,7 @@ pub(super) struct RodPlan {
     pub(super) counts: Vec<usize>,
     pub(super) d1: Option<Vec3>,
     pub(super) curvature: Vec3,
+    pub(super) curvature_measure: CurvatureMeasure,
     pub(super) drag: f64,
     pub(super) props_key: (String, String),
     pub(super) path: KeyPath,
@@ -296,6 +297,16 @@ fn plan_rod(
     let curvature = cx
         .opt_vec3(&path.key("curvature"), &r.curvature)?
         .unwrap_or_else(Vec3::zeros);
+    let curvature_measure = match r.curvature_measure.as_deref() {
+        None | Some("sine") => CurvatureMeasure::Sine,
+        Some("rational") => CurvatureMeasure::Rational,
+        Some(other) => {
+            return Err(cx.err(
+                &path.key("curvature_measure"),
+                format!("unknown curvature measure `{other}` (known: `sine`, `rational`)"),
+            ))
+        }
+    };
     let drag = cx.opt_non_negative(&path.key("drag"), r.drag)?;
     Ok(RodPlan {
         name,
@@ -303,6 +314,7 @@ fn plan_rod(
         counts,
         d1,
         curvature,
+        curvature_measure,
         drag,
         props_key: (mat, sec),
         path: path.clone(),

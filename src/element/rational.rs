@@ -1,0 +1,370 @@
+//! The rational curvature measure (`[[rod]] curvature_measure = "rational"`; docs/theory.md
+//! §2, "The rational curvature measure").
+//!
+//! The sine measure `q = Ω` of [`super::strain::raw_strains`] (bilinear in the directors)
+//! divided by the objective scalar
+//!
+//! ```text
+//! n = ½ + ⅙ Σ_i a_i·b_i          (= (2 + cos δ)/3 for end triads turned δ apart)
+//! Ω̃ = q / n                      (= 3 sin δ / ((2 + cos δ) h) · axis)
+//! ```
+//!
+//! `q` and `n` are both quadratic in the nodal directors, so their mid-point gradients are
+//! exact discrete derivatives, and so is the algebraic combination
+//!
+//! ```text
+//! Ω̃₁ − Ω̃₀ = B̄ (Φ₁ − Φ₀),   B̄ = [n̄ Dq(Φ_½) − q̄ ⊗ Dn(Φ_½)] / (n₀ n₁),
+//! n̄ = ½(n₀ + n₁),  q̄ = ½(q₀ + q₁).
+//! ```
+//!
+//! With `B̄` in place of the mid-point gradient of the moment rows and the mean of the
+//! (rational) strains as stress, EM's energy identity holds exactly; `q` and `n` are
+//! invariant under rigid motions, so `B̄ᵀ M` annihilates them and `L`, `J` are conserved.
+//! `n ≥ ⅓` for any pair of rotations (the measure is defined for every turn).
+//!
+//! Only the moment rows change; the force strains Γ are the sine element's. The kernel
+//! here is `f64` only (no four-element lanes) and EM only.
+
+use nalgebra::{Matrix3, Vector6};
+
+use super::strain::{raw_strains, strain_gradient, stress_hessian, Config, A0, B0};
+use super::{
+    amax3, th_idx, ElementData, ElementEval, ElementState, FrozenScalars, Kinematics, StepConsts,
+    GROSS_WEIGHT,
+};
+use crate::math::lane::Lane;
+use crate::math::{hat, hat_mul, mul_hat};
+use crate::model::{Mat3, Vec3};
+
+/// The objective denominator `n = ½ + ⅙ Σ_i d_i⁰·d_i¹` of a configuration.
+#[inline]
+pub fn denominator<T: Lane>(c: &Config<T>) -> T {
+    let mut s = T::zero();
+    for i in 0..3 {
+        s += c.d[0].column(i).dot(&c.d[1].column(i));
+    }
+    T::splat(0.5) + s * T::splat(1.0 / 6.0)
+}
+
+/// Raw strains `(Γ, Ω̃)` with the rational moment strains `Ω̃ = q/n`.
+#[inline]
+pub fn rational_strains<T: Lane>(c: &Config<T>, h: T) -> Vector6<T> {
+    let (g, o) = raw_strains(c, h);
+    let n = denominator(c);
+    Vector6::new(g.x, g.y, g.z, o.x / n, o.y / n, o.z / n)
+}
+
+/// `∂n/∂d` on the six director fields (`a_1..a_3, b_1..b_3`): `∂n/∂a_i = b_i/6`,
+/// `∂n/∂b_i = a_i/6`.
+fn denominator_gradient(c: &Config) -> [Vec3; 6] {
+    let s = 1.0 / 6.0;
+    std::array::from_fn(|p| {
+        if p < 3 {
+            c.d[1].column(p) * s
+        } else {
+            c.d[0].column(p - 3) * s
+        }
+    })
+}
+
+/// `∂q_k/∂d` of the sine moment strains on the six director fields.
+fn sine_gradient(c: &Config, h: f64) -> [[Vec3; 6]; 3] {
+    let b = strain_gradient(c, h);
+    std::array::from_fn(|k| std::array::from_fn(|p| b[3 + k][A0 + p]))
+}
+
+/// `q` (the sine moment strains) of a configuration.
+fn sine_omega(c: &Config, h: f64) -> Vec3 {
+    raw_strains(c, h).1
+}
+
+/// The algebraic discrete gradient `B̄` of the rational moment strains between `c0` and
+/// `c1` (rows k = 0..3, the six director fields): `B̄ (Φ₁ − Φ₀) = Ω̃₁ − Ω̃₀` exactly.
+pub fn discrete_gradient(c0: &Config, c1: &Config, h: f64) -> [[Vec3; 6]; 3] {
+    let mid = c0.mean(c1);
+    let (q0, q1) = (sine_omega(c0, h), sine_omega(c1, h));
+    let (n0, n1) = (denominator(c0), denominator(c1));
+    let (nbar, qbar) = (0.5 * (n0 + n1), 0.5 * (q0 + q1));
+    let (dq, dn) = (sine_gradient(&mid, h), denominator_gradient(&mid));
+    let inv = 1.0 / (n0 * n1);
+    std::array::from_fn(|k| std::array::from_fn(|p| (dq[k][p] * nbar - dn[p] * qbar[k]) * inv))
+}
+
+/// The gradient `∂Ω̃/∂d` of the rational moment strains at one configuration.
+pub fn gradient(c: &Config, h: f64) -> [[Vec3; 6]; 3] {
+    let q = sine_omega(c, h);
+    let n = denominator(c);
+    let (dq, dn) = (sine_gradient(c, h), denominator_gradient(c));
+    std::array::from_fn(|k| std::array::from_fn(|p| (dq[k][p] - dn[p] * (q[k] / n)) / n))
+}
+
+/// Element residual and tangent of an element with the rational measure: the sine
+/// kernel ([`super::residual_tangent_into`]) with the moment stiffness removed, plus the
+/// moment rows `h B̄ᵀ M*` projected onto the rotations with the mid-point directors, and
+/// their exact linearization. `M* = C_Ω(½(Ω̃_n + Ω̃_{n+1}) − Ω̃° + ½ β_Ω ΔΩ̃)` (EM with
+/// Kelvin–Voigt damping, the mean of the strains).
+#[allow(clippy::too_many_arguments)]
+pub fn residual_tangent_into(
+    data: &ElementData,
+    st: &ElementState,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    k: &StepConsts,
+    trans_diss: bool,
+    want_tangent: bool,
+    out: &mut ElementEval,
+) {
+    let mut base = data.clone();
+    base.props.c_omega = Mat3::zeros();
+    super::residual_tangent_into(&base, st, kin, s, k, trans_diss, want_tangent, out);
+
+    let p = &data.props;
+    let h = p.h;
+    let (c0, c1, mid) = (&st.cfg, &kin.cfg1, &kin.mid);
+    let (q0, q1) = (sine_omega(c0, h), sine_omega(c1, h));
+    let (n0, n1) = (denominator(c0), denominator(c1));
+    let (nbar, qbar) = (0.5 * (n0 + n1), 0.5 * (q0 + q1));
+    let (dq_mid, dn_mid) = (sine_gradient(mid, h), denominator_gradient(mid));
+    let (dq_1, dn_1) = (sine_gradient(c1, h), denominator_gradient(c1));
+    let inv = 1.0 / (n0 * n1);
+    let bbar: [[Vec3; 6]; 3] = std::array::from_fn(|kk| {
+        std::array::from_fn(|f| (dq_mid[kk][f] * nbar - dn_mid[f] * qbar[kk]) * inv)
+    });
+    // Stresses from the mean of the strains the kinematics carries (the rational ones).
+    let om_n: Vec3 = kin.eps_n.fixed_rows::<3>(3).into_owned();
+    let om_1: Vec3 = kin.eps1.fixed_rows::<3>(3).into_owned();
+    let om0_ref: Vec3 = data.eps0.fixed_rows::<3>(3).into_owned();
+    let mean = 0.5 * (om_n + om_1);
+    let mstar = p.c_omega * (mean - om0_ref + (om_1 - om_n) * (0.5 * s.beta_omega));
+    // Forces on the six director fields.
+    let f: [Vec3; 6] =
+        std::array::from_fn(|ff| (0..3).map(|kk| bbar[kk][ff] * (h * mstar[kk])).sum());
+    // Round-off floor, as the sine kernel's (GROSS_WEIGHT · h |B̄|ᵀ |C| (|Ω̃| + |Ω̃°|)).
+    let gross = p.c_omega.map(f64::abs) * (mean.map(f64::abs) + om0_ref.map(f64::abs));
+    let floor: [f64; 6] = std::array::from_fn(|ff| {
+        (0..3)
+            .map(|kk| GROSS_WEIGHT * amax3(&bbar[kk][ff]) * h * gross[kk])
+            .sum()
+    });
+    let dcol = |l: usize, i: usize| -> Vec3 { mid.d[l].column(i).into_owned() };
+    for l in 0..2 {
+        let mut rt = Vec3::zeros();
+        let mut fmax: f64 = 0.0;
+        for i in 0..3 {
+            rt += dcol(l, i).cross(&f[3 * l + i]);
+            fmax = fmax.max(amax3(&f[3 * l + i])).max(floor[3 * l + i]);
+        }
+        let dnorm = (0..3)
+            .map(|i| mid.d[l].column(i).norm_squared())
+            .fold(0.0f64, f64::max)
+            .sqrt();
+        for cc in 0..3 {
+            out.r[th_idx(l) + cc] += rt[cc];
+            out.scale[th_idx(l) + cc] = out.scale[th_idx(l) + cc].max(fmax * dnorm);
+        }
+    }
+    if !want_tangent {
+        return;
+    }
+    let amat = kin.amat;
+    let at = [amat[0].transpose(), amat[1].transpose()];
+    // Material part: h B̄ᵀ (½(1 + β_Ω) C_Ω) DΩ̃(Φ_{n+1}), reduced to (θ_0, θ_1).
+    let d1 = gradient(c1, h);
+    let mut tb = [[Vec3::zeros(); 2]; 3];
+    let mut jb = [[Vec3::zeros(); 2]; 3];
+    for kk in 0..3 {
+        for l in 0..2 {
+            for i in 0..3 {
+                tb[kk][l] += dcol(l, i).cross(&bbar[kk][3 * l + i]);
+                jb[kk][l] += dcol(l, i).cross(&(at[l] * d1[kk][3 * l + i]));
+            }
+        }
+    }
+    let cm = p.c_omega * (0.5 * h * (1.0 + s.beta_omega));
+    for l in 0..2 {
+        for m in 0..2 {
+            let mut blk = Matrix3::zeros();
+            for k1 in 0..3 {
+                for k2 in 0..3 {
+                    if cm[(k1, k2)] != 0.0 {
+                        blk += tb[k1][l] * jb[k2][m].transpose() * cm[(k1, k2)];
+                    }
+                }
+            }
+            let mut v = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
+            v += blk;
+        }
+    }
+    // Geometric part in field space: G_pq = ∂f_p/∂d_{q,n+1} (3×3 per pair of director
+    // fields), then K_{θl θm} += −Σ_{p∈l, q∈m} \hat{d_p} G_pq A_m \hat{d_q}.
+    let qm: [Vec3; 6] = std::array::from_fn(|ff| (0..3).map(|kk| dq_mid[kk][ff] * mstar[kk]).sum());
+    let q1m: [Vec3; 6] = std::array::from_fn(|ff| (0..3).map(|kk| dq_1[kk][ff] * mstar[kk]).sum());
+    let c_half = 0.5 * h * inv;
+    let hq = stress_hessian(
+        &Vector6::new(0.0, 0.0, 0.0, mstar[0], mstar[1], mstar[2]),
+        h,
+    );
+    let mq = mstar.dot(&qbar);
+    let g = |pf: usize, qf: usize| -> Mat3 {
+        let mut m = (qm[pf] * dn_1[qf].transpose() - dn_mid[pf] * q1m[qf].transpose()) * c_half
+            - f[pf] * dn_1[qf].transpose() / n1;
+        let mut sc = c_half * nbar * hq[(A0 + pf, A0 + qf)];
+        // Hessian of n: ⅙ between a_i and b_i.
+        if pf % 3 == qf % 3 && pf / 3 != qf / 3 {
+            sc -= c_half * mq / 6.0;
+        }
+        for d in 0..3 {
+            m[(d, d)] += sc;
+        }
+        m
+    };
+    debug_assert_eq!(A0 + 3, B0);
+    for l in 0..2 {
+        for m in 0..2 {
+            let mut blk = Matrix3::zeros();
+            for i in 0..3 {
+                for j in 0..3 {
+                    let gpq = g(3 * l + i, 3 * m + j);
+                    blk += hat_mul(&dcol(l, i), &(gpq * mul_hat(&amat[m], &dcol(m, j))));
+                }
+            }
+            let mut v = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
+            v -= blk;
+        }
+    }
+    // Projection: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.
+    for l in 0..2 {
+        let mut blk = Matrix3::zeros();
+        for i in 0..3 {
+            blk += hat(&f[3 * l + i]) * mul_hat(&amat[l], &dcol(l, i));
+        }
+        let mut v = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(l));
+        v += blk * 0.5;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::cay;
+
+    fn rotated(q: &Mat3, c: &Config) -> Config {
+        Config {
+            r: [q * c.r[0], q * c.r[1]],
+            d: [q * c.d[0], q * c.d[1]],
+        }
+    }
+
+    fn sample(seed: f64) -> Config {
+        let t0 = cay(&Vec3::new(0.3 * seed, -0.2, 0.5));
+        let t1 = cay(&Vec3::new(-0.4, 0.9 * seed, 0.1));
+        Config {
+            r: [Vec3::new(0.1, 0.2, -0.3 * seed), Vec3::new(0.9, 0.4, 0.1)],
+            d: [t0, t1],
+        }
+    }
+
+    #[test]
+    fn a_pure_turn_gives_three_sine_over_two_plus_cosine() {
+        let h = 0.3;
+        for delta in [0.01, 0.5, 1.0, 1.5, 2.5, 3.1] {
+            for axis in [Vec3::x(), Vec3::y(), Vec3::z()] {
+                let base = cay(&Vec3::new(0.2, -0.7, 0.4));
+                let turn = nalgebra::Rotation3::from_axis_angle(
+                    &nalgebra::Unit::new_normalize(base * axis),
+                    delta,
+                );
+                let c = Config {
+                    r: [Vec3::zeros(), base * Vec3::z() * h],
+                    d: [base, turn.matrix() * base],
+                };
+                let om = rational_strains(&c, h).fixed_rows::<3>(3).into_owned();
+                let want = axis * (3.0 * delta.sin() / ((2.0 + delta.cos()) * h));
+                assert!((om - want).norm() < 1e-13 / h, "{delta}: {om} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn discrete_gradient_gives_the_exact_strain_difference() {
+        let h = 0.7;
+        for (s0, s1) in [(0.3, -0.8), (1.5, 2.0), (-2.0, 0.1)] {
+            let (c0, c1) = (sample(s0), sample(s1));
+            let bb = discrete_gradient(&c0, &c1, h);
+            let dd: [Vec3; 6] = std::array::from_fn(|p| {
+                let (l, i) = (p / 3, p % 3);
+                c1.d[l].column(i) - c0.d[l].column(i)
+            });
+            let lhs = Vec3::from_fn(|k, _| (0..6).map(|p| bb[k][p].dot(&dd[p])).sum());
+            let rhs = rational_strains(&c1, h).fixed_rows::<3>(3).into_owned()
+                - rational_strains(&c0, h).fixed_rows::<3>(3).into_owned();
+            assert!(
+                (lhs - rhs).norm() < 1e-14 * (1.0 + rhs.norm()),
+                "{lhs} vs {rhs}"
+            );
+        }
+    }
+
+    #[test]
+    fn discrete_gradient_annihilates_infinitesimal_rotations() {
+        let h = 0.4;
+        let (c0, c1) = (sample(0.7), sample(-1.3));
+        let mid = c0.mean(&c1);
+        let bb = discrete_gradient(&c0, &c1, h);
+        let w = Vec3::new(0.3, -1.1, 0.6);
+        let rot = Vec3::from_fn(|k, _| {
+            (0..6)
+                .map(|p| bb[k][p].dot(&w.cross(&mid.d[p / 3].column(p % 3).into_owned())))
+                .sum()
+        });
+        let size: f64 = bb.iter().flatten().map(|v| v.norm()).sum();
+        assert!(rot.norm() < 1e-15 * size * w.norm(), "{rot}");
+    }
+
+    #[test]
+    fn rational_strains_are_frame_indifferent() {
+        let c = sample(0.4);
+        let q = cay(&Vec3::new(0.7, -0.4, 1.3));
+        let (e0, e1) = (
+            rational_strains(&c, 0.5),
+            rational_strains(&rotated(&q, &c), 0.5),
+        );
+        assert!((e0 - e1).norm() < 1e-14 * e0.norm());
+    }
+
+    #[test]
+    fn gradient_is_the_derivative_of_the_strains() {
+        let h = 0.6;
+        let c = sample(0.9);
+        let g = gradient(&c, h);
+        let pert: [Vec3; 6] =
+            std::array::from_fn(|p| Vec3::new(0.3 * p as f64, -0.2, 0.1 + 0.05 * p as f64));
+        let shifted = |e: f64| {
+            let mut x = c;
+            for p in 0..6 {
+                let mut col = x.d[p / 3].column_mut(p % 3);
+                col += pert[p] * e;
+            }
+            rational_strains(&x, h).fixed_rows::<3>(3).into_owned()
+        };
+        let e = 1e-6;
+        let fd = (shifted(e) - shifted(-e)) / (2.0 * e);
+        let an = Vec3::from_fn(|k, _| (0..6).map(|p| g[k][p].dot(&pert[p])).sum());
+        assert!((fd - an).norm() < 1e-8 * an.norm(), "{fd} vs {an}");
+    }
+
+    #[test]
+    fn small_turns_agree_with_the_sine_measure_to_second_order() {
+        // Ω̃ − Ω = Ω (1/n − 1) = O(δ³/h): the ratio of the differences at δ and δ/2 is 8.
+        let h = 1.0;
+        let diff = |delta: f64| {
+            let c = Config {
+                r: [Vec3::zeros(), Vec3::z()],
+                d: [Mat3::identity(), cay(&(Vec3::new(0.3, -0.5, 0.8) * delta))],
+            };
+            (rational_strains(&c, h) - super::super::strains6(&c, h)).norm()
+        };
+        let ratio = diff(1e-2) / diff(5e-3);
+        assert!((ratio - 8.0).abs() < 1e-3, "{ratio}");
+    }
+}
