@@ -401,7 +401,9 @@ fn runs_are_the_same_with_and_without_lanes() {
     let (stag, mono) = (Strategy::Staggered, Strategy::Monolithic);
     // The monolithic cases assemble with consistent scalars and their linearization
     // (planar and 3D kernels, with and without director dissipation).
-    let cases: [(&str, Option<(Scheme, Strategy)>, usize); 10] = [
+    // (scene, scheme and strategy if not the scene's, steps)
+    type Case = (&'static str, Option<(Scheme, Strategy)>, usize);
+    let cases: [Case; 10] = [
         ("cantilever_planar", None, 40),
         ("cantilever", None, 25),
         ("mechanism", None, 40),

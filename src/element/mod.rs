@@ -1113,7 +1113,8 @@ impl<const N: usize> ScalarCorrection<N> {
         let ds = &self.dsigma[col];
         for i in 0..4 {
             if self.varies[i] {
-                v = ds[i] * self.d_r[i].as_slice()[row] + v;
+                // (`a·x + v`, as `axpy`; IEEE addition commutes.)
+                v += ds[i] * self.d_r[i].as_slice()[row];
             }
         }
         v
