@@ -177,38 +177,31 @@ fn ratio(num: Real, den: Real) -> Real {
     return 0.0;
 }
 
-// Gaussian elimination with partial pivoting (what nalgebra's LU does); zeros if singular.
-fn solve4(m_in: array<Real, 16>, rhs_in: array<Real, 4>) -> array<Real, 4> {
-    var m = m_in;
-    var r = rhs_in;
-    for (var c = 0u; c < 4u; c++) {
-        var piv = c;
-        var best = abs(m[4u * c + c]);
-        for (var k = c + 1u; k < 4u; k++) {
-            if abs(m[4u * k + c]) > best { best = abs(m[4u * k + c]); piv = k; }
-        }
-        if best == 0.0 { return array<Real, 4>(0.0, 0.0, 0.0, 0.0); }
-        if piv != c {
-            for (var j = 0u; j < 4u; j++) {
-                let t = m[4u * c + j]; m[4u * c + j] = m[4u * piv + j]; m[4u * piv + j] = t;
-            }
-            let t = r[c]; r[c] = r[piv]; r[piv] = t;
-        }
-        let p = m[4u * c + c];
-        for (var k = c + 1u; k < 4u; k++) {
-            let f = m[4u * k + c] / p;
-            for (var j = c; j < 4u; j++) { m[4u * k + j] -= f * m[4u * c + j]; }
-            r[k] -= f * r[c];
-        }
-    }
-    var x: array<Real, 4>;
-    for (var ci = 0u; ci < 4u; ci++) {
-        let c = 3u - ci;
-        var s = r[c];
-        for (var j = c + 1u; j < 4u; j++) { s -= m[4u * c + j] * x[j]; }
-        x[c] = s / m[4u * c + c];
-    }
-    return x;
+// EDMC-2's law M s = r, M = [[I, M12], [M21, M22]] in 2×2 blocks (row-major m), by its
+// 2×2 Schur complement S = M22 − M21 M12 (twin of element::dissipation::LawFactors, the
+// same operations in the same order); zeros if S is singular.
+fn solve_law(m: array<Real, 16>, r: array<Real, 4>) -> array<Real, 4> {
+    let s00 = m[10] - (m[8] * m[2] + m[9] * m[6]);
+    let s01 = m[11] - (m[8] * m[3] + m[9] * m[7]);
+    let s10 = m[14] - (m[12] * m[2] + m[13] * m[6]);
+    let s11 = m[15] - (m[12] * m[3] + m[13] * m[7]);
+    let det = s00 * s11 - s01 * s10;
+    if det == 0.0 { return array<Real, 4>(0.0, 0.0, 0.0, 0.0); }
+    let inv = 1.0 / det;
+    let i00 = s11 * inv;
+    let i01 = -s01 * inv;
+    let i10 = -s10 * inv;
+    let i11 = s00 * inv;
+    let b0 = r[2] - (m[8] * r[0] + m[9] * r[1]);
+    let b1 = r[3] - (m[12] * r[0] + m[13] * r[1]);
+    let y0 = i00 * b0 + i01 * b1;
+    let y1 = i10 * b0 + i11 * b1;
+    return array<Real, 4>(
+        r[0] - (m[2] * y0 + m[3] * y1),
+        r[1] - (m[6] * y0 + m[7] * y1),
+        y0,
+        y1,
+    );
 }
 
 // s = 3ρ² − 2ρ³ for ρ = V/F < 1, else 1 (twin of element::dissipation::fade).
@@ -256,7 +249,7 @@ fn local_scalars(inp: Inputs, a_rho: Real, dt_h: Real) -> Local {
             a_rho * inp.v_n + agv * xg + aov * xo,
             a_rho * inp.nu_n + agn * xg + aon * xo,
         );
-        let s = solve4(m, rhs);
+        let s = solve_law(m, rhs);
         return Local(s[0], s[1], s[2] - inp.v_n, s[3] - inp.nu_n);
     }
     return Local(0.0, 0.0, 0.0, 0.0);

@@ -377,7 +377,9 @@ fn planar_lanes_equal_single_evaluations_bit_for_bit() {
 /// Whole runs with and without the four-element kernel calls: every state field of every
 /// step, the iterations and the residuals are the same bit for bit, on the 3D and the
 /// planar kernel, under EM (frozen scalars throughout), with rigid links, with contact,
-/// and with the staggered EDMC-2 loop (frozen scalars with dissipation). This covers what
+/// with the staggered EDMC-2 loop (frozen scalars with dissipation) and with the
+/// monolithic one (consistent scalars, their linearization added as each lane's tangent is
+/// scattered, with and without director dissipation). This covers what
 /// the kernel-level test above does not: the packing per step and per assembly, the
 /// reused evaluation buffers and the scatter of each lane.
 #[test]
@@ -390,20 +392,36 @@ fn runs_are_the_same_with_and_without_lanes() {
         alpha_ov: 0.5,
         alpha_on: 0.5,
     };
-    let cases: [(&str, Option<Scheme>, usize); 6] = [
+    // The paper's single α (translational dissipation only).
+    let edmc2_gv = Scheme::Edmc2 {
+        alpha_gv: 0.5,
+        alpha_gn: 0.0,
+        alpha_ov: 0.0,
+        alpha_on: 0.0,
+    };
+    let (stag, mono) = (Strategy::Staggered, Strategy::Monolithic);
+    // The monolithic cases assemble with consistent scalars and their linearization
+    // (planar and 3D kernels, with and without director dissipation).
+    // (scene, scheme and strategy if not the scene's, steps)
+    type Case = (&'static str, Option<(Scheme, Strategy)>, usize);
+    let cases: [Case; 10] = [
         ("cantilever_planar", None, 40),
         ("cantilever", None, 25),
         ("mechanism", None, 40),
         ("bounce", None, 40),
-        ("arch", Some(edmc2), 30),
-        ("frame", Some(edmc2), 15),
+        ("arch", Some((edmc2, stag)), 30),
+        ("frame", Some((edmc2, stag)), 15),
+        ("cantilever_planar", Some((edmc2_gv, mono)), 30),
+        ("cantilever_planar", Some((edmc2, mono)), 20),
+        ("cantilever", Some((edmc2_gv, mono)), 20),
+        ("frame", Some((edmc2, mono)), 15),
     ];
     for (name, scheme, steps) in cases {
         let scene = load_scene(name).unwrap();
         let mut params = scene.params;
-        if let Some(s) = scheme {
+        if let Some((s, strategy)) = scheme {
             params.scheme = s;
-            params.strategy = Strategy::Staggered;
+            params.strategy = strategy;
         }
         let sims: Vec<Simulation> = [true, false]
             .into_iter()

@@ -95,7 +95,9 @@ pub fn local_scalars(
             let (m, rhs, _, _) = edmc2_system(scheme, inp, a_rho, dt_over_h);
             // The matrix is I + (rank-2 coupling) with a positive Aρ block: always regular
             // for X ≥ 0 (its determinant is Aρ² + Aρ Σ a² X > 0 in the single-α case).
-            let s = m.lu().solve(&rhs).unwrap_or_else(Vector4::zeros);
+            let s = LawFactors::new(&m)
+                .map(|f| f.solve(&rhs))
+                .unwrap_or_else(Vector4::zeros);
             LocalScalars {
                 beta_gamma: s[0],
                 beta_omega: s[1],
@@ -180,6 +182,60 @@ fn edmc2_system(
         a_rho * inp.nu_n + agn * xg + aon * xo,
     );
     (m, rhs, a0, fades)
+}
+
+/// The solver of EDMC-2's law `M s = r` ([`edmc2_system`]): `M = [[I, M₁₂], [M₂₁, Aρ I]]`
+/// in 2 × 2 blocks, solved by eliminating `(β_Γ, β_Ω)`: `S (ṽ, ν̃) = r₂ − M₂₁ r₁` with the
+/// 2 × 2 Schur complement `S = Aρ I − M₂₁ M₁₂` (its inverse in closed form), then
+/// `(β_Γ, β_Ω) = r₁ − M₁₂ (ṽ, ν̃)`. `S` is `Aρ I` plus a positive semi-definite product
+/// for `X ≥ 0` (single α: `Aρ + a² X`), so no pivoting is needed; the general 4 × 4 LU it
+/// replaces cost as much as the rest of the local law.
+#[derive(Clone, Copy, Debug)]
+struct LawFactors {
+    m12: [[f64; 2]; 2],
+    m21: [[f64; 2]; 2],
+    /// `S⁻¹`.
+    s_inv: [[f64; 2]; 2],
+}
+
+impl LawFactors {
+    /// The factors of `m` (of [`edmc2_system`]'s form); `None` if `S` is singular.
+    #[inline]
+    fn new(m: &Matrix4<f64>) -> Option<Self> {
+        debug_assert!(m[(0, 0)] == 1.0 && m[(1, 1)] == 1.0 && m[(0, 1)] == 0.0 && m[(1, 0)] == 0.0);
+        let m12 = [[m[(0, 2)], m[(0, 3)]], [m[(1, 2)], m[(1, 3)]]];
+        let m21 = [[m[(2, 0)], m[(2, 1)]], [m[(3, 0)], m[(3, 1)]]];
+        let sch = |i: usize, j: usize| {
+            m[(2 + i, 2 + j)] - (m21[i][0] * m12[0][j] + m21[i][1] * m12[1][j])
+        };
+        let (s00, s01, s10, s11) = (sch(0, 0), sch(0, 1), sch(1, 0), sch(1, 1));
+        let det = s00 * s11 - s01 * s10;
+        if det == 0.0 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        Some(Self {
+            m12,
+            m21,
+            s_inv: [[s11 * inv, -s01 * inv], [-s10 * inv, s00 * inv]],
+        })
+    }
+
+    /// `M⁻¹ r`.
+    #[inline]
+    fn solve(&self, r: &Vector4<f64>) -> Vector4<f64> {
+        let (m12, m21, si) = (&self.m12, &self.m21, &self.s_inv);
+        let b0 = r[2] - (m21[0][0] * r[0] + m21[0][1] * r[1]);
+        let b1 = r[3] - (m21[1][0] * r[0] + m21[1][1] * r[1]);
+        let y0 = si[0][0] * b0 + si[0][1] * b1;
+        let y1 = si[1][0] * b0 + si[1][1] * b1;
+        Vector4::new(
+            r[0] - (m12[0][0] * y0 + m12[0][1] * y1),
+            r[1] - (m12[1][0] * y0 + m12[1][1] * y1),
+            y0,
+            y1,
+        )
+    }
 }
 
 /// The fade of EDMC-2's velocity couplings, `(s, ∂s/∂V, ∂s/∂F)`: `s = 3ρ² − 2ρ³` for
@@ -272,9 +328,9 @@ pub(crate) fn local_scalars_jacobian(
             let (m, rhs, a0, fades) = edmc2_system(scheme, inp, a_rho, dt_over_h);
             let (sv, snu) = (fades.v.0, fades.nu.0);
             let (agv, agn, aov, aon) = (sv * a0[0], snu * a0[1], sv * a0[2], snu * a0[3]);
-            let lu = m.lu();
+            let lu = LawFactors::new(&m);
             // As `local_scalars` (the same factorization and solve, so the same values).
-            let s = lu.solve(&rhs).unwrap_or_else(Vector4::zeros);
+            let s = lu.map(|f| f.solve(&rhs)).unwrap_or_else(Vector4::zeros);
             let law = LocalScalars {
                 beta_gamma: s[0],
                 beta_omega: s[1],
@@ -321,10 +377,11 @@ pub(crate) fn local_scalars_jacobian(
                     cols[(i, j)] += add[i];
                 }
             }
-            if let Some(ds) = lu.solve(&cols) {
-                for (i, row) in d.iter_mut().enumerate() {
-                    for (j, v) in row.iter_mut().enumerate() {
-                        *v = ds[(i, j)];
+            if let Some(f) = lu {
+                for j in 0..4 {
+                    let ds = f.solve(&cols.column(j).into_owned());
+                    for (i, row) in d.iter_mut().enumerate() {
+                        row[j] = ds[i];
                     }
                 }
             }

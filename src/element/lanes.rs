@@ -5,9 +5,12 @@
 
 use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector2, Vector3, Vector6};
 
-use super::planar::{pg_idx, pth_idx, pu_idx, PConfig, PElemVec, PIncrement, PState, PlanarData};
+use super::planar::{
+    pg_idx, pth_idx, pu_idx, PConfig, PElemVec, PIncrement, PKinematics, PState, PlanarData,
+};
 use super::strain::Config;
-use super::{ElementData, ElementEval, ElementState, FrozenScalars, Increment, NDOF};
+use super::{ElementData, ElementEval, ElementState, FrozenScalars, Increment, Kinematics, NDOF};
+use crate::element::dissipation::LocalInputs;
 use crate::math::lane::{F64x4, LANES};
 use crate::model::ElementProps;
 
@@ -204,6 +207,70 @@ impl PIncrement<F64x4> {
             u: [v(pu_idx(0)), v(pu_idx(1))],
             theta: [l(pth_idx(0)), l(pth_idx(1))],
             g: [v(pg_idx(0)), v(pg_idx(1))],
+        }
+    }
+}
+
+/// Lane `i` of a 3-vector.
+#[inline(always)]
+fn lane3(v: &Vector3<F64x4>, i: usize) -> Vector3<f64> {
+    Vector3::new(v.x.lane(i), v.y.lane(i), v.z.lane(i))
+}
+
+/// Lane `i` of a 2-vector.
+#[inline(always)]
+fn lane2(v: &Vector2<F64x4>, i: usize) -> Vector2<f64> {
+    Vector2::new(v.x.lane(i), v.y.lane(i))
+}
+
+/// Lane `i` of a 3×3 matrix.
+#[inline(always)]
+fn lane33(m: &Matrix3<F64x4>, i: usize) -> Matrix3<f64> {
+    Matrix3::from_fn(|r, c| m[(r, c)].lane(i))
+}
+
+impl Kinematics<F64x4> {
+    /// Lane `i`'s kinematics as a one-element update (the local dissipation inputs at
+    /// their default, as [`super::kinematics_core`] leaves them).
+    pub fn lane(&self, i: usize) -> Kinematics {
+        let cfg = |c: &Config<F64x4>| Config {
+            r: [lane3(&c.r[0], i), lane3(&c.r[1], i)],
+            d: [lane33(&c.d[0], i), lane33(&c.d[1], i)],
+        };
+        let v6 = |v: &Vector6<F64x4>| Vector6::from_fn(|r, _| v[r].lane(i));
+        Kinematics {
+            cfg1: cfg(&self.cfg1),
+            mid: cfg(&self.mid),
+            amat: [lane33(&self.amat[0], i), lane33(&self.amat[1], i)],
+            eps_n: v6(&self.eps_n),
+            eps1: v6(&self.eps1),
+            v1: [lane3(&self.v1[0], i), lane3(&self.v1[1], i)],
+            vd1: [0, 1].map(|l| [lane3(&self.vd1[l][0], i), lane3(&self.vd1[l][1], i)]),
+            w: [lane3(&self.w[0], i), lane3(&self.w[1], i)],
+            inputs: LocalInputs::default(),
+        }
+    }
+}
+
+impl PKinematics<F64x4> {
+    /// Lane `i`'s planar kinematics as a one-element update (the local dissipation inputs
+    /// at their default, as [`super::planar::kinematics_core`] leaves them).
+    pub fn lane(&self, i: usize) -> PKinematics {
+        let cfg = |c: &PConfig<F64x4>| PConfig {
+            r: [lane2(&c.r[0], i), lane2(&c.r[1], i)],
+            d: [0, 1].map(|l| [lane2(&c.d[l][0], i), lane2(&c.d[l][1], i)]),
+        };
+        let m2 = |m: &Matrix2<F64x4>| Matrix2::from_fn(|r, c| m[(r, c)].lane(i));
+        PKinematics {
+            cfg1: cfg(&self.cfg1),
+            mid: cfg(&self.mid),
+            amat: [m2(&self.amat[0]), m2(&self.amat[1])],
+            eps_n: lane3(&self.eps_n, i),
+            eps1: lane3(&self.eps1, i),
+            v1: [lane2(&self.v1[0], i), lane2(&self.v1[1], i)],
+            vs1: [lane2(&self.vs1[0], i), lane2(&self.vs1[1], i)],
+            w: lane2(&self.w, i),
+            inputs: LocalInputs::default(),
         }
     }
 }

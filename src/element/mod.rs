@@ -433,24 +433,58 @@ pub fn consistent_scalars_near(
     k: &StepConsts,
     c_nu_ref: f64,
 ) -> (FrozenScalars, LocalScalars, Kinematics) {
+    let c_nu = consistent_director_factor(data, st, eps_n, inc, k, c_nu_ref);
+    consistent_scalars_at(
+        data,
+        st,
+        kinematics_core(data, st, eps_n, inc, c_nu, k.dt),
+        k,
+        c_nu,
+    )
+}
+
+/// The director factor `c_ν` of [`consistent_scalars_near`] (zero without director
+/// dissipation).
+pub fn consistent_director_factor(
+    data: &ElementData,
+    st: &ElementState,
+    eps_n: &Vector6<f64>,
+    inc: &Increment,
+    k: &StepConsts,
+    c_nu_ref: f64,
+) -> f64 {
+    if !k.scheme.director_dissipation() {
+        return 0.0;
+    }
     let p = &data.props;
     let dt_h = k.dt / p.h;
-    let mut c_nu = 0.0;
-    if k.scheme.director_dissipation() {
-        let law = |c: f64| {
-            let kin = kinematics(data, st, eps_n, inc, c, k.dt);
-            local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h).c_nu(&kin.inputs)
-        };
-        // The update divides by 1 + K c_ν (K = Σ κ_l): the domain is c_ν > −1/K.
-        let ksum: f64 = data.kappa().iter().sum();
-        let c_min = if ksum > 0.0 {
-            -1.0 / ksum
-        } else {
-            f64::NEG_INFINITY
-        };
-        c_nu = director_factor::solve_fixed_point_near(law, c_min, c_nu_ref);
-    }
-    let kin = kinematics(data, st, eps_n, inc, c_nu, k.dt);
+    let law = |c: f64| {
+        let kin = kinematics(data, st, eps_n, inc, c, k.dt);
+        local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h).c_nu(&kin.inputs)
+    };
+    // The update divides by 1 + K c_ν (K = Σ κ_l): the domain is c_ν > −1/K.
+    let ksum: f64 = data.kappa().iter().sum();
+    let c_min = if ksum > 0.0 {
+        -1.0 / ksum
+    } else {
+        f64::NEG_INFINITY
+    };
+    director_factor::solve_fixed_point_near(law, c_min, c_nu_ref)
+}
+
+/// The rest of [`consistent_scalars_near`]: the consistent scalars from the kinematics
+/// [`kinematics_core`] gives at the consistent director factor `c_nu` (the four-element
+/// assembly computes those in lanes; this completes them element by element).
+pub fn consistent_scalars_at(
+    data: &ElementData,
+    st: &ElementState,
+    mut kin: Kinematics,
+    k: &StepConsts,
+    c_nu: f64,
+) -> (FrozenScalars, LocalScalars, Kinematics) {
+    let p = &data.props;
+    let dt_h = k.dt / p.h;
+    kin.inputs = local_inputs(data, st, &kin);
     let mut loc = local_scalars(&k.scheme, &kin.inputs, p.a_rho, dt_h);
     // Kelvin–Voigt material damping: viscous stresses η C Δε/Δt = ½ (2η/Δt) C Δε add to
     // the scheme's β (its work ½ β X is part of the dissipation D).
@@ -1097,10 +1131,60 @@ pub fn monolithic_correction(
     active: &[bool; NDOF],
     kt: &mut ElemMat,
 ) {
+    let c = monolithic_terms(data, st, s, kin, k, trans_diss, active);
+    scalar_correction(&c.dsigma, &c.d_r, active, c.varies, kt);
+}
+
+/// The two factors of [`monolithic_correction`], for adding their product where the
+/// frozen-scalar tangent is read (the four-element assembly scatters each lane's tangent
+/// with it, [`ScalarCorrection::entry`]).
+#[derive(Clone, Debug)]
+pub struct ScalarCorrection<const N: usize> {
+    /// `∂σ/∂x_j` (row `j`).
+    pub dsigma: [[f64; 4]; N],
+    /// `∂R/∂σ_i` (zero where `varies[i]` is false).
+    pub d_r: [SVector<f64, N>; 4],
+    /// Which scalars vary with the active unknowns ([`scalars_varying`]).
+    pub varies: [bool; 4],
+}
+
+impl<const N: usize> ScalarCorrection<N> {
+    /// Entry `(row, col)` of the corrected tangent from the frozen-scalar entry `k`: the
+    /// same operations in the same order as [`scalar_correction`]'s column updates, so the
+    /// same number bit for bit. `col` must be an active unknown.
+    #[inline(always)]
+    pub fn entry(&self, row: usize, col: usize, k: f64) -> f64 {
+        let mut v = k;
+        let ds = &self.dsigma[col];
+        for i in 0..4 {
+            if self.varies[i] {
+                // (`a·x + v`, as `axpy`; IEEE addition commutes.)
+                v += ds[i] * self.d_r[i].as_slice()[row];
+            }
+        }
+        v
+    }
+}
+
+/// [`ScalarCorrection`] of an element (the factors of [`monolithic_correction`]).
+#[allow(clippy::too_many_arguments)]
+pub fn monolithic_terms(
+    data: &ElementData,
+    st: &ElementState,
+    s: &FrozenScalars,
+    kin: &Kinematics,
+    k: &StepConsts,
+    trans_diss: bool,
+    active: &[bool; NDOF],
+) -> ScalarCorrection<NDOF> {
     let dsigma = scalar_gradient::scalar_gradient(data, st, kin, s, k);
     let varies = scalars_varying(&dsigma, active);
     let d_r = scalar_gradient::residual_scalar_derivatives(data, st, kin, k, trans_diss, varies);
-    scalar_correction(&dsigma, &d_r, active, varies, kt);
+    ScalarCorrection {
+        dsigma,
+        d_r,
+        varies,
+    }
 }
 
 /// Which of `σ = (β_Γ, β_Ω, c_v, φ)` vary with the unknowns marked `active`.

@@ -565,23 +565,53 @@ pub fn consistent_scalars_near(
     k: &StepConsts,
     c_nu_ref: f64,
 ) -> (FrozenScalars, LocalScalars, PKinematics) {
-    let dt_h = k.dt / pd.h;
-    let mut c_nu = 0.0;
-    if k.scheme.director_dissipation() {
-        // The same root solve as the 3D kernel (plain iteration oscillates at reversals).
-        let law = |c: f64| {
-            let kin = kinematics(pd, st, eps_n, inc, c, k.dt);
-            local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h).c_nu(&kin.inputs)
-        };
-        let ksum = pd.kappa[0] + pd.kappa[1];
-        let c_min = if ksum > 0.0 {
-            -1.0 / ksum
-        } else {
-            f64::NEG_INFINITY
-        };
-        c_nu = super::director_factor::solve_fixed_point_near(law, c_min, c_nu_ref);
+    let c_nu = consistent_director_factor(pd, st, eps_n, inc, k, c_nu_ref);
+    consistent_scalars_at(
+        pd,
+        st,
+        kinematics_core(pd, st, eps_n, inc, c_nu, k.dt),
+        k,
+        c_nu,
+    )
+}
+
+/// Planar twin of [`super::consistent_director_factor`].
+pub fn consistent_director_factor(
+    pd: &PlanarData,
+    st: &PState,
+    eps_n: &Vector3<f64>,
+    inc: &PIncrement,
+    k: &StepConsts,
+    c_nu_ref: f64,
+) -> f64 {
+    if !k.scheme.director_dissipation() {
+        return 0.0;
     }
-    let kin = kinematics(pd, st, eps_n, inc, c_nu, k.dt);
+    let dt_h = k.dt / pd.h;
+    // The same root solve as the 3D kernel (plain iteration oscillates at reversals).
+    let law = |c: f64| {
+        let kin = kinematics(pd, st, eps_n, inc, c, k.dt);
+        local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h).c_nu(&kin.inputs)
+    };
+    let ksum = pd.kappa[0] + pd.kappa[1];
+    let c_min = if ksum > 0.0 {
+        -1.0 / ksum
+    } else {
+        f64::NEG_INFINITY
+    };
+    super::director_factor::solve_fixed_point_near(law, c_min, c_nu_ref)
+}
+
+/// Planar twin of [`super::consistent_scalars_at`].
+pub fn consistent_scalars_at(
+    pd: &PlanarData,
+    st: &PState,
+    mut kin: PKinematics,
+    k: &StepConsts,
+    c_nu: f64,
+) -> (FrozenScalars, LocalScalars, PKinematics) {
+    let dt_h = k.dt / pd.h;
+    kin.inputs = local_inputs(pd, st, &kin);
     let mut loc = local_scalars(&k.scheme, &kin.inputs, pd.a_rho, dt_h);
     // Kelvin–Voigt material damping (as the 3D kernel): β += 2η/Δt.
     let kv = 2.0 * pd.damping / k.dt;
@@ -949,10 +979,29 @@ pub fn monolithic_correction(
     active: &[bool; NDOF_P],
     kt: &mut PElemMat,
 ) {
+    let c = monolithic_terms(pd, st, s, kin, k, trans_diss, active);
+    super::scalar_correction(&c.dsigma, &c.d_r, active, c.varies, kt);
+}
+
+/// Planar twin of [`super::monolithic_terms`].
+#[allow(clippy::too_many_arguments)]
+pub fn monolithic_terms(
+    pd: &PlanarData,
+    st: &PState,
+    s: &FrozenScalars,
+    kin: &PKinematics,
+    k: &StepConsts,
+    trans_diss: bool,
+    active: &[bool; NDOF_P],
+) -> super::ScalarCorrection<NDOF_P> {
     let dsigma = scalar_gradient(pd, st, kin, s, k);
     let varies = super::scalars_varying(&dsigma, active);
     let d_r = residual_scalar_derivatives(pd, st, kin, k, trans_diss, varies);
-    super::scalar_correction(&dsigma, &d_r, active, varies, kt);
+    super::ScalarCorrection {
+        dsigma,
+        d_r,
+        varies,
+    }
 }
 
 /// Planar twin of [`super::scalar_gradient::scalar_gradient`]: `∂σ/∂x_j` (row `j`) over

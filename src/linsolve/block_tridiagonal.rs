@@ -11,17 +11,19 @@
 //!
 //! About `4.7 B³` flops per node (B ≤ 9), against the band LU's `2·n·kl·(kl+ku)` with
 //! `kl = 2B−1` that ignores the block structure, and without the index chasing of a
-//! general sparse LU. Pivoting happens only inside the diagonal blocks (nalgebra's
-//! fixed-size LU with partial pivoting; 3 × 3 blocks — planar rods without translational
-//! dissipation — are inverted in closed form instead, 1.6× cheaper on the planar
-//! cantilever), so the factorization is not backward stable for every matrix: [`super::SparseSolver`] checks the backward error of each solve and falls
-//! back to faer's pivoted sparse LU when it is too large.
+//! general sparse LU. Pivoting happens only inside the diagonal blocks (a fixed-size LU
+//! with partial pivoting, [`BlockFactors`], whose triangular solves run on all `B` columns
+//! of `U_i` at once; 3 × 3 blocks — planar rods without translational dissipation — are
+//! inverted in closed form instead, 1.6× cheaper on the planar cantilever), so the
+//! factorization is not backward stable for every matrix: [`super::SparseSolver`] checks
+//! the backward error of each solve and falls back to faer's pivoted sparse LU when it is
+//! too large.
 //!
 //! Blocks are stored padded to a fixed size `B` ∈ {3, 6, 9} (the largest node block rounded
 //! up): padded rows and columns hold an identity diagonal and are decoupled from the rest,
 //! so they change neither the solution nor the pivots of the real unknowns.
 
-use nalgebra::{Const, DimMin, SMatrix, SVector, LU};
+use nalgebra::{Const, DimMin, SMatrix, SVector};
 
 /// A factorization of a block-tridiagonal matrix given in compressed sparse column form.
 pub(super) trait BlockLu: Send + Sync {
@@ -79,7 +81,7 @@ where
     /// `W_i = S_i⁻¹ U_i`.
     w: Vec<Block<B>>,
     /// LU factors of the `S_i` (blocks larger than 3 × 3).
-    lu: Vec<LU<f64, Const<B>, Const<B>>>,
+    lu: Vec<BlockFactors<B>>,
     /// Inverses of the `S_i` (3 × 3 blocks: closed form, cheaper than LU and its solves).
     inv: Vec<Block<B>>,
     /// The diagonal blocks `D_i` as loaded (the factorization overwrites them).
@@ -184,13 +186,10 @@ where
                 self.inv.push(inv);
                 continue;
             }
-            let lu = self.blocks[i].lu();
-            if !lu.is_invertible() {
-                return Err(singular());
-            }
+            let lu = BlockFactors::new(self.blocks[i]).ok_or_else(singular)?;
             if i + 1 < m {
                 let mut w = self.blocks[m + i];
-                lu.solve_mut(&mut w);
+                lu.solve_columns(&mut w);
                 let update = self.blocks[2 * m - 1 + i] * w;
                 self.blocks[i + 1] -= update;
                 self.w[i] = w;
@@ -211,7 +210,7 @@ where
             if B <= 3 {
                 b = self.inv[i] * b;
             } else {
-                self.lu[i].solve_mut(&mut b);
+                self.lu[i].solve_columns(&mut b);
             }
             y.push(b);
         }
@@ -245,5 +244,97 @@ where
 
     fn block_size(&self) -> usize {
         B
+    }
+}
+
+/// The LU factorization with partial (row) pivoting of one `B × B` block, `P S = L U`: `L`
+/// (unit diagonal) below the diagonal of `lu`, `U` on and above it, the reciprocals of
+/// `U`'s diagonal in `inv_diag`, and the row swapped with row `k` at step `k` in `pivots`.
+/// Written for the block sizes the rods have (6, 9): fixed-size loops over contiguous
+/// columns, which the compiler unrolls and vectorizes, where nalgebra's `LU` solves one
+/// right-hand side at a time through its generic triangular solvers.
+#[derive(Clone, Debug)]
+struct BlockFactors<const B: usize> {
+    lu: Block<B>,
+    inv_diag: [f64; B],
+    pivots: [usize; B],
+}
+
+impl<const B: usize> BlockFactors<B> {
+    /// Factorizes `a`; `None` when a pivot is zero (the block is singular).
+    #[inline]
+    fn new(mut a: Block<B>) -> Option<Self> {
+        let mut pivots = [0; B];
+        let mut inv_diag = [0.0; B];
+        let s = a.as_mut_slice();
+        for k in 0..B {
+            // The largest |entry| of column k on or below the diagonal (the first one on
+            // ties; NaN is never larger).
+            let mut p = k;
+            let mut big = s[k * B + k].abs();
+            for i in k + 1..B {
+                let v = s[k * B + i].abs();
+                if v > big {
+                    (p, big) = (i, v);
+                }
+            }
+            pivots[k] = p;
+            if p != k {
+                for j in 0..B {
+                    s.swap(j * B + k, j * B + p);
+                }
+            }
+            let pivot = s[k * B + k];
+            if pivot == 0.0 {
+                return None;
+            }
+            let inv = 1.0 / pivot;
+            inv_diag[k] = inv;
+            for i in k + 1..B {
+                s[k * B + i] *= inv;
+            }
+            // Column-wise update of the trailing block (contiguous columns).
+            let (left, right) = s.split_at_mut((k + 1) * B);
+            let lcol = &left[k * B..(k + 1) * B];
+            for col in right.chunks_exact_mut(B) {
+                let ukj = col[k];
+                for i in k + 1..B {
+                    col[i] -= lcol[i] * ukj;
+                }
+            }
+        }
+        Some(Self {
+            lu: a,
+            inv_diag,
+            pivots,
+        })
+    }
+
+    /// Solves `S X = R` in place for the `C` columns of `r`.
+    #[inline]
+    fn solve_columns<const C: usize>(&self, r: &mut SMatrix<f64, B, C>) {
+        let f = self.lu.as_slice();
+        for col in r.as_mut_slice().chunks_exact_mut(B) {
+            for k in 0..B {
+                col.swap(k, self.pivots[k]);
+            }
+            // L y = P r (unit lower triangle), by columns of L.
+            for k in 0..B {
+                let yk = col[k];
+                let lcol = &f[k * B..(k + 1) * B];
+                for i in k + 1..B {
+                    col[i] -= lcol[i] * yk;
+                }
+            }
+            // U x = y, by columns of U.
+            for k in (0..B).rev() {
+                let xk = col[k] * self.inv_diag[k];
+                col[k] = xk;
+                let ucol = &f[k * B..(k + 1) * B];
+                for i in 0..k {
+                    col[i] -= ucol[i] * xk;
+                }
+            }
+        }
     }
 }

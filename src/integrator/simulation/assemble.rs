@@ -9,9 +9,9 @@ use std::time::Instant;
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::lanes::pack6;
 use crate::element::{
-    consistent_scalars_near, kinematics_core, monolithic_correction, residual_tangent_into,
-    residual_tangent_measured_into, ElementData, ElementEval, ElementState, FrozenScalars,
-    Increment, NDOF,
+    consistent_director_factor, consistent_scalars_at, consistent_scalars_near, kinematics_core,
+    monolithic_correction, monolithic_terms, residual_tangent_into, residual_tangent_measured_into,
+    ElementData, ElementEval, ElementState, FrozenScalars, Increment, ScalarCorrection, NDOF,
 };
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
@@ -151,10 +151,10 @@ impl Simulation {
         } else {
             self.model.elements.len()
         };
-        // Frozen scalars: the elements go through the kernel four at a time, one per
-        // lane (bit-identical to one at a time); the rest one by one below.
-        let first_single = if mode == Mode::Frozen && self.lanes {
-            self.assemble_lanes(q, n_cpu, tangent, r, &mut scale)
+        // The elements go through the kernel four at a time, one per lane (bit-identical
+        // to one at a time); the rest one by one below.
+        let first_single = if self.lanes {
+            self.assemble_lanes(q, n_cpu, mode, tangent, r, &mut scale)
         } else {
             0
         };
@@ -239,46 +239,131 @@ impl Simulation {
         self.lanes = on && self.model.rational_curvature_rod().is_none();
     }
 
-    /// The frozen-scalar elements `0..4⌊n/4⌋` through the kernel by groups of four, one
-    /// element per [`F64x4`] lane, scattered like [`Self::scatter`]. Returns the first
-    /// element left for the one-by-one loop.
+    /// The elements `0..4⌊n/4⌋` through the kernel by groups of four, one element per
+    /// [`F64x4`] lane, scattered like [`Self::scatter`]. Returns the first element left
+    /// for the one-by-one loop.
+    ///
+    /// With consistent scalars the kinematics run in lanes at each element's director
+    /// factor (solved element by element where director dissipation is on), the local
+    /// law completes the scalars element by element from its lane of the kinematics, and
+    /// the monolithic linearization is added to each lane's tangent as it is scattered
+    /// ([`ScalarCorrection::entry`]): every number is the one-element path's, bit for bit.
     fn assemble_lanes(
         &mut self,
         q: &[f64],
         n: usize,
+        mode: Mode,
         tangent: bool,
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) -> usize {
         let k = self.consts();
         let groups = n / LANES;
+        let consistent = mode == Mode::Consistent;
+        let correct = tangent && consistent && k.scheme.is_dissipative() && !self.inexact_tangent;
         let mut ev = ElementEval::<F64x4>::zeros();
+        let mut corr = Vec::with_capacity(if correct { LANES } else { 0 });
         for g in 0..groups {
             let e0 = g * LANES;
             // (Array literals, not `from_fn`: that moves each element through a buffer.)
-            let inc = Increment::pack(&[
+            let incs = [
                 self.gather(e0, q),
                 self.gather(e0 + 1, q),
                 self.gather(e0 + 2, q),
                 self.gather(e0 + 3, q),
-            ]);
+            ];
+            let inc = Increment::pack(&incs);
             let (m, sv) = (&self.model, &self.state);
-            let st = ElementState::pack(&[
+            let sts = [
                 sv.element(m, e0),
                 sv.element(m, e0 + 1),
                 sv.element(m, e0 + 2),
                 sv.element(m, e0 + 3),
-            ]);
-            let eps_n = pack6(sv.eps[e0..e0 + LANES].try_into().unwrap());
-            let s = FrozenScalars::pack(self.frozen[e0..e0 + LANES].try_into().unwrap());
+            ];
+            let st = ElementState::pack(&sts);
+            let eps = &sv.eps[e0..e0 + LANES];
+            let eps_n = pack6(eps.try_into().unwrap());
             let data = &self.data_lanes[g];
-            let kin = kinematics_core(data, &st, &eps_n, &inc, s.c_nu, k.dt);
+            if !consistent {
+                let s = FrozenScalars::pack(self.frozen[e0..e0 + LANES].try_into().unwrap());
+                let kin = kinematics_core(data, &st, &eps_n, &inc, s.c_nu, k.dt);
+                residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
+                for i in 0..LANES {
+                    self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
+                }
+                continue;
+            }
+            let c_nu: [f64; LANES] = std::array::from_fn(|i| {
+                let e = e0 + i;
+                consistent_director_factor(
+                    &self.data[e],
+                    &sts[i],
+                    &eps[i],
+                    &incs[i],
+                    &k,
+                    self.frozen[e].c_nu,
+                )
+            });
+            let kin = kinematics_core(data, &st, &eps_n, &inc, F64x4::new(c_nu), k.dt);
+            let mut s1 = [FrozenScalars::default(); LANES];
+            corr.clear();
+            for i in 0..LANES {
+                let e = e0 + i;
+                let (s, _, kin_i) =
+                    consistent_scalars_at(&self.data[e], &sts[i], kin.lane(i), &k, c_nu[i]);
+                // The next iterate's director factor follows this one's branch.
+                self.frozen[e].c_nu = s.c_nu;
+                s1[i] = s;
+                if correct {
+                    let map = &self.dofs.elements[e];
+                    let active: [bool; NDOF] = std::array::from_fn(|j| map[j] != NONE);
+                    corr.push(monolithic_terms(
+                        &self.data[e],
+                        &sts[i],
+                        &s,
+                        &kin_i,
+                        &k,
+                        self.trans_diss,
+                        &active,
+                    ));
+                }
+            }
+            let s = FrozenScalars::pack(&s1);
             residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
             for i in 0..LANES {
-                self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
+                if correct {
+                    self.scatter_lane_corrected(e0 + i, &ev, i, &corr[i], r, scale);
+                } else {
+                    self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
+                }
             }
         }
         groups * LANES
+    }
+
+    /// [`Self::scatter_lane`] with the tangent, each entry corrected by the scalars'
+    /// linearization `c` ([`ScalarCorrection::entry`]).
+    fn scatter_lane_corrected(
+        &mut self,
+        e: usize,
+        ev: &ElementEval<F64x4>,
+        lane: usize,
+        c: &ScalarCorrection<NDOF>,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
+        let (lo, hi) = (self.scatter_off[e], self.scatter_off[e + 1]);
+        add_element_corrected(
+            (ev.r.as_slice(), ev.scale.as_slice(), ev.k.as_slice()),
+            lane,
+            &self.row_map[lo.0..hi.0],
+            kind_of_local,
+            &self.tangent_map[lo.1..hi.1],
+            c,
+            r,
+            scale,
+            self.solver.values_mut(),
+        );
     }
 
     /// [`ElementData`] by full groups of four consecutive elements, one per lane (the last
@@ -550,6 +635,38 @@ impl Simulation {
             }
         }
         k
+    }
+}
+
+/// [`add_element`] of a lane's evaluation with its tangent, each active entry `(i, j)`
+/// corrected by the scalars' linearization `c` on the way ([`ScalarCorrection::entry`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn add_element_corrected<const N: usize>(
+    (er, es, ek): (&[F64x4], &[F64x4], &[F64x4]),
+    lane: usize,
+    rows: &[(usize, usize)],
+    kind: impl Fn(usize) -> usize,
+    runs: &[(usize, usize, usize)],
+    c: &ScalarCorrection<N>,
+    r: &mut [f64],
+    scale: &mut [f64; 3],
+    vals: &mut [f64],
+) {
+    add_element((er, es, ek), lane, rows, kind, None, r, scale, vals);
+    let w = LANES;
+    let ks = F64x4::flat(ek);
+    for &(src, dst, len) in runs {
+        // Entry `src` of the column-major element matrix, then on down the column (a run
+        // may cross into the next one).
+        let (mut row, mut col) = (src % N, src / N);
+        for (x, v) in (src..src + len).zip(&mut vals[dst..dst + len]) {
+            *v += c.entry(row, col, ks[x * w + lane]);
+            row += 1;
+            if row == N {
+                (row, col) = (0, col + 1);
+            }
+        }
     }
 }
 

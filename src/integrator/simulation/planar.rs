@@ -6,7 +6,7 @@
 
 use nalgebra::Vector3;
 
-use super::assemble::add_element;
+use super::assemble::{add_element, add_element_corrected};
 use super::{extend_runs, Mode, Simulation};
 use crate::element::dissipation::LocalScalars;
 use crate::element::lanes::pack3;
@@ -15,7 +15,7 @@ use crate::element::planar::{
     NDOF_P,
 };
 use crate::element::strain::Config;
-use crate::element::{strains6, ElementData, FrozenScalars, NDOF};
+use crate::element::{strains6, ElementData, FrozenScalars, ScalarCorrection, NDOF};
 use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::state::State;
 use crate::math::lane::{F64x4, Lane, LANES};
@@ -272,19 +272,75 @@ impl Simulation {
             None => gather_free(&pk.dofs[e], q),
         };
         let vals = self.solver.values_mut();
-        let first_single = if mode == Mode::Frozen && self.lanes {
+        let consistent = mode == Mode::Consistent;
+        let correct = tangent && consistent && k.scheme.is_dissipative() && !self.inexact_tangent;
+        // Four elements per kernel call; with consistent scalars as in the 3D
+        // `assemble_lanes` (kinematics in lanes, the local law and the scalars'
+        // linearization element by element, added to each lane's tangent as it is
+        // scattered): the one-element path's numbers bit for bit.
+        let first_single = if self.lanes {
             let mut ev = PElementEval::<F64x4>::zeros();
+            let mut corr = Vec::with_capacity(if correct { LANES } else { 0 });
             for (g, data) in pk.groups.iter().enumerate() {
                 let e0 = g * LANES;
-                let inc = PIncrement::from_locals(&[
-                    local(e0),
-                    local(e0 + 1),
-                    local(e0 + 2),
-                    local(e0 + 3),
-                ]);
+                let locals = [local(e0), local(e0 + 1), local(e0 + 2), local(e0 + 3)];
+                let inc = PIncrement::from_locals(&locals);
                 let (st, eps_n) = &pk.lane_states[g];
-                let s = FrozenScalars::pack(self.frozen[e0..e0 + LANES].try_into().unwrap());
-                let kin = planar::kinematics_core(data, st, eps_n, &inc, s.c_nu, dt);
+                if !consistent {
+                    let s = FrozenScalars::pack(self.frozen[e0..e0 + LANES].try_into().unwrap());
+                    let kin = planar::kinematics_core(data, st, eps_n, &inc, s.c_nu, dt);
+                    planar::residual_tangent_into(
+                        data,
+                        st,
+                        &kin,
+                        &s,
+                        &k,
+                        self.trans_diss,
+                        tangent,
+                        &mut ev,
+                    );
+                    for i in 0..LANES {
+                        pk.scatter(e0 + i, &ev, i, tangent, r, scale, vals);
+                    }
+                    continue;
+                }
+                let c_nu: [f64; LANES] = std::array::from_fn(|i| {
+                    let e = e0 + i;
+                    let (st_e, eps_e) = &pk.states[e];
+                    planar::consistent_director_factor(
+                        &pk.data[e],
+                        st_e,
+                        eps_e,
+                        &PIncrement::from_local(&locals[i]),
+                        &k,
+                        self.frozen[e].c_nu,
+                    )
+                });
+                let kin = planar::kinematics_core(data, st, eps_n, &inc, F64x4::new(c_nu), dt);
+                let mut s1 = [FrozenScalars::default(); LANES];
+                corr.clear();
+                for i in 0..LANES {
+                    let e = e0 + i;
+                    let (pd, st_e) = (&pk.data[e], &pk.states[e].0);
+                    let (s, _, kin_i) =
+                        planar::consistent_scalars_at(pd, st_e, kin.lane(i), &k, c_nu[i]);
+                    // The next iterate's director factor follows this one's branch.
+                    self.frozen[e].c_nu = s.c_nu;
+                    s1[i] = s;
+                    if correct {
+                        let active: [bool; NDOF_P] = std::array::from_fn(|j| pk.dofs[e][j] != NONE);
+                        corr.push(planar::monolithic_terms(
+                            pd,
+                            st_e,
+                            &s,
+                            &kin_i,
+                            &k,
+                            self.trans_diss,
+                            &active,
+                        ));
+                    }
+                }
+                let s = FrozenScalars::pack(&s1);
                 planar::residual_tangent_into(
                     data,
                     st,
@@ -296,7 +352,11 @@ impl Simulation {
                     &mut ev,
                 );
                 for i in 0..LANES {
-                    pk.scatter(e0 + i, &ev, i, tangent, r, scale, vals);
+                    if correct {
+                        pk.scatter_corrected(e0 + i, &ev, i, &corr[i], r, scale, vals);
+                    } else {
+                        pk.scatter(e0 + i, &ev, i, tangent, r, scale, vals);
+                    }
                 }
             }
             pk.groups.len() * LANES
@@ -373,6 +433,35 @@ impl PlanarKernel {
             &self.rows[lo.0..hi.0],
             pkind,
             tangent.then_some(&self.entries[lo.1..hi.1]),
+            r,
+            scale,
+            vals,
+        );
+    }
+}
+
+impl PlanarKernel {
+    /// [`Self::scatter`] of a lane with its tangent, each entry corrected by the scalars'
+    /// linearization `c` ([`ScalarCorrection::entry`]).
+    #[allow(clippy::too_many_arguments)]
+    fn scatter_corrected(
+        &self,
+        e: usize,
+        ev: &PElementEval<F64x4>,
+        lane: usize,
+        c: &ScalarCorrection<NDOF_P>,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+        vals: &mut [f64],
+    ) {
+        let (lo, hi) = (self.offsets[e], self.offsets[e + 1]);
+        add_element_corrected(
+            (ev.r.as_slice(), ev.scale.as_slice(), ev.k.as_slice()),
+            lane,
+            &self.rows[lo.0..hi.0],
+            pkind,
+            &self.entries[lo.1..hi.1],
+            c,
             r,
             scale,
             vals,
