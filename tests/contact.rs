@@ -575,7 +575,7 @@ fn bad_rod_contacts_are_named() {
         ),
         (
             "[[contact]]\nrods = [\"a\", \"b\"]\ncontact_radius = 0.06",
-            "contact[0].rods: the rods start overlapping: contact spheres at",
+            "contact[0].rods: the rods start overlapping: contact points at",
         ),
         (
             "[[contact]]\nrods = [\"a\", \"b\"]\nstiffness = 0",
