@@ -378,10 +378,29 @@ fn collision_text(scheme: &str) -> String {
     text.replace("scheme = \"em\"", &format!("scheme = \"{scheme}\"{alpha}"))
 }
 
+/// The collision scene with line contact (`model = "line"`).
+fn line_collision_text(scheme: &str) -> String {
+    collision_text(scheme).replace(
+        "[[contact]]\nrods = [\"a\", \"b\"]\n",
+        "[[contact]]\nrods = [\"a\", \"b\"]\nmodel = \"line\"\n",
+    )
+}
+
 #[test]
 fn colliding_rods_keep_l_j_and_em_energy_to_round_off() {
-    for scheme in ["em", "edmc2"] {
-        let s = parse_scene(&collision_text(scheme), "collide.toml").unwrap();
+    collide(collision_text, &["em", "edmc2"]);
+}
+
+#[test]
+fn colliding_rods_with_line_contact_keep_l_j_and_em_energy_to_round_off() {
+    collide(line_collision_text, &["em", "edmc2"]);
+}
+
+/// Runs the collision scene `text(scheme)` for each scheme: L and J per step to the
+/// Newton tolerance's level, EM's H likewise, EDMC's dissipation identity.
+fn collide(text: fn(&str) -> String, schemes: &[&str]) {
+    for &scheme in schemes {
+        let s = parse_scene(&text(scheme), "collide.toml").unwrap();
         assert!(s.model.is_free_flight());
         let a_nodes: Vec<usize> = s.model.elements[s.model.rods[0].elements.clone()]
             .iter()
@@ -439,12 +458,16 @@ fn colliding_rods_keep_l_j_and_em_energy_to_round_off() {
 /// Largest difference between the assembled tangent at a fixed increment and central
 /// differences of the residual (step 1e-7), and the tangent's largest entry.
 fn tangent_vs_central_differences(sim: &mut Simulation) -> (f64, f64) {
+    tangent_vs_central_differences_at(sim, 1e-7)
+}
+
+/// [`tangent_vs_central_differences`] with the step `h`.
+fn tangent_vs_central_differences_at(sim: &mut Simulation, h: f64) -> (f64, f64) {
     let n = sim.n_dofs();
     let q: Vec<f64> = (0..n).map(|i| 1e-4 * ((i as f64 * 0.37).sin())).collect();
     let k = sim.dense_tangent_at(&q, false);
     let kmax = k.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
     let mut worst: f64 = 0.0;
-    let h = 1e-7;
     for j in 0..n {
         let mut qp = q.clone();
         qp[j] += h;
@@ -460,9 +483,47 @@ fn tangent_vs_central_differences(sim: &mut Simulation) -> (f64, f64) {
 
 #[test]
 fn rod_contact_tangent_matches_finite_differences() {
-    // Step the collision into contact, then compare the assembled tangent with central
-    // differences of the residual (pair list fixed at the state).
-    let s = parse_scene(&collision_text("em"), "collide.toml").unwrap();
+    contact_tangent(collision_text("em"));
+}
+
+#[test]
+fn line_contact_tangent_matches_finite_differences() {
+    let text = line_collision_text("em");
+    let s = parse_scene(&text, "collide.toml").unwrap();
+    assert_eq!(
+        s.model.rod_contacts[0].model,
+        cosserat::rod_contact::ContactModel::Line
+    );
+    let s = parse_scene(&text, "collide.toml").unwrap();
+    let mut sim = Simulation::new(s.model, s.params).unwrap();
+    for _ in 0..40 {
+        sim.step().unwrap();
+    }
+    assert!(
+        sim.model().rod_contacts[0].energy(&sim.state().r) > 0.0,
+        "not in contact after 40 steps"
+    );
+    // The line model has hundreds of pairs, some of which cross the contact distance
+    // within a step of 1e-7, where W″ jumps: the difference there is truncation, and it
+    // falls with the step down to round-off. Measured 3.1e-7, 2.8e-8, 3.1e-9, 8.9e-9 at
+    // h = 1e-7, 3e-8, 1e-8, 3e-9.
+    let mut rel = Vec::new();
+    for h in [1e-7, 3e-8, 1e-8, 3e-9] {
+        let (worst, kmax) = tangent_vs_central_differences_at(&mut sim, h);
+        rel.push(worst / kmax);
+        eprintln!(
+            "line contact tangent vs central differences at h = {h:.0e}: {:.1e}",
+            worst / kmax
+        );
+    }
+    assert!(rel[2] <= 2e-8, "tangent off by {:e} at h = 1e-8", rel[2]);
+    assert!(rel[2] <= 0.1 * rel[0], "not truncation: {rel:?}");
+}
+
+/// Steps the collision `text` into contact, then compares the assembled tangent with
+/// central differences of the residual (pair list fixed at the state).
+fn contact_tangent(text: String) {
+    let s = parse_scene(&text, "collide.toml").unwrap();
     let mut sim = Simulation::new(s.model, s.params).unwrap();
     for _ in 0..40 {
         sim.step().unwrap();
@@ -575,11 +636,23 @@ fn bad_rod_contacts_are_named() {
         ),
         (
             "[[contact]]\nrods = [\"a\", \"b\"]\ncontact_radius = 0.06",
-            "contact[0].rods: the rods start overlapping: contact spheres at",
+            "contact[0].rods: the rods start overlapping: contact points at",
         ),
         (
             "[[contact]]\nrods = [\"a\", \"b\"]\nstiffness = 0",
             "contact[0].stiffness: must be > 0 (got 0)",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"b\"]\nmodel = \"tube\"",
+            "contact[0].model: unknown contact model `tube` (models: spheres, line)",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"b\"]\npoints_per_radius = 8",
+            "contact[0].points_per_radius: only with `model = \"line\"`",
+        ),
+        (
+            "[[contact]]\nrods = [\"a\", \"b\"]\nmodel = \"line\"\npoints_per_radius = 0",
+            "contact[0].points_per_radius: must be an integer from 1 to 64, got 0",
         ),
     ];
     for (extra, want) in cases {
@@ -588,15 +661,25 @@ fn bad_rod_contacts_are_named() {
             .to_string();
         assert!(err.contains(want), "{extra}\n got: {err}\nwant: {want}");
     }
-    let ga = base
-        .replace("@@", "[[contact]]\nrods = [\"a\", \"b\"]\n\n")
-        .replace("scheme = \"em\"", "scheme = \"gen-alpha\"");
-    let err = parse_scene(&ga, "bad.toml").unwrap_err().to_string();
-    assert!(
-        err.contains("gen-alpha does not support contact between rods"),
-        "{err}"
-    );
+    for model in ["", "model = \"line\"\n"] {
+        let ga = base
+            .replace(
+                "@@",
+                &format!("[[contact]]\nrods = [\"a\", \"b\"]\n{model}\n"),
+            )
+            .replace("scheme = \"em\"", "scheme = \"gen-alpha\"");
+        let err = parse_scene(&ga, "bad.toml").unwrap_err().to_string();
+        assert!(
+            err.contains("gen-alpha does not support contact between rods"),
+            "{err}"
+        );
+    }
     let s = load_scene("crossing").unwrap();
+    assert_eq!(
+        s.model.gpu_unsupported(),
+        Some("contact between rods ([[contact]])")
+    );
+    let s = parse_scene(&line_collision_text("em"), "line.toml").unwrap();
     assert_eq!(
         s.model.gpu_unsupported(),
         Some("contact between rods ([[contact]])")

@@ -682,8 +682,12 @@ impl Scene {
         if !m.rod_contacts.is_empty() {
             let _ = writeln!(s, "contact between rods: {}", m.rod_contacts.len());
             list(&mut s, m.rod_contacts.iter(), |c| {
+                let what = match c.model {
+                    crate::rod_contact::ContactModel::Spheres => "contact spheres",
+                    crate::rod_contact::ContactModel::Line => "line-contact quadrature points",
+                };
                 format!(
-                    "{}: {} contact spheres of radius up to {}, stiffness {} N/m², frictionless",
+                    "{}: {} {what} of radius up to {}, stiffness {} N/m², frictionless",
                     if c.is_self() {
                         format!("rod {} with itself", c.rods[0])
                     } else {

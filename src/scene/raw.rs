@@ -52,6 +52,8 @@ pub(crate) struct RawContact {
     pub contact_radius: Option<f64>,
     pub friction: Option<f64>,
     pub slip: Option<f64>,
+    pub model: Option<String>,
+    pub points_per_radius: Option<i64>,
 }
 
 /// `[[obstacle]]`: a rigid plane, sphere or cylinder the rods' nodes can touch.

@@ -16,6 +16,9 @@ use crate::scene::span::KeyPath;
 /// "Friction").
 pub const FRICTION_CUTBACK: usize = 6;
 
+/// Most quadrature points per contact radius of line contact (`points_per_radius`).
+const MAX_POINTS_PER_RADIUS: i64 = 64;
+
 /// A unit vector from `v` (error naming the key when it is zero).
 fn unit(cx: &Ctx, path: &KeyPath, v: &[f64]) -> Result<Vec3> {
     let v = cx.vec3(path, v)?;
@@ -255,7 +258,7 @@ pub(super) fn rod_contact(
     start: &[Vec3],
     spheres_so_far: &mut f64,
 ) -> Result<crate::rod_contact::RodContact> {
-    use crate::rod_contact::{RodContact, SamplePoint};
+    use crate::rod_contact::{ContactModel, RodContact, SamplePoint};
     let rp = path.key("rods");
     let names = cx.required(&rp, c.rods.as_ref())?;
     if names.is_empty() || names.len() > 2 {
@@ -303,6 +306,41 @@ pub(super) fn rod_contact(
             })
         })
         .collect::<Result<_>>()?;
+    let model = match c.model.as_deref() {
+        None | Some("spheres") => ContactModel::Spheres,
+        Some("line") => ContactModel::Line,
+        Some(other) => {
+            return Err(cx.err(
+                &path.key("model"),
+                format!("unknown contact model `{other}` (models: spheres, line)"),
+            ))
+        }
+    };
+    // Line contact's quadrature points per contact radius along each element.
+    let per_radius = match c.points_per_radius {
+        None => 16.0,
+        Some(_) if model != ContactModel::Line => {
+            return Err(cx.err(
+                &path.key("points_per_radius"),
+                "only with `model = \"line\"`",
+            ))
+        }
+        Some(n) if (1..=MAX_POINTS_PER_RADIUS).contains(&n) => n as f64,
+        Some(n) => {
+            return Err(cx.err(
+                &path.key("points_per_radius"),
+                format!("must be an integer from 1 to {MAX_POINTS_PER_RADIUS}, got {n}"),
+            ))
+        }
+    };
+    // Points on an element of length `h` at contact radius `ρ`: spheres at most `ρ` apart
+    // (both ends included where the rod ends), or line contact's midpoint rule.
+    let per_element = |h: f64, rho: f64| -> f64 {
+        match model {
+            ContactModel::Spheres => (h / rho).ceil().max(1.0),
+            ContactModel::Line => (per_radius * h / rho).ceil().max(1.0),
+        }
+    };
     let radius_override = c
         .contact_radius
         .map(|r| cx.positive(&path.key("contact_radius"), r))
@@ -318,7 +356,7 @@ pub(super) fn rod_contact(
     for &ri in &which {
         let rho = radius_of(ri);
         for el in &elements[rods[ri].elements.clone()] {
-            let m = (el.props.h / rho).ceil().max(1.0);
+            let m = per_element(el.props.h, rho);
             count += m;
             per_diameter = per_diameter.max(2.0 * rho * m / el.props.h);
         }
@@ -344,7 +382,21 @@ pub(super) fn rod_contact(
         let mut arc = 0.0;
         for (n, el) in els.iter().enumerate() {
             let h = el.props.h;
-            let m = (h / rho).ceil().max(1.0) as usize;
+            let m = per_element(h, rho) as usize;
+            if model == ContactModel::Line {
+                for s in 0..m {
+                    let xi = (s as f64 + 0.5) / m as f64;
+                    points.push(SamplePoint {
+                        nodes: el.nodes,
+                        xi,
+                        radius: rho,
+                        spacing: h / m as f64,
+                        arc: arc + h * xi,
+                    });
+                }
+                arc += h;
+                continue;
+            }
             let last = n + 1 == els.len();
             for s in 0..m + usize::from(last) {
                 points.push(SamplePoint {
@@ -370,6 +422,7 @@ pub(super) fn rod_contact(
         stiffness,
         friction,
         slip,
+        model,
         split: if which.len() == 1 {
             points.len()
         } else {
@@ -382,7 +435,7 @@ pub(super) fn rod_contact(
         return Err(cx.err(
             &rp,
             format!(
-                "the rods start overlapping: contact spheres at {} and {} are {:.3e} apart, closer than their contact diameter {}",
+                "the rods start overlapping: contact points at {} and {} are {:.3e} apart, closer than their contact diameter {}",
                 fmt_v(&a),
                 fmt_v(&b),
                 (a - b).norm(),
