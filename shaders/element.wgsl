@@ -13,11 +13,11 @@
 //   y = the node): the reduced strain gradients of the node into the intermediate buffer.
 // * `tangent_main`, four invocations per listed element slot (dispatch y = the block):
 //   one 9×9 node block each, read from the intermediate buffer and the state.
-// * `advance_main`, one invocation per element slot, after a converged Newton solve: the
-//   state at n+1 of the slot's increment (the same kinematics) into the intermediate
-//   buffer's first NS fields (binding 1's layout: copied over the state afterwards), and
-//   the element's terms of the invariants at n+1 and its dissipation (T_ADV);
-//   `record_main`, one invocation per member slot, sums them per member (T_REC).
+// * `advance_main`, one invocation per listed element slot (binding 6), after an accepted
+//   Newton solve: the state at n+1 of the slot's increment (the same kinematics) over its
+//   state at n (binding 1), and the element's terms of the invariants at n+1 and its
+//   dissipation into the intermediate buffer (T_ADV); `record_main`, one invocation per
+//   member slot, sums those of its active element slots (T_REC).
 //
 // Buffers are struct-of-arrays, field-major: field `f` of element `i` is `buf[f * n + i]`
 // (coalesced loads on a real GPU). Field offsets are the constants below; their Rust twin is
@@ -70,7 +70,7 @@ const T_F: u32 = 48u;     // 18: director forces f[2..8] (stress + inertia)
 // ---- tangent prep → tangent blocks (binding 5) ----
 const T_BT: u32 = 66u;    // 72: B̃_½ columns of nodes 0, 1 (36 n + 6 k + 3 g + c)
 const T_DB: u32 = 138u;   // 72: D B̃_{n+1} columns of nodes 0, 1 (same order)
-// ---- advance pass → record pass (binding 5; fields 0..NS: the state at n+1) ----
+// ---- advance pass → record pass (binding 5) ----
 const T_ADV: u32 = 48u;   // 9: per element: kinetic, stored energy, L (3), J (3), dissipation
 const T_REC: u32 = 57u;   // 9: per member slot (index = member slot): the sums of T_ADV
 
@@ -90,7 +90,8 @@ struct Params {
 }
 
 @group(0) @binding(0) var<storage, read> elem: array<Real>;
-@group(0) @binding(1) var<storage, read> state: array<Real>;
+// Written by the advance pass only.
+@group(0) @binding(1) var<storage, read_write> state: array<Real>;
 @group(0) @binding(2) var<storage, read> iter: array<Real>;
 @group(0) @binding(3) var<storage, read_write> outp: array<Real>;
 @group(0) @binding(4) var<uniform> prm: Params;
@@ -970,31 +971,31 @@ fn tangent_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 // ---- step advance and records (twin of Simulation::advance and of the element terms of
 // integrator::invariants) ----
 
-// The state fields of the current slot at n+1, into the intermediate buffer.
+fn st_s3(f: u32, v: V3) {
+    state[f * prm.n + gi] = v.x;
+    state[(f + 1u) * prm.n + gi] = v.y;
+    state[(f + 2u) * prm.n + gi] = v.z;
+}
+
+// The state of the current slot at n+1 over its state at n.
 fn st_next(k: Kin) {
-    st_t3(S_R, k.cfg1.r0);
-    st_t3(S_R + 3u, k.cfg1.r1);
+    st_s3(S_R, k.cfg1.r0);
+    st_s3(S_R + 3u, k.cfg1.r1);
     for (var i = 0u; i < 3u; i++) {
-        st_t3(S_D + 3u * i, k.cfg1.d0[i]);
-        st_t3(S_D + 9u + 3u * i, k.cfg1.d1[i]);
+        st_s3(S_D + 3u * i, k.cfg1.d0[i]);
+        st_s3(S_D + 9u + 3u * i, k.cfg1.d1[i]);
     }
-    st_t3(S_V, k.v10);
-    st_t3(S_V + 3u, k.v11);
-    for (var a = 0u; a < 4u; a++) { st_t3(S_VD + 3u * a, k.vd1[a]); }
-    st_t3(S_EPS, k.eps1.g);
-    st_t3(S_EPS + 3u, k.eps1.o);
+    st_s3(S_V, k.v10);
+    st_s3(S_V + 3u, k.v11);
+    for (var a = 0u; a < 4u; a++) { st_s3(S_VD + 3u * a, k.vd1[a]); }
+    st_s3(S_EPS, k.eps1.g);
+    st_s3(S_EPS + 3u, k.eps1.o);
 }
 
 @compute @workgroup_size(64)
 fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= prm.n { return; }
-    gi = gid.x;
-    if ld_i(I_ACTIVE) == 0.0 {
-        // Not advanced: the state stays, no terms.
-        for (var f = 0u; f < T_ADV; f++) { st_t(f, ld_s(f)); }
-        for (var k = 0u; k < 9u; k++) { st_t(T_ADV + k, 0.0); }
-        return;
-    }
+    if gid.x >= prm.n_tan { return; }
+    gi = tan_list[gid.x];
     let dt = ld_e(E_DT);
     let h = ld_e(E_H);
     let a_rho = ld_e(E_ARHO);
@@ -1015,6 +1016,7 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if prm.mode == 0u && ld_i(I_ACTIVE) != 2.0 && c_frozen != c.s[3] {
         kin = kinematics(st, x, c_frozen, dt);
     }
+    // (Everything below reads `kin`, not the state: in place is safe.)
     st_next(kin);
     // Invariants' element terms at n+1 (two-point rule for K, L, J; one-point for V).
     var kinetic: Real = 0.0;
@@ -1058,7 +1060,10 @@ fn record_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if per == 0u || m >= prm.n / per { return; }
     for (var k = 0u; k < 9u; k++) {
         var sum: Real = 0.0;
-        for (var e = 0u; e < per; e++) { sum += tmid[(T_ADV + k) * prm.n + m * per + e]; }
+        for (var e = 0u; e < per; e++) {
+            let i = m * per + e;
+            if iter[I_ACTIVE * prm.n + i] != 0.0 { sum += tmid[(T_ADV + k) * prm.n + i]; }
+        }
         tmid[(T_REC + k) * prm.n + m] = sum;
     }
 }

@@ -10,18 +10,28 @@
 //! keep their state and add nothing), two advances in a row (the second starts from the
 //! state the first left on the device).
 //!
+//! `--solve whole` (EM members keep their state on the device, which advances it after
+//! each step instead of the host uploading it): an EM cantilever batch with seeded random
+//! kicks, stiffnesses, time steps and time-tabled tip loads, members that end early, fail
+//! on the device and finish on the CPU (monolithic fallback), fail, run on the CPU kernel
+//! or are solved on the host, through 5 slots, and the paper's frame: every member ends
+//! as on the CPU path (status, reason, steps, Newton iterations, fallback steps; states
+//! and energy histories within `STATE_RTOL`), as with `--solve resident`, with one host
+//! sync per step and no state uploads for the steps the device advanced.
+//!
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case it fails.
 
 mod common;
 
-use common::{rel, Rng};
-use cosserat::batch::bench_members;
+use common::{batch_mix, compare_results, gpu, rel, run_batch, Rng, STATE_RTOL};
+use cosserat::batch::{bench_members, Executor, Member, SolveMode};
 use cosserat::element::{FrozenScalars, StepConsts};
 use cosserat::gpu::kernel::KernelMode;
 use cosserat::gpu::{gpu_required, ElementKernel, GpuContext};
 use cosserat::integrator::state::State;
-use cosserat::integrator::{Scheme, Simulation};
+use cosserat::integrator::{NewtonVariant, Scheme, Simulation, Strategy};
+use cosserat::observe::record::RunStatus;
 
 /// Bound on states and records against the CPU (round-off of the same arithmetic; the
 /// records sum in another association).
@@ -164,4 +174,113 @@ fn device_advance_and_records_match_the_cpu() {
             sim.set_state(next);
         }
     }
+}
+
+/// `--solve whole` against the CPU path (`fresh` Newton: the GPU paths run `full` as
+/// `fresh`) and `--solve resident`; `workers` slots. Returns the worst relative
+/// difference from the CPU path and from resident, and the whole run's stats.
+fn check_whole(
+    label: &str,
+    ms: &[Member],
+    exec: &Executor,
+    workers: usize,
+) -> (
+    Vec<cosserat::batch::MemberResult>,
+    cosserat::batch::BatchStats,
+) {
+    let (cpu, _) = run_batch(ms, &Executor::Cpu, NewtonVariant::Fresh, SolveMode::Host, 0);
+    let (res, rs) = run_batch(ms, exec, NewtonVariant::Full, SolveMode::Resident, workers);
+    let (whole, ws) = run_batch(ms, exec, NewtonVariant::Full, SolveMode::Whole, workers);
+    assert_eq!(ws.device_members, rs.device_members, "{label}");
+    assert_eq!(ws.serve.multi_mismatches, 0, "{label}");
+    let (mut worst_cpu, mut worst_res) = (0.0f64, 0.0f64);
+    for ((c, r), w) in cpu.iter().zip(&res).zip(&whole) {
+        let i = c.index;
+        worst_cpu = worst_cpu.max(compare_results(&format!("{label}, member {i}, cpu"), c, w));
+        worst_res = worst_res.max(compare_results(
+            &format!("{label}, member {i}, resident"),
+            r,
+            w,
+        ));
+    }
+    let (kw, kr) = (&ws.gpu, &rs.gpu);
+    println!(
+        "{label}: whole vs CPU {worst_cpu:.3e}, vs resident {worst_res:.3e}; {} member-steps advanced on the device in {} submissions; dispatches {} (resident {}); bytes up {} (resident {}), down {} (resident {})",
+        ws.serve.device_advances, ws.serve.advance_submits, ws.serve.dispatches, rs.serve.dispatches,
+        kw.bytes_up, kr.bytes_up, kw.bytes_down, kr.bytes_down
+    );
+    assert!(
+        worst_cpu <= STATE_RTOL,
+        "{label}: {worst_cpu:.3e} from the CPU path"
+    );
+    assert!(
+        ws.serve.device_advances > 0,
+        "{label}: nothing advanced on the device"
+    );
+    assert_eq!(ws.serve.dispatches, rs.serve.dispatches, "{label}: syncs");
+    assert!(
+        kw.bytes_up < kr.bytes_up,
+        "{label}: no fewer bytes up than resident"
+    );
+    (whole, ws)
+}
+
+#[test]
+fn whole_em_batch_with_failures_and_fallbacks_ends_as_on_the_cpu_path() {
+    let Some(exec) = gpu() else { return };
+    let ms = batch_mix(Some(Scheme::Em), Strategy::Staggered);
+    // 5 slots for 14 members: the queue streams through (a slot's next member uploads
+    // its states).
+    let (whole, ws) = check_whole("EM", &ms, &exec, 5);
+    assert_eq!(ws.device_members, (12, 1));
+    assert_eq!(whole[11].outcome.status, RunStatus::Failed);
+    assert!(whole[..9]
+        .iter()
+        .all(|r| r.outcome.status == RunStatus::Completed));
+    for r in &whole {
+        println!(
+            "member {}: {:?}, {} steps, {} Newton iterations, {} fallback steps",
+            r.index,
+            r.outcome.status,
+            r.outcome.steps,
+            r.outcome.newton_iters_total,
+            r.outcome.fallback_steps
+        );
+    }
+}
+
+#[test]
+fn whole_em_batch_syncs_once_per_step_and_uploads_no_states() {
+    let Some(exec) = gpu() else { return };
+    let mut ms = batch_mix(Some(Scheme::Em), Strategy::Staggered);
+    ms.truncate(9);
+    let (whole, ws) = check_whole("EM aligned", &ms, &exec, ms.len());
+    let steps = whole.iter().map(|r| r.outcome.steps).max().unwrap() as u64;
+    assert_eq!(ws.serve.multi_dispatches, steps);
+    assert_eq!(ws.serve.dispatches, steps);
+    // Every step after a member's first starts from the device's advance.
+    let member_steps: u64 = whole.iter().map(|r| r.outcome.steps as u64).sum();
+    assert_eq!(ws.serve.device_advances, member_steps - whole.len() as u64);
+}
+
+#[test]
+fn whole_frame_matches_cpu() {
+    let Some(exec) = gpu() else { return };
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .expect("the built-in frame scene exists")
+        .toml;
+    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
+    let mut params = scene.params;
+    params.t_end = 15.0 * params.dt;
+    params.scheme = Scheme::Em;
+    let ms = vec![Member {
+        model: scene.model.clone(),
+        params,
+    }];
+    let (whole, ws) = check_whole("frame", &ms, &exec, 1);
+    assert_eq!(ws.device_members, (1, 0), "the frame is covered");
+    assert_eq!(whole[0].outcome.status, RunStatus::Completed);
+    assert_eq!(whole[0].outcome.steps, 15);
 }

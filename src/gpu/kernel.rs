@@ -124,6 +124,9 @@ pub struct ElementKernel {
     /// before the element pass writes the increments on the device
     /// ([`crate::gpu::Assembler`] gathers them from per-node increments).
     iter_from: usize,
+    /// Clean slots between two changed ones that state uploads re-send
+    /// ([`Self::set_state_gap`]).
+    state_gap: usize,
     out: Vec<f64>,
     /// The uploads of the next dispatch.
     scatter: Scatter,
@@ -180,7 +183,8 @@ impl ElementKernel {
             label: Some("element"),
             entries: &[
                 storage(0, true),
-                storage(1, true),
+                // The advance pass writes the states.
+                storage(1, false),
                 storage(2, true),
                 storage(3, false),
                 wgpu::BindGroupLayoutEntry {
@@ -229,7 +233,7 @@ impl ElementKernel {
         let input = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let bufs = [
             mk("elem", NE, input),
-            mk("state", NS, input),
+            mk("state", NS, input | wgpu::BufferUsages::COPY_SRC),
             mk("iter", NI, input),
             mk(
                 "out",
@@ -240,7 +244,9 @@ impl ElementKernel {
         let tmid = mk(
             "intermediate",
             NT,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
         );
         // The node increments' place until an assembler takes it.
         let placeholder = device.create_buffer(&wgpu::BufferDescriptor {
@@ -309,6 +315,7 @@ impl ElementKernel {
             ],
             dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
             iter_from: I_X,
+            state_gap: SCATTER_GAP,
             out: Vec::new(),
             scatter,
             timers: KernelTimers::default(),
@@ -487,7 +494,8 @@ impl ElementKernel {
                 f0,
                 nf: nf - f0,
             };
-            for (lo, hi) in take_runs_gap(&mut self.dirty[b], SCATTER_GAP) {
+            let gap = if b == 1 { self.state_gap } else { SCATTER_GAP };
+            for (lo, hi) in take_runs_gap(&mut self.dirty[b], gap) {
                 rows.push(MirrorRows {
                     block,
                     lo,
@@ -574,23 +582,36 @@ impl ElementKernel {
         self.timers.upload_s += t0.elapsed().as_secs_f64();
     }
 
-    /// Records the step's advance into `enc`, in a command buffer of its own (the
-    /// passes' parameters are written at submission): for every active element slot the
-    /// state at `n+1` that its increment (iteration buffer) produces with the scalars of
-    /// `mode` — the kinematics of the residual pass, as [`crate::integrator::Simulation`]'s
+    /// Records the step's advance into `enc`: for every element slot of `slots` the state
+    /// at `n+1` that its increment (iteration buffer) produces with the scalars of `mode`
+    /// — the kinematics of the residual pass, as [`crate::integrator::Simulation`]'s
     /// advance — replaces its state at `n` on the device, and its terms of the invariants
-    /// at `n+1` and its dissipation are summed per member slot of `per_member` element
-    /// slots ([`MemberRecord`]). Inactive slots keep their state. The host mirror of the
-    /// advanced slots' states is marked stale, so that the next state the host writes
-    /// there goes up whatever it is.
+    /// at `n+1` and its dissipation go to the intermediate buffer; with `per_member` > 0
+    /// the record pass sums them per member slot of `per_member` element slots (over its
+    /// active slots: [`MemberRecord`]). The host mirror of the advanced slots' states is
+    /// marked stale, so that the next state the host writes there goes up whatever it is.
+    ///
+    /// In a command buffer of its own, submitted ahead of the next dispatch's (the passes'
+    /// parameters and slot list are written at submission); `flush`: with the uploads
+    /// queued so far (else they go with the next dispatch, after this advance).
     pub(crate) fn encode_advance(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
         mode: KernelMode,
+        slots: &[u32],
         per_member: usize,
+        flush: bool,
     ) {
         let t0 = Instant::now();
-        self.flush_uploads(enc);
+        if flush {
+            self.flush_uploads(enc);
+        }
+        if !slots.is_empty() && slots != self.tan_uploaded {
+            self.queue
+                .write_buffer(&self.tan_list, 0, bytemuck::cast_slice(slots));
+            self.timers.bytes_up += 4 * slots.len() as u64;
+            self.tan_uploaded = slots.to_vec();
+        }
         let prm = Params {
             n: self.cap as u32,
             want_tangent: 0,
@@ -598,7 +619,7 @@ impl ElementKernel {
                 KernelMode::Frozen => 0,
                 KernelMode::Consistent => 1,
             },
-            n_tan: 0,
+            n_tan: slots.len() as u32,
             per_member: per_member as u32,
             pad: [0; 3],
         };
@@ -609,31 +630,52 @@ impl ElementKernel {
             timestamp_writes: None,
         });
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_pipeline(&self.advance_pipeline);
-        pass.dispatch_workgroups(self.cap.div_ceil(64) as u32, 1, 1);
-        let members = self.cap / per_member.max(1);
-        pass.set_pipeline(&self.record_pipeline);
-        pass.dispatch_workgroups(members.div_ceil(64).max(1) as u32, 1, 1);
+        if !slots.is_empty() {
+            pass.set_pipeline(&self.advance_pipeline);
+            pass.dispatch_workgroups(slots.len().div_ceil(64) as u32, 1, 1);
+        }
+        if per_member > 0 {
+            let members = self.cap / per_member;
+            pass.set_pipeline(&self.record_pipeline);
+            pass.dispatch_workgroups(members.div_ceil(64).max(1) as u32, 1, 1);
+        }
         drop(pass);
-        let w = Self::width(self.precision) as u64;
-        enc.copy_buffer_to_buffer(&self.tmid, 0, &self.bufs[1], 0, (NS * self.cap) as u64 * w);
-        for i in 0..self.cap {
-            if self.host[2][i * NI + I_ACTIVE] != 0.0 {
-                self.host[1][i * NS] = f64::NAN;
-            }
+        for &i in slots {
+            self.host[1][i as usize * NS] = f64::NAN;
         }
         self.timers.upload_s += t0.elapsed().as_secs_f64();
     }
 
-    /// [`Self::encode_advance`], submitted, with the new states and the records read back
-    /// (tests of the advance's arithmetic against the CPU's).
+    /// Clean slots between two changed ones up to which state uploads re-send them (0
+    /// when the device advances states itself: its copy may be newer than the mirror).
+    pub(crate) fn set_state_gap(&mut self, gap: usize) {
+        self.state_gap = gap;
+    }
+
+    /// [`Self::encode_advance`] of element slots `slots` (frozen scalars, no records) in a
+    /// submission of its own, ahead of the next dispatch's; nothing waits for it.
+    pub(crate) fn submit_advance(&mut self, slots: &[u32]) {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.encode_advance(&mut enc, KernelMode::Frozen, slots, 0, false);
+        self.queue.submit(Some(enc.finish()));
+    }
+
+    /// [`Self::encode_advance`] of every active slot, submitted, with the new states and
+    /// the records read back (tests of the advance's arithmetic against the CPU's).
     pub fn advance(&mut self, mode: KernelMode, per_member: usize) -> Result<Advanced, GpuError> {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        self.encode_advance(&mut enc, mode, per_member);
+        let slots: Vec<u32> = (0..self.cap)
+            .filter(|&i| self.host[2][i * NI + I_ACTIVE] != 0.0)
+            .map(|i| i as u32)
+            .collect();
+        self.encode_advance(&mut enc, mode, &slots, per_member, true);
         let w = Self::width(self.precision) as u64;
         let cap = self.cap as u64;
+        enc.copy_buffer_to_buffer(&self.bufs[1], 0, &self.tmid, 0, NS as u64 * cap * w);
         let staging = self.adv_staging.get_or_insert_with(|| {
             self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("advance staging"),
@@ -643,8 +685,10 @@ impl ElementKernel {
             })
         });
         let members = self.cap / per_member.max(1);
+        // The states (copied into the intermediate buffer's leading fields, which the
+        // advance leaves alone) and the records.
         let ranges = [
-            (0, (T_ADV + 9) as u64 * cap * w),
+            (0, NS as u64 * cap * w),
             (T_REC as u64 * cap * w, 9 * cap * w),
         ];
         let mut out = vec![0.0; NT * self.cap];
