@@ -634,8 +634,7 @@ impl ElementKernel {
             pass.set_pipeline(&self.advance_pipeline);
             pass.dispatch_workgroups(slots.len().div_ceil(64) as u32, 1, 1);
         }
-        if per_member > 0 {
-            let members = self.cap / per_member;
+        if let Some(members) = self.cap.checked_div(per_member) {
             pass.set_pipeline(&self.record_pipeline);
             pass.dispatch_workgroups(members.div_ceil(64).max(1) as u32, 1, 1);
         }
