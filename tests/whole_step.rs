@@ -26,12 +26,13 @@ mod common;
 
 use common::{batch_mix, compare_results, gpu, rel, run_batch, Rng, STATE_RTOL};
 use cosserat::batch::{bench_members, Executor, Member, SolveMode};
-use cosserat::element::{FrozenScalars, StepConsts};
+use cosserat::element::{ElementState, FrozenScalars, StepConsts};
 use cosserat::gpu::kernel::KernelMode;
 use cosserat::gpu::{gpu_required, ElementKernel, GpuContext};
 use cosserat::integrator::state::State;
 use cosserat::integrator::{NewtonVariant, Scheme, Simulation, Strategy};
 use cosserat::observe::record::RunStatus;
+use nalgebra::Vector6;
 
 /// Bound on states and records against the CPU (round-off of the same arithmetic; the
 /// records sum in another association).
@@ -48,23 +49,24 @@ fn context() -> Option<GpuContext> {
     }
 }
 
-/// The flattened element fields of `state` (positions, triads, velocities, director
-/// velocities, strains) of every element.
+/// The flattened fields of one element state (positions, triads, velocities, director
+/// velocities) and its strains.
+fn fields(st: &ElementState, eps: &Vector6<f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = Vec::new();
+    for l in 0..2 {
+        v.extend(st.cfg.r[l].iter());
+        v.extend(st.cfg.d[l].iter());
+        v.extend(st.v[l].iter());
+        v.extend(st.vd[l].iter().flat_map(|x| x.iter().copied()));
+    }
+    v.extend(eps.iter());
+    v
+}
+
+/// [`fields`] of every element of `state`.
 fn element_fields(sim: &Simulation, state: &State) -> Vec<f64> {
-    let model = sim.model();
-    (0..model.elements.len())
-        .flat_map(|e| {
-            let st = state.element(model, e);
-            let mut v: Vec<f64> = Vec::new();
-            for l in 0..2 {
-                v.extend(st.cfg.r[l].iter());
-                v.extend(st.cfg.d[l].iter());
-                v.extend(st.v[l].iter());
-                v.extend(st.vd[l].iter().flat_map(|x| x.iter().copied()));
-            }
-            v.extend(state.eps[e].iter());
-            v
-        })
+    (0..sim.model().elements.len())
+        .flat_map(|e| fields(&state.element(sim.model(), e), &state.eps[e]))
         .collect()
 }
 
@@ -129,17 +131,7 @@ fn device_advance_and_records_match_the_cpu() {
             let n_el = sim.model().elements.len();
             let dev: Vec<f64> = got.states[m * per..m * per + n_el]
                 .iter()
-                .flat_map(|(st, eps)| {
-                    let mut v: Vec<f64> = Vec::new();
-                    for l in 0..2 {
-                        v.extend(st.cfg.r[l].iter());
-                        v.extend(st.cfg.d[l].iter());
-                        v.extend(st.v[l].iter());
-                        v.extend(st.vd[l].iter().flat_map(|x| x.iter().copied()));
-                    }
-                    v.extend(eps.iter());
-                    v
-                })
+                .flat_map(|(st, eps)| fields(st, eps))
                 .collect();
             let host = element_fields(sim, &next);
             let e_state = rel(host.iter().copied(), dev.iter().copied());
