@@ -13,6 +13,11 @@
 //   y = the node): the reduced strain gradients of the node into the intermediate buffer.
 // * `tangent_main`, four invocations per listed element slot (dispatch y = the block):
 //   one 9×9 node block each, read from the intermediate buffer and the state.
+// * `advance_main`, one invocation per listed element slot (binding 6), after an accepted
+//   Newton solve: the state at n+1 of the slot's increment (the same kinematics) over its
+//   state at n (binding 1), and the element's terms of the invariants at n+1 and its
+//   dissipation into the intermediate buffer (T_ADV); `record_main`, one invocation per
+//   member slot, sums those of its active element slots (T_REC).
 //
 // Buffers are struct-of-arrays, field-major: field `f` of element `i` is `buf[f * n + i]`
 // (coalesced loads on a real GPU). Field offsets are the constants below; their Rust twin is
@@ -65,6 +70,9 @@ const T_F: u32 = 48u;     // 18: director forces f[2..8] (stress + inertia)
 // ---- tangent prep → tangent blocks (binding 5) ----
 const T_BT: u32 = 66u;    // 72: B̃_½ columns of nodes 0, 1 (36 n + 6 k + 3 g + c)
 const T_DB: u32 = 138u;   // 72: D B̃_{n+1} columns of nodes 0, 1 (same order)
+// ---- advance pass → record pass (binding 5) ----
+const T_ADV: u32 = 48u;   // 9: per element: kinetic, stored energy, L (3), J (3), dissipation
+const T_REC: u32 = 57u;   // 9: per member slot (index = member slot): the sums of T_ADV
 
 struct Params {
     n: u32,
@@ -74,10 +82,16 @@ struct Params {
     mode: u32,
     // Element slots listed for the tangent pass (binding 6).
     n_tan: u32,
+    // Element slots per member slot (the record pass).
+    per_member: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<storage, read> elem: array<Real>;
-@group(0) @binding(1) var<storage, read> state: array<Real>;
+// Written by the advance pass only.
+@group(0) @binding(1) var<storage, read_write> state: array<Real>;
 @group(0) @binding(2) var<storage, read> iter: array<Real>;
 @group(0) @binding(3) var<storage, read_write> outp: array<Real>;
 @group(0) @binding(4) var<uniform> prm: Params;
@@ -945,4 +959,104 @@ fn tangent_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     gi = tan_list[gid.x];
     if ld_i(I_ACTIVE) == 0.0 { return; }
     tangent_block(gid.y / 2u, gid.y % 2u);
+}
+
+// ---- step advance and records (twin of Simulation::advance and of the element terms of
+// integrator::invariants) ----
+
+fn st_s3(f: u32, v: V3) {
+    state[f * prm.n + gi] = v.x;
+    state[(f + 1u) * prm.n + gi] = v.y;
+    state[(f + 2u) * prm.n + gi] = v.z;
+}
+
+// The state of the current slot at n+1 over its state at n.
+fn st_next(k: Kin) {
+    st_s3(S_R, k.cfg1.r0);
+    st_s3(S_R + 3u, k.cfg1.r1);
+    for (var i = 0u; i < 3u; i++) {
+        st_s3(S_D + 3u * i, k.cfg1.d0[i]);
+        st_s3(S_D + 9u + 3u * i, k.cfg1.d1[i]);
+    }
+    st_s3(S_V, k.v10);
+    st_s3(S_V + 3u, k.v11);
+    for (var a = 0u; a < 4u; a++) { st_s3(S_VD + 3u * a, k.vd1[a]); }
+    st_s3(S_EPS, k.eps1.g);
+    st_s3(S_EPS + 3u, k.eps1.o);
+}
+
+@compute @workgroup_size(64)
+fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n_tan { return; }
+    gi = tan_list[gid.x];
+    let dt = ld_e(E_DT);
+    let h = ld_e(E_H);
+    let a_rho = ld_e(E_ARHO);
+    let st = load_state();
+    var x: array<Real, 18>;
+    for (var i = 0u; i < 18u; i++) { x[i] = ld_i(I_X + i); }
+    // On the branch of the director factor the increment was solved with; the frozen
+    // kinematics differ from the consistent ones only through c_ν.
+    let c_frozen = ld_i(I_S + 3u);
+    let c = consistent_scalars(st, x, dt, c_frozen);
+    let loc = local_scalars(c.kin.inputs, a_rho, dt / h);
+    let inp = c.kin.inputs;
+    let diss = h * (0.5 * a_rho * loc.dv * (inp.v_n1 - inp.v_n)
+        + 0.5 * a_rho * loc.dnu * (inp.nu_n1 - inp.nu_n)
+        + 0.5 * loc.beta_g * inp.x_g
+        + 0.5 * loc.beta_o * inp.x_o);
+    var kin = c.kin;
+    if prm.mode == 0u && ld_i(I_ACTIVE) != 2.0 && c_frozen != c.s[3] {
+        kin = kinematics(st, x, c_frozen, dt);
+    }
+    // (Everything below reads `kin`, not the state: in place is safe.)
+    st_next(kin);
+    // Invariants' element terms at n+1 (two-point rule for K, L, J; one-point for V).
+    var kinetic: Real = 0.0;
+    var lm = V3(0.0, 0.0, 0.0);
+    var jm = V3(0.0, 0.0, 0.0);
+    for (var l = 0u; l < 2u; l++) {
+        for (var m = 0u; m < 2u; m++) {
+            let w = h * m2(l, m);
+            let rl = cfg_r(kin.cfg1, l);
+            let vl = kin_v1(kin, l);
+            let vm = kin_v1(kin, m);
+            kinetic += 0.5 * w * a_rho * dot(vl, vm);
+            lm += w * a_rho * vm;
+            jm += w * a_rho * cross(rl, vm);
+            let dl = cfg_d(kin.cfg1, l);
+            for (var a = 0u; a < 2u; a++) {
+                for (var b = 0u; b < 2u; b++) {
+                    let ir = w * irho(a, b);
+                    let vlb = kin.vd1[2u * m + b];
+                    kinetic += 0.5 * ir * dot(kin.vd1[2u * l + a], vlb);
+                    jm += ir * cross(dl[a], vlb);
+                }
+            }
+        }
+    }
+    let dg = kin.eps1.g - V3(ld_e(E_EPS0), ld_e(E_EPS0 + 1u), ld_e(E_EPS0 + 2u));
+    let dom = kin.eps1.o - V3(ld_e(E_EPS0 + 3u), ld_e(E_EPS0 + 4u), ld_e(E_EPS0 + 5u));
+    let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
+    let stored = 0.5 * h * (dot(dg, cg * dg) + dot(dom, c_omega_mv(dom)));
+    st_t(T_ADV, kinetic);
+    st_t(T_ADV + 1u, stored);
+    st_t3(T_ADV + 2u, lm);
+    st_t3(T_ADV + 5u, jm);
+    st_t(T_ADV + 8u, diss);
+}
+
+@compute @workgroup_size(64)
+fn record_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let m = gid.x;
+    let per = prm.per_member;
+    if per == 0u || m >= prm.n / per { return; }
+    for (var k = 0u; k < 9u; k++) {
+        var sum: Real = 0.0;
+        for (var e = 0u; e < per; e++) {
+            let i = m * per + e;
+            if iter[I_ACTIVE * prm.n + i] != 0.0 { sum += tmid[(T_ADV + k) * prm.n + i]; }
+        }
+        tmid[(T_REC + k) * prm.n + m] = sum;
+    }
 }

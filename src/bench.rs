@@ -158,6 +158,18 @@ fn timed(
     })
 }
 
+/// The benchmark members' scheme: EDMC-2 α = 0.5, or EM with `COSSERAT_BENCH_SCHEME=em`
+/// (for measurements of `--solve whole`, which keeps EM members' states on the device).
+pub fn bench_scheme() -> crate::integrator::Scheme {
+    match std::env::var("COSSERAT_BENCH_SCHEME")
+        .as_deref()
+        .map(str::trim)
+    {
+        Ok("em") => crate::integrator::Scheme::Em,
+        _ => crate::integrator::Scheme::edmc2(0.5),
+    }
+}
+
 /// The process's peak resident set size (Linux `VmHWM`), if known.
 pub fn peak_rss_bytes() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -179,6 +191,9 @@ pub struct BenchRun {
     pub device: Option<Timed>,
     /// The GPU batch with resident Newton iterations (`BenchSolve::Resident`).
     pub resident: Option<Timed>,
+    /// The same with the EM members' states kept on the device (`--solve whole`, timed
+    /// with `BenchSolve::Resident`).
+    pub whole: Option<Timed>,
     /// The adapter's description, `none`, or `none (why)`.
     pub adapter: String,
     /// Whether the adapter has f64 shaders.
@@ -225,8 +240,10 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
     }
     limits::check_memory("bench", opts.rods as u64, opts.elements as u64)?;
     let mut members = bench_members(opts.rods, opts.elements, opts.steps)?;
+    let scheme = bench_scheme();
     for m in &mut members {
         m.params.strategy = opts.strategy;
+        m.params.scheme = scheme;
     }
     let gpu_exec = if opts.cpu_only {
         Ok((Executor::Cpu, None))
@@ -261,7 +278,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
         BenchSolve::Resident => (false, true),
     };
     let resident_solve = opts.solve == BenchSolve::Resident;
-    let (adapter, f64_ok, gpu, device, resident) = match &gpu_exec {
+    let (adapter, f64_ok, gpu, device, (resident, whole)) = match &gpu_exec {
         Ok((exec @ Executor::Gpu(ctx), _)) => {
             let g = if host_solve {
                 Some(
@@ -294,24 +311,32 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
                 None
             };
             let r = if resident_solve {
-                Some(
-                    timed(
-                        &members,
-                        exec,
-                        opts.newton,
-                        opts.slots,
-                        SolveMode::Resident,
-                        false,
-                    )
-                    .map_err(batch("GPU batch, resident"))?,
+                let resident = timed(
+                    &members,
+                    exec,
+                    opts.newton,
+                    opts.slots,
+                    SolveMode::Resident,
+                    false,
                 )
+                .map_err(batch("GPU batch, resident"))?;
+                let whole = timed(
+                    &members,
+                    exec,
+                    opts.newton,
+                    opts.slots,
+                    SolveMode::Whole,
+                    false,
+                )
+                .map_err(batch("GPU batch, whole"))?;
+                (Some(resident), Some(whole))
             } else {
-                None
+                (None, None)
             };
             (ctx.describe(), ctx.is_f64(), g, d, r)
         }
-        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None, None),
-        Err(e) => (format!("none ({e})"), false, None, None, None),
+        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None, (None, None)),
+        Err(e) => (format!("none ({e})"), false, None, None, (None, None)),
     };
     Ok(BenchRun {
         opts: opts.clone(),
@@ -319,6 +344,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
         gpu,
         device,
         resident,
+        whole,
         adapter,
         f64: f64_ok,
         peak_rss_before,
@@ -463,6 +489,7 @@ impl BenchRun {
             "steps": o.steps,
             "newton": o.newton.name(),
             "strategy": o.strategy.name(),
+            "scheme": bench_scheme().name(),
             "cpu_strategy": self.cpu.as_ref().map(|_| o.strategy.resolve(false).name()),
             "gpu_strategy": (self.gpu.is_some() || self.device.is_some() || self.resident.is_some())
                 .then(|| o.strategy.resolve(true).name()),
@@ -525,6 +552,22 @@ impl BenchRun {
             });
             gpu_model_json(&mut v, d, o);
             obj["resident"] = v;
+        }
+        if let Some(d) = &self.whole {
+            let rate = self.work() / d.stats.wall_s;
+            let mut v = serde_json::json!({
+                "solve": "whole",
+                "iterations_per_submission": crate::batch::resident_k(),
+                "element_steps_per_s": rate,
+                "rod_steps_per_s": rod_steps / d.stats.wall_s,
+                "ratio": cpu_rate.map(|c| rate / c),
+                "members_device_solved": d.stats.device_members.0,
+                "members_host_solved": d.stats.device_members.1,
+                "device_advances": d.stats.serve.device_advances,
+                "advance_submits": d.stats.serve.advance_submits,
+            });
+            gpu_model_json(&mut v, d, o);
+            obj["whole"] = v;
         }
         obj
     }

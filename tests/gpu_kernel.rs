@@ -387,6 +387,8 @@ fn shader_layout_matches_rust_layout() {
         ("T_F", layout::T_F),
         ("T_BT", layout::T_BT),
         ("T_DB", layout::T_DB),
+        ("T_ADV", layout::T_ADV),
+        ("T_REC", layout::T_REC),
     ];
     for (name, val) in consts {
         let needle = format!("const {name}: u32 = {val}u;");

@@ -14,7 +14,7 @@ use crate::gpu::assemble::MemberIncrements;
 use crate::gpu::blocktri::{
     Readback, Report, SpecParams, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_SPEC, OP_UPDATE,
 };
-use crate::gpu::kernel::{KernelTimers, MemberPack};
+use crate::gpu::kernel::{KernelTimers, MemberPack, SCATTER_GAP};
 use crate::gpu::layout::{AsmLayout, A_NODE};
 use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
 use crate::integrator::evaluate::{
@@ -67,6 +67,11 @@ pub struct ServeTimers {
     /// `--solve resident`: the host asked for an iterate the device had moved past (its
     /// Newton test stopped later than the device's): the step fails. Expected 0.
     pub multi_mismatches: u64,
+    /// `--solve whole`: member-steps whose state the device advanced (no states uploaded).
+    pub device_advances: u64,
+    /// `--solve whole`: submissions of the advance pass (one ahead of a dispatch that
+    /// starts the next steps of advanced members; no wait).
+    pub advance_submits: u64,
 }
 
 /// `--solve resident`: a member's Newton solve as its multi-iteration submission ran it
@@ -140,6 +145,13 @@ pub struct GpuEvaluator {
     multi: Vec<Option<MultiRun>>,
     /// Requests held back (lockstep): they wait while other members read their runs.
     deferred: Vec<(usize, EvalRequest)>,
+    /// `--solve whole`: EM members with multi-iteration Newton get their state advanced on
+    /// the device ([`Self::set_device_advance`]).
+    whole: bool,
+    /// Per slot: its member's state is advanced on the device.
+    advance_ok: Vec<bool>,
+    /// Slots whose requests of the dispatch being packed asked for the advance.
+    to_advance: Vec<usize>,
 }
 
 /// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
@@ -239,6 +251,9 @@ impl GpuEvaluator {
             multi_tol: vec![None; slots],
             multi: vec![None; slots],
             deferred: Vec::new(),
+            whole: false,
+            advance_ok: vec![false; slots],
+            to_advance: Vec::new(),
         })
     }
 
@@ -282,6 +297,18 @@ impl GpuEvaluator {
     /// the host's Newton loop stops; set before attaching members.
     pub fn set_iterations_per_submission(&mut self, k: usize) {
         self.multi_k = k.min(crate::gpu::blocktri::RESIDENT_MAX_K);
+    }
+
+    /// `--solve whole`: members attached from now on that run several Newton iterations
+    /// per submission ([`Self::set_iterations_per_submission`]) with the EM scheme keep
+    /// their state on the device: after a step that accepted the device's iterate, the
+    /// advance pass forms the state at `n+1` from it (the kinematics of the element
+    /// passes) instead of the host uploading it; set before attaching members.
+    pub fn set_device_advance(&mut self, on: bool) {
+        self.whole = on;
+        // A clean slot between two changed ones must not go up with them: the device's
+        // copy of an advanced member's state is newer than the host mirror.
+        self.kernel.set_state_gap(if on { 0 } else { SCATTER_GAP });
     }
 
     /// Largest number of slots of `per_slot` elements and `nodes_per_slot` nodes that fits
@@ -386,6 +413,10 @@ impl GpuEvaluator {
         sim.set_device_solve(on);
         sim.set_device_resident(on && self.resident);
         sim.set_multi_iteration(self.multi_tol[slot].is_some());
+        self.advance_ok[slot] = self.whole
+            && self.multi_tol[slot].is_some()
+            && sim.params().scheme == crate::integrator::Scheme::Em;
+        sim.set_device_advance(self.advance_ok[slot]);
         self.assembler.set_device_owned(slot, on && self.resident);
         on
     }
@@ -404,6 +435,7 @@ impl GpuEvaluator {
         self.ports[slot] = None;
         self.multi[slot] = None;
         self.multi_tol[slot] = None;
+        self.advance_ok[slot] = false;
         self.deactivate(slot);
         if self.device[slot] {
             // The device changed the slot's increments: the next member uploads all.
@@ -457,6 +489,14 @@ impl GpuEvaluator {
                     return Ok(());
                 }
                 self.fits(*slot, req)?;
+                if req.advance {
+                    if !self.advance_ok[*slot] {
+                        return Err(format!(
+                            "GPU slot {slot}: a state advance asked of a member whose state the device does not keep"
+                        ));
+                    }
+                    self.to_advance.push(*slot);
+                }
                 if self.device[*slot] {
                     extras[*slot] = req.device_extra.as_deref();
                 }
@@ -671,6 +711,20 @@ impl GpuEvaluator {
         // The requests' vectors were allocated by the member threads: freeing them is
         // per-member work, done on the pool, not on this (the driver's) thread.
         rayon::spawn(move || drop(reqs));
+        // `--solve whole`: the advance of the members whose last step accepted the
+        // device's iterate, ahead of this dispatch (whose gather overwrites the iterate).
+        if !self.to_advance.is_empty() {
+            let per = self.per_slot;
+            let list: Vec<u32> = self
+                .to_advance
+                .iter()
+                .flat_map(|&m| (0..self.sizes[m].0).map(move |e| (m * per + e) as u32))
+                .collect();
+            self.serve_timers.device_advances += self.to_advance.len() as u64;
+            self.serve_timers.advance_submits += 1;
+            self.to_advance.clear();
+            self.kernel.submit_advance(&list);
+        }
         self.serve_timers.pack_s += t0.elapsed().as_secs_f64();
         if pending.is_empty() && fetching.is_empty() {
             return answers;
@@ -998,6 +1052,11 @@ impl GpuBatcher {
     /// See [`GpuEvaluator::set_iterations_per_submission`].
     pub fn set_iterations_per_submission(&self, k: usize) {
         self.lock().set_iterations_per_submission(k)
+    }
+
+    /// See [`GpuEvaluator::set_device_advance`].
+    pub fn set_device_advance(&self, on: bool) {
+        self.lock().set_device_advance(on)
     }
 
     /// Layout of the assembled buffer.

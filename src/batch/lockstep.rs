@@ -82,9 +82,10 @@ pub(super) fn run(
     if opts.solve.on_device() {
         gpu.enable_device_solve(ctx)?;
         gpu.set_resident(!opts.host_update);
-        if opts.solve == super::SolveMode::Resident {
+        if opts.solve.multi_iteration() {
             gpu.set_iterations_per_submission(super::resident_k());
         }
+        gpu.set_device_advance(opts.solve == super::SolveMode::Whole);
     }
     stats.setup_s = t0.elapsed().as_secs_f64();
     stats.slots = slots;

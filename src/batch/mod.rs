@@ -173,19 +173,32 @@ pub enum SolveMode {
     /// the host's Newton loop stops, and the host reads the iterations back once
     /// (docs/gpu.md, "Whole step on the device").
     Resident,
+    /// As [`Self::Resident`], and the EM members it covers keep their state on the
+    /// device: after each step the device advances it by the accepted iterate (the
+    /// element passes' kinematics) instead of the host uploading it (docs/gpu.md, "Whole
+    /// step on the device").
+    Whole,
 }
 
 impl SolveMode {
-    /// `host`, `device` or `resident` (as on the command line and in `summary.json`).
+    /// `host`, `device`, `resident` or `whole` (as on the command line and in
+    /// `summary.json`).
     pub fn name(self) -> &'static str {
         match self {
             SolveMode::Host => "host",
             SolveMode::Device => "device",
             SolveMode::Resident => "resident",
+            SolveMode::Whole => "whole",
         }
     }
 
-    /// Whether the device solves the Newton systems (`device` or `resident`).
+    /// Whether members run several Newton iterations per submission (`resident`,
+    /// `whole`).
+    pub fn multi_iteration(self) -> bool {
+        matches!(self, SolveMode::Resident | SolveMode::Whole)
+    }
+
+    /// Whether the device solves the Newton systems (`device`, `resident` or `whole`).
     pub fn on_device(self) -> bool {
         self != SolveMode::Host
     }

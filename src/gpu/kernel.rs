@@ -73,6 +73,8 @@ struct Params {
     want_tangent: u32,
     mode: u32,
     n_tan: u32,
+    per_member: u32,
+    pad: [u32; 3],
 }
 
 /// Which element slots the tangent pass evaluates.
@@ -95,6 +97,12 @@ pub struct ElementKernel {
     residual_pipeline: wgpu::ComputePipeline,
     prep_pipeline: wgpu::ComputePipeline,
     tangent_pipeline: wgpu::ComputePipeline,
+    advance_pipeline: wgpu::ComputePipeline,
+    record_pipeline: wgpu::ComputePipeline,
+    /// The intermediate buffer (residual → tangent passes; advance → record passes).
+    tmid: wgpu::Buffer,
+    /// Mappable twin of [`Self::tmid`], created by the first [`Self::advance`].
+    adv_staging: Option<wgpu::Buffer>,
     bind_group: wgpu::BindGroup,
     bufs: [wgpu::Buffer; 4],
     params: wgpu::Buffer,
@@ -116,6 +124,9 @@ pub struct ElementKernel {
     /// before the element pass writes the increments on the device
     /// ([`crate::gpu::Assembler`] gathers them from per-node increments).
     iter_from: usize,
+    /// Clean slots between two changed ones that state uploads re-send
+    /// ([`Self::set_state_gap`]).
+    state_gap: usize,
     out: Vec<f64>,
     /// The uploads of the next dispatch.
     scatter: Scatter,
@@ -172,7 +183,8 @@ impl ElementKernel {
             label: Some("element"),
             entries: &[
                 storage(0, true),
-                storage(1, true),
+                // The advance pass writes the states.
+                storage(1, false),
                 storage(2, true),
                 storage(3, false),
                 wgpu::BindGroupLayoutEntry {
@@ -207,6 +219,8 @@ impl ElementKernel {
         let residual_pipeline = pipe("residual_main");
         let prep_pipeline = pipe("tangent_prep_main");
         let tangent_pipeline = pipe("tangent_main");
+        let advance_pipeline = pipe("advance_main");
+        let record_pipeline = pipe("record_main");
         ctx.save_pipeline_cache();
         let mk = |label: &str, fields: usize, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -219,7 +233,7 @@ impl ElementKernel {
         let input = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let bufs = [
             mk("elem", NE, input),
-            mk("state", NS, input),
+            mk("state", NS, input | wgpu::BufferUsages::COPY_SRC),
             mk("iter", NI, input),
             mk(
                 "out",
@@ -227,7 +241,13 @@ impl ElementKernel {
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             ),
         ];
-        let tmid = mk("intermediate", NT, wgpu::BufferUsages::STORAGE);
+        let tmid = mk(
+            "intermediate",
+            NT,
+            wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        );
         // The node increments' place until an assembler takes it.
         let placeholder = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("scatter placeholder"),
@@ -278,6 +298,10 @@ impl ElementKernel {
             residual_pipeline,
             prep_pipeline,
             tangent_pipeline,
+            advance_pipeline,
+            record_pipeline,
+            tmid,
+            adv_staging: None,
             bind_group,
             bufs,
             params,
@@ -291,6 +315,7 @@ impl ElementKernel {
             ],
             dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
             iter_from: I_X,
+            state_gap: SCATTER_GAP,
             out: Vec::new(),
             scatter,
             timers: KernelTimers::default(),
@@ -469,7 +494,8 @@ impl ElementKernel {
                 f0,
                 nf: nf - f0,
             };
-            for (lo, hi) in take_runs_gap(&mut self.dirty[b], SCATTER_GAP) {
+            let gap = if b == 1 { self.state_gap } else { SCATTER_GAP };
+            for (lo, hi) in take_runs_gap(&mut self.dirty[b], gap) {
                 rows.push(MirrorRows {
                     block,
                     lo,
@@ -530,6 +556,8 @@ impl ElementKernel {
                 KernelMode::Consistent => 1,
             },
             n_tan: n_tan as u32,
+            per_member: 0,
+            pad: [0; 3],
         };
         self.timers.tangent_elements += n_tan as u64;
         self.queue
@@ -552,6 +580,160 @@ impl ElementKernel {
         }
         drop(pass);
         self.timers.upload_s += t0.elapsed().as_secs_f64();
+    }
+
+    /// Records the step's advance into `enc`: for every element slot of `slots` the state
+    /// at `n+1` that its increment (iteration buffer) produces with the scalars of `mode`
+    /// — the kinematics of the residual pass, as [`crate::integrator::Simulation`]'s
+    /// advance — replaces its state at `n` on the device, and its terms of the invariants
+    /// at `n+1` and its dissipation go to the intermediate buffer; with `per_member` > 0
+    /// the record pass sums them per member slot of `per_member` element slots (over its
+    /// active slots: [`MemberRecord`]). The host mirror of the advanced slots' states is
+    /// marked stale, so that the next state the host writes there goes up whatever it is.
+    ///
+    /// In a command buffer of its own, submitted ahead of the next dispatch's (the passes'
+    /// parameters and slot list are written at submission); `flush`: with the uploads
+    /// queued so far (else they go with the next dispatch, after this advance).
+    pub(crate) fn encode_advance(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        mode: KernelMode,
+        slots: &[u32],
+        per_member: usize,
+        flush: bool,
+    ) {
+        let t0 = Instant::now();
+        if flush {
+            self.flush_uploads(enc);
+        }
+        if !slots.is_empty() && slots != self.tan_uploaded {
+            self.queue
+                .write_buffer(&self.tan_list, 0, bytemuck::cast_slice(slots));
+            self.timers.bytes_up += 4 * slots.len() as u64;
+            self.tan_uploaded = slots.to_vec();
+        }
+        let prm = Params {
+            n: self.cap as u32,
+            want_tangent: 0,
+            mode: match mode {
+                KernelMode::Frozen => 0,
+                KernelMode::Consistent => 1,
+            },
+            n_tan: slots.len() as u32,
+            per_member: per_member as u32,
+            pad: [0; 3],
+        };
+        self.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("advance"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        if !slots.is_empty() {
+            pass.set_pipeline(&self.advance_pipeline);
+            pass.dispatch_workgroups(slots.len().div_ceil(64) as u32, 1, 1);
+        }
+        if let Some(members) = self.cap.checked_div(per_member) {
+            pass.set_pipeline(&self.record_pipeline);
+            pass.dispatch_workgroups(members.div_ceil(64).max(1) as u32, 1, 1);
+        }
+        drop(pass);
+        for &i in slots {
+            self.host[1][i as usize * NS] = f64::NAN;
+        }
+        self.timers.upload_s += t0.elapsed().as_secs_f64();
+    }
+
+    /// Clean slots between two changed ones up to which state uploads re-send them (0
+    /// when the device advances states itself: its copy may be newer than the mirror).
+    pub(crate) fn set_state_gap(&mut self, gap: usize) {
+        self.state_gap = gap;
+    }
+
+    /// [`Self::encode_advance`] of element slots `slots` (frozen scalars, no records) in a
+    /// submission of its own, ahead of the next dispatch's; nothing waits for it.
+    pub(crate) fn submit_advance(&mut self, slots: &[u32]) {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.encode_advance(&mut enc, KernelMode::Frozen, slots, 0, false);
+        self.queue.submit(Some(enc.finish()));
+    }
+
+    /// [`Self::encode_advance`] of every active slot, submitted, with the new states and
+    /// the records read back (tests of the advance's arithmetic against the CPU's).
+    pub fn advance(&mut self, mode: KernelMode, per_member: usize) -> Result<Advanced, GpuError> {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let slots: Vec<u32> = (0..self.cap)
+            .filter(|&i| self.host[2][i * NI + I_ACTIVE] != 0.0)
+            .map(|i| i as u32)
+            .collect();
+        self.encode_advance(&mut enc, mode, &slots, per_member, true);
+        let w = Self::width(self.precision) as u64;
+        let cap = self.cap as u64;
+        enc.copy_buffer_to_buffer(&self.bufs[1], 0, &self.tmid, 0, NS as u64 * cap * w);
+        let staging = self.adv_staging.get_or_insert_with(|| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("advance staging"),
+                size: NT as u64 * cap * w,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        let members = self.cap / per_member.max(1);
+        // The states (copied into the intermediate buffer's leading fields, which the
+        // advance leaves alone) and the records.
+        let ranges = [
+            (0, NS as u64 * cap * w),
+            (T_REC as u64 * cap * w, 9 * cap * w),
+        ];
+        let mut out = vec![0.0; NT * self.cap];
+        let rb = Readback {
+            device: &self.device,
+            queue: &self.queue,
+            src: &self.tmid,
+            staging,
+            precision: self.precision,
+        };
+        rb.run(enc, &ranges, &mut out, &mut self.timers)?;
+        let at = |f: usize, i: usize| out[f * self.cap + i];
+        let records = (0..members)
+            .map(|m| {
+                let r = |k: usize| at(T_REC + k, m);
+                MemberRecord {
+                    kinetic: r(0),
+                    potential: r(1),
+                    l: crate::model::Vec3::new(r(2), r(3), r(4)),
+                    j: crate::model::Vec3::new(r(5), r(6), r(7)),
+                    dissipation: r(8),
+                }
+            })
+            .collect();
+        let states = (0..self.cap)
+            .map(|i| {
+                let v = |f: usize| crate::model::Vec3::new(at(f, i), at(f + 1, i), at(f + 2, i));
+                let d = |l: usize| {
+                    crate::model::Mat3::from_columns(&[
+                        v(S_D + 9 * l),
+                        v(S_D + 9 * l + 3),
+                        v(S_D + 9 * l + 6),
+                    ])
+                };
+                let st = ElementState {
+                    cfg: crate::element::strain::Config {
+                        r: [v(S_R), v(S_R + 3)],
+                        d: [d(0), d(1)],
+                    },
+                    v: [v(S_V), v(S_V + 3)],
+                    vd: [[v(S_VD), v(S_VD + 3)], [v(S_VD + 6), v(S_VD + 9)]],
+                };
+                (st, Vector6::from_fn(|k, _| at(S_EPS + k, i)))
+            })
+            .collect();
+        Ok(Advanced { states, records })
     }
 
     /// Evaluates every active slot and reads the raw element output back. Without the
@@ -624,6 +806,34 @@ impl ElementKernel {
             c_nu: self.get(O_S + 3, i),
         }
     }
+}
+
+/// One member slot's record of an advanced step ([`ElementKernel::encode_advance`]): the
+/// sums over its element slots, in element order, of their terms of the invariants at
+/// `n+1` ([`crate::integrator::invariants::Invariants`] without links, point masses and
+/// contact) and of their dissipation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MemberRecord {
+    /// Kinetic energy.
+    pub kinetic: f64,
+    /// Strain energy.
+    pub potential: f64,
+    /// Linear momentum.
+    pub l: crate::model::Vec3,
+    /// Angular momentum about the origin.
+    pub j: crate::model::Vec3,
+    /// Predicted dissipation of the step.
+    pub dissipation: f64,
+}
+
+/// What [`ElementKernel::advance`] read back.
+#[derive(Clone, Debug)]
+pub struct Advanced {
+    /// Per element slot: its state at `n+1` and raw strains there (inactive slots: their
+    /// state as it was).
+    pub states: Vec<(ElementState, Vector6<f64>)>,
+    /// Per member slot: its record.
+    pub records: Vec<MemberRecord>,
 }
 
 /// Clean slots between two changed ones up to which both go up in one copy: each copy

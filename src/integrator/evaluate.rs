@@ -40,6 +40,10 @@ pub struct EvalRequest {
     /// Per element: state at `n` and raw strains at `n`. Sent only when they changed
     /// since this simulation's last request (once per step); `None` means "as before".
     pub states: Option<Vec<(ElementState, Vector6<f64>)>>,
+    /// `--solve whole` (with `states` `None`): the state changed by the step that
+    /// accepted the iterate this simulation's last evaluation evaluated; the evaluator
+    /// advances its copy of the state by that iterate (the same kinematics) instead.
+    pub advance: bool,
     /// Per element: the frozen dissipation scalars.
     pub scalars: Vec<FrozenScalars>,
     /// Evaluate with the scalars consistent with the increment instead of `scalars`, the

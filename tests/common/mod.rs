@@ -371,3 +371,149 @@ pub fn rel(a: impl Iterator<Item = f64> + Clone, b: impl Iterator<Item = f64>) -
     let scale = a.clone().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
     a.zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
 }
+
+// ---- GPU batch parity (tests/resident_step.rs, tests/whole_step.rs) ----
+
+use cosserat::batch::{
+    run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
+};
+use cosserat::integrator::{NewtonVariant, Scheme, Strategy};
+use cosserat::model::NodalLoad;
+use cosserat::table::TimeTable;
+
+/// The bound on final states against the CPU path with the same strategy and
+/// Newton variant.
+pub const STATE_RTOL: f64 = 1e-10;
+
+/// 14 cantilevers of 10 elements (EDMC-2 unless `scheme` says otherwise) with random
+/// kicks, stiffnesses, time steps and ramped tip loads on 0..9; 9 ends after 3 steps,
+/// 10 needs the monolithic fallback (its staggered cap is too low for its kick), 11 fails on
+/// its Newton cap, 12 is generalized-α (CPU kernel), 13 has a point mass (host solve).
+pub fn batch_mix(scheme: Option<Scheme>, strategy: Strategy) -> Vec<Member> {
+    let mut ms = cosserat::batch::bench_members(14, 10, 6).unwrap();
+    let mut rng = Rng(0x5e51_de7f);
+    for (i, m) in ms.iter_mut().enumerate() {
+        if let Some(s) = scheme {
+            m.params.scheme = s;
+        }
+        m.params.strategy = strategy;
+        if i < 9 {
+            let tip = m.model.n_nodes() - 1;
+            let mut v = || Vec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
+            let (force, moment) = (2.0 * v(), 0.5 * v());
+            m.model.loads.push(NodalLoad {
+                node: tip,
+                force,
+                moment,
+                table: TimeTable {
+                    times: vec![0.0, 0.1],
+                    values: vec![0.2, 1.0],
+                },
+            });
+        }
+        let kick = 0.5 + 1.5 * rng.next();
+        m.model.velocity0.iter_mut().for_each(|v| *v *= kick);
+        let stiff = 0.5 + rng.next();
+        for e in m.model.elements.iter_mut() {
+            e.props.c_gamma *= stiff;
+            e.props.c_omega *= stiff;
+        }
+        m.params.dt *= 0.5 + rng.next();
+        m.params.t_end = 6.0 * m.params.dt;
+        match i {
+            9 => m.params.t_end = 3.0 * m.params.dt,
+            10 => {
+                m.params.max_outer = 3;
+                m.params.fallback = true;
+                m.model.velocity0.iter_mut().for_each(|v| *v *= 4.0);
+            }
+            11 => {
+                m.params.max_iter = 2;
+                m.params.fallback = false;
+            }
+            12 => m.params.scheme = Scheme::GenAlpha { rho_inf: 0.8 },
+            13 => {
+                let tip = m.model.point_mass.len() - 1;
+                m.model.point_mass[tip] = 0.05;
+            }
+            _ => {}
+        }
+    }
+    ms
+}
+
+pub fn run_batch(
+    ms: &[Member],
+    exec: &Executor,
+    newton: NewtonVariant,
+    solve: SolveMode,
+    workers: usize,
+) -> (Vec<MemberResult>, BatchStats) {
+    let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
+    let stats = run_members(
+        ms,
+        exec,
+        BatchOptions {
+            keep_history: true,
+            keep_state: true,
+            workers,
+            newton: Some(newton),
+            solve,
+            ..Default::default()
+        },
+        |r| {
+            let i = r.index;
+            assert!(out[i].is_none(), "member {i} reported twice");
+            out[i] = Some(r);
+        },
+    )
+    .unwrap();
+    let out = out
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| r.unwrap_or_else(|| panic!("member {i} never reported")))
+        .collect();
+    (out, stats)
+}
+
+/// The largest relative difference of final positions, directors, velocities and energy
+/// histories, after asserting equal status, reason, steps and Newton iterations.
+pub fn compare_results(tag: &str, a: &MemberResult, b: &MemberResult) -> f64 {
+    assert_eq!(
+        a.outcome.status, b.outcome.status,
+        "{tag}: {:?}",
+        b.outcome.reason
+    );
+    assert_eq!(a.outcome.reason, b.outcome.reason, "{tag}");
+    assert_eq!(a.outcome.steps, b.outcome.steps, "{tag}");
+    assert_eq!(
+        a.outcome.newton_iters_total, b.outcome.newton_iters_total,
+        "{tag}"
+    );
+    assert_eq!(a.outcome.fallback_steps, b.outcome.fallback_steps, "{tag}");
+    assert_eq!(a.history.len(), b.history.len(), "{tag}");
+    let (sa, sb) = (a.state.as_ref().unwrap(), b.state.as_ref().unwrap());
+    assert_eq!(sa.t, sb.t, "{tag}");
+    [
+        rel(
+            sa.r.iter().flat_map(|x| x.iter().copied()),
+            sb.r.iter().flat_map(|x| x.iter().copied()),
+        ),
+        rel(
+            sa.d.iter()
+                .flat_map(|d| d.iter().flat_map(|m| m.iter().copied())),
+            sb.d.iter()
+                .flat_map(|d| d.iter().flat_map(|m| m.iter().copied())),
+        ),
+        rel(
+            sa.v.iter().flat_map(|x| x.iter().copied()),
+            sb.v.iter().flat_map(|x| x.iter().copied()),
+        ),
+        rel(
+            a.history.iter().map(|h| h.total),
+            b.history.iter().map(|h| h.total),
+        ),
+    ]
+    .into_iter()
+    .fold(0.0, f64::max)
+}

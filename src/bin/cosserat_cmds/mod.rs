@@ -125,6 +125,9 @@ pub enum SolveArg {
     /// As `device`, with several Newton iterations per submission: one host sync per
     /// step (docs/gpu.md, "Whole step on the device").
     Resident,
+    /// As `resident`, and EM members keep their state on the device (the device advances
+    /// it after each step; docs/gpu.md, "Whole step on the device").
+    Whole,
 }
 
 impl SolveArg {
@@ -134,6 +137,7 @@ impl SolveArg {
             SolveArg::Host => SolveMode::Host,
             SolveArg::Device => SolveMode::Device,
             SolveArg::Resident => SolveMode::Resident,
+            SolveArg::Whole => SolveMode::Whole,
         }
     }
 }
@@ -209,9 +213,10 @@ pub fn attach(
             let _ = sim.set_backend(b.clone(), 0);
             if solve.on_device() {
                 b.enable_device_solve(&ctx)?;
-                if solve == SolveMode::Resident {
+                if solve.multi_iteration() {
                     b.set_iterations_per_submission(cosserat::batch::resident_k());
                 }
+                b.set_device_advance(solve == SolveMode::Whole);
                 if !b.register_device(0, sim)? {
                     let why = cosserat::batch::gpu::device_solve_refusal(sim).unwrap_or("");
                     let name = solve.name();
@@ -708,7 +713,8 @@ pub enum BenchSolveArg {
     /// Both, one after the other in this process.
     Both,
     /// Device solves, then several Newton iterations per submission (`--solve
-    /// resident`), one after the other in this process (JSON: the `device` and `resident`
+    /// resident`), then that with EM members' states kept on the device (`--solve whole`),
+    /// one after the other in this process (JSON: the `device`, `resident` and `whole`
     /// objects).
     Resident,
 }

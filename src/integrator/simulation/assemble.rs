@@ -139,6 +139,7 @@ impl Simulation {
                 Err(_) => {
                     // The evaluator may not hold this state any more.
                     self.sent_version = None;
+                    self.advanced_version = None;
                     return (f64::NAN, scale);
                 }
             }
@@ -515,7 +516,12 @@ impl Simulation {
     /// consistent ones), the increments per node (none without `q`: a device-resident
     /// iteration continues from the device's).
     pub(super) fn eval_request(&mut self, q: Option<&[f64]>, tangent: bool) -> EvalRequest {
-        let states = (self.sent_version != Some(self.state_version)).then(|| {
+        // `--solve whole`: the evaluator advances its copy by the iterate it evaluated last
+        // (the one the last step accepted) instead.
+        let advance = self.sent_version.is_some()
+            && self.sent_version != Some(self.state_version)
+            && self.advanced_version == Some(self.state_version);
+        let states = (!advance && self.sent_version != Some(self.state_version)).then(|| {
             (0..self.model.elements.len())
                 .map(|e| (self.state.element(&self.model, e), self.state.eps[e]))
                 .collect()
@@ -523,6 +529,7 @@ impl Simulation {
         self.sent_version = Some(self.state_version);
         EvalRequest {
             states,
+            advance,
             scalars: self.frozen.clone(),
             // Removed unknowns are zero, except those of a driven support: they move by the
             // prescribed increment (as in [`Simulation::gather`]).

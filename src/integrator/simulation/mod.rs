@@ -164,6 +164,12 @@ pub struct Simulation {
     state_version: u64,
     /// The state version the attached evaluator holds (`None`: nothing sent yet).
     sent_version: Option<u64>,
+    /// `--solve whole`: the attached evaluator advances its copy of the state by the
+    /// iterate it evaluated last when the next request says so ([`Self::set_device_advance`]).
+    device_advance: bool,
+    /// The state version the evaluator's copy reaches by that advance (set when a step
+    /// accepts the device's iterate; the next request then sends no states).
+    advanced_version: Option<u64>,
     /// Time spent per Newton stage.
     timers: SolveTimers,
     /// The mode whose tangent the solver holds factorized (modified Newton reuses it);
@@ -286,6 +292,8 @@ impl Simulation {
             backend: Backend::Cpu,
             state_version: 0,
             sent_version: None,
+            device_advance: false,
+            advanced_version: None,
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
@@ -511,10 +519,20 @@ impl Simulation {
         self.multi_iteration = on;
     }
 
+    /// `--solve whole` (set by the batch evaluator, for members it covers): after a step
+    /// that accepted the device's Newton iterate, the next request asks the device to
+    /// advance its copy of the state by that iterate instead of sending the states.
+    pub fn set_device_advance(&mut self, on: bool) {
+        self.device_advance = on;
+        self.advanced_version = None;
+    }
+
     /// Where its Newton systems are solved, as `summary.json` records it: `host`,
-    /// `device`, or `resident` (device, several iterations per submission).
+    /// `device`, `resident` (device, several iterations per submission) or `whole`
+    /// (resident, and the device advances the state).
     pub fn solve_label(&self) -> &'static str {
         match (self.device_solve, self.multi_iteration) {
+            _ if self.device_advance && self.device_solve => "whole",
             (false, _) => "host",
             (true, false) => "device",
             (true, true) => "resident",
@@ -527,6 +545,7 @@ impl Simulation {
         }
         self.backend = backend;
         self.sent_version = None;
+        self.advanced_version = None;
         true
     }
 

@@ -3,8 +3,10 @@
 //! hand.
 
 use super::{Mode, Simulation};
-use crate::element::FrozenScalars;
+use crate::element::{FrozenScalars, Increment};
 use crate::integrator::evaluate::now;
+use crate::integrator::invariants::{invariants, Invariants};
+use crate::integrator::state::State;
 
 impl Simulation {
     /// Position and triad updates of a global increment applied to the current state
@@ -47,6 +49,24 @@ impl Simulation {
             Vec::new()
         };
         (r, scale, values)
+    }
+
+    /// The step's advance from the current state by the increment `q` with the frozen
+    /// scalars (loads and support motion of the coming mid-step): the state at `n+1`, its
+    /// invariants and the predicted dissipation (tests of the device's advance).
+    pub fn advanced_at(&mut self, q: &[f64]) -> (State, Invariants, f64) {
+        self.mid_step_loads();
+        let (next, diss, _) = self.advance(q, Mode::Frozen);
+        let inv = invariants(&self.model, &self.data, &next);
+        (next, inv, diss)
+    }
+
+    /// Per element: its element-local increment of `q` (after [`Self::advanced_at`] or
+    /// another entry point that set the coming step's support motion).
+    pub fn element_increments(&self, q: &[f64]) -> Vec<Increment> {
+        (0..self.model.elements.len())
+            .map(|e| self.gather(e, q))
+            .collect()
     }
 
     /// Sets the frozen dissipation scalars of every element (tests of the staggered

@@ -213,6 +213,14 @@ impl Simulation {
                         self.inv = inv0;
                         return Err(f);
                     }
+                    // `--solve whole`: the device's last evaluated iterate is `q` (it ran
+                    // this step's Newton solve and the step needed no fallback), so its
+                    // state advances by it as this one does.
+                    self.advanced_version = (self.device_advance
+                        && self.device_resident()
+                        && !self.fell_back
+                        && self.sent_version == Some(self.state_version))
+                    .then_some(self.state_version + 1);
                     self.state = next;
                     self.state_version += 1;
                     self.inv = inv;

@@ -1,0 +1,278 @@
+//! The step's advance on the device ≡ the CPU's, element by element and member by member.
+//!
+//! `advance_main` (shaders/element.wgsl) forms each element's state at `n+1` from its
+//! increment with the same kinematics as the residual pass and writes it over the state at
+//! `n` on the device; `record_main` sums the elements' terms of the invariants at `n+1` and
+//! their dissipation per member. Checked here against the host's advance
+//! (`Simulation::advanced_at`) and `invariants`, on lavapipe: cantilevers after a few CPU
+//! steps, EM and EDMC-2 (frozen scalars apart from the consistent ones, so that both
+//! kinematics branches run), members of different lengths in one kernel (inactive slots
+//! keep their state and add nothing), two advances in a row (the second starts from the
+//! state the first left on the device).
+//!
+//! `--solve whole` (EM members keep their state on the device, which advances it after
+//! each step instead of the host uploading it): an EM cantilever batch with seeded random
+//! kicks, stiffnesses, time steps and time-tabled tip loads, members that end early, fail
+//! on the device and finish on the CPU (monolithic fallback), fail, run on the CPU kernel
+//! or are solved on the host, through 5 slots, and the paper's frame: every member ends
+//! as on the CPU path (status, reason, steps, Newton iterations, fallback steps; states
+//! and energy histories within `STATE_RTOL`), as with `--solve resident`, with one host
+//! sync per step and no state uploads for the steps the device advanced.
+//!
+//! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
+//! is set, in which case it fails.
+
+mod common;
+
+use common::{batch_mix, compare_results, gpu, rel, run_batch, Rng, STATE_RTOL};
+use cosserat::batch::{bench_members, Executor, Member, SolveMode};
+use cosserat::element::{ElementState, FrozenScalars, StepConsts};
+use cosserat::gpu::kernel::KernelMode;
+use cosserat::gpu::{gpu_required, ElementKernel, GpuContext};
+use cosserat::integrator::state::State;
+use cosserat::integrator::{NewtonVariant, Scheme, Simulation, Strategy};
+use cosserat::observe::record::RunStatus;
+use nalgebra::Vector6;
+
+/// Bound on states and records against the CPU (round-off of the same arithmetic; the
+/// records sum in another association).
+const RTOL: f64 = 1e-13;
+
+fn context() -> Option<GpuContext> {
+    match GpuContext::new(None) {
+        Ok(c) => Some(c),
+        Err(e) if !gpu_required() => {
+            println!("skipped: no adapter ({e})");
+            None
+        }
+        Err(e) => panic!("COSSERAT_REQUIRE_GPU is set but no adapter: {e}"),
+    }
+}
+
+/// The flattened fields of one element state (positions, triads, velocities, director
+/// velocities) and its strains.
+fn fields(st: &ElementState, eps: &Vector6<f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = Vec::new();
+    for l in 0..2 {
+        v.extend(st.cfg.r[l].iter());
+        v.extend(st.cfg.d[l].iter());
+        v.extend(st.v[l].iter());
+        v.extend(st.vd[l].iter().flat_map(|x| x.iter().copied()));
+    }
+    v.extend(eps.iter());
+    v
+}
+
+/// [`fields`] of every element of `state`.
+fn element_fields(sim: &Simulation, state: &State) -> Vec<f64> {
+    (0..sim.model().elements.len())
+        .flat_map(|e| fields(&state.element(sim.model(), e), &state.eps[e]))
+        .collect()
+}
+
+#[test]
+fn device_advance_and_records_match_the_cpu() {
+    let Some(ctx) = context() else { return };
+    // Three members: EM and EDMC-2 cantilevers of 10 elements, an EM one of 6.
+    let mut ms = bench_members(2, 10, 4).unwrap();
+    ms[0].params.scheme = Scheme::Em;
+    let mut short = bench_members(1, 6, 4).unwrap().remove(0);
+    short.params.scheme = Scheme::Em;
+    ms.push(short);
+    let mut rng = Rng(0xad7a_11ce);
+    let mut sims: Vec<Simulation> = ms
+        .into_iter()
+        .map(|m| {
+            let mut sim = Simulation::new(m.model, m.params).unwrap();
+            for _ in 0..3 {
+                sim.step().unwrap();
+            }
+            sim
+        })
+        .collect();
+    let per = 10;
+    let mut kern = ElementKernel::new(&ctx, per * sims.len()).unwrap();
+    for round in 0..2 {
+        let mut want = Vec::new();
+        for (m, sim) in sims.iter_mut().enumerate() {
+            let p = *sim.params();
+            let k = StepConsts {
+                dt: p.dt,
+                scheme: p.scheme,
+            };
+            let trans = p.scheme.translational_dissipation();
+            // Frozen scalars apart from the consistent ones (EDMC-2): the advance takes
+            // the frozen kinematics where c_ν differs.
+            let frozen = FrozenScalars {
+                beta_gamma: 0.1 * rng.next(),
+                beta_omega: 0.1 * rng.next(),
+                c_v: 0.1 * rng.next(),
+                c_nu: 0.05 * rng.next(),
+            };
+            sim.set_frozen(frozen);
+            let q: Vec<f64> = (0..sim.dof_map().n)
+                .map(|_| 2e-3 * (rng.next() - 0.5))
+                .collect();
+            let (next, inv, diss) = sim.advanced_at(&q);
+            let incs = sim.element_increments(&q);
+            let state = sim.state().clone();
+            for (e, d) in sim.element_data().iter().enumerate() {
+                let i = m * per + e;
+                if round == 0 {
+                    kern.set_element(i, d, &k, trans);
+                    kern.set_state(i, &state.element(sim.model(), e), &state.eps[e]);
+                }
+                kern.set_iter(i, &incs[e], &frozen);
+            }
+            want.push((next, inv, diss));
+        }
+        let got = kern.advance(KernelMode::Frozen, per).unwrap();
+        for (m, (sim, (next, inv, diss))) in sims.iter_mut().zip(want).enumerate() {
+            let n_el = sim.model().elements.len();
+            let dev: Vec<f64> = got.states[m * per..m * per + n_el]
+                .iter()
+                .flat_map(|(st, eps)| fields(st, eps))
+                .collect();
+            let host = element_fields(sim, &next);
+            let e_state = rel(host.iter().copied(), dev.iter().copied());
+            let r = got.records[m];
+            let h_ref = inv.kinetic.abs().max(inv.potential.abs());
+            let e_energy =
+                ((r.kinetic - inv.kinetic).abs() + (r.potential - inv.potential).abs()) / h_ref;
+            let e_l = (r.l - inv.l).norm() / inv.l.norm().max(1e-300);
+            let e_j = (r.j - inv.j).norm() / inv.j.norm().max(1e-300);
+            let e_d = (r.dissipation - diss).abs() / h_ref;
+            println!(
+                "round {round} member {m} ({}): state {e_state:.2e}, energy {e_energy:.2e}, L {e_l:.2e}, J {e_j:.2e}, D {e_d:.2e} (D = {diss:.3e})",
+                sim.params().scheme.name()
+            );
+            assert!(e_state <= RTOL, "member {m}: states differ by {e_state:e}");
+            assert!(
+                e_energy <= RTOL,
+                "member {m}: energies differ by {e_energy:e}"
+            );
+            assert!(e_l <= RTOL && e_j <= RTOL, "member {m}: momenta differ");
+            assert!(e_d <= RTOL, "member {m}: dissipation differs by {e_d:e}");
+            if sim.params().scheme == Scheme::Em {
+                assert_eq!(r.dissipation, 0.0, "EM dissipates nothing");
+            } else {
+                assert!(diss != 0.0, "the EDMC member dissipates");
+            }
+            // Inactive slots add nothing and keep their (zero) state.
+            for (st, eps) in &got.states[m * per + n_el..(m + 1) * per] {
+                assert!(st.cfg.r[0].norm() == 0.0 && eps.norm() == 0.0);
+            }
+            // The next round starts from the advanced state, on both sides.
+            sim.set_state(next);
+        }
+    }
+}
+
+/// `--solve whole` against the CPU path (`fresh` Newton: the GPU paths run `full` as
+/// `fresh`) and `--solve resident`; `workers` slots. Returns the worst relative
+/// difference from the CPU path and from resident, and the whole run's stats.
+fn check_whole(
+    label: &str,
+    ms: &[Member],
+    exec: &Executor,
+    workers: usize,
+) -> (
+    Vec<cosserat::batch::MemberResult>,
+    cosserat::batch::BatchStats,
+) {
+    let (cpu, _) = run_batch(ms, &Executor::Cpu, NewtonVariant::Fresh, SolveMode::Host, 0);
+    let (res, rs) = run_batch(ms, exec, NewtonVariant::Full, SolveMode::Resident, workers);
+    let (whole, ws) = run_batch(ms, exec, NewtonVariant::Full, SolveMode::Whole, workers);
+    assert_eq!(ws.device_members, rs.device_members, "{label}");
+    assert_eq!(ws.serve.multi_mismatches, 0, "{label}");
+    let (mut worst_cpu, mut worst_res) = (0.0f64, 0.0f64);
+    for ((c, r), w) in cpu.iter().zip(&res).zip(&whole) {
+        let i = c.index;
+        worst_cpu = worst_cpu.max(compare_results(&format!("{label}, member {i}, cpu"), c, w));
+        worst_res = worst_res.max(compare_results(
+            &format!("{label}, member {i}, resident"),
+            r,
+            w,
+        ));
+    }
+    let (kw, kr) = (&ws.gpu, &rs.gpu);
+    println!(
+        "{label}: whole vs CPU {worst_cpu:.3e}, vs resident {worst_res:.3e}; {} member-steps advanced on the device in {} submissions; dispatches {} (resident {}); bytes up {} (resident {}), down {} (resident {})",
+        ws.serve.device_advances, ws.serve.advance_submits, ws.serve.dispatches, rs.serve.dispatches,
+        kw.bytes_up, kr.bytes_up, kw.bytes_down, kr.bytes_down
+    );
+    assert!(
+        worst_cpu <= STATE_RTOL,
+        "{label}: {worst_cpu:.3e} from the CPU path"
+    );
+    assert!(
+        ws.serve.device_advances > 0,
+        "{label}: nothing advanced on the device"
+    );
+    assert_eq!(ws.serve.dispatches, rs.serve.dispatches, "{label}: syncs");
+    assert!(
+        kw.bytes_up < kr.bytes_up,
+        "{label}: no fewer bytes up than resident"
+    );
+    (whole, ws)
+}
+
+#[test]
+fn whole_em_batch_with_failures_and_fallbacks_ends_as_on_the_cpu_path() {
+    let Some(exec) = gpu() else { return };
+    let ms = batch_mix(Some(Scheme::Em), Strategy::Staggered);
+    // 5 slots for 14 members: the queue streams through (a slot's next member uploads
+    // its states).
+    let (whole, ws) = check_whole("EM", &ms, &exec, 5);
+    assert_eq!(ws.device_members, (12, 1));
+    assert_eq!(whole[11].outcome.status, RunStatus::Failed);
+    assert!(whole[..9]
+        .iter()
+        .all(|r| r.outcome.status == RunStatus::Completed));
+    for r in &whole {
+        println!(
+            "member {}: {:?}, {} steps, {} Newton iterations, {} fallback steps",
+            r.index,
+            r.outcome.status,
+            r.outcome.steps,
+            r.outcome.newton_iters_total,
+            r.outcome.fallback_steps
+        );
+    }
+}
+
+#[test]
+fn whole_em_batch_syncs_once_per_step_and_uploads_no_states() {
+    let Some(exec) = gpu() else { return };
+    let mut ms = batch_mix(Some(Scheme::Em), Strategy::Staggered);
+    ms.truncate(9);
+    let (whole, ws) = check_whole("EM aligned", &ms, &exec, ms.len());
+    let steps = whole.iter().map(|r| r.outcome.steps).max().unwrap() as u64;
+    assert_eq!(ws.serve.multi_dispatches, steps);
+    assert_eq!(ws.serve.dispatches, steps);
+    // Every step after a member's first starts from the device's advance.
+    let member_steps: u64 = whole.iter().map(|r| r.outcome.steps as u64).sum();
+    assert_eq!(ws.serve.device_advances, member_steps - whole.len() as u64);
+}
+
+#[test]
+fn whole_frame_matches_cpu() {
+    let Some(exec) = gpu() else { return };
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .expect("the built-in frame scene exists")
+        .toml;
+    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
+    let mut params = scene.params;
+    params.t_end = 15.0 * params.dt;
+    params.scheme = Scheme::Em;
+    let ms = vec![Member {
+        model: scene.model.clone(),
+        params,
+    }];
+    let (whole, ws) = check_whole("frame", &ms, &exec, 1);
+    assert_eq!(ws.device_members, (1, 0), "the frame is covered");
+    assert_eq!(whole[0].outcome.status, RunStatus::Completed);
+    assert_eq!(whole[0].outcome.steps, 15);
+}
