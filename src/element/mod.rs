@@ -1144,13 +1144,13 @@ pub struct ScalarCorrection<const N: usize> {
     pub dsigma: [[f64; 4]; N],
     /// `∂R/∂σ_i` (zero where `varies[i]` is false).
     pub d_r: [SVector<f64, N>; 4],
-    /// Which scalars vary with the active unknowns ([`scalars_varying`]).
+    /// Which scalars vary with the active unknowns (`scalars_varying`).
     pub varies: [bool; 4],
 }
 
 impl<const N: usize> ScalarCorrection<N> {
     /// Entry `(row, col)` of the corrected tangent from the frozen-scalar entry `k`: the
-    /// same operations in the same order as [`scalar_correction`]'s column updates, so the
+    /// same operations in the same order as `scalar_correction`'s column updates, so the
     /// same number bit for bit. `col` must be an active unknown.
     #[inline(always)]
     pub fn entry(&self, row: usize, col: usize, k: f64) -> f64 {

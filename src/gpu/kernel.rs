@@ -661,7 +661,7 @@ impl ElementKernel {
         self.queue.submit(Some(enc.finish()));
     }
 
-    /// [`Self::encode_advance`] of every active slot, submitted, with the new states and
+    /// `encode_advance` of every active slot, submitted, with the new states and
     /// the records read back (tests of the advance's arithmetic against the CPU's).
     pub fn advance(&mut self, mode: KernelMode, per_member: usize) -> Result<Advanced, GpuError> {
         let mut enc = self
@@ -808,7 +808,7 @@ impl ElementKernel {
     }
 }
 
-/// One member slot's record of an advanced step ([`ElementKernel::encode_advance`]): the
+/// One member slot's record of an advanced step (`ElementKernel::encode_advance`): the
 /// sums over its element slots, in element order, of their terms of the invariants at
 /// `n+1` ([`crate::integrator::invariants::Invariants`] without links, point masses and
 /// contact) and of their dissipation.
