@@ -27,7 +27,7 @@
 mod common;
 
 use common::gpu;
-use common::{rel, Rng};
+use common::{frame_member, rel, Rng};
 use cosserat::batch::{
     bench_members, run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
 };
@@ -367,21 +367,9 @@ const RESIDENT_RTOL: f64 = 0.0;
 #[test]
 fn device_solve_frame_matches_cpu() {
     let Some(exec) = gpu() else { return };
-    let text = cosserat::scene::builtin_scenes()
-        .iter()
-        .find(|b| b.name == "frame")
-        .expect("the built-in frame scene exists")
-        .toml;
-    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
-    let mut params = scene.params;
-    params.t_end = 15.0 * params.dt;
     // The same strategy on both paths (the default `auto` is monolithic on the CPU,
     // staggered with a GPU evaluator).
-    params.strategy = Strategy::Staggered;
-    let ms = vec![Member {
-        model: scene.model.clone(),
-        params,
-    }];
+    let ms = vec![frame_member(15.0, |p| p.strategy = Strategy::Staggered)];
     let (cpu, _) = run(&ms, &Executor::Cpu, NewtonVariant::Full, SolveMode::Host);
     let (dev, stats) = run(&ms, &exec, NewtonVariant::Full, SolveMode::Device);
     assert_eq!(stats.device_members, (1, 0), "the frame is covered");

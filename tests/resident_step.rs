@@ -23,7 +23,9 @@
 mod common;
 
 use common::gpu;
-use common::{batch_mix as members, compare_results as compare, run_batch as run, STATE_RTOL};
+use common::{
+    batch_mix as members, compare_results as compare, frame_member, run_batch as run, STATE_RTOL,
+};
 use cosserat::batch::{BatchStats, Executor, Member, MemberResult, SolveMode};
 use cosserat::integrator::{NewtonVariant, Scheme, Strategy};
 use cosserat::observe::record::RunStatus;
@@ -132,19 +134,7 @@ fn resident_inexact_batch_syncs_once_per_step() {
 #[test]
 fn resident_frame_matches_cpu() {
     let Some(exec) = gpu() else { return };
-    let text = cosserat::scene::builtin_scenes()
-        .iter()
-        .find(|b| b.name == "frame")
-        .expect("the built-in frame scene exists")
-        .toml;
-    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
-    let mut params = scene.params;
-    params.t_end = 15.0 * params.dt;
-    params.strategy = Strategy::Staggered;
-    let ms = vec![Member {
-        model: scene.model.clone(),
-        params,
-    }];
+    let ms = vec![frame_member(15.0, |p| p.strategy = Strategy::Staggered)];
     let (res, rs) = check_batch("frame", &ms, &exec, 1);
     assert_eq!(rs.device_members, (1, 0), "the frame is covered");
     assert_eq!(res[0].outcome.status, RunStatus::Completed);

@@ -24,7 +24,7 @@
 
 mod common;
 
-use common::{batch_mix, compare_results, gpu, rel, run_batch, Rng, STATE_RTOL};
+use common::{batch_mix, compare_results, frame_member, gpu, rel, run_batch, Rng, STATE_RTOL};
 use cosserat::batch::{bench_members, Executor, Member, SolveMode};
 use cosserat::element::{ElementState, FrozenScalars, StepConsts};
 use cosserat::gpu::kernel::KernelMode;
@@ -258,19 +258,7 @@ fn whole_em_batch_syncs_once_per_step_and_uploads_no_states() {
 #[test]
 fn whole_frame_matches_cpu() {
     let Some(exec) = gpu() else { return };
-    let text = cosserat::scene::builtin_scenes()
-        .iter()
-        .find(|b| b.name == "frame")
-        .expect("the built-in frame scene exists")
-        .toml;
-    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
-    let mut params = scene.params;
-    params.t_end = 15.0 * params.dt;
-    params.scheme = Scheme::Em;
-    let ms = vec![Member {
-        model: scene.model.clone(),
-        params,
-    }];
+    let ms = vec![frame_member(15.0, |p| p.scheme = Scheme::Em)];
     let (whole, ws) = check_whole("frame", &ms, &exec, 1);
     assert_eq!(ws.device_members, (1, 0), "the frame is covered");
     assert_eq!(whole[0].outcome.status, RunStatus::Completed);

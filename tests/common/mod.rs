@@ -385,6 +385,27 @@ use cosserat::table::TimeTable;
 /// Newton variant.
 pub const STATE_RTOL: f64 = 1e-10;
 
+/// The built-in frame as one batch member, run for `steps` of its Δt; `set` adjusts its
+/// parameters (scheme, strategy) before the member is made.
+pub fn frame_member(
+    steps: f64,
+    set: impl FnOnce(&mut cosserat::integrator::IntegratorParams),
+) -> Member {
+    let text = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .expect("the built-in frame scene exists")
+        .toml;
+    let scene = cosserat::scene::parse_scene(text, "builtin:frame").unwrap();
+    let mut params = scene.params;
+    params.t_end = steps * params.dt;
+    set(&mut params);
+    Member {
+        model: scene.model,
+        params,
+    }
+}
+
 /// 14 cantilevers of 10 elements (EDMC-2 unless `scheme` says otherwise) with random
 /// kicks, stiffnesses, time steps and ramped tip loads on 0..9; 9 ends after 3 steps,
 /// 10 needs the monolithic fallback (its staggered cap is too low for its kick), 11 fails on
