@@ -1,7 +1,7 @@
 //! The GPU batch path runs the scene features that enter the element kernel through data
 //! it already receives — an initial configuration apart from the reference, intrinsic
 //! curvature (the reference strains), Kelvin–Voigt damping (the frozen scalars), line
-//! loads and drag (nodal terms on the CPU), sliding clamps (the unknown numbering) and
+//! loads and drag (nodal terms on the CPU), sliding clamps, spinning or not (the unknown numbering), and
 //! driven supports (their prescribed increments travel with the Newton increments) — with
 //! CPU parity.
 //!
@@ -56,20 +56,25 @@ t_end = 0.1
 }
 
 fn members(extra: &str) -> Vec<Member> {
-    ["scheme = \"em\"", "scheme = \"edmc2\"\nalpha = 0.5"]
-        .iter()
-        .map(|s| {
-            let sc = parse_scene(&scene(s, extra), "t.toml").unwrap();
-            let mut params = sc.params;
-            // The same strategy on both paths (the default `auto` is monolithic on the CPU,
-            // staggered with a GPU evaluator).
-            params.strategy = Strategy::Staggered;
-            Member {
-                model: sc.model,
-                params,
-            }
-        })
-        .collect()
+    [
+        "scheme = \"em\"",
+        "scheme = \"edmc2\"\nalpha = 0.5",
+        // The director dissipation (α_Ων, α_Γν): a spinning end takes its share of it.
+        "scheme = \"edmc2\"\nalpha_on = 0.5\nalpha_gn = 0.5",
+    ]
+    .iter()
+    .map(|s| {
+        let sc = parse_scene(&scene(s, extra), "t.toml").unwrap();
+        let mut params = sc.params;
+        // The same strategy on both paths (the default `auto` is monolithic on the CPU,
+        // staggered with a GPU evaluator).
+        params.strategy = Strategy::Staggered;
+        Member {
+            model: sc.model,
+            params,
+        }
+    })
+    .collect()
 }
 
 fn run(ms: &[Member], exec: &Executor) -> Result<Vec<MemberResult>, String> {
@@ -123,6 +128,12 @@ fn gpu_runs_reference_shapes_damping_and_line_loads_like_the_cpu() {
     // And along an oblique axis (all components unknown; the host constrains the rows of
     // the assembled system the GPU returns).
     ms.extend(members("[[clamp]]\nat = [1, 0, 0]\nslide = [0, 1, 2]"));
+    // And spinning about an oblique slide axis: the end's directors turn about the axis,
+    // and EDMC-2's director dissipation (α_Ων, α_Γν) takes the end's share through the
+    // element data both kernels read.
+    ms.extend(members(
+        "[[clamp]]\nat = [1, 0, 0]\nslide = [0, 1, 2]\nspin = true",
+    ));
     let cpu = run(&ms, &Executor::Cpu).unwrap();
     let gpu = run(&ms, &exec).unwrap();
     let mut worst = 0.0f64;
