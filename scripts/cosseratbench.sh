@@ -57,11 +57,18 @@ done
 
 "$venv/bin/cosseratbench" rescore -r "$results" "${experiments[@]}"
 
-"$venv/bin/python" - "$results" "${experiments[@]}" <<'EOF'
-import json, sys
+"$venv/bin/python" - "$results" "$("$bin" --version)" "$(git rev-parse --short HEAD 2>/dev/null || echo unknown)" "${experiments[@]}" <<'EOF'
+import json, os, sys, time
+from importlib.metadata import version
 from pathlib import Path
 
-results, names = Path(sys.argv[1]), sys.argv[2:]
+results, binary, commit, names = Path(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4:]
+print()
+print(
+    f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {binary} ({commit}), "
+    f"cosseratbench {version('cosseratbench')}, pyelastica {version('pyelastica')}; "
+    f"load average {os.getloadavg()[0]:.1f} at the end"
+)
 print()
 print("| experiment (n) | solver | outcome | metrics | wall s |")
 print("|---|---|---|---|---|")

@@ -15,8 +15,11 @@ The translation is the one docs/scenes.md offers a user: each rod's stress-free 
 is straight (the suite's rods are), along its mean direction, with `d1` its `normal`; the
 start shape, pre-stretch included, goes to `[rod.initial] positions`; supports, end loads,
 gravity, obstacles and contact map key for key; EM throughout. Quasi-static experiments
-(the suite lets a solver add dissipation to reach equilibrium) get drag `2 ω ρA`, ω the
-suite's slowest frequency, and Kelvin-Voigt damping η = Δt/2. Contact stiffness is
+(the suite lets a solver add dissipation to reach equilibrium) get Kelvin-Voigt damping
+η = Δt/2 and drag that makes the suite's slowest mode (frequency ω) critically damped
+(docs/scenes.md, "Material damping"): `2 ω ρA` where that mode swings under gravity (the
+viscous stresses hardly see it), `2 ω ρA (1 − η ω / 2)` where it is a bending mode, whose
+ratio η ω / 2 from the viscous stresses adds to the drag's. Contact stiffness is
 cosserat's default; friction against obstacles uses the elastic-stick law
 (`friction_law = "stick"`, tangential stiffness the contact stiffness), the one
 docs/scenes.md offers for a load that must hold; FRICTION_LAW=regularized in the
@@ -70,6 +73,28 @@ def curvature_measure(sc: Scenario) -> str:
         for e in End
     )
     return "rational" if sc.self_contact or turned else "sine"
+
+
+def drag_rate(sc: Scenario, dt: float) -> float:
+    """The drag per unit mass, c/(ρA), of a quasi-static scene: critical damping of the
+    suite's slowest mode ω (`Scenario.slowest_frequency`) together with the Kelvin-Voigt
+    damping η = Δt/2. A mode damped by drag c and by η has the ratio c/(2ωρA) + ηω/2
+    (docs/scenes.md, "Material damping"), the second only where the mode strains the rod:
+    a bending mode (the suite's bending estimate is the slowest), not a pendulum swing."""
+    g = float(np.linalg.norm(sc.gravity))
+    # The suite's estimate per rod (Scenario.slowest_frequency): the larger of its first
+    # bending frequency and its pendulum frequency; the slowest rod's decides.
+    modes = []
+    for rod in sc.rods:
+        m = rod.material
+        bending = 3.516 * math.sqrt(
+            m.youngs_modulus * rod.second_moment_of_area / (m.density * rod.area)
+        ) / rod.length**2
+        pendulum = math.sqrt(g / rod.length)
+        modes.append((max(bending, pendulum), bending >= pendulum))
+    omega, elastic = min(modes)
+    eta = dt / 2
+    return 2.0 * omega * max(1.0 - eta * omega / 2.0, 0.0) if elastic else 2.0 * omega
 
 
 def vec(v) -> str:
@@ -142,7 +167,7 @@ def scene_toml(
         f"gravity = {vec(sc.gravity)}",
         "",
     ]
-    omega = sc.slowest_frequency()
+    rate = drag_rate(sc, dt)
     supports, loads = [], []
     for i, rod in enumerate(sc.rods):
         m = rod.material
@@ -187,7 +212,7 @@ def scene_toml(
         if measure != "sine":
             out.append(f'curvature_measure = "{measure}"')
         if sc.quasi_static:
-            out.append(f"drag = {2 * omega * m.density * area!r}")
+            out.append(f"drag = {rate * m.density * area!r}")
         out += ["", "[rod.initial]", "positions = [", *(f"  {vec(p)}," for p in nodes), "]"]
         rotations = node_rotations(chords, normal, t0, d1)
         out += ["rotations = [", *(f"  {vec(r)}," for r in rotations), "]", ""]
@@ -288,11 +313,10 @@ class CosseratSolver:
         """The numerical choices this adapter makes for a scenario, as it makes them."""
         output_dt = scenario.duration / (n_frames - 1)
         dt = output_dt / steps_per_frame(scenario) * self.time_step_scale
-        omega = scenario.slowest_frequency()
         return {
             "integrator": "energy-momentum (EM, implicit, Newton)",
             "time_step": dt,
-            "drag_rate": 2.0 * omega if scenario.quasi_static else 0.0,
+            "drag_rate": drag_rate(scenario, dt) if scenario.quasi_static else 0.0,
             "kelvin_voigt_retardation": dt / 2 if scenario.quasi_static else 0.0,
             "contact": "cosserat defaults (docs/scenes.md)",
         }
