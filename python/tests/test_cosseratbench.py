@@ -37,3 +37,17 @@ def test_the_suite_runs_the_cantilever_in_process_as_the_command_exports_it(cli,
     assert solver.settings(sc, n_elements=n, n_frames=frames)["time_step"] == pytest.approx(
         output_dt
     )
+
+
+def test_quasi_static_drag_damps_the_slowest_mode_critically():
+    """Drag plus Kelvin-Voigt (η = Δt/2) give the slowest mode the damping ratio 1: the
+    viscous stresses' ηω/2 counts where that mode bends the rod (the cantilever), not
+    where it swings under gravity (the pendulum)."""
+    cant = registry.load_experiment("cantilever").scenario
+    dt = 1e-3
+    omega = cant.slowest_frequency()
+    rate = adapter.drag_rate(cant, dt)
+    assert rate / (2 * omega) + (dt / 2) * omega / 2 == pytest.approx(1.0, rel=1e-12)
+    assert rate < 2 * omega
+    pend = registry.load_experiment("pendulum").scenario
+    assert adapter.drag_rate(pend, dt) == pytest.approx(2 * pend.slowest_frequency(), rel=1e-12)
