@@ -863,6 +863,15 @@ mod tests {
         let chains = [(0..9).collect::<Vec<_>>(), (9..18).collect()];
         let c = match model {
             ContactModel::Line => line_contact(&chains, &r, rho, 16.0, 1e6),
+            ContactModel::Smooth => {
+                let mut c = line_contact(&chains, &r, rho, 16.0, 1e6);
+                let h = vec![el; 8];
+                c.points = smooth_points(&chains[0], &h, rho, 16.0);
+                c.split = c.points.len();
+                c.points.extend(smooth_points(&chains[1], &h, rho, 16.0));
+                c.model = ContactModel::Smooth;
+                c
+            }
             ContactModel::Spheres => {
                 let mut c = line_contact(&chains, &r, rho, 1.0, 1e6);
                 c.model = ContactModel::Spheres;
@@ -884,9 +893,11 @@ mod tests {
             let law = 1e6 * h * (r_sum * r_sum - h * h).powi(2) / (2.0 * r_sum.powi(4));
             let mut line = Vec::new();
             let mut spheres = Vec::new();
+            let mut smooth = Vec::new();
             for k in 0..=40 {
                 let t = k as f64 / 40.0;
                 line.push(crossing_force(ContactModel::Line, h, t));
+                smooth.push(crossing_force(ContactModel::Smooth, h, t));
                 spheres.push(crossing_force(ContactModel::Spheres, h, t));
             }
             let spread = |v: &[f64]| {
@@ -898,6 +909,13 @@ mod tests {
             };
             let (sl, ml) = spread(&line);
             let (ss, ms) = spread(&spheres);
+            let (so, mo) = spread(&smooth);
+            eprintln!("smooth: force {mo:.3e} N, spread {so:.1e}");
+            assert!(so <= 0.08, "smooth contact's force varies by {so:e}");
+            assert!(
+                (mo / law - 1.0).abs() <= 0.01,
+                "smooth force {mo:e} vs law {law:e}"
+            );
             eprintln!(
                 "crossing at overlap {g:.0e}: line force {ml:.3e} N (law {law:.3e}), spread {sl:.1e}; spheres {ms:.3e} N, spread {ss:.1e}"
             );
