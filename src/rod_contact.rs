@@ -47,9 +47,9 @@ pub use smooth::smooth_points;
 type V3 = Vector3<f64>;
 type M3 = Matrix3<f64>;
 
-/// Most nodes a sample point's position combines (the smooth model's corrected cubic
-/// quintic B-spline: eight).
-pub const MAX_STENCIL: usize = 8;
+/// Most nodes a sample point's position combines (a cubic B-spline with corrected control
+/// points: six; the smooth model's quadratic: three).
+pub const MAX_STENCIL: usize = 6;
 
 /// The fixed nodes and weights whose combination `x = Σ wₐ rₐ` is a sample point's
 /// position (`Σ wₐ = 1`). Iterates over its `(node, weight)` pairs.
