@@ -1,4 +1,4 @@
-//! Contact between rods and of a rod with itself, in one of two models.
+//! Contact between rods and of a rod with itself, in one of three models.
 //!
 //! **Sphere chains** (`model = "spheres"`). Each rod of a `[[contact]]` carries sample
 //! points at fixed places along its elements (the nodes and, where an element is longer
@@ -23,7 +23,11 @@
 //! sin θ) ≈ 2 k g²/R` wherever along their elements they cross (to the quadrature's
 //! corrugation, which falls with `n`); the surface has no bumps at the sphere spacing.
 //!
-//! In both, over a step a pair exerts the discrete gradient of its energy in `s` (a
+//! **Smooth contact** (`model = "smooth"`, [`smooth`]): line contact whose quadrature
+//! points lie on a quadratic B-spline of each rod's nodes (each a fixed combination of
+//! three nodes) instead of on its polyline.
+//!
+//! In all three, over a step a pair exerts the discrete gradient of its energy in `s` (a
 //! quadratic function of the node positions):
 //!
 //! ```text
@@ -41,7 +45,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::obstacle::quotient_quadric;
 
-mod smooth;
+pub mod smooth;
 pub use smooth::smooth_points;
 
 type V3 = Vector3<f64>;
@@ -154,7 +158,7 @@ pub enum ContactModel {
     Spheres,
     /// Line contact: a midpoint quadrature of a smooth pair potential along both rods.
     Line,
-    /// Line contact along a smooth (C²) contact curve per rod: a cubic B-spline of the
+    /// Line contact along a smooth (C¹) contact curve per rod: a quadratic B-spline of the
     /// nodes, so that a load is carried alike wherever along an element it acts.
     Smooth,
 }
