@@ -1,4 +1,4 @@
-//! Contact between rods and of a rod with itself, in one of two models.
+//! Contact between rods and of a rod with itself, in one of three models.
 //!
 //! **Sphere chains** (`model = "spheres"`). Each rod of a `[[contact]]` carries sample
 //! points at fixed places along its elements (the nodes and, where an element is longer
@@ -23,7 +23,11 @@
 //! sin θ) ≈ 2 k g²/R` wherever along their elements they cross (to the quadrature's
 //! corrugation, which falls with `n`); the surface has no bumps at the sphere spacing.
 //!
-//! In both, over a step a pair exerts the discrete gradient of its energy in `s` (a
+//! **Smooth contact** (`model = "smooth"`, [`smooth`]): line contact whose quadrature
+//! points lie on a quadratic B-spline of each rod's nodes (each a fixed combination of
+//! three nodes) instead of on its polyline.
+//!
+//! In all three, over a step a pair exerts the discrete gradient of its energy in `s` (a
 //! quadratic function of the node positions):
 //!
 //! ```text
@@ -41,16 +45,89 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::obstacle::quotient_quadric;
 
+pub mod smooth;
+pub use smooth::smooth_points;
+
 type V3 = Vector3<f64>;
 type M3 = Matrix3<f64>;
 
-/// A contact sphere's centre on an element.
+/// Most nodes a sample point's position combines (a cubic B-spline with corrected control
+/// points: six; the smooth model's quadratic: three).
+pub const MAX_STENCIL: usize = 6;
+
+/// The fixed nodes and weights whose combination `x = Σ wₐ rₐ` is a sample point's
+/// position (`Σ wₐ = 1`). Iterates over its `(node, weight)` pairs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stencil {
+    entries: [(usize, f64); MAX_STENCIL],
+    len: usize,
+}
+
+impl Stencil {
+    /// The linear interpolation `(1 − ξ) r_{n₀} + ξ r_{n₁}` of an element's end nodes.
+    pub fn linear(nodes: [usize; 2], xi: f64) -> Self {
+        Self::from_pairs(&[(nodes[0], 1.0 - xi), (nodes[1], xi)])
+    }
+
+    /// From `(node, weight)` pairs, at most [`MAX_STENCIL`] (kept as given, zeros too).
+    ///
+    /// # Panics
+    /// With more than [`MAX_STENCIL`] pairs.
+    pub fn from_pairs(pairs: &[(usize, f64)]) -> Self {
+        assert!(
+            pairs.len() <= MAX_STENCIL,
+            "a stencil of {} nodes",
+            pairs.len()
+        );
+        let mut entries = [(0, 0.0); MAX_STENCIL];
+        entries[..pairs.len()].copy_from_slice(pairs);
+        Self {
+            entries,
+            len: pairs.len(),
+        }
+    }
+
+    /// The `(node, weight)` pairs.
+    pub fn iter(&self) -> std::slice::Iter<'_, (usize, f64)> {
+        self.entries[..self.len].iter()
+    }
+
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True without nodes.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The combination `Σ wₐ rₐ`.
+    #[inline]
+    pub fn at(&self, r: &[V3]) -> V3 {
+        self.iter().fold(V3::zeros(), |x, &(a, w)| x + w * r[a])
+    }
+}
+
+impl IntoIterator for Stencil {
+    type Item = (usize, f64);
+    type IntoIter = std::iter::Take<std::array::IntoIter<(usize, f64), MAX_STENCIL>>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.entries.into_iter().take(self.len)
+    }
+}
+
+/// A contact sphere's centre on an element (or a quadrature point of line contact).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SamplePoint {
     /// The element's end nodes.
     pub nodes: [usize; 2],
-    /// Position along the element, `x = (1 − ξ) r₀ + ξ r₁`.
+    /// Position along the element (for spheres and line contact `x = (1 − ξ) r₀ + ξ r₁`;
+    /// for the smooth model the curve parameter within the element).
     pub xi: f64,
+    /// The nodes and weights of the position (the linear interpolation above, or the
+    /// smooth model's B-spline weights over up to six nodes).
+    pub stencil: Stencil,
     /// Contact radius `ρ`.
     pub radius: f64,
     /// Distance to the neighbouring sample points along the rod (reference).
@@ -63,13 +140,13 @@ impl SamplePoint {
     /// Position at node positions `r`.
     #[inline]
     pub fn at(&self, r: &[V3]) -> V3 {
-        (1.0 - self.xi) * r[self.nodes[0]] + self.xi * r[self.nodes[1]]
+        self.stencil.at(r)
     }
 
-    /// The nodes and weights of the interpolation.
+    /// The nodes and weights of the position.
     #[inline]
-    pub fn weights(&self) -> [(usize, f64); 2] {
-        [(self.nodes[0], 1.0 - self.xi), (self.nodes[1], self.xi)]
+    pub fn weights(&self) -> Stencil {
+        self.stencil
     }
 }
 
@@ -81,6 +158,9 @@ pub enum ContactModel {
     Spheres,
     /// Line contact: a midpoint quadrature of a smooth pair potential along both rods.
     Line,
+    /// Line contact along a smooth (C¹) contact curve per rod: a quadratic B-spline of the
+    /// nodes, so that a load is carried alike wherever along an element it acts.
+    Smooth,
 }
 
 impl ContactModel {
@@ -89,6 +169,7 @@ impl ContactModel {
         match self {
             Self::Spheres => "spheres",
             Self::Line => "line",
+            Self::Smooth => "smooth",
         }
     }
 }
@@ -179,8 +260,10 @@ impl RodContact {
     /// positions `r` (a uniform grid of cell `2 ρ_max + reach` over the points; for line
     /// contact over the elements first, see [`Self::candidates_by_element`]).
     pub fn candidates(&self, r: &[V3], reach: f64) -> Vec<(usize, usize)> {
-        if self.model == ContactModel::Line {
-            return self.candidates_by_element(r, reach);
+        match self.model {
+            ContactModel::Line => return self.candidates_by_element(r, reach),
+            ContactModel::Smooth => return self.candidates_by_bounds(r, reach),
+            ContactModel::Spheres => {}
         }
         let cell = 2.0 * self.max_radius() + reach;
         let x: Vec<V3> = self.points.iter().map(|p| p.at(r)).collect();
@@ -217,7 +300,7 @@ impl RodContact {
     }
 
     /// The runs of points on one element: `(first, end)` index ranges.
-    fn elements(&self) -> Vec<(usize, usize)> {
+    pub(crate) fn elements(&self) -> Vec<(usize, usize)> {
         let mut out: Vec<(usize, usize)> = Vec::new();
         for (i, p) in self.points.iter().enumerate() {
             match out.last_mut() {
@@ -328,7 +411,7 @@ impl RodContact {
                     0.0
                 }
             }
-            ContactModel::Line => {
+            ContactModel::Line | ContactModel::Smooth => {
                 let b2 = reach * reach;
                 if s < b2 {
                     self.line_c(i, j) * (b2 - s) * (b2 - s)
@@ -355,7 +438,9 @@ impl RodContact {
             ContactModel::Spheres => {
                 quotient_quadric(self.stiffness * a.spacing.min(b.spacing), reach, s0, s1)
             }
-            ContactModel::Line => quotient_quartic(self.line_c(i, j), reach * reach, s0, s1),
+            ContactModel::Line | ContactModel::Smooth => {
+                quotient_quartic(self.line_c(i, j), reach * reach, s0, s1)
+            }
         }
     }
 
@@ -463,6 +548,7 @@ mod tests {
         let pt = |nodes: [usize; 2], xi: f64, arc: f64| SamplePoint {
             nodes,
             xi,
+            stencil: Stencil::linear(nodes, xi),
             radius: 0.01,
             spacing: 0.01,
             arc,
@@ -618,6 +704,7 @@ mod tests {
                     points.push(SamplePoint {
                         nodes: [w[0], w[1]],
                         xi,
+                        stencil: Stencil::linear([w[0], w[1]], xi),
                         radius: rho,
                         spacing: h / m as f64,
                         arc: arc + h * xi,
@@ -780,6 +867,15 @@ mod tests {
         let chains = [(0..9).collect::<Vec<_>>(), (9..18).collect()];
         let c = match model {
             ContactModel::Line => line_contact(&chains, &r, rho, 16.0, 1e6),
+            ContactModel::Smooth => {
+                let mut c = line_contact(&chains, &r, rho, 16.0, 1e6);
+                let h = vec![el; 8];
+                c.points = smooth_points(&chains[0], &h, rho, 16.0);
+                c.split = c.points.len();
+                c.points.extend(smooth_points(&chains[1], &h, rho, 16.0));
+                c.model = ContactModel::Smooth;
+                c
+            }
             ContactModel::Spheres => {
                 let mut c = line_contact(&chains, &r, rho, 1.0, 1e6);
                 c.model = ContactModel::Spheres;
@@ -801,9 +897,11 @@ mod tests {
             let law = 1e6 * h * (r_sum * r_sum - h * h).powi(2) / (2.0 * r_sum.powi(4));
             let mut line = Vec::new();
             let mut spheres = Vec::new();
+            let mut smooth = Vec::new();
             for k in 0..=40 {
                 let t = k as f64 / 40.0;
                 line.push(crossing_force(ContactModel::Line, h, t));
+                smooth.push(crossing_force(ContactModel::Smooth, h, t));
                 spheres.push(crossing_force(ContactModel::Spheres, h, t));
             }
             let spread = |v: &[f64]| {
@@ -815,6 +913,13 @@ mod tests {
             };
             let (sl, ml) = spread(&line);
             let (ss, ms) = spread(&spheres);
+            let (so, mo) = spread(&smooth);
+            eprintln!("smooth: force {mo:.3e} N, spread {so:.1e}");
+            assert!(so <= 0.08, "smooth contact's force varies by {so:e}");
+            assert!(
+                (mo / law - 1.0).abs() <= 0.01,
+                "smooth force {mo:e} vs law {law:e}"
+            );
             eprintln!(
                 "crossing at overlap {g:.0e}: line force {ml:.3e} N (law {law:.3e}), spread {sl:.1e}; spheres {ms:.3e} N, spread {ss:.1e}"
             );

@@ -685,6 +685,7 @@ impl Scene {
                 let what = match c.model {
                     crate::rod_contact::ContactModel::Spheres => "contact spheres",
                     crate::rod_contact::ContactModel::Line => "line-contact quadrature points",
+                    crate::rod_contact::ContactModel::Smooth => "smooth-contact quadrature points",
                 };
                 format!(
                     "{}: {} {what} of radius up to {}, stiffness {} N/m², frictionless",

@@ -34,29 +34,45 @@ impl Simulation {
         for c in &self.model.rod_contacts {
             let reach = 3.0 * umax + 0.25 * c.max_radius();
             let pairs = c.candidates(&self.state.r, reach);
+            // The node pairs the pairs couple (once each): a stencil wider than its
+            // element (the smooth model's) also couples nodes of one point that no
+            // element joins.
+            let mut couples: std::collections::HashSet<(usize, usize)> =
+                std::collections::HashSet::new();
             for &(i, j) in &pairs {
-                for (a, wa) in c.points[i].weights() {
-                    for (b, wb) in c.points[j].weights() {
-                        if wa == 0.0 || wb == 0.0 {
-                            continue;
-                        }
-                        let (na, nb) = (&self.dofs.nodes[a], &self.dofs.nodes[b]);
-                        // Friction also couples the rotations (its moments and the slip).
-                        let (ua, ub): (Vec<usize>, Vec<usize>) = if c.friction > 0.0 {
-                            (
-                                na.u.iter().chain(&na.th).copied().collect(),
-                                nb.u.iter().chain(&nb.th).copied().collect(),
-                            )
-                        } else {
-                            (na.u.to_vec(), nb.u.to_vec())
-                        };
-                        for x in ua.iter().filter(|&&x| x != NONE) {
-                            for y in ub.iter().filter(|&&y| y != NONE) {
-                                if self.solver.try_slot(*x, *y).is_none() {
-                                    needed.insert((*x, *y));
-                                    needed.insert((*y, *x));
-                                }
-                            }
+                let (si, sj) = (c.points[i].weights(), c.points[j].weights());
+                let wide = si.len() > 2 || sj.len() > 2;
+                let live = |&(_, w): &(usize, f64)| w != 0.0;
+                for (a, _) in si
+                    .into_iter()
+                    .chain(sj.into_iter().filter(|_| wide))
+                    .filter(live)
+                {
+                    for (b, _) in sj
+                        .into_iter()
+                        .chain(si.into_iter().filter(|_| wide))
+                        .filter(live)
+                    {
+                        couples.insert((a, b));
+                    }
+                }
+            }
+            for (a, b) in couples {
+                let (na, nb) = (&self.dofs.nodes[a], &self.dofs.nodes[b]);
+                // Friction also couples the rotations (its moments and the slip).
+                let (ua, ub): (Vec<usize>, Vec<usize>) = if c.friction > 0.0 {
+                    (
+                        na.u.iter().chain(&na.th).copied().collect(),
+                        nb.u.iter().chain(&nb.th).copied().collect(),
+                    )
+                } else {
+                    (na.u.to_vec(), nb.u.to_vec())
+                };
+                for x in ua.iter().filter(|&&x| x != NONE) {
+                    for y in ub.iter().filter(|&&y| y != NONE) {
+                        if self.solver.try_slot(*x, *y).is_none() {
+                            needed.insert((*x, *y));
+                            needed.insert((*y, *x));
                         }
                     }
                 }

@@ -258,7 +258,7 @@ pub(super) fn rod_contact(
     start: &[Vec3],
     spheres_so_far: &mut f64,
 ) -> Result<crate::rod_contact::RodContact> {
-    use crate::rod_contact::{ContactModel, RodContact, SamplePoint};
+    use crate::rod_contact::{ContactModel, RodContact, SamplePoint, Stencil};
     let rp = path.key("rods");
     let names = cx.required(&rp, c.rods.as_ref())?;
     if names.is_empty() || names.len() > 2 {
@@ -309,20 +309,21 @@ pub(super) fn rod_contact(
     let model = match c.model.as_deref() {
         None | Some("spheres") => ContactModel::Spheres,
         Some("line") => ContactModel::Line,
+        Some("smooth") => ContactModel::Smooth,
         Some(other) => {
             return Err(cx.err(
                 &path.key("model"),
-                format!("unknown contact model `{other}` (models: spheres, line)"),
+                format!("unknown contact model `{other}` (models: spheres, line, smooth)"),
             ))
         }
     };
     // Line contact's quadrature points per contact radius along each element.
     let per_radius = match c.points_per_radius {
         None => 16.0,
-        Some(_) if model != ContactModel::Line => {
+        Some(_) if model == ContactModel::Spheres => {
             return Err(cx.err(
                 &path.key("points_per_radius"),
-                "only with `model = \"line\"`",
+                "only with `model = \"line\"` or `\"smooth\"`",
             ))
         }
         Some(n) if (1..=MAX_POINTS_PER_RADIUS).contains(&n) => n as f64,
@@ -338,7 +339,7 @@ pub(super) fn rod_contact(
     let per_element = |h: f64, rho: f64| -> f64 {
         match model {
             ContactModel::Spheres => (h / rho).ceil().max(1.0),
-            ContactModel::Line => (per_radius * h / rho).ceil().max(1.0),
+            ContactModel::Line | ContactModel::Smooth => (per_radius * h / rho).ceil().max(1.0),
         }
     };
     let radius_override = c
@@ -379,6 +380,17 @@ pub(super) fn rod_contact(
         e_max = e_max.max(materials[&plan.props_key.0].e);
         let rho = radius_of(ri);
         let els = &elements[rods[ri].elements.clone()];
+        if model == ContactModel::Smooth {
+            let chain = super::mesh::rod_chain(elements, &rods[ri]);
+            let h: Vec<f64> = els.iter().map(|el| el.props.h).collect();
+            points.extend(crate::rod_contact::smooth_points(
+                &chain, &h, rho, per_radius,
+            ));
+            if k == 0 {
+                split = points.len();
+            }
+            continue;
+        }
         let mut arc = 0.0;
         for (n, el) in els.iter().enumerate() {
             let h = el.props.h;
@@ -389,6 +401,7 @@ pub(super) fn rod_contact(
                     points.push(SamplePoint {
                         nodes: el.nodes,
                         xi,
+                        stencil: Stencil::linear(el.nodes, xi),
                         radius: rho,
                         spacing: h / m as f64,
                         arc: arc + h * xi,
@@ -402,6 +415,7 @@ pub(super) fn rod_contact(
                 points.push(SamplePoint {
                     nodes: el.nodes,
                     xi: s as f64 / m as f64,
+                    stencil: Stencil::linear(el.nodes, s as f64 / m as f64),
                     radius: rho,
                     spacing: h / m as f64,
                     arc: arc + h * s as f64 / m as f64,
