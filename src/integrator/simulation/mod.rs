@@ -241,8 +241,7 @@ impl Simulation {
         params: IntegratorParams,
     ) -> Result<Self, crate::linsolve::LinsolveError> {
         let data = ElementData::for_model(&model);
-        // The rational curvature measure has no lane kernel (elements one by one).
-        let rational = model.rational_curvature_rod().is_some();
+        let lanes = assemble::LANES_PAY && Self::lanes_fit(&data);
         let trans_diss = params.scheme.translational_dissipation();
         let dofs = DofMap::new(&model, trans_diss);
         let parts = Self::system_parts(&model, &data, &dofs, &[])?;
@@ -301,7 +300,7 @@ impl Simulation {
             fallback_pending: false,
             solved_consistent: false,
             inexact_tangent: false,
-            lanes: assemble::LANES_PAY && !rational,
+            lanes,
             polish: false,
             step_start: false,
             step_r0: 0.0,
