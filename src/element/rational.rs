@@ -222,33 +222,53 @@ pub fn add_moment_terms(
         h,
     );
     let mq = mstar.dot(&qbar);
-    let g = |pf: usize, qf: usize| -> Mat3 {
-        let mut m = (qm[pf] * dn_1[qf].transpose() - dn_mid[pf] * q1m[qf].transpose()) * c_half
-            - f[pf] * dn_1[qf].transpose() / n1;
-        let mut sc = c_half * nbar * hq[(A0 + pf, A0 + qf)];
-        // Hessian of n: ⅙ between a_i and b_i.
+    // G_pq = a_p ⊗ ∂n/∂d_q(Φ_{n+1}) + b_p ⊗ (∂q/∂d_q(Φ_{n+1}))ᵀM* + s_pq I with
+    // a_p = ½h/(n₀n₁) q_p·M* (mid) − f_p/n₁ and b_p = −½h/(n₀n₁) ∂n/∂d_p (mid), so each
+    // block is two outer products, \hat{d}(a ⊗ w) Y = (d × a) ⊗ (Yᵀw), plus the scalar
+    // part Σ_ij s_pq \hat{d_p} Y_q = Σ_j \hat{v_q} Y_q, v_q = Σ_i s_pq d_p (â is linear
+    // in a). The scalar s_pq: the stress Hessian of q and, between a_i and b_i, that of n.
+    let sc = |pf: usize, qf: usize| -> f64 {
+        let mut x = c_half * nbar * hq[(A0 + pf, A0 + qf)];
         if pf % 3 == qf % 3 && pf / 3 != qf / 3 {
-            sc -= c_half * mq / 6.0;
+            x -= c_half * mq / 6.0;
         }
-        for d in 0..3 {
-            m[(d, d)] += sc;
-        }
-        m
+        x
     };
     debug_assert_eq!(A0 + 3, B0);
-    // A_m \hat{d_q}, once per director field.
+    // Y_q = A_m \hat{d_q}, once per director field.
     let ad: [Mat3; 6] = std::array::from_fn(|qf| mul_hat(&amat[qf / 3], &dcol(qf / 3, qf % 3)));
+    let u: [[Vec3; 2]; 2] = std::array::from_fn(|l| {
+        let mut ua = Vec3::zeros();
+        let mut ub = Vec3::zeros();
+        for i in 0..3 {
+            let pf = 3 * l + i;
+            let a = qm[pf] * c_half - f[pf] / n1;
+            let b = dn_mid[pf] * (-c_half);
+            ua += dcol(l, i).cross(&a);
+            ub += dcol(l, i).cross(&b);
+        }
+        [ua, ub]
+    });
+    let w: [[Vec3; 2]; 2] = std::array::from_fn(|m| {
+        let mut wa = Vec3::zeros();
+        let mut wb = Vec3::zeros();
+        for j in 0..3 {
+            let qf = 3 * m + j;
+            wa += ad[qf].tr_mul(&dn_1[qf]);
+            wb += ad[qf].tr_mul(&q1m[qf]);
+        }
+        [wa, wb]
+    });
     for l in 0..2 {
         for m in 0..2 {
-            let mut blk = Matrix3::zeros();
-            for i in 0..3 {
-                for j in 0..3 {
-                    let gpq = g(3 * l + i, 3 * m + j);
-                    blk += hat_mul(&dcol(l, i), &(gpq * ad[3 * m + j]));
-                }
+            let mut blk = u[l][0] * w[m][0].transpose() + u[l][1] * w[m][1].transpose();
+            for j in 0..3 {
+                let qf = 3 * m + j;
+                let v: Vec3 = (0..3).map(|i| dcol(l, i) * sc(3 * l + i, qf)).sum();
+                blk += hat_mul(&v, &ad[qf]);
             }
-            let mut v = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
-            v -= blk;
+            let mut kv = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
+            kv -= blk;
         }
     }
     // Projection: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.
