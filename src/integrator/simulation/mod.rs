@@ -136,6 +136,10 @@ pub struct Simulation {
     rod_pairs: Vec<Vec<(usize, usize)>>,
     /// The state version `rod_pairs` was searched at.
     rod_pairs_version: Option<u64>,
+    /// Rod contact: the matrix slots of node pairs' `(u, θ) × (u, θ)` blocks (`NONE`
+    /// where not in the pattern), found as they are first needed; cleared with the
+    /// pattern.
+    node_pair_slots: std::collections::HashMap<(usize, usize), [[usize; 6]; 6]>,
     /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
     row_kinds: Vec<usize>,
     state: State,
@@ -284,6 +288,7 @@ impl Simulation {
             extra_pattern: Vec::new(),
             rod_pairs: Vec::new(),
             rod_pairs_version: None,
+            node_pair_slots: std::collections::HashMap::new(),
             slide_blocks: parts.slide_blocks,
             state,
             inv,
@@ -420,6 +425,7 @@ impl Simulation {
         let parts = Self::system_parts(&self.model, &self.data, &self.dofs, &extra)?;
         let planar_on = self.planar.as_ref().is_none_or(|p| p.enabled);
         self.solver = parts.solver;
+        self.node_pair_slots.clear();
         self.slots = parts.slots;
         self.row_map = parts.row_map;
         self.tangent_map = parts.tangent_map;
