@@ -257,41 +257,38 @@ impl RodContact {
     }
 
     /// Pairs `(i, j)`, `i < j`, allowed to touch and closer than `ρᵢ + ρⱼ + reach` at node
-    /// positions `r` (a uniform grid of cell `2 ρ_max + reach` over the points; for line
-    /// contact over the elements first, see [`Self::candidates_by_element`]).
+    /// positions `r` (sweep and prune along the axis of the points' largest extent; for
+    /// line contact over the elements first, see [`Self::candidates_by_element`]).
     pub fn candidates(&self, r: &[V3], reach: f64) -> Vec<(usize, usize)> {
         match self.model {
             ContactModel::Line => return self.candidates_by_element(r, reach),
             ContactModel::Smooth => return self.candidates_by_bounds(r, reach),
             ContactModel::Spheres => {}
         }
-        let cell = 2.0 * self.max_radius() + reach;
         let x: Vec<V3> = self.points.iter().map(|p| p.at(r)).collect();
-        let key = |v: &V3| -> [i64; 3] { std::array::from_fn(|c| (v[c] / cell).floor() as i64) };
-        let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> =
-            std::collections::HashMap::new();
-        for (i, v) in x.iter().enumerate() {
-            grid.entry(key(v)).or_default().push(i);
-        }
+        let Some(first) = x.first() else {
+            return Vec::new();
+        };
+        let (lo, hi) = x
+            .iter()
+            .fold((*first, *first), |(lo, hi), v| (lo.inf(v), hi.sup(v)));
+        let ax = (hi - lo).imax();
+        let mut order: Vec<usize> = (0..x.len()).collect();
+        order.sort_unstable_by(|&a, &b| x[a][ax].total_cmp(&x[b][ax]));
+        let rmax = self.max_radius();
         let mut out = Vec::new();
-        for (i, v) in x.iter().enumerate() {
-            let k = key(v);
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        let Some(list) = grid.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
-                            continue;
-                        };
-                        for &j in list {
-                            if j <= i || !self.allowed(i, j) {
-                                continue;
-                            }
-                            let lim = self.points[i].radius + self.points[j].radius + reach;
-                            if (x[i] - x[j]).norm_squared() < lim * lim {
-                                out.push((i, j));
-                            }
-                        }
-                    }
+        for (k, &i) in order.iter().enumerate() {
+            // No point farther along the axis than `ρᵢ + ρ_max + reach` can touch `i`
+            // (its distance is at least its distance along the axis).
+            let window = self.points[i].radius + rmax + reach;
+            for &j in &order[k + 1..] {
+                if x[j][ax] - x[i][ax] >= window {
+                    break;
+                }
+                let (a, b) = (i.min(j), i.max(j));
+                let lim = self.points[a].radius + self.points[b].radius + reach;
+                if (x[a] - x[b]).norm_squared() < lim * lim && self.allowed(a, b) {
+                    out.push((a, b));
                 }
             }
         }
@@ -953,6 +950,54 @@ mod tests {
                 for j in i + 1..c.points.len() {
                     let l = c.points[i].radius + c.points[j].radius + reach;
                     if c.allowed(i, j) && (c.points[i].at(&r) - c.points[j].at(&r)).norm() < l {
+                        brute.push((i, j));
+                    }
+                }
+            }
+            assert!(!brute.is_empty());
+            assert_eq!(found, brute, "reach {reach}");
+        }
+    }
+
+    #[test]
+    fn sphere_pair_search_finds_every_pair_in_reach() {
+        // A rod coiled on itself (self contact, one sphere per node and two between) and
+        // brute force over all pairs.
+        let r: Vec<V3> = (0..60)
+            .map(|a| {
+                let t = a as f64 * 0.35;
+                V3::new(0.03 * t.cos(), 0.03 * t.sin(), 0.0008 * t)
+            })
+            .collect();
+        let mut points = Vec::new();
+        for e in 0..59 {
+            for k in 0..3 {
+                points.push(SamplePoint {
+                    nodes: [e, e + 1],
+                    xi: k as f64 / 3.0,
+                    radius: 0.004,
+                    spacing: 0.0035,
+                    arc: 0.0105 * (e as f64 + k as f64 / 3.0),
+                });
+            }
+        }
+        let c = RodContact {
+            rods: vec!["a".into()],
+            stiffness: 1e5,
+            friction: 0.0,
+            slip: 1e-3,
+            model: ContactModel::Spheres,
+            split: points.len(),
+            points,
+        };
+        for reach in [0.0, 0.002, 0.02] {
+            let found = c.candidates(&r, reach);
+            let mut brute = Vec::new();
+            for i in 0..c.points.len() {
+                for j in i + 1..c.points.len() {
+                    let l = c.points[i].radius + c.points[j].radius + reach;
+                    let d = c.points[i].at(&r) - c.points[j].at(&r);
+                    if c.allowed(i, j) && d.norm_squared() < l * l {
                         brute.push((i, j));
                     }
                 }

@@ -11,7 +11,7 @@ use super::planar::{
 use super::strain::Config;
 use super::{ElementData, ElementEval, ElementState, FrozenScalars, Increment, Kinematics, NDOF};
 use crate::element::dissipation::LocalInputs;
-use crate::math::lane::{F64x4, LANES};
+use crate::math::lane::{F64x4, Lane, LANES};
 use crate::model::ElementProps;
 
 /// Packs a 6-vector per lane.
@@ -40,7 +40,8 @@ impl ElementData<F64x4> {
             },
             eps0: pack6(&d.map(|x| x.eps0)),
             rot_free: [0, 1].map(|l| d.map(|x| x.rot_free[l])),
-            // (The rational measure has no lane kernel: such elements never come here.)
+            // (Four elements of one measure: the rational measure's without `C_Ω`,
+            // their moment rows added lane by lane.)
             measure: d[0].measure,
         }
     }
@@ -125,6 +126,23 @@ impl ElementEval<F64x4> {
             r: SVector::<f64, NDOF>::from_fn(|r, _| self.r[r].lane(i)),
             scale: SVector::<f64, NDOF>::from_fn(|r, _| self.scale[r].lane(i)),
             k: SMatrix::<f64, NDOF, NDOF>::from_fn(|r, c| self.k[(r, c)].lane(i)),
+        }
+    }
+
+    /// Lane `i`'s residual and row scales (and with `tangent` its tangent) into `out`.
+    pub fn lane_into(&self, i: usize, tangent: bool, out: &mut ElementEval) {
+        let flat = |x: &[F64x4], y: &mut [f64]| {
+            for (v, a) in y
+                .iter_mut()
+                .zip(F64x4::flat(x).iter().skip(i).step_by(LANES))
+            {
+                *v = *a;
+            }
+        };
+        flat(self.r.as_slice(), out.r.as_mut_slice());
+        flat(self.scale.as_slice(), out.scale.as_mut_slice());
+        if tangent {
+            flat(self.k.as_slice(), out.k.as_mut_slice());
         }
     }
 }

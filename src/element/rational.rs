@@ -22,8 +22,9 @@
 //! invariant under rigid motions, so `B̄ᵀ M` annihilates them and `L`, `J` are conserved.
 //! `n ≥ ⅓` for any pair of rotations (the measure is defined for every turn).
 //!
-//! Only the moment rows change; the force strains Γ are the sine element's. The kernel
-//! here is `f64` only (no four-element lanes) and EM only.
+//! Only the moment rows change; the force strains Γ are the sine element's. The moment
+//! rows here are `f64` only and EM only; the rest of the element (the sine kernel with
+//! `C_Ω = 0`) runs in the four-element lanes like any element's.
 
 use nalgebra::{Matrix3, Vector6};
 
@@ -100,9 +101,7 @@ pub fn gradient(c: &Config, h: f64) -> [[Vec3; 6]; 3] {
 
 /// Element residual and tangent of an element with the rational measure: the sine
 /// kernel ([`super::residual_tangent_into`]) with the moment stiffness removed, plus the
-/// moment rows `h B̄ᵀ M*` projected onto the rotations with the mid-point directors, and
-/// their exact linearization. `M* = C_Ω(½(Ω̃_n + Ω̃_{n+1}) − Ω̃° + ½ β_Ω ΔΩ̃)` (EM with
-/// Kelvin–Voigt damping, the mean of the strains).
+/// moment rows of [`add_moment_terms`].
 #[allow(clippy::too_many_arguments)]
 pub fn residual_tangent_into(
     data: &ElementData,
@@ -117,7 +116,22 @@ pub fn residual_tangent_into(
     let mut base = data.clone();
     base.props.c_omega = Mat3::zeros();
     super::residual_tangent_into(&base, st, kin, s, k, trans_diss, want_tangent, out);
+    add_moment_terms(data, st, kin, s, want_tangent, out);
+}
 
+/// Adds the rational measure's moment rows to `out`, an evaluation of the sine kernel
+/// with the moment stiffness removed (`c_Ω = 0`; one element, or a lane of four): the
+/// moment rows `h B̄ᵀ M*` projected onto the rotations with the mid-point directors, and
+/// (with `want_tangent`) their exact linearization. `M* = C_Ω(½(Ω̃_n + Ω̃_{n+1}) − Ω̃° +
+/// ½ β_Ω ΔΩ̃)` (EM with Kelvin–Voigt damping, the mean of the strains).
+pub fn add_moment_terms(
+    data: &ElementData,
+    st: &ElementState,
+    kin: &Kinematics,
+    s: &FrozenScalars,
+    want_tangent: bool,
+    out: &mut ElementEval,
+) {
     let p = &data.props;
     let h = p.h;
     let (c0, c1, mid) = (&st.cfg, &kin.cfg1, &kin.mid);
@@ -125,7 +139,6 @@ pub fn residual_tangent_into(
     let (n0, n1) = (denominator(c0), denominator(c1));
     let (nbar, qbar) = (0.5 * (n0 + n1), 0.5 * (q0 + q1));
     let (dq_mid, dn_mid) = (sine_gradient(mid, h), denominator_gradient(mid));
-    let (dq_1, dn_1) = (sine_gradient(c1, h), denominator_gradient(c1));
     let inv = 1.0 / (n0 * n1);
     let bbar: [[Vec3; 6]; 3] = std::array::from_fn(|kk| {
         std::array::from_fn(|f| (dq_mid[kk][f] * nbar - dn_mid[f] * qbar[kk]) * inv)
@@ -166,10 +179,14 @@ pub fn residual_tangent_into(
     if !want_tangent {
         return;
     }
+    let (dq_1, dn_1) = (sine_gradient(c1, h), denominator_gradient(c1));
     let amat = kin.amat;
     let at = [amat[0].transpose(), amat[1].transpose()];
-    // Material part: h B̄ᵀ (½(1 + β_Ω) C_Ω) DΩ̃(Φ_{n+1}), reduced to (θ_0, θ_1).
-    let d1 = gradient(c1, h);
+    // Material part: h B̄ᵀ (½(1 + β_Ω) C_Ω) DΩ̃(Φ_{n+1}), reduced to (θ_0, θ_1): the
+    // gradient at the end of the step ([`gradient`], from the pieces at hand).
+    let d1: [[Vec3; 6]; 3] = std::array::from_fn(|kk| {
+        std::array::from_fn(|f| (dq_1[kk][f] - dn_1[f] * (q1[kk] / n1)) / n1)
+    });
     let mut tb = [[Vec3::zeros(); 2]; 3];
     let mut jb = [[Vec3::zeros(); 2]; 3];
     for kk in 0..3 {
@@ -205,31 +222,53 @@ pub fn residual_tangent_into(
         h,
     );
     let mq = mstar.dot(&qbar);
-    let g = |pf: usize, qf: usize| -> Mat3 {
-        let mut m = (qm[pf] * dn_1[qf].transpose() - dn_mid[pf] * q1m[qf].transpose()) * c_half
-            - f[pf] * dn_1[qf].transpose() / n1;
-        let mut sc = c_half * nbar * hq[(A0 + pf, A0 + qf)];
-        // Hessian of n: ⅙ between a_i and b_i.
+    // G_pq = a_p ⊗ ∂n/∂d_q(Φ_{n+1}) + b_p ⊗ (∂q/∂d_q(Φ_{n+1}))ᵀM* + s_pq I with
+    // a_p = ½h/(n₀n₁) q_p·M* (mid) − f_p/n₁ and b_p = −½h/(n₀n₁) ∂n/∂d_p (mid), so each
+    // block is two outer products, \hat{d}(a ⊗ w) Y = (d × a) ⊗ (Yᵀw), plus the scalar
+    // part Σ_ij s_pq \hat{d_p} Y_q = Σ_j \hat{v_q} Y_q, v_q = Σ_i s_pq d_p (â is linear
+    // in a). The scalar s_pq: the stress Hessian of q and, between a_i and b_i, that of n.
+    let sc = |pf: usize, qf: usize| -> f64 {
+        let mut x = c_half * nbar * hq[(A0 + pf, A0 + qf)];
         if pf % 3 == qf % 3 && pf / 3 != qf / 3 {
-            sc -= c_half * mq / 6.0;
+            x -= c_half * mq / 6.0;
         }
-        for d in 0..3 {
-            m[(d, d)] += sc;
-        }
-        m
+        x
     };
     debug_assert_eq!(A0 + 3, B0);
+    // Y_q = A_m \hat{d_q}, once per director field.
+    let ad: [Mat3; 6] = std::array::from_fn(|qf| mul_hat(&amat[qf / 3], &dcol(qf / 3, qf % 3)));
+    let u: [[Vec3; 2]; 2] = std::array::from_fn(|l| {
+        let mut ua = Vec3::zeros();
+        let mut ub = Vec3::zeros();
+        for i in 0..3 {
+            let pf = 3 * l + i;
+            let a = qm[pf] * c_half - f[pf] / n1;
+            let b = dn_mid[pf] * (-c_half);
+            ua += dcol(l, i).cross(&a);
+            ub += dcol(l, i).cross(&b);
+        }
+        [ua, ub]
+    });
+    let w: [[Vec3; 2]; 2] = std::array::from_fn(|m| {
+        let mut wa = Vec3::zeros();
+        let mut wb = Vec3::zeros();
+        for j in 0..3 {
+            let qf = 3 * m + j;
+            wa += ad[qf].tr_mul(&dn_1[qf]);
+            wb += ad[qf].tr_mul(&q1m[qf]);
+        }
+        [wa, wb]
+    });
     for l in 0..2 {
         for m in 0..2 {
-            let mut blk = Matrix3::zeros();
-            for i in 0..3 {
-                for j in 0..3 {
-                    let gpq = g(3 * l + i, 3 * m + j);
-                    blk += hat_mul(&dcol(l, i), &(gpq * mul_hat(&amat[m], &dcol(m, j))));
-                }
+            let mut blk = u[l][0] * w[m][0].transpose() + u[l][1] * w[m][1].transpose();
+            for j in 0..3 {
+                let qf = 3 * m + j;
+                let v: Vec3 = (0..3).map(|i| dcol(l, i) * sc(3 * l + i, qf)).sum();
+                blk += hat_mul(&v, &ad[qf]);
             }
-            let mut v = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
-            v -= blk;
+            let mut kv = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
+            kv -= blk;
         }
     }
     // Projection: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.

@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::lanes::pack6;
+use crate::element::rational::add_moment_terms;
 use crate::element::{
     consistent_director_factor, consistent_scalars_at, consistent_scalars_near, kinematics_core,
     monolithic_correction, monolithic_terms, residual_tangent_into, residual_tangent_measured_into,
@@ -17,7 +18,7 @@ use crate::integrator::dofs::{DofMap, NONE};
 use crate::integrator::evaluate::{AssembledSystem, EvalRequest, Resident, ResidentAnswer};
 use crate::integrator::links;
 use crate::math::lane::{F64x4, Lane, LANES};
-use crate::model::Vec3;
+use crate::model::{CurvatureMeasure, Mat3, Vec3};
 
 /// Whether the four-element lanes pay: with AVX an [`F64x4`] is one register and the
 /// kernel runs 2.1–2.35× faster per element; with SSE2 only (two registers per value)
@@ -236,8 +237,14 @@ impl Simulation {
     /// call") and off elsewhere. Either way every result is the same bit for bit
     /// (`tests/lanes.rs` runs scenes both ways); off serves comparisons and tests.
     pub fn set_lanes(&mut self, on: bool) {
-        // The rational curvature measure has no lane kernel: such models go one by one.
-        self.lanes = on && self.model.rational_curvature_rod().is_none();
+        self.lanes = on && Self::lanes_fit(&self.data);
+    }
+
+    /// Whether the elements can go through the lanes: all of one curvature measure (the
+    /// rational measure's elements run the sine kernel with `C_Ω = 0` in lanes and add
+    /// their moment rows one by one; a model mixing measures goes one by one).
+    pub(super) fn lanes_fit(data: &[ElementData]) -> bool {
+        data.windows(2).all(|w| w[0].measure == w[1].measure)
     }
 
     /// The elements `0..4⌊n/4⌋` through the kernel by groups of four, one element per
@@ -261,6 +268,16 @@ impl Simulation {
         let k = self.consts();
         let groups = n / LANES;
         let consistent = mode == Mode::Consistent;
+        // The rational measure (EM only, frozen scalars): its moment rows are added to
+        // each lane's evaluation of the sine kernel without moment stiffness.
+        let rational = self
+            .data
+            .first()
+            .is_some_and(|d| d.measure == CurvatureMeasure::Rational);
+        if rational && consistent {
+            return 0;
+        }
+        let mut one = ElementEval::zeros();
         let correct = tangent && consistent && k.scheme.is_dissipative() && !self.inexact_tangent;
         let mut ev = ElementEval::<F64x4>::zeros();
         let mut corr = Vec::with_capacity(if correct { LANES } else { 0 });
@@ -290,7 +307,22 @@ impl Simulation {
                 let kin = kinematics_core(data, &st, &eps_n, &inc, s.c_nu, k.dt);
                 residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
                 for i in 0..LANES {
-                    self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
+                    if rational {
+                        let e = e0 + i;
+                        ev.lane_into(i, tangent, &mut one);
+                        let kin_i = kin.lane(i);
+                        add_moment_terms(
+                            &self.data[e],
+                            &sts[i],
+                            &kin_i,
+                            &self.frozen[e],
+                            tangent,
+                            &mut one,
+                        );
+                        self.scatter(e, &one, tangent, r, scale);
+                    } else {
+                        self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
+                    }
                 }
                 continue;
             }
@@ -369,9 +401,23 @@ impl Simulation {
 
     /// [`ElementData`] by full groups of four consecutive elements, one per lane (the last
     /// `n mod 4` elements go one by one).
+    ///
+    /// Groups of the rational measure carry no moment stiffness (`C_Ω = 0`): the lanes
+    /// evaluate the rest of the element, [`add_moment_terms`] the moment rows.
     pub(super) fn lane_groups(data: &[ElementData]) -> Vec<ElementData<F64x4>> {
         data.chunks_exact(LANES)
-            .map(|c| ElementData::pack([&c[0], &c[1], &c[2], &c[3]]))
+            .map(|c| {
+                if c.iter().all(|d| d.measure == CurvatureMeasure::Rational) {
+                    let base: [ElementData; LANES] = std::array::from_fn(|i| {
+                        let mut d = c[i].clone();
+                        d.props.c_omega = Mat3::zeros();
+                        d
+                    });
+                    ElementData::pack([&base[0], &base[1], &base[2], &base[3]])
+                } else {
+                    ElementData::pack([&c[0], &c[1], &c[2], &c[3]])
+                }
+            })
             .collect()
     }
 

@@ -136,6 +136,10 @@ pub struct Simulation {
     rod_pairs: Vec<Vec<(usize, usize)>>,
     /// The state version `rod_pairs` was searched at.
     rod_pairs_version: Option<u64>,
+    /// Rod contact: the matrix slots of node pairs' `(u, θ) × (u, θ)` blocks (`NONE`
+    /// where not in the pattern), found as they are first needed; cleared with the
+    /// pattern.
+    node_pair_slots: std::collections::HashMap<(usize, usize), [[usize; 6]; 6]>,
     /// Kind of each global row (0 = u, 1 = θ, 2 = g), for the per-kind residual scale.
     row_kinds: Vec<usize>,
     state: State,
@@ -241,8 +245,7 @@ impl Simulation {
         params: IntegratorParams,
     ) -> Result<Self, crate::linsolve::LinsolveError> {
         let data = ElementData::for_model(&model);
-        // The rational curvature measure has no lane kernel (elements one by one).
-        let rational = model.rational_curvature_rod().is_some();
+        let lanes = assemble::LANES_PAY && Self::lanes_fit(&data);
         let trans_diss = params.scheme.translational_dissipation();
         let dofs = DofMap::new(&model, trans_diss);
         let parts = Self::system_parts(&model, &data, &dofs, &[])?;
@@ -285,6 +288,7 @@ impl Simulation {
             extra_pattern: Vec::new(),
             rod_pairs: Vec::new(),
             rod_pairs_version: None,
+            node_pair_slots: std::collections::HashMap::new(),
             slide_blocks: parts.slide_blocks,
             state,
             inv,
@@ -301,7 +305,7 @@ impl Simulation {
             fallback_pending: false,
             solved_consistent: false,
             inexact_tangent: false,
-            lanes: assemble::LANES_PAY && !rational,
+            lanes,
             polish: false,
             step_start: false,
             step_r0: 0.0,
@@ -421,6 +425,7 @@ impl Simulation {
         let parts = Self::system_parts(&self.model, &self.data, &self.dofs, &extra)?;
         let planar_on = self.planar.as_ref().is_none_or(|p| p.enabled);
         self.solver = parts.solver;
+        self.node_pair_slots.clear();
         self.slots = parts.slots;
         self.row_map = parts.row_map;
         self.tangent_map = parts.tangent_map;

@@ -111,16 +111,18 @@ impl Simulation {
             return;
         }
         let r1 = self.end_positions(q);
-        let r0 = &self.state.r;
-        for (c, pairs) in self.model.rod_contacts.iter().zip(&self.rod_pairs) {
-            for &(i, j) in pairs {
-                let f = c.pair_force(i, j, r0, &r1, tangent);
+        for ci in 0..self.model.rod_contacts.len() {
+            for pi in 0..self.rod_pairs[ci].len() {
+                let (i, j) = self.rod_pairs[ci][pi];
+                let c = &self.model.rod_contacts[ci];
+                let f = c.pair_force(i, j, &self.state.r, &r1, tangent);
                 if f.force == Vec3::zeros() && !tangent {
                     continue;
                 }
                 let ends = [(i, 1.0), (j, -1.0)];
-                for &(p, sp) in &ends {
-                    for (a, wa) in c.points[p].weights() {
+                let wts = [c.points[i].weights(), c.points[j].weights()];
+                for (&(_, sp), wp) in ends.iter().zip(&wts) {
+                    for &(a, wa) in wp {
                         let ua = self.dofs.nodes[a].u;
                         for k in 0..3 {
                             if ua[k] == NONE {
@@ -133,23 +135,23 @@ impl Simulation {
                         if !tangent || f.jacobian == nalgebra::Matrix3::zeros() {
                             continue;
                         }
-                        for &(p2, sq) in &ends {
-                            for (b, wb) in c.points[p2].weights() {
+                        for (&(_, sq), wq) in ends.iter().zip(&wts) {
+                            for &(b, wb) in wq {
                                 let ub = self.dofs.nodes[b].u;
                                 let w = sp * sq * wa * wb;
                                 if w == 0.0 {
                                     continue;
                                 }
+                                let blk = self.pair_block(a, b);
+                                let vals = self.solver.values_mut();
                                 for k in 0..3 {
                                     for l in 0..3 {
                                         if ua[k] == NONE || ub[l] == NONE {
                                             continue;
                                         }
-                                        let slot = self
-                                            .solver
-                                            .try_slot(ua[k], ub[l])
-                                            .expect("contact coupling in the pattern");
-                                        self.solver.values_mut()[slot] -= w * f.jacobian[(k, l)];
+                                        let slot = blk[k][l];
+                                        assert!(slot != NONE, "contact coupling in the pattern");
+                                        vals[slot] -= w * f.jacobian[(k, l)];
                                     }
                                 }
                             }
@@ -158,6 +160,29 @@ impl Simulation {
                 }
             }
         }
+    }
+
+    /// The matrix slots of the `(u, θ) × (u, θ)` block of nodes `a` (rows) and `b`
+    /// (columns), `NONE` where an unknown is removed or the coupling is not in the
+    /// pattern (cached until the pattern changes).
+    fn pair_block(&mut self, a: usize, b: usize) -> [[usize; 6]; 6] {
+        if let Some(blk) = self.node_pair_slots.get(&(a, b)) {
+            return *blk;
+        }
+        let (na, nb) = (&self.dofs.nodes[a], &self.dofs.nodes[b]);
+        let rows: [usize; 6] = std::array::from_fn(|k| if k < 3 { na.u[k] } else { na.th[k - 3] });
+        let cols: [usize; 6] = std::array::from_fn(|k| if k < 3 { nb.u[k] } else { nb.th[k - 3] });
+        let blk = std::array::from_fn(|k| {
+            std::array::from_fn(|l| {
+                if rows[k] == NONE || cols[l] == NONE {
+                    NONE
+                } else {
+                    self.solver.try_slot(rows[k], cols[l]).unwrap_or(NONE)
+                }
+            })
+        });
+        self.node_pair_slots.insert((a, b), blk);
+        blk
     }
 
     /// Node rotation increments at `q` (prescribed where removed).
@@ -267,18 +292,20 @@ impl Simulation {
                                 th[b][comp] -= sign * h;
                             }
                         }
+                        let lc = kind * 3 + comp;
                         for (a, df, dm) in diff {
                             let na = self.dofs.nodes[a];
+                            let blk = self.pair_block(a, b);
+                            let vals = self.solver.values_mut();
                             for k in 0..3 {
-                                for (row, v) in [(na.u[k], df[k]), (na.th[k], dm[k])] {
+                                for (row, lr, v) in [(na.u[k], k, df[k]), (na.th[k], 3 + k, dm[k])]
+                                {
                                     if row == NONE {
                                         continue;
                                     }
-                                    let slot = self
-                                        .solver
-                                        .try_slot(row, col)
-                                        .expect("friction coupling in the pattern");
-                                    self.solver.values_mut()[slot] -= v;
+                                    let slot = blk[lr][lc];
+                                    assert!(slot != NONE, "friction coupling in the pattern");
+                                    vals[slot] -= v;
                                 }
                             }
                         }
