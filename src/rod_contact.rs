@@ -117,6 +117,14 @@ impl IntoIterator for Stencil {
     }
 }
 
+impl<'a> IntoIterator for &'a Stencil {
+    type Item = &'a (usize, f64);
+    type IntoIter = std::slice::Iter<'a, (usize, f64)>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
 /// A contact sphere's centre on an element (or a quadrature point of line contact).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SamplePoint {
