@@ -983,6 +983,7 @@ mod tests {
                 points.push(SamplePoint {
                     nodes: [e, e + 1],
                     xi: k as f64 / 3.0,
+                    stencil: Stencil::linear([e, e + 1], k as f64 / 3.0),
                     radius: 0.004,
                     spacing: 0.0035,
                     arc: 0.0105 * (e as f64 + k as f64 / 3.0),
