@@ -31,14 +31,6 @@ def scene(name: str) -> tuple[str, float, str]:
     experiment = registry.load_experiment(name)
     sc = experiment.scenario
     text, output_dt = adapter.scene_toml(sc, experiment.n_elements, experiment.n_frames, name=name)
-    if name == "crossing":
-        # Smooth contact (docs/scenes.md, `[[contact]]`): the frictionless upper rope
-        # settles centred, where on sphere chains or the polyline it slides off-centre.
-        text = text.replace(
-            '[[contact]]\nrods = ["r0", "r1"]\n',
-            '[[contact]]\nrods = ["r0", "r1"]\nmodel = "smooth"\n',
-        )
-        assert 'model = "smooth"' in text, "the crossing's [[contact]] was not found"
     return text, output_dt, scenario_digest(sc)
 
 

@@ -23,7 +23,8 @@ ratio η ω / 2 from the viscous stresses adds to the drag's. Contact stiffness 
 cosserat's default; friction against obstacles uses the elastic-stick law
 (`friction_law = "stick"`, tangential stiffness the contact stiffness), the one
 docs/scenes.md offers for a load that must hold; FRICTION_LAW=regularized in the
-environment writes the regularized law at its default slip speed instead. A driven
+environment writes the regularized law at its default slip speed instead. Frictionless
+contact between two rods (the crossing) uses the smooth contact model. A driven
 sliding end (twist) is a driven `[[clamp]]` with `slide` along a coordinate axis.
 Rods that may turn far per element (self contact, a turned end: the pile, the twist) get
 `curvature_measure = "rational"` (docs/scenes.md); CURVATURE_MEASURE=sine or =rational in
@@ -280,6 +281,11 @@ def scene_toml(
         mu = max(sc.rods[i].friction, sc.rods[j].friction)
         rods = f'["r{i}"]' if i == j else f'["r{i}", "r{j}"]'
         out += ["[[contact]]", f"rods = {rods}"]
+        if i != j and mu == 0:
+            # Frictionless contact between two rods rides on the smooth contact curve
+            # (docs/scenes.md): on sphere chains or the polyline a sliding rope settles
+            # off-centre next to a node.
+            out.append('model = "smooth"')
         if mu > 0:
             out.append(f"friction = {mu!r}")
         out.append("")
