@@ -71,8 +71,13 @@ const T_F: u32 = 48u;     // 18: director forces f[2..8] (stress + inertia)
 const T_BT: u32 = 66u;    // 72: B̃_½ columns of nodes 0, 1 (36 n + 6 k + 3 g + c)
 const T_DB: u32 = 138u;   // 72: D B̃_{n+1} columns of nodes 0, 1 (same order)
 // ---- advance pass → record pass (binding 5) ----
-const T_ADV: u32 = 48u;   // 9: per element: kinetic, stored energy, L (3), J (3), dissipation
-const T_REC: u32 = 57u;   // 9: per member slot (index = member slot): the sums of T_ADV
+const T_ADV: u32 = 48u;   // 12: per element: kinetic, stored energy, L (3), J (3), dissipation,
+                          // the two acceleration-norm sums, the turn beyond MAX_TURN_COS
+const T_REC: u32 = 60u;   // 12: per member slot (index = member slot): the sums of T_ADV
+const N_ADV: u32 = 12u;
+// cos of the largest turn between an element's end triads a step may produce (twin of
+// `MAX_ELEMENT_TURN` in src/integrator/simulation/accept.rs: cos 2).
+const MAX_TURN_COS: Real = -0.4161468365471424;
 
 struct Params {
     n: u32,
@@ -84,7 +89,10 @@ struct Params {
     n_tan: u32,
     // Element slots per member slot (the record pass).
     per_member: u32,
-    pad0: u32,
+    // 1: the advance pass writes the records only, not the state (the state at n stays
+    // until the host has read the step's record), and the record pass sums every element
+    // slot of a member (the advance cleared the fields of the unlisted ones).
+    dry: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -1009,8 +1017,8 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if prm.mode == 0u && ld_i(I_ACTIVE) != 2.0 && c_frozen != c.s[3] {
         kin = kinematics(st, x, c_frozen, dt);
     }
-    // (Everything below reads `kin`, not the state: in place is safe.)
-    st_next(kin);
+    // (Everything below reads `kin` and `st`, not the state: in place is safe.)
+    if prm.dry == 0u { st_next(kin); }
     // Invariants' element terms at n+1 (two-point rule for K, L, J; one-point for V).
     var kinetic: Real = 0.0;
     var lm = V3(0.0, 0.0, 0.0);
@@ -1044,6 +1052,33 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     st_t3(T_ADV + 2u, lm);
     st_t3(T_ADV + 5u, jm);
     st_t(T_ADV + 8u, diss);
+    // Acceleration norms' sums (twin of integrator::invariants::acceleration_norms).
+    var at: Real = 0.0;
+    var ar: Real = 0.0;
+    let acc0 = (kin.v10 - st.v0) / dt;
+    let acc1 = (kin.v11 - st.v1) / dt;
+    for (var l = 0u; l < 2u; l++) {
+        for (var m = 0u; m < 2u; m++) {
+            let w = h * m2(l, m);
+            var al = acc0;
+            if l == 1u { al = acc1; }
+            var am = acc0;
+            if m == 1u { am = acc1; }
+            at += w * dot(al, am);
+            for (var a = 0u; a < 2u; a++) {
+                let dl = (kin.vd1[2u * l + a] - st.vd[2u * l + a]) / dt;
+                let dm = (kin.vd1[2u * m + a] - st.vd[2u * m + a]) / dt;
+                ar += w * dot(dl, dm);
+            }
+        }
+    }
+    st_t(T_ADV + 9u, at);
+    st_t(T_ADV + 10u, ar);
+    // How far the end triads' relative turn passes the limit (cos δ below MAX_TURN_COS).
+    let d0 = kin.cfg1.d0;
+    let d1 = kin.cfg1.d1;
+    let cos_turn = (dot(d0[0], d1[0]) + dot(d0[1], d1[1]) + dot(d0[2], d1[2]) - 1.0) / 2.0;
+    st_t(T_ADV + 11u, max(MAX_TURN_COS - cos_turn, 0.0));
 }
 
 @compute @workgroup_size(64)
@@ -1051,11 +1086,11 @@ fn record_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let m = gid.x;
     let per = prm.per_member;
     if per == 0u || m >= prm.n / per { return; }
-    for (var k = 0u; k < 9u; k++) {
+    for (var k = 0u; k < N_ADV; k++) {
         var sum: Real = 0.0;
         for (var e = 0u; e < per; e++) {
             let i = m * per + e;
-            if iter[I_ACTIVE * prm.n + i] != 0.0 { sum += tmid[(T_ADV + k) * prm.n + i]; }
+            if prm.dry != 0u || iter[I_ACTIVE * prm.n + i] != 0.0 { sum += tmid[(T_ADV + k) * prm.n + i]; }
         }
         tmid[(T_REC + k) * prm.n + m] = sum;
     }

@@ -18,7 +18,8 @@ use crate::gpu::kernel::{KernelTimers, MemberPack, SCATTER_GAP};
 use crate::gpu::layout::{AsmLayout, A_NODE};
 use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
 use crate::integrator::evaluate::{
-    AssembledSystem, DeviceSolution, ElementBackend, EvalPort, EvalRequest, ResidentAnswer,
+    AssembledSystem, DeviceSolution, DeviceStepAnswer, ElementBackend, EvalPort, EvalRequest, Pull,
+    Pulled, ResidentAnswer,
 };
 use crate::integrator::Simulation;
 use crate::linsolve::batched::{BatchLayout, NONFINITE, OK};
@@ -72,6 +73,20 @@ pub struct ServeTimers {
     /// `--solve whole`: submissions of the advance pass (one ahead of a dispatch that
     /// starts the next steps of advanced members; no wait).
     pub advance_submits: u64,
+    /// `--solve whole`: member-steps run entirely on the device (their records read
+    /// back; the host's step runs only for those handed back).
+    pub device_steps: u64,
+    /// Of [`Self::device_steps`]: handed back to the host's step (a test of the host's
+    /// step would not accept the device's iterate as it stands).
+    pub device_step_handoffs: u64,
+    /// Bytes read back for [`Self::device_steps`] (iteration history, residual work and
+    /// records).
+    pub device_step_bytes_down: u64,
+    /// `--solve whole`: members' states handed back to the host (a failed device step, or
+    /// the member's end), each one read-back that waits, and their bytes.
+    pub state_pulls: u64,
+    /// Bytes read back for [`Self::state_pulls`].
+    pub pull_bytes_down: u64,
 }
 
 /// `--solve resident`: a member's Newton solve as its multi-iteration submission ran it
@@ -152,6 +167,50 @@ pub struct GpuEvaluator {
     advance_ok: Vec<bool>,
     /// Slots whose requests of the dispatch being packed asked for the advance.
     to_advance: Vec<usize>,
+    /// Per slot: its member's steps run entirely on the device
+    /// ([`crate::integrator::evaluate::DeviceStep`]).
+    fast: Vec<bool>,
+    /// The node increments as they were at the start of the last dispatch with device
+    /// steps (a failed device step's predictor, for the host's step).
+    saved_increments: Option<wgpu::Buffer>,
+}
+
+/// `--solve whole`: whether EM members the device step covers run their steps entirely on
+/// the device (default on; `bench` turns it off for its side-by-side "before" run).
+static DEVICE_STEPS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
+
+/// Turns whole steps on the device on or off for evaluators created from now on (process
+/// wide; `bench --solve whole` compares both in one process).
+pub fn set_device_steps(on: bool) {
+    DEVICE_STEPS.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Newton iterations a whole step on the device runs at most in its submission (a step
+/// that needs more goes to the host's step).
+pub const DEVICE_STEP_K: usize = 8;
+
+/// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
+/// solve with several iterations per submission): EM (no dissipation to evaluate between
+/// rounds), no loads (nodal, gravity, line), no moving or sliding supports, links,
+/// contact, damping or control commands.
+pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
+    let m = sim.model();
+    if sim.params().scheme != crate::integrator::Scheme::Em {
+        return Some("scheme other than EM");
+    }
+    if !m.loads.is_empty() || m.gravity != crate::model::Vec3::zeros() || !m.line_loads.is_empty() {
+        return Some("loads");
+    }
+    if !m.drives.is_empty() || !m.slides.is_empty() || sim.has_commands() {
+        return Some("moving supports");
+    }
+    if !m.links.is_empty() || !m.obstacles.is_empty() || !m.rod_contacts.is_empty() {
+        return Some("links or contact");
+    }
+    if m.has_material_damping() || m.has_drag() || m.planar.is_some() {
+        return Some("damping or a planar model");
+    }
+    None
 }
 
 /// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
@@ -254,6 +313,8 @@ impl GpuEvaluator {
             whole: false,
             advance_ok: vec![false; slots],
             to_advance: Vec::new(),
+            fast: vec![false; slots],
+            saved_increments: None,
         })
     }
 
@@ -417,6 +478,10 @@ impl GpuEvaluator {
             && self.multi_tol[slot].is_some()
             && sim.params().scheme == crate::integrator::Scheme::Em;
         sim.set_device_advance(self.advance_ok[slot]);
+        self.fast[slot] = self.advance_ok[slot]
+            && DEVICE_STEPS.load(std::sync::atomic::Ordering::Relaxed)
+            && device_step_refusal(sim).is_none();
+        sim.set_device_steps(self.fast[slot]);
         self.assembler.set_device_owned(slot, on && self.resident);
         on
     }
@@ -436,6 +501,7 @@ impl GpuEvaluator {
         self.multi[slot] = None;
         self.multi_tol[slot] = None;
         self.advance_ok[slot] = false;
+        self.fast[slot] = false;
         self.deactivate(slot);
         if self.device[slot] {
             // The device changed the slot's increments: the next member uploads all.
@@ -486,6 +552,17 @@ impl GpuEvaluator {
             .map(|(slot, req)| {
                 let resident = req.resident.filter(|_| self.device[*slot]);
                 if resident.is_some_and(|r| r.fetch) {
+                    return Ok(());
+                }
+                if req.device_step.is_some() {
+                    if !self.fast[*slot] {
+                        return Err(format!(
+                            "GPU slot {slot}: a step on the device asked of a member it does not cover"
+                        ));
+                    }
+                    if req.advance {
+                        self.to_advance.push(*slot);
+                    }
                     return Ok(());
                 }
                 self.fits(*slot, req)?;
@@ -638,6 +715,12 @@ impl GpuEvaluator {
         let mut with_iterate: Vec<usize> = Vec::new();
         // `--solve resident`: Newton solves starting here that run several iterations.
         let mut multi: Vec<usize> = Vec::new();
+        // `--solve whole`: whole steps on the device.
+        let mut fast: Vec<usize> = Vec::new();
+        let fast_k = self
+            .multi_k
+            .max(DEVICE_STEP_K)
+            .min(crate::gpu::blocktri::RESIDENT_MAX_K);
         // Their Newton tests (tolerance, quadratic convergence).
         let mut multi_test: Vec<(f64, bool)> = vec![(0.0, false); self.sizes.len()];
         let multi_k = self.multi_k;
@@ -649,6 +732,32 @@ impl GpuEvaluator {
                 continue;
             }
             match packed {
+                Ok(()) if req.device_step.is_some() => {
+                    let (Some(solver), Some(ds)) = (&mut self.solver, req.device_step) else {
+                        answers.push((slot, Err("no device solver for a device step".into())));
+                        continue;
+                    };
+                    solver.set_host_scale(slot, ds.scale);
+                    solver.set_spec(
+                        slot,
+                        SpecParams {
+                            tol: self.multi_tol[slot].unwrap_or(0.0),
+                            quadratic: true,
+                            min_corrections: crate::integrator::scaling::MIN_CORRECTIONS,
+                            k: fast_k,
+                        },
+                    );
+                    ops.push((slot, OP_FACTOR | OP_SOLVE | OP_UPDATE | OP_SPEC));
+                    fast.push(slot);
+                    let n = self.sizes[slot].0 as u64;
+                    let st = &mut self.serve_timers;
+                    st.requests += 1;
+                    st.tangent_requests += 1;
+                    st.element_evals += n;
+                    st.element_tangent_evals += n;
+                    st.device_steps += 1;
+                    pending.push((slot, true));
+                }
                 Ok(()) => {
                     if let (Some(_), Some(solver), true) =
                         (&req.device_extra, &mut self.solver, self.device[slot])
@@ -731,14 +840,41 @@ impl GpuEvaluator {
         }
         let device = &self.device;
         let mut resident_slot = vec![false; self.sizes.len()];
-        for &m in iterating.iter().chain(&multi) {
+        for &m in iterating.iter().chain(&multi).chain(&fast) {
             resident_slot[m] = true;
         }
         let mut multi_slot = vec![false; self.sizes.len()];
-        for &m in &multi {
+        for &m in multi.iter().chain(&fast) {
             multi_slot[m] = true;
         }
-        let repeats = if multi.is_empty() { 1 } else { multi_k };
+        let repeats = if !fast.is_empty() {
+            multi_k.max(fast_k)
+        } else if multi.is_empty() {
+            1
+        } else {
+            multi_k
+        };
+        // The node increments at the start of a dispatch with device steps: a failed
+        // step's predictor, handed to the host's step with the state.
+        let save = if fast.is_empty() {
+            None
+        } else {
+            let src = self.assembler.increments_buffer().clone();
+            let dst = self
+                .saved_increments
+                .get_or_insert_with(|| {
+                    self.kernel.device().create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("saved increments"),
+                        size: src.size(),
+                        usage: wgpu::BufferUsages::STORAGE
+                            | wgpu::BufferUsages::COPY_DST
+                            | wgpu::BufferUsages::COPY_SRC,
+                        mapped_at_creation: false,
+                    })
+                })
+                .clone();
+            Some((src, dst))
+        };
         self.serve_timers.dispatches += 1;
         if !multi.is_empty() {
             self.serve_timers.multi_dispatches += 1;
@@ -759,6 +895,9 @@ impl GpuEvaluator {
                         &|m| !device[m],
                         &|m| !is_resident(m),
                         &mut |enc| {
+                            if let Some((src, dst)) = &save {
+                                enc.copy_buffer_to_buffer(src, 0, dst, 0, src.size());
+                            }
                             let mut s = solver.borrow_mut();
                             s.encode_restore(enc, &ops);
                             if repeats > 1 {
@@ -783,6 +922,29 @@ impl GpuEvaluator {
         };
         // Device solves: statuses and corrections of the per-iteration members, reports of
         // the resident ones, iterates of the fetching ones.
+        // `--solve whole`: the records of the device steps' last iterates (states kept).
+        let fast_runs = crate::gpu::kernel::index_runs(fast.iter().copied());
+        let mut extra = Vec::new();
+        if res.is_ok() && !fast.is_empty() {
+            let per = self.per_slot;
+            let list: Vec<u32> = fast
+                .iter()
+                .flat_map(|&m| (0..self.sizes[m].0).map(move |e| (m * per + e) as u32))
+                .collect();
+            self.kernel.submit_records(&list, per);
+            let cap = self.kernel.capacity() as u64;
+            let tmid = self.kernel.tmid_buffer().clone();
+            for &(lo, hi) in &fast_runs {
+                for k in 0..crate::gpu::layout::N_ADV as u64 {
+                    let f = crate::gpu::layout::T_REC as u64 + k;
+                    extra.push((
+                        tmid.clone(),
+                        8 * (f * cap + lo as u64),
+                        8 * (hi - lo) as u64,
+                    ));
+                }
+            }
+        }
         let mut solved = None;
         if let (Ok(()), Some(solver)) = (&res, &mut self.solver) {
             let per_iteration: Vec<usize> = ops
@@ -800,7 +962,9 @@ impl GpuEvaluator {
                     .chain(&multi)
                     .copied()
                     .collect(),
-                hist: multi.clone(),
+                hist: multi.iter().chain(&fast).copied().collect(),
+                rwork: fast.clone(),
+                extra,
             };
             let t0 = Instant::now();
             let npn = self.assembler.layout().nodes_per_slot as u64;
@@ -811,6 +975,9 @@ impl GpuEvaluator {
             st.iterates_sent += with_iterate.len() as u64;
             st.fetch_bytes_down += (72 * npn + 8) * (what.fetch.len() - multi.len()) as u64;
             st.multi_bytes_down += (72 * npn + 8 + 8 + 16 * multi_k as u64) * multi.len() as u64;
+            st.device_step_bytes_down +=
+                (8 + 16 * fast_k as u64 + 8 + 8 * crate::gpu::layout::N_ADV as u64)
+                    * fast.len() as u64;
             match solver.read_back(&what) {
                 Ok(s) => solved = Some(s),
                 Err(e) => res = Err(e),
@@ -822,7 +989,7 @@ impl GpuEvaluator {
             // When every evaluated member is device-resident the assembly read nothing
             // back, so this read is where the wait for the passes happens: kernel time.
             let waited = t0.elapsed().as_secs_f64();
-            if !pending.is_empty() && iterating.len() + multi.len() == pending.len() {
+            if !pending.is_empty() && iterating.len() + multi.len() + fast.len() == pending.len() {
                 self.kernel.timers.kernel_s += waited;
             } else {
                 self.kernel.timers.readback_s += waited;
@@ -916,6 +1083,53 @@ impl GpuEvaluator {
         // Multi-iteration runs: each member's first iteration is answered now, the
         // others as its Newton loop asks for them.
         let hist_of: &[(usize, Vec<Report>)] = solved.as_ref().map_or(&[], |s| &s.hist);
+        if !fast.is_empty() {
+            let mut rec_of: Vec<Option<[f64; crate::gpu::layout::N_ADV]>> = vec![None; sizes.len()];
+            let mut rw_of: Vec<f64> = vec![f64::NAN; sizes.len()];
+            if let Some(s) = &solved {
+                let mut at = 0usize;
+                for &(lo, hi) in &fast_runs {
+                    let n = hi - lo;
+                    for (i, m) in (lo..hi).enumerate() {
+                        rec_of[m] = s
+                            .extra
+                            .get(at..at + crate::gpu::layout::N_ADV * n)
+                            .map(|v| std::array::from_fn(|k| v[k * n + i]));
+                    }
+                    at += crate::gpu::layout::N_ADV * n;
+                }
+                for &(m, w) in &s.rwork {
+                    rw_of[m] = w;
+                }
+            }
+            let (rec_of, rw_of) = (&rec_of, &rw_of);
+            answers.par_extend(fast.par_iter().map(|&slot| {
+                let out = match (&res, hist_of.iter().find(|h| h.0 == slot), rec_of[slot]) {
+                    (Err(e), _, _) => Err(e.to_string()),
+                    (Ok(()), Some((_, reports)), Some(rec)) => Ok(AssembledSystem {
+                        step: Some(DeviceStepAnswer {
+                            iterations: reports
+                                .iter()
+                                .map(|r| {
+                                    let ok = device_outcome(r.status, r.berr, &[], 0).is_ok();
+                                    (r.residual, ok)
+                                })
+                                .collect(),
+                            residual_work: rw_of[slot],
+                            record: crate::gpu::kernel::MemberRecord::from_fields(&rec),
+                        }),
+                        ..AssembledSystem::default()
+                    }),
+                    _ => Err("the device did not report the step".into()),
+                };
+                (slot, out)
+            }));
+            self.serve_timers.multi_iterations += hist_of
+                .iter()
+                .filter(|h| fast.contains(&h.0))
+                .map(|h| h.1.len() as u64)
+                .sum::<u64>();
+        }
         let runs: Vec<(usize, Result<MultiRun, String>)> = multi
             .par_iter()
             .map(|&slot| {
@@ -964,6 +1178,43 @@ impl GpuEvaluator {
         answers
     }
 
+    /// `--solve whole`: `slot`'s member's element states on the device and its node
+    /// increments (the saved ones: the predictor of its last device step), in one read.
+    fn pull(&mut self, slot: usize, pull: Pull) -> Result<Pulled, GpuError> {
+        let (n_elems, n_nodes) = self.sizes[slot];
+        let lo = slot * self.per_slot;
+        let npn = self.assembler.layout().nodes_per_slot as u64;
+        let nn = self.sizes.len() as u64 * npn;
+        let inc = match (&self.saved_increments, pull.saved) {
+            (Some(b), true) => b.clone(),
+            (None, true) => {
+                return Err(GpuError::Kernel("no saved increments to hand back".into()))
+            }
+            _ => self.assembler.increments_buffer().clone(),
+        };
+        let mut copies = self.kernel.state_copies(lo, lo + n_elems);
+        for k in 0..9u64 {
+            copies.push((
+                inc.clone(),
+                8 * (k * nn + slot as u64 * npn),
+                8 * n_nodes as u64,
+            ));
+        }
+        let bytes: u64 = copies.iter().map(|c| c.2).sum();
+        let v = self.kernel.read_f64(&copies)?;
+        self.serve_timers.state_pulls += 1;
+        self.serve_timers.device_step_handoffs += u64::from(pull.saved);
+        self.serve_timers.pull_bytes_down += bytes;
+        self.serve_timers.dispatches += 1;
+        let (sv, iv) = v.split_at(crate::gpu::layout::NS * n_elems);
+        Ok(Pulled {
+            states: ElementKernel::states_from(sv, n_elems),
+            increments: (0..n_nodes)
+                .map(|j| std::array::from_fn(|k| iv[k * n_nodes + j]))
+                .collect(),
+        })
+    }
+
     /// Serves every request posted by the attached members in one dispatch and answers
     /// each. Returns the number of requests served (0: nobody was waiting).
     ///
@@ -980,6 +1231,17 @@ impl GpuEvaluator {
         let mut n = reqs.len();
         let mut answered = 0usize;
         for (slot, req) in reqs {
+            if let Some(pull) = req.pull {
+                answered += 1;
+                let a = self.pull(slot, pull).map_err(|e| e.to_string());
+                if let Some(p) = &self.ports[slot] {
+                    p.respond(a.map(|pulled| AssembledSystem {
+                        pulled: Some(pulled),
+                        ..AssembledSystem::default()
+                    }));
+                }
+                continue;
+            }
             match self.answer_from_run(slot, &req) {
                 Some(a) => {
                     answered += 1;

@@ -303,11 +303,13 @@ async fn run_member(index: usize, mut sim: Simulation, opts: BatchOptions) -> Me
     })
     .await
     .unwrap_or_else(|e| match e {});
+    // `--solve whole`: the state comes back from the device for the result only.
+    let synced = !opts.keep_state || sim.sync_device_state().await.is_ok();
     MemberResult {
         index,
         outcome,
         history,
-        state: opts.keep_state.then(|| sim.state().clone()),
+        state: (opts.keep_state && synced).then(|| sim.state().clone()),
     }
 }
 

@@ -210,7 +210,10 @@ impl Assembler {
         let node_x = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("node increments"),
             size: (A_NODE * n_nodes) as u64 * w,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            // (Copied out: `--solve whole` keeps a step's predictor and hands it back.)
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
         let gather_params = device.create_buffer(&wgpu::BufferDescriptor {
@@ -613,6 +616,8 @@ impl Assembler {
             scale,
             solution: None,
             resident: None,
+            step: None,
+            pulled: None,
         }
     }
 }

@@ -118,6 +118,11 @@ pub struct Solved {
     /// Per member slot asked for ([`Readback::hist`]): the [`Report`]s of the iterations
     /// of its multi-iteration submission, in order.
     pub hist: Vec<(usize, Vec<Report>)>,
+    /// Per member slot asked for ([`Readback::rwork`]): `Σ |R_i q_i|` of its last
+    /// evaluated iterate.
+    pub rwork: Vec<(usize, f64)>,
+    /// The scalars of [`Readback::extra`], in order.
+    pub extra: Vec<f64>,
 }
 
 impl Solved {
@@ -149,6 +154,12 @@ pub struct Readback {
     pub fetch: Vec<usize>,
     /// Iteration histories of these slots ([`Solved::hist`]; 8 + 16 K bytes each).
     pub hist: Vec<usize>,
+    /// Residual work of the last evaluated iterate of these slots ([`Solved::rwork`]; 8
+    /// bytes each).
+    pub rwork: Vec<usize>,
+    /// Further ranges (buffer, byte offset, byte length) of other f64 buffers read in the
+    /// same copy and map ([`Solved::extra`]).
+    pub extra: Vec<(wgpu::Buffer, u64, u64)>,
 }
 
 /// A batch of `members` block-tridiagonal systems on the device.
@@ -397,7 +408,8 @@ impl BlockTriSolver {
         let kiter = kernel.map_or(&own_iter, |k| k.0);
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("blocktri staging"),
-            size: 16 * xn + 36 * members as u64 + (8 * HSTRIDE * members) as u64,
+            // (+ 128 per member: residual works and records of `--solve whole` steps.)
+            size: 16 * xn + 164 * members as u64 + (8 * HSTRIDE * members) as u64,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -772,6 +784,13 @@ impl BlockTriSolver {
         for &(lo, hi) in &h_runs {
             copies.push((&self.spec[0], hb * lo as u64, hb * (hi - lo) as u64));
         }
+        let w_runs = index_runs(what.rwork.iter().copied());
+        for &(lo, hi) in &w_runs {
+            copies.push((&self.resident[3], 8 * lo as u64, 8 * (hi - lo) as u64));
+        }
+        for (b, off, len) in &what.extra {
+            copies.push((b, *off, *len));
+        }
         let mut out = Solved::default();
         let down: u64 = copies.iter().map(|c| c.2).sum();
         self.last_bytes_down = down;
@@ -846,6 +865,14 @@ impl BlockTriSolver {
                             .collect();
                         (m, reports)
                     }));
+            }
+            for &(lo, hi) in &w_runs {
+                let v: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * (hi - lo)));
+                out.rwork.extend((lo..hi).zip(v));
+            }
+            for (_, _, len) in &what.extra {
+                let v: Vec<f64> = bytemuck::pod_collect_to_vec(take(*len as usize));
+                out.extra.extend(v);
             }
         }
         self.staging.unmap();

@@ -74,7 +74,9 @@ struct Params {
     mode: u32,
     n_tan: u32,
     per_member: u32,
-    pad: [u32; 3],
+    /// 1: the advance pass writes records only (`encode_advance`'s `dry`).
+    dry: u32,
+    pad: [u32; 2],
 }
 
 /// Which element slots the tangent pass evaluates.
@@ -557,7 +559,8 @@ impl ElementKernel {
             },
             n_tan: n_tan as u32,
             per_member: 0,
-            pad: [0; 3],
+            dry: 0,
+            pad: [0; 2],
         };
         self.timers.tangent_elements += n_tan as u64;
         self.queue
@@ -593,7 +596,9 @@ impl ElementKernel {
     ///
     /// In a command buffer of its own, submitted ahead of the next dispatch's (the passes'
     /// parameters and slot list are written at submission); `flush`: with the uploads
-    /// queued so far (else they go with the next dispatch, after this advance).
+    /// queued so far (else they go with the next dispatch, after this advance). `dry`: the
+    /// records only, the state at `n` stays (the record pass then sums every element slot
+    /// of a member: the fields of the unlisted ones are cleared first).
     pub(crate) fn encode_advance(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
@@ -601,10 +606,20 @@ impl ElementKernel {
         slots: &[u32],
         per_member: usize,
         flush: bool,
+        dry: bool,
     ) {
         let t0 = Instant::now();
         if flush {
             self.flush_uploads(enc);
+        }
+        if dry {
+            let w = Self::width(self.precision) as u64;
+            let cap = self.cap as u64;
+            enc.clear_buffer(
+                &self.tmid,
+                T_ADV as u64 * cap * w,
+                Some(N_ADV as u64 * cap * w),
+            );
         }
         if !slots.is_empty() && slots != self.tan_uploaded {
             self.queue
@@ -621,7 +636,8 @@ impl ElementKernel {
             },
             n_tan: slots.len() as u32,
             per_member: per_member as u32,
-            pad: [0; 3],
+            dry: u32::from(dry),
+            pad: [0; 2],
         };
         self.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
@@ -639,8 +655,10 @@ impl ElementKernel {
             pass.dispatch_workgroups(members.div_ceil(64).max(1) as u32, 1, 1);
         }
         drop(pass);
-        for &i in slots {
-            self.host[1][i as usize * NS] = f64::NAN;
+        if !dry {
+            for &i in slots {
+                self.host[1][i as usize * NS] = f64::NAN;
+            }
         }
         self.timers.upload_s += t0.elapsed().as_secs_f64();
     }
@@ -657,8 +675,101 @@ impl ElementKernel {
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        self.encode_advance(&mut enc, KernelMode::Frozen, slots, 0, false);
+        self.encode_advance(&mut enc, KernelMode::Frozen, slots, 0, false, false);
         self.queue.submit(Some(enc.finish()));
+    }
+
+    /// The records of a step whose increments the element slots `slots` hold (frozen
+    /// scalars), summed per member slot of `per_member` element slots, in a submission of
+    /// its own (after the dispatch that solved the step, before its read-back); the states
+    /// stay at `n` ([`Self::encode_advance`] `dry`).
+    pub(crate) fn submit_records(&mut self, slots: &[u32], per_member: usize) {
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.encode_advance(&mut enc, KernelMode::Frozen, slots, per_member, false, true);
+        self.queue.submit(Some(enc.finish()));
+    }
+
+    /// The intermediate buffer (the records: [`T_REC`]).
+    pub(crate) fn tmid_buffer(&self) -> &wgpu::Buffer {
+        &self.tmid
+    }
+
+    /// Reads `copies` (buffer, byte offset, byte length) of f64 storage buffers in one
+    /// submission and wait, through a staging buffer made for it (rare reads: a member's
+    /// state handed back to the host). Counts a dispatch and the bytes read.
+    pub(crate) fn read_f64(
+        &mut self,
+        copies: &[(wgpu::Buffer, u64, u64)],
+    ) -> Result<Vec<f64>, GpuError> {
+        let down: u64 = copies.iter().map(|c| c.2).sum();
+        if down == 0 {
+            return Ok(Vec::new());
+        }
+        let t0 = Instant::now();
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("state pull staging"),
+            size: down,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut at = 0u64;
+        for (src, off, len) in copies {
+            enc.copy_buffer_to_buffer(src, *off, &staging, at, *len);
+            at += len;
+        }
+        self.queue.submit(Some(enc.finish()));
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Kernel(e.to_string()))?
+            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        let out = {
+            let view = staging
+                .get_mapped_range(..)
+                .map_err(|e| GpuError::Kernel(e.to_string()))?;
+            bytemuck::pod_collect_to_vec(&view)
+        };
+        staging.unmap();
+        self.timers.bytes_down += down;
+        self.timers.readback_copies += copies.len() as u64;
+        self.timers.readback_s += t0.elapsed().as_secs_f64();
+        Ok(out)
+    }
+
+    /// The element states of `n` element slots from [`Self::read_f64`]'s output for
+    /// [`Self::state_copies`] of those slots.
+    pub(crate) fn states_from(v: &[f64], n: usize) -> Vec<(ElementState, Vector6<f64>)> {
+        let at = |f: usize, i: usize| v[f * n + i];
+        (0..n).map(|i| element_state(&at, i)).collect()
+    }
+
+    /// The copies of [`Self::read_f64`] that read the states of element slots `lo..hi`.
+    pub(crate) fn state_copies(&self, lo: usize, hi: usize) -> Vec<(wgpu::Buffer, u64, u64)> {
+        let cap = self.cap as u64;
+        (0..NS as u64)
+            .map(|f| {
+                (
+                    self.bufs[1].clone(),
+                    8 * (f * cap + lo as u64),
+                    8 * (hi - lo) as u64,
+                )
+            })
+            .collect()
+    }
+
+    /// The device the kernel runs on.
+    pub(crate) fn device(&self) -> &wgpu::Device {
+        &self.device
     }
 
     /// `encode_advance` of every active slot, submitted, with the new states and
@@ -671,7 +782,7 @@ impl ElementKernel {
             .filter(|&i| self.host[2][i * NI + I_ACTIVE] != 0.0)
             .map(|i| i as u32)
             .collect();
-        self.encode_advance(&mut enc, mode, &slots, per_member, true);
+        self.encode_advance(&mut enc, mode, &slots, per_member, true, false);
         let w = Self::width(self.precision) as u64;
         let cap = self.cap as u64;
         enc.copy_buffer_to_buffer(&self.bufs[1], 0, &self.tmid, 0, NS as u64 * cap * w);
@@ -688,7 +799,7 @@ impl ElementKernel {
         // advance leaves alone) and the records.
         let ranges = [
             (0, NS as u64 * cap * w),
-            (T_REC as u64 * cap * w, 9 * cap * w),
+            (T_REC as u64 * cap * w, N_ADV as u64 * cap * w),
         ];
         let mut out = vec![0.0; NT * self.cap];
         let rb = Readback {
@@ -702,37 +813,11 @@ impl ElementKernel {
         let at = |f: usize, i: usize| out[f * self.cap + i];
         let records = (0..members)
             .map(|m| {
-                let r = |k: usize| at(T_REC + k, m);
-                MemberRecord {
-                    kinetic: r(0),
-                    potential: r(1),
-                    l: crate::model::Vec3::new(r(2), r(3), r(4)),
-                    j: crate::model::Vec3::new(r(5), r(6), r(7)),
-                    dissipation: r(8),
-                }
+                let r: Vec<f64> = (0..N_ADV).map(|k| at(T_REC + k, m)).collect();
+                MemberRecord::from_fields(&r)
             })
             .collect();
-        let states = (0..self.cap)
-            .map(|i| {
-                let v = |f: usize| crate::model::Vec3::new(at(f, i), at(f + 1, i), at(f + 2, i));
-                let d = |l: usize| {
-                    crate::model::Mat3::from_columns(&[
-                        v(S_D + 9 * l),
-                        v(S_D + 9 * l + 3),
-                        v(S_D + 9 * l + 6),
-                    ])
-                };
-                let st = ElementState {
-                    cfg: crate::element::strain::Config {
-                        r: [v(S_R), v(S_R + 3)],
-                        d: [d(0), d(1)],
-                    },
-                    v: [v(S_V), v(S_V + 3)],
-                    vd: [[v(S_VD), v(S_VD + 3)], [v(S_VD + 6), v(S_VD + 9)]],
-                };
-                (st, Vector6::from_fn(|k, _| at(S_EPS + k, i)))
-            })
-            .collect();
+        let states = (0..self.cap).map(|i| element_state(&at, i)).collect();
         Ok(Advanced { states, records })
     }
 
@@ -824,6 +909,44 @@ pub struct MemberRecord {
     pub j: crate::model::Vec3,
     /// Predicted dissipation of the step.
     pub dissipation: f64,
+    /// The sums under the square roots of the step's acceleration norms (translational,
+    /// rotational: [`crate::integrator::invariants::acceleration_norms`]).
+    pub acc_sums: [f64; 2],
+    /// Sum over the elements of how far the cosine of the turn between their end triads
+    /// lies below the limit's (positive: some element turned too far).
+    pub turn: f64,
+}
+
+impl MemberRecord {
+    /// The record from its [`N_ADV`] fields.
+    pub fn from_fields(r: &[f64]) -> Self {
+        MemberRecord {
+            kinetic: r[0],
+            potential: r[1],
+            l: crate::model::Vec3::new(r[2], r[3], r[4]),
+            j: crate::model::Vec3::new(r[5], r[6], r[7]),
+            dissipation: r[8],
+            acc_sums: [r[9], r[10]],
+            turn: r[11],
+        }
+    }
+}
+
+/// Element slot `i`'s state and strains from a field-major reader `at(field, slot)`.
+fn element_state(at: &dyn Fn(usize, usize) -> f64, i: usize) -> (ElementState, Vector6<f64>) {
+    let v = |f: usize| crate::model::Vec3::new(at(f, i), at(f + 1, i), at(f + 2, i));
+    let d = |l: usize| {
+        crate::model::Mat3::from_columns(&[v(S_D + 9 * l), v(S_D + 9 * l + 3), v(S_D + 9 * l + 6)])
+    };
+    let st = ElementState {
+        cfg: crate::element::strain::Config {
+            r: [v(S_R), v(S_R + 3)],
+            d: [d(0), d(1)],
+        },
+        v: [v(S_V), v(S_V + 3)],
+        vd: [[v(S_VD), v(S_VD + 3)], [v(S_VD + 6), v(S_VD + 9)]],
+    };
+    (st, Vector6::from_fn(|k, _| at(S_EPS + k, i)))
 }
 
 /// What [`ElementKernel::advance`] read back.

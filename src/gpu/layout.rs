@@ -78,12 +78,16 @@ pub const T_BT: usize = 66;
 /// `D B̃_{n+1}` columns of nodes 0 and 1 (72, same order).
 pub const T_DB: usize = 138;
 /// Advance pass → record pass: per element slot its terms of the invariants at `n+1` and
-/// its dissipation (9: kinetic, stored energy, `L` (3), `J` (3), dissipation; the first
-/// [`NS`] fields hold its state at `n+1`, in the state buffer's layout).
+/// its dissipation ([`N_ADV`]: kinetic, stored energy, `L` (3), `J` (3), dissipation, the
+/// sums of the translational and rotational acceleration norms' squares, and how far the
+/// cosine of its end triads' turn lies below the limit's; the first [`NS`] fields hold its
+/// state at `n+1`, in the state buffer's layout).
 pub const T_ADV: usize = 48;
+/// Fields of [`T_ADV`] and [`T_REC`].
+pub const N_ADV: usize = 12;
 /// Record pass: per member slot (index = member slot) the sums of [`T_ADV`] over its
-/// element slots (9, same order).
-pub const T_REC: usize = 57;
+/// element slots ([`N_ADV`], same order).
+pub const T_REC: usize = 60;
 /// Number of intermediate fields.
 pub const NT: usize = 210;
 

@@ -65,6 +65,52 @@ pub struct EvalRequest {
     /// its own correction after the solve and answers the relative residual only
     /// ([`ResidentAnswer`]). `None`: the host keeps the increment.
     pub resident: Option<Resident>,
+    /// `--solve whole`, a member's whole step on the device ([`DeviceStep`]); the answer
+    /// is [`AssembledSystem::step`]. With `advance` set (the device advances its state by
+    /// the step accepted last first); nothing else of the request is read.
+    pub device_step: Option<DeviceStep>,
+    /// `--solve whole`: no evaluation; hand the member's state on the device back
+    /// ([`AssembledSystem::pulled`]).
+    pub pull: Option<Pull>,
+}
+
+/// A whole step on the device ([`EvalRequest::device_step`]): Newton from the device's
+/// own iterate (the last step's increment: the predictor) with the member's Newton test,
+/// then the records of the iterate it stopped at, the state at `n` kept.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DeviceStep {
+    /// The row scales (u, θ, g) of the host's nodal terms (as in [`Resident::scale`]).
+    pub scale: [f64; 3],
+}
+
+/// Which increments a state hand-back brings ([`EvalRequest::pull`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Pull {
+    /// The increments the device held at the start of its last step (that step's
+    /// predictor; its Newton solve failed) instead of its current ones (the last accepted
+    /// step's).
+    pub saved: bool,
+}
+
+/// The answer to a [`DeviceStep`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DeviceStepAnswer {
+    /// Per Newton iteration the device ran: the relative residual of the evaluated
+    /// iterate and whether its solve succeeded.
+    pub iterations: Vec<(f64, bool)>,
+    /// `Σ |R_i q_i|` at the last evaluated iterate (the energy check's residual work).
+    pub residual_work: f64,
+    /// The records of the step to that iterate (the state at `n+1` is not formed).
+    pub record: crate::gpu::kernel::MemberRecord,
+}
+
+/// A member's state handed back by the device ([`EvalRequest::pull`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Pulled {
+    /// Per element: its state and raw strains at the device's level.
+    pub states: Vec<(ElementState, Vector6<f64>)>,
+    /// Per node: the increments ([`Pull::saved`]), node-local order.
+    pub increments: Vec<[f64; 9]>,
 }
 
 /// A device-resident Newton request ([`EvalRequest::resident`]).
@@ -142,6 +188,10 @@ pub struct AssembledSystem {
     /// The answer to a device-resident request ([`EvalRequest::resident`]); then the
     /// residual rows and blocks are left empty.
     pub resident: Option<ResidentAnswer>,
+    /// The answer to a [`DeviceStep`].
+    pub step: Option<DeviceStepAnswer>,
+    /// The answer to a [`Pull`].
+    pub pulled: Option<Pulled>,
 }
 
 /// Evaluates all elements of one simulation at once (frozen scalars), synchronously.

@@ -599,6 +599,8 @@ impl Simulation {
             consistent: self.inexact_tangent,
             device_extra: None,
             resident: None,
+            device_step: None,
+            pull: None,
         }
     }
 

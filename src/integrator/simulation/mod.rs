@@ -22,6 +22,7 @@ mod accept;
 mod assemble;
 mod contact;
 mod control;
+mod device_step;
 mod drag;
 mod drive;
 mod follower;
@@ -174,6 +175,13 @@ pub struct Simulation {
     /// The state version the evaluator's copy reaches by that advance (set when a step
     /// accepts the device's iterate; the next request then sends no states).
     advanced_version: Option<u64>,
+    /// `--solve whole`: steps whose start the device holds run entirely on the device
+    /// ([`Self::set_device_steps`]).
+    device_steps: bool,
+    /// The host's state arrays are behind the device's (steps ran on the device: the
+    /// time and the invariants are current, the rest is taken back by
+    /// [`Self::sync_device_state`]).
+    host_stale: bool,
     /// Time spent per Newton stage.
     timers: SolveTimers,
     /// The mode whose tangent the solver holds factorized (modified Newton reuses it);
@@ -298,6 +306,8 @@ impl Simulation {
             sent_version: None,
             device_advance: false,
             advanced_version: None,
+            device_steps: false,
+            host_stale: false,
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
@@ -566,7 +576,8 @@ impl Simulation {
     pub fn params(&self) -> &IntegratorParams {
         &self.params
     }
-    /// Current state.
+    /// Current state (`--solve whole`: after steps on the device, its time only, until
+    /// [`Self::sync_device_state`] takes the rest back).
     pub fn state(&self) -> &State {
         &self.state
     }

@@ -425,7 +425,7 @@ const ARMIJO: f64 = 1e-4;
 /// iterations, never below the predictor's 0.68–0.83). Re-measured on the ten built-in
 /// scenes' default runs (about 10 000 solves): none that converged stayed at or above its
 /// best for 4 iterations.
-const STAGNATION_ITERS: usize = 5;
+pub(super) const STAGNATION_ITERS: usize = 5;
 
 /// A solve from the step's first predictor (the zero predictor follows) stops when each of
 /// its first this many corrections raised the residual. Measured on the ten built-in
@@ -441,13 +441,13 @@ const RISES_FROM_START: usize = 2;
 
 /// Whether the residual `history` rose on each of its first [`RISES_FROM_START`]
 /// corrections (checked once, when it has exactly that many).
-fn rose_from_start(history: &[f64]) -> bool {
+pub(super) fn rose_from_start(history: &[f64]) -> bool {
     history.len() == RISES_FROM_START + 1 && history.windows(2).all(|w| w[1] > w[0])
 }
 
 /// Whether the residual `history` has not decreased for `k` iterations: its last `k`
 /// entries are all at or above the smallest before them.
-fn stagnated(history: &[f64], k: usize) -> bool {
+pub(super) fn stagnated(history: &[f64], k: usize) -> bool {
     let h = history.len();
     if k == 0 || h <= k {
         return false;
@@ -477,7 +477,7 @@ fn after_kept_first(history: &[f64], kept_first: bool) -> &[f64] {
 ///   from the last two residuals (`r₁³/r₂²`): the correction that led here was at the
 ///   round-off level (the 50-element cantilever at `tol` = 1e-11: 0.11 → 1e-8 → 3e-11,
 ///   where a further correction leaves 3e-11 again).
-fn at_floor(history: &[f64], res: f64, tol: f64, quadratic_rate: bool) -> bool {
+pub(super) fn at_floor(history: &[f64], res: f64, tol: f64, quadratic_rate: bool) -> bool {
     let h = history.len();
     if h < 2 {
         return false;

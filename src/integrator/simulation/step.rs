@@ -24,6 +24,12 @@ impl Simulation {
     /// [`Self::step`] as a future that waits wherever the element evaluation is posted to
     /// a lockstep batch driver (on the CPU kernel or a direct backend it never waits).
     pub async fn step_async(&mut self) -> Result<StepReport, StepFailure> {
+        // `--solve whole`: the whole step on the device where it covers it.
+        if self.device_steps {
+            if let Some(out) = self.device_step().await {
+                return out;
+            }
+        }
         let fail = match self.step_at_dt().await {
             Ok(rep) => return Ok(rep),
             Err(f) => f,

@@ -1,0 +1,255 @@
+//! `--solve whole`: a step run entirely on the device (docs/gpu.md, "Whole step on the
+//! device"). The member posts one request per step; the device advances its state by the
+//! step accepted last, runs Newton from its own iterate (the last increment: the CPU's
+//! first predictor), and sends back the iterations' residuals, the residual work and the
+//! records at the iterate it stopped at, keeping the state at `n`. The host replays its
+//! own Newton test and the EM energy check on those numbers (the same tests, the same
+//! tolerances), and either takes the step from the record alone — no state, no increment
+//! on the host: they stay on the device — or, where any test would go another way than
+//! "accepted at the device's last iterate", takes the state at `n` and that step's
+//! predictor back from the device and runs the step as every other path does.
+
+use super::newton::{at_floor, rose_from_start, stagnated, STAGNATION_ITERS};
+use super::{node_local, Backend, Mode, Simulation};
+use crate::integrator::dofs::NONE;
+use crate::integrator::evaluate::{
+    AssembledSystem, DeviceStep, DeviceStepAnswer, EvalRequest, Pull, Pulled,
+};
+use crate::integrator::invariants::Invariants;
+use crate::integrator::report::{StepFailure, StepReport};
+use crate::integrator::scaling;
+use crate::integrator::state::State;
+
+impl Simulation {
+    /// `--solve whole` (set by the batch evaluator for the members its device step
+    /// covers: [`crate::batch::gpu::device_step_refusal`]): steps whose start the device
+    /// holds run entirely there.
+    pub fn set_device_steps(&mut self, on: bool) {
+        self.device_steps = on;
+    }
+
+    /// Whether commands move driven supports (the device step covers none).
+    pub fn has_commands(&self) -> bool {
+        !self.commands.is_empty()
+    }
+
+    /// A step on the device, when it covers this one: the device holds the state at `n`
+    /// once advanced by the step accepted last and that step's increment (the predictor).
+    /// `None`: the step runs as on every path (after the state was taken back, where the
+    /// device's attempt would not have been accepted as it stands).
+    pub(super) async fn device_step(&mut self) -> Option<Result<StepReport, StepFailure>> {
+        let advance = self.sent_version.is_some()
+            && self.sent_version != Some(self.state_version)
+            && self.advanced_version == Some(self.state_version);
+        if !(self.device_steps && advance && self.gen_alpha.is_none()) {
+            return None;
+        }
+        let Backend::Lockstep(port) = &self.backend else {
+            return None;
+        };
+        let port = port.clone();
+        self.sent_version = Some(self.state_version);
+        let req = EvalRequest {
+            advance: true,
+            device_step: Some(DeviceStep {
+                scale: self.resident_scale,
+            }),
+            ..EvalRequest::default()
+        };
+        let answer = port.evaluate(req).await;
+        let taken = match answer {
+            Ok(AssembledSystem { step: Some(a), .. }) => self.take_device_step(&a),
+            Ok(_) => None,
+            Err(_) => None,
+        };
+        if let Some(rep) = taken {
+            return Some(Ok(rep));
+        }
+        // The host's step from the device's state at `n` and the step's predictor.
+        match self.pull(&port, true).await {
+            Ok(p) => {
+                self.set_pulled(&p);
+                None
+            }
+            Err(e) => {
+                self.sent_version = None;
+                self.advanced_version = None;
+                Some(Err(StepFailure {
+                    reason: format!("the device did not hand the state back: {e}"),
+                    residuals: vec![],
+                }))
+            }
+        }
+    }
+
+    /// The step from the device's answer, if every test of the host's step accepts it at
+    /// the device's last iterate (`None`: the host runs the step).
+    fn take_device_step(&mut self, a: &DeviceStepAnswer) -> Option<StepReport> {
+        let tol = self.params.newton_tol;
+        let mut history: Vec<f64> = Vec::with_capacity(a.iterations.len());
+        let mut accepted_at = None;
+        for (it, &(res, solved)) in a.iterations.iter().enumerate() {
+            let accepted =
+                (res <= tol && scaling::may_accept(it)) || at_floor(&history, res, tol, true);
+            history.push(res);
+            if !res.is_finite() {
+                return None;
+            }
+            if accepted {
+                accepted_at = Some(it);
+                break;
+            }
+            // The host's early stops (which depend on the predictor it is on) and its
+            // cap: the host decides.
+            if rose_from_start(&history)
+                || stagnated(&history, STAGNATION_ITERS)
+                || it == self.params.max_iter
+                || !solved
+            {
+                return None;
+            }
+        }
+        let Some(it) = accepted_at.filter(|&it| it + 1 == a.iterations.len()) else {
+            if std::env::var_os("COSSERAT_DEBUG_DEVICE_STEP").is_some() {
+                eprintln!("device step handed back: Newton {:?}", a.iterations);
+            }
+            return None;
+        };
+        let r = &a.record;
+        let fields = [
+            r.kinetic,
+            r.potential,
+            r.dissipation,
+            r.acc_sums[0],
+            r.acc_sums[1],
+            r.turn,
+            a.residual_work,
+        ];
+        if fields.iter().any(|x| !x.is_finite())
+            || !(r.l.iter().chain(r.j.iter()).all(|x| x.is_finite()))
+            || r.turn > 0.0
+        {
+            return None;
+        }
+        // The EM energy check (`accept.rs`, `check_advanced`): no loads, so W = 0.
+        let inv = Invariants {
+            kinetic: r.kinetic,
+            potential: r.potential,
+            l: r.l,
+            j: r.j,
+        };
+        let w = 0.0f64;
+        let (h0, h1) = (self.inv.total(), inv.total());
+        let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
+        let residual_work = a.residual_work;
+        scaling::check_resolved(residual_work, href).ok()?;
+        let growth = h1 - h0 - w;
+        if self.params.scheme.controls_energy()
+            && growth > self.params.energy_tol * href + residual_work
+        {
+            return None;
+        }
+        self.state.t += self.params.dt;
+        self.state_version += 1;
+        self.advanced_version = Some(self.state_version);
+        self.host_stale = true;
+        self.inv = inv;
+        self.fell_back = false;
+        Some(StepReport {
+            newton_iters: it,
+            outer_iters: 1,
+            residual: history[it],
+            dissipation: r.dissipation,
+            external_work: w,
+            support_work: 0.0,
+            friction: 0.0,
+            acc_trans: r.acc_sums[0].max(0.0).sqrt(),
+            acc_rot: r.acc_sums[1].max(0.0).sqrt(),
+            max_link_g: 0.0,
+            link_rounds: 1,
+            fallback: false,
+            substeps: 1,
+        })
+    }
+
+    /// Takes the member's state and increments back from the device.
+    async fn pull(
+        &mut self,
+        port: &crate::integrator::evaluate::EvalPort,
+        saved: bool,
+    ) -> Result<Pulled, String> {
+        let req = EvalRequest {
+            pull: Some(Pull { saved }),
+            ..EvalRequest::default()
+        };
+        match port.evaluate(req).await? {
+            AssembledSystem {
+                pulled: Some(p), ..
+            } => {
+                if p.states.len() != self.model.elements.len()
+                    || p.increments.len() != self.dofs.nodes.len()
+                {
+                    return Err("the device handed back a state of another size".into());
+                }
+                Ok(p)
+            }
+            _ => Err("the evaluator did not hand the state back".into()),
+        }
+    }
+
+    /// The host's state from the device's element states (the time stays the host's) and
+    /// its predictor from the device's increments.
+    fn set_pulled(&mut self, p: &Pulled) {
+        let mut state = State {
+            t: self.state.t,
+            r: self.state.r.clone(),
+            v: self.state.v.clone(),
+            d: Vec::with_capacity(p.states.len()),
+            vd: Vec::with_capacity(p.states.len()),
+            eps: Vec::with_capacity(p.states.len()),
+            lambda: self.state.lambda.clone(),
+            anchors: self.state.anchors.clone(),
+        };
+        for (e, (st, eps)) in p.states.iter().enumerate() {
+            for l in 0..2 {
+                let a = self.model.elements[e].nodes[l];
+                state.r[a] = st.cfg.r[l];
+                state.v[a] = st.v[l];
+            }
+            state.d.push(st.cfg.d);
+            state.vd.push(st.vd);
+            state.eps.push(*eps);
+        }
+        self.state = state;
+        self.prev.iter_mut().for_each(|x| *x = 0.0);
+        for (nd, x) in self.dofs.nodes.iter().zip(&p.increments) {
+            for (&i, &v) in node_local(nd).iter().zip(x) {
+                if i != NONE {
+                    self.prev[i] = v;
+                }
+            }
+        }
+        self.host_stale = false;
+    }
+
+    /// `--solve whole`: after steps run on the device, the host's copy of the state is
+    /// behind; this takes the device's back (the state before the last step and that
+    /// step's increment, advanced here as the host's step does). A no-op otherwise.
+    pub async fn sync_device_state(&mut self) -> Result<(), String> {
+        if !self.host_stale {
+            return Ok(());
+        }
+        let Backend::Lockstep(port) = &self.backend else {
+            return Err("no device holds the state".into());
+        };
+        let port = port.clone();
+        let p = self.pull(&port, false).await?;
+        let t = self.state.t;
+        self.set_pulled(&p);
+        let q = self.prev.clone();
+        let (mut next, _, _) = self.advance(&q, Mode::Frozen);
+        next.t = t;
+        self.state = next;
+        Ok(())
+    }
+}
