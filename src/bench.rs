@@ -192,8 +192,12 @@ pub struct BenchRun {
     /// The GPU batch with resident Newton iterations (`BenchSolve::Resident`).
     pub resident: Option<Timed>,
     /// The same with the EM members' states kept on the device (`--solve whole`, timed
-    /// with `BenchSolve::Resident`).
+    /// with `BenchSolve::Resident`): EM members the device step covers run their steps
+    /// entirely on the device.
     pub whole: Option<Timed>,
+    /// `--solve whole` without whole steps on the device (the host runs every step, the
+    /// device keeps the state): the comparison run, timed first.
+    pub whole_host_steps: Option<Timed>,
     /// The adapter's description, `none`, or `none (why)`.
     pub adapter: String,
     /// Whether the adapter has f64 shaders.
@@ -278,7 +282,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
         BenchSolve::Resident => (false, true),
     };
     let resident_solve = opts.solve == BenchSolve::Resident;
-    let (adapter, f64_ok, gpu, device, (resident, whole)) = match &gpu_exec {
+    let (adapter, f64_ok, gpu, device, (resident, whole, whole_host_steps)) = match &gpu_exec {
         Ok((exec @ Executor::Gpu(ctx), _)) => {
             let g = if host_solve {
                 Some(
@@ -320,6 +324,17 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
                     false,
                 )
                 .map_err(batch("GPU batch, resident"))?;
+                crate::batch::gpu::set_device_steps(false);
+                let before = timed(
+                    &members,
+                    exec,
+                    opts.newton,
+                    opts.slots,
+                    SolveMode::Whole,
+                    false,
+                );
+                crate::batch::gpu::set_device_steps(true);
+                let before = before.map_err(batch("GPU batch, whole (host steps)"))?;
                 let whole = timed(
                     &members,
                     exec,
@@ -329,14 +344,14 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
                     false,
                 )
                 .map_err(batch("GPU batch, whole"))?;
-                (Some(resident), Some(whole))
+                (Some(resident), Some(whole), Some(before))
             } else {
-                (None, None)
+                (None, None, None)
             };
             (ctx.describe(), ctx.is_f64(), g, d, r)
         }
-        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None, (None, None)),
-        Err(e) => (format!("none ({e})"), false, None, None, (None, None)),
+        Ok((Executor::Cpu, _)) => ("none".into(), false, None, None, (None, None, None)),
+        Err(e) => (format!("none ({e})"), false, None, None, (None, None, None)),
     };
     Ok(BenchRun {
         opts: opts.clone(),
@@ -345,6 +360,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
         device,
         resident,
         whole,
+        whole_host_steps,
         adapter,
         f64: f64_ok,
         peak_rss_before,
@@ -440,6 +456,12 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, o: &BenchOptions) {
     obj["multi_bytes_down_per_solve"] =
         (sv.multi_bytes_down as f64 / sv.multi_solves.max(1) as f64).into();
     obj["multi_mismatches"] = sv.multi_mismatches.into();
+    obj["device_steps"] = sv.device_steps.into();
+    obj["device_step_handoffs"] = sv.device_step_handoffs.into();
+    obj["device_step_bytes_down_per_step"] =
+        (sv.device_step_bytes_down as f64 / sv.device_steps.max(1) as f64).into();
+    obj["state_pulls"] = sv.state_pulls.into();
+    obj["state_pull_bytes_down"] = sv.pull_bytes_down.into();
     stages_json(obj, "gpu", &g.stages);
 }
 
@@ -553,7 +575,11 @@ impl BenchRun {
             gpu_model_json(&mut v, d, o);
             obj["resident"] = v;
         }
-        if let Some(d) = &self.whole {
+        for (key, d) in [
+            ("whole", &self.whole),
+            ("whole_host_steps", &self.whole_host_steps),
+        ] {
+            let Some(d) = d else { continue };
             let rate = self.work() / d.stats.wall_s;
             let mut v = serde_json::json!({
                 "solve": "whole",
@@ -567,7 +593,7 @@ impl BenchRun {
                 "advance_submits": d.stats.serve.advance_submits,
             });
             gpu_model_json(&mut v, d, o);
-            obj["whole"] = v;
+            obj[key] = v;
         }
         obj
     }
