@@ -719,8 +719,7 @@ impl GpuEvaluator {
         let mut fast: Vec<usize> = Vec::new();
         let fast_k = self
             .multi_k
-            .max(DEVICE_STEP_K)
-            .min(crate::gpu::blocktri::RESIDENT_MAX_K);
+            .clamp(DEVICE_STEP_K, crate::gpu::blocktri::RESIDENT_MAX_K);
         // Their Newton tests (tolerance, quadratic convergence).
         let mut multi_test: Vec<(f64, bool)> = vec![(0.0, false); self.sizes.len()];
         let multi_k = self.multi_k;

@@ -109,12 +109,7 @@ impl Simulation {
                 return None;
             }
         }
-        let Some(it) = accepted_at.filter(|&it| it + 1 == a.iterations.len()) else {
-            if std::env::var_os("COSSERAT_DEBUG_DEVICE_STEP").is_some() {
-                eprintln!("device step handed back: Newton {:?}", a.iterations);
-            }
-            return None;
-        };
+        let it = accepted_at.filter(|&it| it + 1 == a.iterations.len())?;
         let r = &a.record;
         let fields = [
             r.kinetic,
