@@ -893,44 +893,7 @@ impl ElementKernel {
     }
 }
 
-/// One member slot's record of an advanced step (`ElementKernel::encode_advance`): the
-/// sums over its element slots, in element order, of their terms of the invariants at
-/// `n+1` ([`crate::integrator::invariants::Invariants`] without links, point masses and
-/// contact) and of their dissipation.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct MemberRecord {
-    /// Kinetic energy.
-    pub kinetic: f64,
-    /// Strain energy.
-    pub potential: f64,
-    /// Linear momentum.
-    pub l: crate::model::Vec3,
-    /// Angular momentum about the origin.
-    pub j: crate::model::Vec3,
-    /// Predicted dissipation of the step.
-    pub dissipation: f64,
-    /// The sums under the square roots of the step's acceleration norms (translational,
-    /// rotational: [`crate::integrator::invariants::acceleration_norms`]).
-    pub acc_sums: [f64; 2],
-    /// Sum over the elements of how far the cosine of the turn between their end triads
-    /// lies below the limit's (positive: some element turned too far).
-    pub turn: f64,
-}
-
-impl MemberRecord {
-    /// The record from its [`N_ADV`] fields.
-    pub fn from_fields(r: &[f64]) -> Self {
-        MemberRecord {
-            kinetic: r[0],
-            potential: r[1],
-            l: crate::model::Vec3::new(r[2], r[3], r[4]),
-            j: crate::model::Vec3::new(r[5], r[6], r[7]),
-            dissipation: r[8],
-            acc_sums: [r[9], r[10]],
-            turn: r[11],
-        }
-    }
-}
+pub use crate::integrator::evaluate::MemberRecord;
 
 /// Element slot `i`'s state and strains from a field-major reader `at(field, slot)`.
 fn element_state(at: &dyn Fn(usize, usize) -> f64, i: usize) -> (ElementState, Vector6<f64>) {

@@ -101,7 +101,7 @@ pub struct DeviceStepAnswer {
     /// `Σ |R_i q_i|` at the last evaluated iterate (the energy check's residual work).
     pub residual_work: f64,
     /// The records of the step to that iterate (the state at `n+1` is not formed).
-    pub record: crate::gpu::kernel::MemberRecord,
+    pub record: MemberRecord,
 }
 
 /// A member's state handed back by the device ([`EvalRequest::pull`]).
@@ -290,5 +290,44 @@ pub fn now<F: Future>(fut: F) -> F::Output {
         Poll::Pending => panic!(
             "a simulation attached to a lockstep batch evaluator must be stepped by its batch driver"
         ),
+    }
+}
+
+/// One member slot's record of an advanced step (the GPU advance pass): the
+/// sums over its element slots, in element order, of their terms of the invariants at
+/// `n+1` ([`crate::integrator::invariants::Invariants`] without links, point masses and
+/// contact) and of their dissipation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MemberRecord {
+    /// Kinetic energy.
+    pub kinetic: f64,
+    /// Strain energy.
+    pub potential: f64,
+    /// Linear momentum.
+    pub l: crate::model::Vec3,
+    /// Angular momentum about the origin.
+    pub j: crate::model::Vec3,
+    /// Predicted dissipation of the step.
+    pub dissipation: f64,
+    /// The sums under the square roots of the step's acceleration norms (translational,
+    /// rotational: [`crate::integrator::invariants::acceleration_norms`]).
+    pub acc_sums: [f64; 2],
+    /// Sum over the elements of how far the cosine of the turn between their end triads
+    /// lies below the limit's (positive: some element turned too far).
+    pub turn: f64,
+}
+
+impl MemberRecord {
+    /// The record from its fields, in this order (the advance pass's layout).
+    pub fn from_fields(r: &[f64]) -> Self {
+        MemberRecord {
+            kinetic: r[0],
+            potential: r[1],
+            l: crate::model::Vec3::new(r[2], r[3], r[4]),
+            j: crate::model::Vec3::new(r[5], r[6], r[7]),
+            dissipation: r[8],
+            acc_sums: [r[9], r[10]],
+            turn: r[11],
+        }
     }
 }
