@@ -738,7 +738,7 @@ mod tests {
 
     /// Work, force sum and moment about the origin of all pairs' nodal forces over the
     /// step `r0 → r1`, each relative to the sum of its terms' magnitudes.
-    fn step_sums(c: &RodContact, r0: &[V3], r1: &[V3]) -> (f64, f64, f64) {
+    pub(super) fn step_sums(c: &RodContact, r0: &[V3], r1: &[V3]) -> (f64, f64, f64) {
         let (mut work, mut f_sum, mut moment) = (0.0, V3::zeros(), V3::zeros());
         let (mut f_abs, mut m_abs) = (0.0, 0.0);
         for &(i, j) in &c.candidates(r0, 0.02) {
@@ -762,8 +762,38 @@ mod tests {
         )
     }
 
+    /// Over 200 random steps from `r0` (each node moved up to 0.2 ρ per axis, `seed`):
+    /// the steps in contact, and the worst |W + ΔV| relative to V, force sum and moment
+    /// ([`step_sums`]).
+    pub(super) fn random_steps(
+        c: &RodContact,
+        r0: &[V3],
+        rho: f64,
+        mut seed: u64,
+    ) -> (usize, f64, f64, f64) {
+        let (mut worst_e, mut worst_l, mut worst_j) = (0.0f64, 0.0f64, 0.0f64);
+        let mut touching = 0;
+        for _ in 0..200 {
+            let r1: Vec<V3> = r0
+                .iter()
+                .map(|x| x + 0.2 * rho * V3::new(rng(&mut seed), rng(&mut seed), rng(&mut seed)))
+                .collect();
+            let (work, f_sum, moment) = step_sums(c, r0, &r1);
+            let (e0, e1) = (c.energy(r0), c.energy(&r1));
+            let scale = e0.max(e1);
+            if scale == 0.0 {
+                continue;
+            }
+            touching += 1;
+            worst_e = worst_e.max((work + e1 - e0).abs() / scale);
+            worst_l = worst_l.max(f_sum);
+            worst_j = worst_j.max(moment);
+        }
+        (touching, worst_e, worst_l, worst_j)
+    }
+
     /// A small deterministic generator (xorshift) for the random steps.
-    fn rng(state: &mut u64) -> f64 {
+    pub(super) fn rng(state: &mut u64) -> f64 {
         *state ^= *state << 13;
         *state ^= *state >> 7;
         *state ^= *state << 17;
@@ -784,25 +814,7 @@ mod tests {
             V3::new(0.04 + 0.02, 0.0346, 0.016),
         ];
         let c = line_contact(&[vec![0, 1, 2], vec![3, 4, 5]], &r0, rho, 16.0, 1e5);
-        let mut seed = 0x9e3779b97f4a7c15u64;
-        let (mut worst_e, mut worst_l, mut worst_j) = (0.0f64, 0.0f64, 0.0f64);
-        let mut touching = 0;
-        for _ in 0..200 {
-            let r1: Vec<V3> = r0
-                .iter()
-                .map(|x| x + 0.2 * rho * V3::new(rng(&mut seed), rng(&mut seed), rng(&mut seed)))
-                .collect();
-            let (work, f_sum, moment) = step_sums(&c, &r0, &r1);
-            let (e0, e1) = (c.energy(&r0), c.energy(&r1));
-            let scale = e0.max(e1);
-            if scale == 0.0 {
-                continue;
-            }
-            touching += 1;
-            worst_e = worst_e.max((work + e1 - e0).abs() / scale);
-            worst_l = worst_l.max(f_sum);
-            worst_j = worst_j.max(moment);
-        }
+        let (touching, worst_e, worst_l, worst_j) = random_steps(&c, &r0, rho, 0x9e3779b97f4a7c15);
         eprintln!(
             "line contact over {touching} random steps: |W + ΔV| {worst_e:.1e} of V, force sum {worst_l:.1e}, moment {worst_j:.1e} (relative)"
         );

@@ -246,14 +246,6 @@ mod tests {
     use super::super::{ContactModel, M3};
     use super::*;
 
-    /// A small deterministic generator (xorshift) in [−1, 1).
-    fn rng(state: &mut u64) -> f64 {
-        *state ^= *state << 13;
-        *state ^= *state >> 7;
-        *state ^= *state << 17;
-        (*state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    }
-
     #[test]
     fn stencils_are_partitions_of_unity_that_keep_straight_lines_and_ends() {
         // An open chain of 6 nodes on a line (uneven ids), and a closed one.
@@ -353,32 +345,6 @@ mod tests {
         (c, r)
     }
 
-    /// Work, force sum and moment about the origin of all pairs' nodal forces over the
-    /// step `r0 → r1`, the last two relative to the sums of their terms' magnitudes.
-    fn step_sums(c: &RodContact, r0: &[V3], r1: &[V3]) -> (f64, f64, f64) {
-        let (mut work, mut f_sum, mut moment) = (0.0, V3::zeros(), V3::zeros());
-        let (mut f_abs, mut m_abs) = (0.0, 0.0);
-        for &(i, j) in &c.candidates(r0, 0.02) {
-            let f = c.pair_force(i, j, r0, r1, false).force;
-            for (p, sign) in [(i, 1.0), (j, -1.0)] {
-                for (node, w) in c.points[p].weights() {
-                    let fa = sign * w * f;
-                    work += fa.dot(&(r1[node] - r0[node]));
-                    f_sum += fa;
-                    let m = (0.5 * (r0[node] + r1[node])).cross(&fa);
-                    moment += m;
-                    f_abs += fa.norm();
-                    m_abs += m.norm();
-                }
-            }
-        }
-        (
-            work,
-            f_sum.norm() / f_abs.max(1e-300),
-            moment.norm() / m_abs.max(1e-300),
-        )
-    }
-
     #[test]
     fn smooth_contact_work_equals_energy_change_and_keeps_momenta() {
         let rho = 0.01;
@@ -386,25 +352,8 @@ mod tests {
         // Three nodes inside, two next to the rods' ends.
         assert!(c.points.iter().all(|p| (2..=3).contains(&p.stencil.len())));
         assert!(c.points.iter().any(|p| p.stencil.len() == 3));
-        let mut seed = 0x2545f4914f6cdd1du64;
-        let (mut worst_e, mut worst_l, mut worst_j) = (0.0f64, 0.0f64, 0.0f64);
-        let mut touching = 0;
-        for _ in 0..200 {
-            let r1: Vec<V3> = r0
-                .iter()
-                .map(|x| x + 0.2 * rho * V3::new(rng(&mut seed), rng(&mut seed), rng(&mut seed)))
-                .collect();
-            let (work, f_sum, moment) = step_sums(&c, &r0, &r1);
-            let (e0, e1) = (c.energy(&r0), c.energy(&r1));
-            let scale = e0.max(e1);
-            if scale == 0.0 {
-                continue;
-            }
-            touching += 1;
-            worst_e = worst_e.max((work + e1 - e0).abs() / scale);
-            worst_l = worst_l.max(f_sum);
-            worst_j = worst_j.max(moment);
-        }
+        let (touching, worst_e, worst_l, worst_j) =
+            super::super::tests::random_steps(&c, &r0, rho, 0x2545f4914f6cdd1d);
         eprintln!(
             "smooth contact over {touching} random steps: |W + ΔV| {worst_e:.1e} of V, force sum {worst_l:.1e}, moment {worst_j:.1e} (relative)"
         );
