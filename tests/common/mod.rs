@@ -406,19 +406,35 @@ pub fn frame_member(
     }
 }
 
-/// 14 cantilevers of 10 elements (EDMC-2 unless `scheme` says otherwise) with random
-/// kicks, stiffnesses, time steps and ramped tip loads on 0..9; 9 ends after 3 steps,
-/// 10 needs the monolithic fallback (its staggered cap is too low for its kick), 11 fails on
-/// its Newton cap, 12 is generalized-α (CPU kernel), 13 has a point mass (host solve).
-pub fn batch_mix(scheme: Option<Scheme>, strategy: Strategy) -> Vec<Member> {
+/// How [`mix`] draws its 14 members.
+#[derive(Clone, Copy, Debug)]
+pub struct Mix {
+    /// The random stream's seed (kicks, stiffnesses, time steps, tip loads).
+    pub seed: u64,
+    /// Members 0..9 carry a random tip force and moment ramping up over the run.
+    pub loads: bool,
+    /// Member 10 may fall back to the monolithic strategy (`false`: it fails on its
+    /// staggered cap).
+    pub fallback: bool,
+    /// Every member's scheme but 12's (`None`: the bench's EDMC-2).
+    pub scheme: Option<Scheme>,
+    /// Every member's strategy.
+    pub strategy: Strategy,
+}
+
+/// 14 cantilevers of 10 elements with random kicks, stiffnesses, time steps and, with
+/// [`Mix::loads`], ramped tip loads on 0..9; 9 ends after 3 steps, 10's staggered cap is
+/// too low for its kick (it needs the monolithic fallback), 11 fails on its Newton cap, 12
+/// is generalized-α (CPU kernel), 13 has a point mass (host solve).
+pub fn mix(o: Mix) -> Vec<Member> {
     let mut ms = cosserat::batch::bench_members(14, 10, 6).unwrap();
-    let mut rng = Rng(0x5e51_de7f);
+    let mut rng = Rng(o.seed);
     for (i, m) in ms.iter_mut().enumerate() {
-        if let Some(s) = scheme {
+        if let Some(s) = o.scheme {
             m.params.scheme = s;
         }
-        m.params.strategy = strategy;
-        if i < 9 {
+        m.params.strategy = o.strategy;
+        if o.loads && i < 9 {
             let tip = m.model.n_nodes() - 1;
             let mut v = || Vec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
             let (force, moment) = (2.0 * v(), 0.5 * v());
@@ -445,7 +461,7 @@ pub fn batch_mix(scheme: Option<Scheme>, strategy: Strategy) -> Vec<Member> {
             9 => m.params.t_end = 3.0 * m.params.dt,
             10 => {
                 m.params.max_outer = 3;
-                m.params.fallback = true;
+                m.params.fallback = o.fallback;
                 m.model.velocity0.iter_mut().for_each(|v| *v *= 4.0);
             }
             11 => {
@@ -461,6 +477,17 @@ pub fn batch_mix(scheme: Option<Scheme>, strategy: Strategy) -> Vec<Member> {
         }
     }
     ms
+}
+
+/// [`mix`] with tip loads and the fallback (EDMC-2 unless `scheme` says otherwise).
+pub fn batch_mix(scheme: Option<Scheme>, strategy: Strategy) -> Vec<Member> {
+    mix(Mix {
+        seed: 0x5e51_de7f,
+        loads: true,
+        fallback: true,
+        scheme,
+        strategy,
+    })
 }
 
 pub fn run_batch(
