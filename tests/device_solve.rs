@@ -27,10 +27,8 @@
 mod common;
 
 use common::gpu;
-use common::{frame_member, mix, rel, Mix};
-use cosserat::batch::{
-    run_members, BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode,
-};
+use common::{frame_member, mix, rel, run_batch_with, Mix};
+use cosserat::batch::{BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode};
 use cosserat::integrator::{NewtonVariant, Strategy};
 use cosserat::observe::record::RunStatus;
 
@@ -82,32 +80,14 @@ fn run_with(
     solve: SolveMode,
     host_update: bool,
 ) -> (Vec<MemberResult>, BatchStats) {
-    let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
-    let stats = run_members(
-        ms,
-        exec,
-        BatchOptions {
-            keep_history: true,
-            keep_state: true,
-            workers: 5,
-            newton: Some(newton),
-            solve,
-            host_update,
-            ..Default::default()
-        },
-        |r| {
-            let i = r.index;
-            assert!(out[i].is_none(), "member {i} reported twice");
-            out[i] = Some(r);
-        },
-    )
-    .unwrap();
-    let out = out
-        .into_iter()
-        .enumerate()
-        .map(|(i, r)| r.unwrap_or_else(|| panic!("member {i} never reported")))
-        .collect();
-    (out, stats)
+    let opts = BatchOptions {
+        workers: 5,
+        newton: Some(newton),
+        solve,
+        host_update,
+        ..Default::default()
+    };
+    run_batch_with(ms, exec, opts)
 }
 
 #[test]

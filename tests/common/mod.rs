@@ -490,12 +490,32 @@ pub fn batch_mix(scheme: Option<Scheme>, strategy: Strategy) -> Vec<Member> {
     })
 }
 
+/// Runs `ms` on `exec` with `newton`, `solve` and `workers` slots ([`run_batch_with`]).
 pub fn run_batch(
     ms: &[Member],
     exec: &Executor,
     newton: NewtonVariant,
     solve: SolveMode,
     workers: usize,
+) -> (Vec<MemberResult>, BatchStats) {
+    run_batch_with(
+        ms,
+        exec,
+        BatchOptions {
+            workers,
+            newton: Some(newton),
+            solve,
+            ..Default::default()
+        },
+    )
+}
+
+/// Runs `ms` with `opts` (keeping every member's history and final state), each result in
+/// its member's place; asserts each member reports exactly once.
+pub fn run_batch_with(
+    ms: &[Member],
+    exec: &Executor,
+    opts: BatchOptions,
 ) -> (Vec<MemberResult>, BatchStats) {
     let mut out: Vec<Option<MemberResult>> = vec![None; ms.len()];
     let stats = run_members(
@@ -504,10 +524,7 @@ pub fn run_batch(
         BatchOptions {
             keep_history: true,
             keep_state: true,
-            workers,
-            newton: Some(newton),
-            solve,
-            ..Default::default()
+            ..opts
         },
         |r| {
             let i = r.index;
