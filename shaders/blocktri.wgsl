@@ -542,7 +542,8 @@ const HSTRIDE: u32 = 33u; // 1 + 2 KMAX
 @group(0) @binding(19) var<storage, read> spec: array<Real>;
 // The element kernel's iteration buffer (field-major, `src/gpu/layout.rs`): a stopped
 // member's element slots get I_ACTIVE = 0, so that the element passes of the later
-// iterations skip them (the host re-uploads the field after the submission).
+// iterations skip them (the host re-uploads the field after the submission, or, for a
+// step on the device, REACTIVATE sets it again in the next one).
 @group(0) @binding(20) var<storage, read_write> kiter: array<Real>;
 const I_ACTIVE: u32 = 22u;
 
@@ -608,12 +609,21 @@ fn spec_check_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if spec_accepts(m, hb, u32(hist[hb]), worst) { ops[m] = ops[m] & ~3u; }
 }
 
-// Before the first iteration: the count of every SPEC member goes to 0.
+// Before the first iteration: the count of every SPEC member goes to 0; a REACTIVATE
+// member's element slots (one per node after the first) evaluate again (frozen scalars).
 @compute @workgroup_size(64)
 fn spec_reset_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let m = gid.x;
     if m >= prm.n_member { return; }
     if (ops[m] & 16u) != 0u { hist[m * HSTRIDE] = 0.0; }
+    let n = member_n[m];
+    if (ops[m] & 32u) != 0u && n > 1u {
+        let cap = u32(spec[4u * prm.n_member]);
+        let per = u32(spec[4u * prm.n_member + 1u]);
+        for (var e = 0u; e < min(n - 1u, per); e++) {
+            kiter[I_ACTIVE * cap + m * per + e] = 1.0;
+        }
+    }
 }
 
 // After each iteration: device-solved members without SPEC (one iteration asked) stop.

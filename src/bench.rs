@@ -23,6 +23,9 @@ pub enum BenchSolve {
     /// Device solves, then several Newton iterations per submission (`--solve resident`),
     /// one after the other.
     Resident,
+    /// Only `--solve whole` (EM members the device step covers run their steps entirely
+    /// on the device): the quick measurement of that mode (JSON: the `whole` object).
+    Whole,
 }
 
 /// What to time: the options of `cosserat bench`.
@@ -280,6 +283,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
         BenchSolve::Device => (false, true),
         BenchSolve::Both => (true, true),
         BenchSolve::Resident => (false, true),
+        BenchSolve::Whole => (false, false),
     };
     let resident_solve = opts.solve == BenchSolve::Resident;
     let (adapter, f64_ok, gpu, device, (resident, whole, whole_host_steps)) = match &gpu_exec {
@@ -345,6 +349,17 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
                 )
                 .map_err(batch("GPU batch, whole"))?;
                 (Some(resident), Some(whole), Some(before))
+            } else if opts.solve == BenchSolve::Whole {
+                let whole = timed(
+                    &members,
+                    exec,
+                    opts.newton,
+                    opts.slots,
+                    SolveMode::Whole,
+                    false,
+                )
+                .map_err(batch("GPU batch, whole"))?;
+                (None, Some(whole), None)
             } else {
                 (None, None, None)
             };
@@ -444,6 +459,18 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, o: &BenchOptions) {
     obj["host_syncs_per_step"] = (sv.dispatches as f64 / o.steps.max(1) as f64).into();
     obj["host_thread_us_per_member_step"] =
         (1e6 * (w.host_s * threads + w.serve_thread_s) / member_steps).into();
+    // The same without the graphics driver's CPU time inside submissions and waits (on a
+    // software adapter the device's work itself, run on the submitting thread).
+    // Per member-step: the member polls' own CPU time (not the pool's idle time) and the
+    // driver thread's CPU time outside the graphics driver.
+    obj["host_own_us_per_member_step"] =
+        (1e6 * (w.member_cpu_s + w.serve_thread_s - w.serve_driver_s) / member_steps).into();
+    obj["member_cpu_us_per_member_step"] = (1e6 * w.member_cpu_s / member_steps).into();
+    obj["serve_own_us_per_member_step"] =
+        (1e6 * (w.serve_thread_s - w.serve_driver_s) / member_steps).into();
+    obj["driver_thread_us_per_member_step"] = (1e6 * w.serve_driver_s / member_steps).into();
+    obj["driver_thread_us_per_dispatch"] =
+        (1e6 * w.serve_driver_s / (k.dispatches.max(1) as f64)).into();
     obj["bus_bytes_per_member_step"] = ((k.bytes_up + k.bytes_down) as f64 / member_steps).into();
     obj["bus_bytes_up_per_member_step"] = (k.bytes_up as f64 / member_steps).into();
     obj["bus_bytes_down_per_member_step"] = (k.bytes_down as f64 / member_steps).into();

@@ -12,7 +12,8 @@ use rayon::prelude::*;
 use crate::element::StepConsts;
 use crate::gpu::assemble::MemberIncrements;
 use crate::gpu::blocktri::{
-    Readback, Report, SpecParams, OP_FACTOR, OP_RESTORE, OP_SOLVE, OP_SPEC, OP_UPDATE,
+    Readback, Report, SpecParams, OP_FACTOR, OP_REACTIVATE, OP_RESTORE, OP_SOLVE, OP_SPEC,
+    OP_UPDATE,
 };
 use crate::gpu::kernel::{KernelTimers, MemberPack, SCATTER_GAP};
 use crate::gpu::layout::{AsmLayout, A_NODE};
@@ -170,6 +171,11 @@ pub struct GpuEvaluator {
     /// Per slot: its member's steps run entirely on the device
     /// ([`crate::integrator::evaluate::DeviceStep`]).
     fast: Vec<bool>,
+    /// Per slot: the device stopped its element slots (`I_ACTIVE` 0) in a step on the
+    /// device and the host did not send its rows again: the slot's next step on the device
+    /// sets them again there ([`crate::gpu::blocktri::OP_REACTIVATE`]), any other
+    /// evaluation sends the host's rows first.
+    device_stopped: Vec<bool>,
     /// The node increments as they were at the start of the last dispatch with device
     /// steps (a failed device step's predictor, for the host's step).
     saved_increments: Option<wgpu::Buffer>,
@@ -314,6 +320,7 @@ impl GpuEvaluator {
             advance_ok: vec![false; slots],
             to_advance: Vec::new(),
             fast: vec![false; slots],
+            device_stopped: vec![false; slots],
             saved_increments: None,
         })
     }
@@ -493,6 +500,8 @@ impl GpuEvaluator {
             self.kernel.set_inactive(base + e);
         }
         self.active[slot] = false;
+        // The host's mirror goes to 0 and up: the device's rows match it again.
+        self.device_stopped[slot] = false;
     }
 
     /// Frees `slot` (its member finished).
@@ -723,6 +732,19 @@ impl GpuEvaluator {
         // Their Newton tests (tolerance, quadratic convergence).
         let mut multi_test: Vec<(f64, bool)> = vec![(0.0, false); self.sizes.len()];
         let multi_k = self.multi_k;
+        // Slots the device stopped in a step on the device: a step on the device sets
+        // them again there, any other evaluation sends the host's rows first.
+        let mut reactivate = vec![false; self.sizes.len()];
+        for (slot, req) in &reqs {
+            if std::mem::take(&mut self.device_stopped[*slot]) {
+                if req.device_step.is_some() {
+                    reactivate[*slot] = true;
+                } else {
+                    let lo = slot * self.per_slot;
+                    self.kernel.touch_iter(lo, lo + self.per_slot);
+                }
+            }
+        }
         let packed = self.pack(&reqs);
         for (&(slot, ref req), packed) in reqs.iter().zip(packed) {
             let resident = req.resident.filter(|_| self.device[slot]);
@@ -746,7 +768,8 @@ impl GpuEvaluator {
                             k: fast_k,
                         },
                     );
-                    ops.push((slot, OP_FACTOR | OP_SOLVE | OP_UPDATE | OP_SPEC));
+                    let react = if reactivate[slot] { OP_REACTIVATE } else { 0 };
+                    ops.push((slot, OP_FACTOR | OP_SOLVE | OP_UPDATE | OP_SPEC | react));
                     fast.push(slot);
                     let n = self.sizes[slot].0 as u64;
                     let st = &mut self.serve_timers;
@@ -1074,9 +1097,18 @@ impl GpuEvaluator {
         if repeats > 1 {
             // The device deactivated the element slots of the members it stopped: the
             // host's rows go back up with the next dispatch.
+            // A step on the device sets them again itself in its next submission.
+            let mut on_device = vec![false; self.sizes.len()];
+            for &m in &fast {
+                on_device[m] = true;
+            }
             for &(slot, _) in &pending {
-                let lo = slot * self.per_slot;
-                self.kernel.touch_iter(lo, lo + self.per_slot);
+                if on_device[slot] {
+                    self.device_stopped[slot] = true;
+                } else {
+                    let lo = slot * self.per_slot;
+                    self.kernel.touch_iter(lo, lo + self.per_slot);
+                }
             }
         }
         // Multi-iteration runs: each member's first iteration is answered now, the

@@ -23,6 +23,7 @@ use rayon::prelude::*;
 
 use super::gpu::GpuEvaluator;
 use super::{run_member, setup, setup_failure, BatchOptions, BatchStats, Member, MemberResult};
+use crate::gpu::driver::{driver_thread_s, thread_cpu_s};
 use crate::gpu::{GpuContext, GpuError};
 use crate::integrator::evaluate::poll_once;
 
@@ -144,12 +145,17 @@ pub(super) fn run(
 
         // 2. Member phase: every member's CPU work up to its next evaluation.
         let t0 = Instant::now();
+        let cpu_ns = std::sync::atomic::AtomicU64::new(0);
         flight.par_iter_mut().for_each(|m| {
+            let c0 = thread_cpu_s();
             if let Poll::Ready(r) = poll_once(m.run.as_mut()) {
                 m.done = Some(r);
             }
+            let ns = (1e9 * (thread_cpu_s() - c0)).max(0.0) as u64;
+            cpu_ns.fetch_add(ns, std::sync::atomic::Ordering::Relaxed);
         });
         stats.host_s += t0.elapsed().as_secs_f64();
+        stats.member_cpu_s += 1e-9 * cpu_ns.into_inner() as f64;
         stats.polls += flight.len() as u64;
         stats.iterations += 1;
 
@@ -169,9 +175,10 @@ pub(super) fn run(
         }
 
         // 4. Serve every posted evaluation in one dispatch.
-        let c0 = thread_cpu_s();
+        let (c0, d0) = (thread_cpu_s(), driver_thread_s());
         let served = gpu.serve();
         stats.serve_thread_s += thread_cpu_s() - c0;
+        stats.serve_driver_s += driver_thread_s() - d0;
         if served == 0 && !flight.is_empty() {
             // Every member in flight is waiting, so each posted a request; none did.
             unreachable!("lockstep batch: members waiting without a posted evaluation");
@@ -181,23 +188,4 @@ pub(super) fn run(
     stats.serve = gpu.serve_timers;
     stats.device_members = gpu.device_members;
     Ok(stats)
-}
-
-/// CPU time of the calling thread, in seconds (wall time where the platform has no
-/// per-thread clock).
-fn thread_cpu_s() -> f64 {
-    #[cfg(unix)]
-    {
-        let mut ts = libc::timespec {
-            tv_sec: 0,
-            tv_nsec: 0,
-        };
-        // SAFETY: `ts` is a valid, writable timespec; the clock id is a constant.
-        if unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0 {
-            return ts.tv_sec as f64 + 1e-9 * ts.tv_nsec as f64;
-        }
-    }
-    use std::sync::OnceLock;
-    static START: OnceLock<Instant> = OnceLock::new();
-    START.get_or_init(Instant::now).elapsed().as_secs_f64()
 }

@@ -236,6 +236,10 @@ pub struct BatchStats {
     /// GPU path: wall time of the parallel member phases (every member's CPU work between
     /// two evaluations: scatter, factorization, solve, checks, bookkeeping).
     pub host_s: f64,
+    /// GPU path: CPU time of the member polls themselves, summed over the threads that
+    /// ran them (the member phase's work without the pool's idle and wake-up time that
+    /// [`Self::host_s`] × threads also counts).
+    pub member_cpu_s: f64,
     /// GPU path: member polls (one per member and batch iteration).
     pub polls: u64,
     /// GPU path: batch iterations (parallel member phase + one dispatch).
@@ -245,6 +249,10 @@ pub struct BatchStats {
     /// device, nor the parallel packing and unpacking it hands to the rayon pool): the
     /// sequential host share of a batch iteration.
     pub serve_thread_s: f64,
+    /// GPU path: of [`Self::serve_thread_s`], the part inside the graphics driver's
+    /// submissions and waits ([`crate::gpu::driver`]): on a software adapter the
+    /// device's own work, run on the driver thread.
+    pub serve_driver_s: f64,
     /// GPU path: members in flight at once (slots).
     pub slots: usize,
     /// Simulation set-up (linear solver analysis, GPU registration), wall time.

@@ -37,6 +37,11 @@ pub const OP_RESTORE: u32 = 8;
 /// and stops where the host's Newton loop would stop (`spec_record` in
 /// `shaders/blocktri.wgsl`).
 pub const OP_SPEC: u32 = 16;
+/// Per-member operation bit (`--solve whole`, a step on the device): before the first
+/// iteration, the member's element slots (one per node after the first) evaluate again
+/// (`spec_reset_main` sets their `I_ACTIVE` to 1: frozen scalars), where the last
+/// multi-iteration submission stopped them; the host then sends no iteration rows.
+pub const OP_REACTIVATE: u32 = 32;
 
 /// Newton iterations one submission holds at most (`KMAX` in `shaders/blocktri.wgsl`).
 pub const RESIDENT_MAX_K: usize = 16;
@@ -731,7 +736,7 @@ impl BlockTriSolver {
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         self.encode(&mut enc, ops);
-        self.queue.submit(Some(enc.finish()));
+        crate::gpu::driver::submit(&self.queue, enc.finish());
         let all: Vec<usize> = if read_x {
             (0..self.members).collect()
         } else {
@@ -803,16 +808,14 @@ impl BlockTriSolver {
             enc.copy_buffer_to_buffer(src, off, &self.staging, at, len);
             at += len;
         }
-        self.queue.submit(Some(enc.finish()));
+        crate::gpu::driver::submit(&self.queue, enc.finish());
         let (tx, rx) = std::sync::mpsc::channel();
         self.staging
             .slice(0..down)
             .map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
             });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        crate::gpu::driver::wait(&self.device)?;
         rx.recv()
             .map_err(|e| GpuError::Kernel(e.to_string()))?
             .map_err(|e| GpuError::Kernel(e.to_string()))?;

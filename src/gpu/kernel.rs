@@ -676,7 +676,7 @@ impl ElementKernel {
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         self.encode_advance(&mut enc, KernelMode::Frozen, slots, 0, false, false);
-        self.queue.submit(Some(enc.finish()));
+        crate::gpu::driver::submit(&self.queue, enc.finish());
     }
 
     /// The records of a step whose increments the element slots `slots` hold (frozen
@@ -688,7 +688,7 @@ impl ElementKernel {
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         self.encode_advance(&mut enc, KernelMode::Frozen, slots, per_member, false, true);
-        self.queue.submit(Some(enc.finish()));
+        crate::gpu::driver::submit(&self.queue, enc.finish());
     }
 
     /// The intermediate buffer (the records: [`T_REC`]).
@@ -722,14 +722,12 @@ impl ElementKernel {
             enc.copy_buffer_to_buffer(src, *off, &staging, at, *len);
             at += len;
         }
-        self.queue.submit(Some(enc.finish()));
+        crate::gpu::driver::submit(&self.queue, enc.finish());
         let (tx, rx) = std::sync::mpsc::channel();
         staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        crate::gpu::driver::wait(&self.device)?;
         rx.recv()
             .map_err(|e| GpuError::Kernel(e.to_string()))?
             .map_err(|e| GpuError::Kernel(e.to_string()))?;
@@ -1059,7 +1057,7 @@ impl Readback<'_> {
             enc.copy_buffer_to_buffer(self.src, off, self.staging, off, len);
         }
         timers.readback_copies += ranges.len() as u64;
-        self.queue.submit(Some(enc.finish()));
+        crate::gpu::driver::submit(&self.queue, enc.finish());
         // One mapping covering every copied range (a buffer admits one pending map).
         let end = ranges.iter().map(|&(o, l)| o + l).max().unwrap_or(0);
         if end == 0 {
@@ -1074,9 +1072,7 @@ impl Readback<'_> {
             .map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
             });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        crate::gpu::driver::wait(&self.device)?;
         rx.recv()
             .map_err(|e| GpuError::Kernel(e.to_string()))?
             .map_err(|e| GpuError::Kernel(e.to_string()))?;

@@ -19,6 +19,8 @@
 //! * `upload`: a dispatch's uploads (changed mirror rows, node increments) in two copies
 //!   and a scatter pass; `compact`: the solver's reports and iterates packed by a pass
 //!   and read back in one copy.
+//! * [`driver`]: every submission and wait, with the calling thread's CPU time inside
+//!   them accounted (the driver's share of the host thread).
 //! * [`inventory`]: what `cosserat gpu` reports: the adapters, the `--backend auto` choice,
 //!   and why a host's NVIDIA GPU is not an adapter.
 //! * [`reach`]: the routes round a headless host's missing Vulkan adapter (an ICD file
@@ -32,6 +34,7 @@ pub mod assemble;
 pub mod blocktri;
 pub(crate) mod compact;
 pub mod context;
+pub mod driver;
 pub mod inventory;
 pub mod kernel;
 pub mod layout;

@@ -155,14 +155,12 @@ impl PlanarKernelGpu {
             pass.dispatch_workgroups(elems.len().div_ceil(64) as u32, 1, 1);
         }
         enc.copy_buffer_to_buffer(&obuf, 0, &staging, 0, out_size);
-        self.queue.submit(Some(enc.finish()));
+        crate::gpu::driver::submit(&self.queue, enc.finish());
         let (tx, rx) = std::sync::mpsc::channel();
         staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Kernel(e.to_string()))?;
+        crate::gpu::driver::wait(&self.device)?;
         rx.recv()
             .map_err(|e| GpuError::Kernel(e.to_string()))?
             .map_err(|e| GpuError::Kernel(e.to_string()))?;

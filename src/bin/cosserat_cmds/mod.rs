@@ -717,6 +717,9 @@ pub enum BenchSolveArg {
     /// one after the other in this process (JSON: the `device`, `resident` and `whole`
     /// objects).
     Resident,
+    /// Only `--solve whole`: EM members the device step covers run their steps entirely
+    /// on the device (JSON: the `whole` object).
+    Whole,
 }
 
 /// `assembly …, factor …, solve …` of summed stage timers (thread-seconds).
@@ -751,6 +754,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
             BenchSolveArg::Device => BenchSolve::Device,
             BenchSolveArg::Both => BenchSolve::Both,
             BenchSolveArg::Resident => BenchSolve::Resident,
+            BenchSolveArg::Whole => BenchSolve::Whole,
         },
         host_update: a.host_update,
     };
@@ -793,6 +797,7 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         BenchSolve::Device => (false, true),
         BenchSolve::Both => (true, true),
         BenchSolve::Resident => (false, true),
+        BenchSolve::Whole => (false, false),
     };
     let resident_solve = opts.solve == BenchSolve::Resident;
     let res = &run.resident;
@@ -907,6 +912,26 @@ pub fn bench_command(a: BenchArgs) -> Result<ExitCode> {
         );
     } else if resident_solve {
         println!("gpu, resident: not run ({adapter})");
+    }
+    if let Some(g) = &run.whole {
+        let (w, k, sv) = (&g.stats, &g.stats.gpu, &g.stats.serve);
+        let member_steps = rod_steps.max(1.0);
+        println!(
+            "gpu, whole ({adapter}): {:.3} s ({:.0} rod-steps/s), {} Newton iterations, {} failed; {} device steps ({} handed to the host); {:.2} host syncs per step, {:.1} host thread µs per member-step ({:.1} the host's own, {:.1} in the driver), {:.0} B per member-step over the bus",
+            w.wall_s,
+            rod_steps / w.wall_s,
+            g.iters,
+            g.failed,
+            sv.device_steps,
+            sv.device_step_handoffs,
+            sv.dispatches as f64 / a.steps.max(1) as f64,
+            1e6 * (w.host_s * rayon::current_num_threads() as f64 + w.serve_thread_s) / member_steps,
+            1e6 * (w.member_cpu_s + w.serve_thread_s - w.serve_driver_s) / member_steps,
+            1e6 * w.serve_driver_s / member_steps,
+            (k.bytes_up + k.bytes_down) as f64 / member_steps,
+        );
+    } else if opts.solve == BenchSolve::Whole {
+        println!("gpu, whole: not run ({adapter})");
     }
     Ok(ExitCode::SUCCESS)
 }
