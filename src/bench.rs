@@ -471,6 +471,11 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, o: &BenchOptions) {
     obj["driver_thread_us_per_member_step"] = (1e6 * w.serve_driver_s / member_steps).into();
     obj["driver_thread_us_per_dispatch"] =
         (1e6 * w.serve_driver_s / (k.dispatches.max(1) as f64)).into();
+    // In dispatches of device steps only: what a device step costs once a member runs.
+    let (dup, dn) = sv.device_step_bytes_up;
+    if dn > 0 {
+        obj["device_step_bytes_up_per_step"] = (dup as f64 / dn as f64).into();
+    }
     obj["bus_bytes_per_member_step"] = ((k.bytes_up + k.bytes_down) as f64 / member_steps).into();
     obj["bus_bytes_up_per_member_step"] = (k.bytes_up as f64 / member_steps).into();
     obj["bus_bytes_down_per_member_step"] = (k.bytes_down as f64 / member_steps).into();

@@ -356,6 +356,20 @@ fn whole_device_steps_sync_once_per_step_and_read_records_only() {
     // What a device step reads back per member: the iteration history, the residual
     // work and the record.
     assert!(st.device_step_bytes_down / st.device_steps <= 512);
+    // What goes up with dispatches of device steps only: operation words and slot lists,
+    // no states, increments or iteration rows (measured 121 bytes per device step: 32
+    // each after a member's first, whose slot lists go up once; 451 when the iteration
+    // rows the device stopped went up again with every step).
+    let (up, n) = st.device_step_bytes_up;
+    assert_eq!(
+        n, st.device_steps,
+        "device steps in dispatches of their own"
+    );
+    assert!(
+        up / n <= 200,
+        "{} bytes up per device step",
+        up as f64 / n as f64
+    );
 }
 
 /// The paper's frame unloaded and kicked hard: some of its Newton solves take more

@@ -83,6 +83,9 @@ pub struct ServeTimers {
     /// Bytes read back for [`Self::device_steps`] (iteration history, residual work and
     /// records).
     pub device_step_bytes_down: u64,
+    /// Bytes sent up in dispatches that held device steps only (operation words, slot
+    /// lists: no states, increments or iteration rows), and the device steps they held.
+    pub device_step_bytes_up: (u64, u64),
     /// `--solve whole`: members' states handed back to the host (a failed device step, or
     /// the member's end), each one read-back that waits, and their bytes.
     pub state_pulls: u64,
@@ -685,6 +688,7 @@ impl GpuEvaluator {
         reqs: Vec<(usize, EvalRequest)>,
     ) -> Vec<(usize, Result<AssembledSystem, String>)> {
         let t0 = Instant::now();
+        let up0 = self.kernel.timers.bytes_up;
         // `--solve resident`: iterations the device already ran are answered from there.
         let mut answers = Vec::with_capacity(reqs.len());
         let reqs: Vec<(usize, EvalRequest)> = reqs
@@ -1204,6 +1208,11 @@ impl GpuEvaluator {
         }
         for &(slot, _) in &pending {
             self.active[slot] = true;
+        }
+        if !fast.is_empty() && fast.len() == pending.len() && fetching.is_empty() {
+            let b = &mut self.serve_timers.device_step_bytes_up;
+            b.0 += self.kernel.timers.bytes_up - up0;
+            b.1 += fast.len() as u64;
         }
         self.kernel.timers.unpack_s += t0.elapsed().as_secs_f64();
         answers
