@@ -154,9 +154,9 @@ fn norm(v: &crate::model::Vec3) -> f64 {
     crate::math::scaled_norm(v)
 }
 
-/// Scales against which momentum drifts are measured: `|L|` or, if the body is nearly
-/// at rest in the mean, `sqrt(2 K m)`; `J` likewise times the model's size.
-fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
+/// The model's mass and size (the extent of its reference nodes), fixed over a run: what
+/// [`momentum_scales`] measures the momenta against.
+fn mass_and_size(sim: &Simulation) -> (f64, f64) {
     let m = sim.model();
     let mass: f64 = m
         .elements
@@ -171,7 +171,13 @@ fn momentum_scales(sim: &Simulation, inv: &Invariants) -> (f64, f64) {
         ),
         |(lo, hi), x| (lo.inf(x), hi.sup(x)),
     );
-    let size = norm(&(hi - lo)).max(1e-300);
+    (mass, norm(&(hi - lo)).max(1e-300))
+}
+
+/// Scales against which momentum drifts are measured: `|L|` or, if the body is nearly
+/// at rest in the mean, `sqrt(2 K m)`; `J` likewise times the model's size
+/// (`(mass, size)` from [`mass_and_size`]).
+fn momentum_scales((mass, size): (f64, f64), inv: &Invariants) -> (f64, f64) {
     // sqrt(2 K m) as a product of roots: K·m alone overflows for masses near 1e300.
     let p = (2.0 * inv.kinetic.max(0.0)).sqrt() * mass.sqrt();
     (
@@ -208,7 +214,8 @@ pub async fn run_async<E>(
     let inv0 = sim.invariants();
     // Drifts are measured against the largest momentum scale the run reaches (a loaded
     // structure starts at rest: its initial scale is zero).
-    let (mut l_ref, mut j_ref) = momentum_scales(sim, &inv0);
+    let body = mass_and_size(sim);
+    let (mut l_ref, mut j_ref) = momentum_scales(body, &inv0);
     let (mut max_dl, mut max_dj) = (0.0f64, 0.0f64);
     let dt = sim.params().dt;
     let mut log = RunLog::new(sim);
@@ -248,7 +255,7 @@ pub async fn run_async<E>(
         match sim.step_async().await {
             Ok(rep) => {
                 let inv = sim.invariants();
-                let (ls, js) = momentum_scales(sim, &inv);
+                let (ls, js) = momentum_scales(body, &inv);
                 (l_ref, j_ref) = (l_ref.max(ls), j_ref.max(js));
                 max_dl = max_dl.max(norm(&(inv.l - prev.l)));
                 max_dj = max_dj.max(norm(&(inv.j - prev.j)));
