@@ -907,6 +907,15 @@ impl GpuEvaluator {
             self.serve_timers.multi_solves += multi.len() as u64;
         }
         let is_resident = |m: usize| resident_slot[m];
+        // A dispatch of device-resident members only reads nothing back before its last
+        // read: from here to there the thread waits for the device (a software adapter
+        // may run the passes inside the submissions), encodes and submits. The device's
+        // pass time is that span less the thread's own CPU time in it.
+        let span = (
+            Instant::now(),
+            crate::gpu::driver::thread_cpu_s() - crate::gpu::driver::driver_thread_s(),
+            self.kernel.timers.kernel_s,
+        );
         let mut res = if pending.is_empty() {
             Ok(())
         } else {
@@ -1016,7 +1025,11 @@ impl GpuEvaluator {
             // back, so this read is where the wait for the passes happens: kernel time.
             let waited = t0.elapsed().as_secs_f64();
             if !pending.is_empty() && iterating.len() + multi.len() + fast.len() == pending.len() {
-                self.kernel.timers.kernel_s += waited;
+                let own = crate::gpu::driver::thread_cpu_s()
+                    - crate::gpu::driver::driver_thread_s()
+                    - span.1;
+                let device_s = (span.0.elapsed().as_secs_f64() - own).max(0.0);
+                self.kernel.timers.kernel_s = span.2 + device_s;
             } else {
                 self.kernel.timers.readback_s += waited;
             }
