@@ -122,6 +122,9 @@ pub struct ElementKernel {
     /// Per buffer and slot: the slot's fields changed since the last upload (only the
     /// changed slots' ranges are uploaded).
     dirty: [Vec<bool>; 3],
+    /// Whether any [`Self::dirty`] flag may be set (a dispatch of device steps and every
+    /// iteration after a submission's first skip scanning them).
+    maybe_dirty: bool,
     /// First iteration field uploaded from the host: [`I_X`], or [`I_S`] when a pass
     /// before the element pass writes the increments on the device
     /// ([`crate::gpu::Assembler`] gathers them from per-node increments).
@@ -316,6 +319,7 @@ impl ElementKernel {
                 vec![0.0; NI * cap],
             ],
             dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
+            maybe_dirty: true,
             iter_from: I_X,
             state_gap: SCATTER_GAP,
             out: Vec::new(),
@@ -401,12 +405,14 @@ impl ElementKernel {
         };
         self.put(0, E_DIRDISS, i, dd);
         self.dirty[0][i] = true;
+        self.maybe_dirty = true;
     }
 
     /// Writes the state at `n` of slot `i` (and its cached strains). The slot is uploaded
     /// again only when its state changed (once per step, not per Newton iteration).
     pub fn set_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
         self.dirty[1][i] |= state_row(&mut self.host[1][i * NS..(i + 1) * NS], st, eps_n);
+        self.maybe_dirty |= self.dirty[1][i];
     }
 
     /// Writes the increment and frozen scalars of slot `i` and marks it active.
@@ -417,6 +423,7 @@ impl ElementKernel {
         }
         self.set_scalars(i, s);
         self.dirty[2][i] = true;
+        self.maybe_dirty = true;
     }
 
     /// Writes the frozen scalars of slot `i` and marks it active (its increment is written
@@ -425,6 +432,7 @@ impl ElementKernel {
     /// round, not per Newton iteration).
     pub fn set_scalars(&mut self, i: usize, s: &FrozenScalars) {
         self.dirty[2][i] |= scalars_row(&mut self.host[2][i * NI..(i + 1) * NI], s, false);
+        self.maybe_dirty |= self.dirty[2][i];
     }
 
     /// [`Self::set_state`] and [`Self::set_scalars`] for whole members at once, in
@@ -432,6 +440,10 @@ impl ElementKernel {
     /// holds element slots `m·per_slot..(m + 1)·per_slot`; `None` leaves it as it is.
     pub(crate) fn pack_members(&mut self, per_slot: usize, members: &[Option<MemberPack<'_>>]) {
         use rayon::prelude::*;
+        if members.iter().all(Option::is_none) {
+            return;
+        }
+        self.maybe_dirty = true;
         let [_, states, iters] = &mut self.host;
         let [_, d_states, d_iters] = &mut self.dirty;
         states
@@ -469,6 +481,7 @@ impl ElementKernel {
         if self.host[2][i * NI + I_ACTIVE] != 0.0 {
             self.put(2, I_ACTIVE, i, 0.0);
             self.dirty[2][i] = true;
+            self.maybe_dirty = true;
         }
     }
 
@@ -476,6 +489,7 @@ impl ElementKernel {
     /// dispatch (a pass on the device changed their activity: `--solve resident`).
     pub(crate) fn touch_iter(&mut self, lo: usize, hi: usize) {
         self.dirty[2][lo..hi.min(self.cap)].fill(true);
+        self.maybe_dirty = true;
     }
 
     /// Records the uploads queued so far (the kernel's changed slots, one block of slots ×
@@ -488,7 +502,8 @@ impl ElementKernel {
         // iteration buffer from its first field that changes per iteration).
         let from = [0, 0, self.iter_from];
         let mut rows = Vec::new();
-        for b in 0..3 {
+        let scan = std::mem::take(&mut self.maybe_dirty);
+        for b in (0..3).filter(|_| scan) {
             let (nf, f0) = (FIELDS[b], from[b]);
             let block = Block {
                 target: b,
@@ -541,7 +556,10 @@ impl ElementKernel {
         };
         let list: Option<Vec<u32>> = match tangent {
             TangentSlots::None => None,
+            TangentSlots::All if self.tan_uploaded.len() == self.cap => None,
             TangentSlots::All => Some((0..self.cap as u32).collect()),
+            // (Compared before copying: the iterations of a submission list the same.)
+            TangentSlots::List(l) if l == self.tan_uploaded.as_slice() => None,
             TangentSlots::List(l) => Some(l.to_vec()),
         };
         if let Some(list) = list.filter(|l| !l.is_empty() && *l != self.tan_uploaded) {
