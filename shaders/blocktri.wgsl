@@ -468,6 +468,9 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var worst: Real = 0.0;
     var finite = true;
     var work: Real = 0.0;
+    // Σ extra · q over the u and θ rows: minus the work of the host's dead loads (their
+    // nodal terms are −F and −M where no point mass sits: `nodal_terms`).
+    var lwork: Real = 0.0;
     for (var i = 0u; i < n; i++) {
         let mi = mask[m * prm.npn + i];
         for (var r = 0u; r < 9u; r++) {
@@ -476,12 +479,15 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let rel = abs(v) / s[r / 3u];
             finite = finite && is_finite(rel);
             worst = max(worst, rel);
-            work += abs(v * node_x[qidx(m, i, r)]);
+            let q = node_x[qidx(m, i, r)];
+            work += abs(v * q);
+            if r < 6u { lwork += extra[9u * (m * prm.npn + i) + r] * q; }
         }
     }
     if !finite { worst = -1.0; }
     report[2u * m] = worst;
     rwork[m] = work;
+    if (ops[m] & 16u) != 0u { hist[m * HSTRIDE + HSTRIDE - 1u] = -lwork; }
     // Without a solve in the operation word (an iterate the host expects to accept) the
     // iterate stays; a failed solve leaves it too.
     let solved = (ops[m] & 2u) != 0u;
@@ -532,9 +538,10 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // Iterations a submission holds at most (`RESIDENT_MAX_K` in `src/gpu/blocktri.rs`).
 const KMAX: u32 = 16u;
-const HSTRIDE: u32 = 33u; // 1 + 2 KMAX
+const HSTRIDE: u32 = 34u; // 1 + 2 KMAX + 1
 
-// Per member HSTRIDE: the count c, then (residual, outcome) per iteration.
+// Per member HSTRIDE: the count c, then (residual, outcome) per iteration, then (last)
+// the work of the dead loads over the step at the iterate evaluated last.
 @group(0) @binding(18) var<storage, read_write> hist: array<Real>;
 // Per member 4: Newton tolerance, 1 for quadratic convergence (full Newton), the
 // corrections before a residual may be accepted, this submission's K; then the element

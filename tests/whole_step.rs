@@ -396,3 +396,84 @@ fn whole_frame_without_loads_runs_on_the_device_as_on_the_cpu() {
     // One hand-back per handed-back step, one at the end.
     assert_eq!(st.state_pulls, st.device_step_handoffs + 1);
 }
+
+/// EM cantilevers under gravity with dead tip loads: constant (the device holds the loads
+/// from the member's first step on) or ramped over the first steps and constant after
+/// (host steps while the load changes, device steps once it holds still); kicked, with
+/// random stiffnesses and time steps.
+fn loaded_mix() -> Vec<Member> {
+    let mut ms = batch_mix(Some(Scheme::Em), Strategy::Staggered);
+    ms.truncate(9);
+    for (i, m) in ms.iter_mut().enumerate() {
+        m.model.gravity = cosserat::model::Vec3::new(0.0, 0.0, -9.81);
+        let dt = m.params.dt;
+        let load = &mut m.model.loads[0];
+        load.table = if i % 2 == 0 {
+            cosserat::table::TimeTable {
+                times: vec![0.0],
+                values: vec![1.0],
+            }
+        } else {
+            cosserat::table::TimeTable {
+                times: vec![0.0, 2.0 * dt],
+                values: vec![0.2, 1.0],
+            }
+        };
+        m.params.t_end = 8.0 * dt;
+    }
+    ms
+}
+
+#[test]
+fn whole_device_steps_with_dead_loads_end_as_on_the_cpu_path() {
+    let ms = loaded_mix();
+    let Some(exec) = gpu() else { return };
+    let (cpu, _) = run_batch(
+        &ms,
+        &Executor::Cpu,
+        NewtonVariant::Fresh,
+        SolveMode::Host,
+        0,
+    );
+    let (whole, ws) = run_batch(&ms, &exec, NewtonVariant::Full, SolveMode::Whole, 5);
+    let (mut worst, mut worst_w, mut worst_balance) = (0.0f64, 0.0f64, 0.0f64);
+    for (c, w) in cpu.iter().zip(&whole) {
+        let i = c.index;
+        assert_eq!(w.outcome.status, RunStatus::Completed, "member {i}");
+        worst = worst.max(compare_results(&format!("loaded, member {i}"), c, w));
+        // The loads' work, step by step, against the CPU path's.
+        worst_w = worst_w.max(rel(
+            c.history.iter().map(|h| h.external_work),
+            w.history.iter().map(|h| h.external_work),
+        ));
+        // EM's balance on the device steps too: H − H₀ = W (no dissipation).
+        let h0 = w.history[0].total;
+        let scale = w
+            .history
+            .iter()
+            .map(|h| h.total.abs().max(h.work_total.abs()))
+            .fold(h0.abs(), f64::max);
+        for h in &w.history {
+            let gap = (h.total - h0 - (h.work_total - h.dissipation_total)).abs() / scale;
+            worst_balance = worst_balance.max(gap);
+        }
+    }
+    let st = &ws.serve;
+    println!(
+        "loaded: vs CPU {worst:.3e}, W {worst_w:.3e}, balance {worst_balance:.3e}; device steps {} ({} handed back), state pulls {}",
+        st.device_steps, st.device_step_handoffs, st.state_pulls
+    );
+    assert!(worst <= STATE_RTOL, "{worst:.3e} from the CPU path");
+    assert!(
+        worst_w <= STATE_RTOL,
+        "loads' work {worst_w:.3e} from the CPU path"
+    );
+    assert!(worst_balance <= 1e-12, "energy balance {worst_balance:.3e}");
+    // Constant loads: 7 device steps of 8 for each of the 5 members; ramped ones: the
+    // steps after the ramp (from the 4th on), 4 members.
+    assert!(
+        st.device_steps >= 5 * 7 + 4 * 4,
+        "{} device steps",
+        st.device_steps
+    );
+}

@@ -200,15 +200,16 @@ pub const DEVICE_STEP_K: usize = 8;
 
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
-/// rounds), no loads (nodal, gravity, line), no moving or sliding supports, links,
-/// contact, damping or control commands.
+/// rounds); dead nodal loads and gravity only (no line loads); no moving or sliding
+/// supports, links, contact, damping or control commands. (A step whose loads differ from
+/// those the device holds runs on the host: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
     if sim.params().scheme != crate::integrator::Scheme::Em {
         return Some("scheme other than EM");
     }
-    if !m.loads.is_empty() || m.gravity != crate::model::Vec3::zeros() || !m.line_loads.is_empty() {
-        return Some("loads");
+    if !m.line_loads.is_empty() {
+        return Some("line loads");
     }
     if !m.drives.is_empty() || !m.slides.is_empty() || sim.has_commands() {
         return Some("moving supports");
@@ -1011,7 +1012,7 @@ impl GpuEvaluator {
             st.fetch_bytes_down += (72 * npn + 8) * (what.fetch.len() - multi.len()) as u64;
             st.multi_bytes_down += (72 * npn + 8 + 8 + 16 * multi_k as u64) * multi.len() as u64;
             st.device_step_bytes_down +=
-                (8 + 16 * fast_k as u64 + 8 + 8 * crate::gpu::layout::N_ADV as u64)
+                (8 + 16 * fast_k as u64 + 8 + 8 + 8 * crate::gpu::layout::N_ADV as u64)
                     * fast.len() as u64;
             match solver.read_back(&what) {
                 Ok(s) => solved = Some(s),
@@ -1131,6 +1132,14 @@ impl GpuEvaluator {
         // Multi-iteration runs: each member's first iteration is answered now, the
         // others as its Newton loop asks for them.
         let hist_of: &[(usize, Vec<Report>)] = solved.as_ref().map_or(&[], |s| &s.hist);
+        let load_work: &[f64] = solved.as_ref().map_or(&[], |s| &s.load_work);
+        // Each slot's history and load work, by slot (a search per member would be
+        // quadratic in them).
+        let mut hist_at: Vec<Option<(&Vec<Report>, f64)>> = vec![None; sizes.len()];
+        for (i, (m, reports)) in hist_of.iter().enumerate() {
+            hist_at[*m] = Some((reports, load_work.get(i).copied().unwrap_or(f64::NAN)));
+        }
+        let hist_at = &hist_at;
         if !fast.is_empty() {
             let mut rec_of: Vec<Option<[f64; crate::gpu::layout::N_ADV]>> = vec![None; sizes.len()];
             let mut rw_of: Vec<f64> = vec![f64::NAN; sizes.len()];
@@ -1152,9 +1161,9 @@ impl GpuEvaluator {
             }
             let (rec_of, rw_of) = (&rec_of, &rw_of);
             answers.par_extend(fast.par_iter().map(|&slot| {
-                let out = match (&res, hist_of.iter().find(|h| h.0 == slot), rec_of[slot]) {
+                let out = match (&res, hist_at[slot], rec_of[slot]) {
                     (Err(e), _, _) => Err(e.to_string()),
-                    (Ok(()), Some((_, reports)), Some(rec)) => Ok(AssembledSystem {
+                    (Ok(()), Some((reports, load_work)), Some(rec)) => Ok(AssembledSystem {
                         step: Some(DeviceStepAnswer {
                             iterations: reports
                                 .iter()
@@ -1164,6 +1173,7 @@ impl GpuEvaluator {
                                 })
                                 .collect(),
                             residual_work: rw_of[slot],
+                            external_work: load_work,
                             record: crate::gpu::kernel::MemberRecord::from_fields(&rec),
                         }),
                         ..AssembledSystem::default()
@@ -1172,18 +1182,18 @@ impl GpuEvaluator {
                 };
                 (slot, out)
             }));
-            self.serve_timers.multi_iterations += hist_of
+            self.serve_timers.multi_iterations += fast
                 .iter()
-                .filter(|h| fast.contains(&h.0))
-                .map(|h| h.1.len() as u64)
+                .filter_map(|&m| hist_at[m])
+                .map(|h| h.0.len() as u64)
                 .sum::<u64>();
         }
         let runs: Vec<(usize, Result<MultiRun, String>)> = multi
             .par_iter()
             .map(|&slot| {
-                let run = match (&res, hist_of.iter().find(|h| h.0 == slot)) {
+                let run = match (&res, hist_at[slot]) {
                     (Err(e), _) => Err(e.to_string()),
-                    (Ok(()), Some((_, reports))) if !reports.is_empty() => {
+                    (Ok(()), Some((reports, _))) if !reports.is_empty() => {
                         let res: Vec<f64> = reports.iter().map(|r| r.residual).collect();
                         let (last, before) = res.split_last().expect("not empty");
                         let (tol, quadratic) = multi_test[slot];

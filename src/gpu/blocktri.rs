@@ -45,8 +45,9 @@ pub const OP_REACTIVATE: u32 = 32;
 
 /// Newton iterations one submission holds at most (`KMAX` in `shaders/blocktri.wgsl`).
 pub const RESIDENT_MAX_K: usize = 16;
-/// Scalars per member of the iteration history: the count, then two per iteration.
-const HSTRIDE: usize = 1 + 2 * RESIDENT_MAX_K;
+/// Scalars per member of the iteration history: the count, two per iteration, and the work
+/// of the dead loads at the iterate evaluated last (`HSTRIDE` in `shaders/blocktri.wgsl`).
+const HSTRIDE: usize = 2 + 2 * RESIDENT_MAX_K;
 
 /// What the host's Newton loop accepts, per member, for [`OP_SPEC`]'s stopping test.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -123,6 +124,9 @@ pub struct Solved {
     /// Per member slot asked for ([`Readback::hist`]): the [`Report`]s of the iterations
     /// of its multi-iteration submission, in order.
     pub hist: Vec<(usize, Vec<Report>)>,
+    /// Per member slot of [`Self::hist`], in its order: the work of the dead loads over the
+    /// step at the iterate evaluated last (`−Σ extra · q` over the u and θ rows).
+    pub load_work: Vec<f64>,
     /// Per member slot asked for ([`Readback::rwork`]): `Σ |R_i q_i|` of its last
     /// evaluated iterate.
     pub rwork: Vec<(usize, f64)>,
@@ -157,7 +161,8 @@ pub struct Readback {
     pub report: Vec<usize>,
     /// Accepted iterates of these slots ([`Solved::iterates`]).
     pub fetch: Vec<usize>,
-    /// Iteration histories of these slots ([`Solved::hist`]; 8 + 16 K bytes each).
+    /// Iteration histories of these slots ([`Solved::hist`], [`Solved::load_work`]; 16 +
+    /// 16 [`RESIDENT_MAX_K`] bytes each).
     pub hist: Vec<usize>,
     /// Residual work of the last evaluated iterate of these slots ([`Solved::rwork`]; 8
     /// bytes each).
@@ -859,6 +864,8 @@ impl BlockTriSolver {
             }
             for &(lo, hi) in &h_runs {
                 let h: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * HSTRIDE * (hi - lo)));
+                out.load_work
+                    .extend(h.chunks_exact(HSTRIDE).map(|h| h[HSTRIDE - 1]));
                 out.hist
                     .extend((lo..hi).zip(h.chunks_exact(HSTRIDE)).map(|(m, h)| {
                         let c = (h[0] as usize).min(RESIDENT_MAX_K);

@@ -77,6 +77,16 @@ impl Simulation {
         } else if device {
             self.nodal_terms(q, false, r, &mut scale);
             self.resident_scale = scale;
+            if self.device_steps {
+                // What the device's nodal terms now hold: the loads of this step.
+                match &mut self.device_loads {
+                    Some((f, m)) => {
+                        f.clone_from(&self.force);
+                        m.clone_from(&self.moment);
+                    }
+                    None => self.device_loads = Some((self.force.clone(), self.moment.clone())),
+                }
+            }
         }
         if external {
             let upload = !resident || self.resident_next.upload;

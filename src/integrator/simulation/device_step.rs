@@ -1,5 +1,6 @@
 //! `--solve whole`: a step run entirely on the device (docs/gpu.md, "Whole step on the
-//! device"). The member posts one request per step; the device advances its state by the
+//! device"). Where the step's dead loads are those whose nodal terms the device holds, the
+//! member posts one request per step; the device advances its state by the
 //! step accepted last, runs Newton from its own iterate (the last increment: the CPU's
 //! first predictor), and sends back the iterations' residuals, the residual work and the
 //! records at the iterate it stopped at, keeping the state at `n`. The host replays its
@@ -48,6 +49,24 @@ impl Simulation {
             return None;
         };
         let port = port.clone();
+        // The device forms the step's nodal terms from the loads it holds: this step's
+        // loads must be those (a constant load, gravity; a tabled load once its table is
+        // flat), else the host steps and sends them.
+        self.mid_step_loads();
+        let same_loads = self
+            .device_loads
+            .as_ref()
+            .is_some_and(|(f, m)| *f == self.force && *m == self.moment);
+        if !same_loads {
+            // The host steps: from the device's state, where steps ran there.
+            return match self.sync_device_state().await {
+                Ok(()) => None,
+                Err(e) => Some(Err(StepFailure {
+                    reason: format!("the device did not hand the state back: {e}"),
+                    residuals: vec![],
+                })),
+            };
+        }
         self.sent_version = Some(self.state_version);
         let req = EvalRequest {
             advance: true,
@@ -119,6 +138,7 @@ impl Simulation {
             r.acc_sums[1],
             r.turn,
             a.residual_work,
+            a.external_work,
         ];
         if fields.iter().any(|x| !x.is_finite())
             || !(r.l.iter().chain(r.j.iter()).all(|x| x.is_finite()))
@@ -126,14 +146,15 @@ impl Simulation {
         {
             return None;
         }
-        // The EM energy check (`accept.rs`, `check_advanced`): no loads, so W = 0.
+        // The EM energy check (`accept.rs`, `check_advanced`), W the dead loads' work the
+        // device summed at the iterate.
         let inv = Invariants {
             kinetic: r.kinetic,
             potential: r.potential,
             l: r.l,
             j: r.j,
         };
-        let w = 0.0f64;
+        let w = a.external_work;
         let (h0, h1) = (self.inv.total(), inv.total());
         let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
         let residual_work = a.residual_work;

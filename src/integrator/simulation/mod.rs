@@ -238,6 +238,9 @@ pub struct Simulation {
     /// The row scales of the nodal terms sent with the current resident solve's first
     /// request (the later requests reuse them).
     resident_scale: [f64; 3],
+    /// The nodal forces and moments of the loads whose nodal terms went up last with a
+    /// device solve's request (`--solve whole`: a step on the device uses them).
+    device_loads: Option<(Vec<Vec3>, Vec<Vec3>)>,
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
@@ -327,6 +330,7 @@ impl Simulation {
             resident_now: false,
             resident_next: Default::default(),
             resident_scale: [0.0; 3],
+            device_loads: None,
             resident_iterate: None,
             residual_work: None,
         })
