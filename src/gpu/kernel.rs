@@ -1075,7 +1075,7 @@ impl Readback<'_> {
             enc.copy_buffer_to_buffer(self.src, off, self.staging, off, len);
         }
         timers.readback_copies += ranges.len() as u64;
-        crate::gpu::driver::submit(&self.queue, enc.finish());
+        crate::gpu::driver::submit(self.queue, enc.finish());
         // One mapping covering every copied range (a buffer admits one pending map).
         let end = ranges.iter().map(|&(o, l)| o + l).max().unwrap_or(0);
         if end == 0 {
@@ -1090,7 +1090,7 @@ impl Readback<'_> {
             .map_async(wgpu::MapMode::Read, move |r| {
                 let _ = tx.send(r);
             });
-        crate::gpu::driver::wait(&self.device)?;
+        crate::gpu::driver::wait(self.device)?;
         rx.recv()
             .map_err(|e| GpuError::Kernel(e.to_string()))?
             .map_err(|e| GpuError::Kernel(e.to_string()))?;
