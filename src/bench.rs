@@ -173,6 +173,19 @@ pub fn bench_scheme() -> crate::integrator::Scheme {
     }
 }
 
+/// The benchmark's gravity: `COSSERAT_BENCH_GRAVITY=1` hangs the cantilevers under
+/// gravity (9.81 m/s² across them), a dead load `--solve whole` forms on the device;
+/// otherwise none.
+pub fn bench_gravity() -> crate::model::Vec3 {
+    match std::env::var("COSSERAT_BENCH_GRAVITY")
+        .as_deref()
+        .map(str::trim)
+    {
+        Ok("1") => crate::model::Vec3::new(0.0, 0.0, -9.81),
+        _ => crate::model::Vec3::zeros(),
+    }
+}
+
 /// The process's peak resident set size (Linux `VmHWM`), if known.
 pub fn peak_rss_bytes() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -247,10 +260,11 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
     }
     limits::check_memory("bench", opts.rods as u64, opts.elements as u64)?;
     let mut members = bench_members(opts.rods, opts.elements, opts.steps)?;
-    let scheme = bench_scheme();
+    let (scheme, gravity) = (bench_scheme(), bench_gravity());
     for m in &mut members {
         m.params.strategy = opts.strategy;
         m.params.scheme = scheme;
+        m.model.gravity = gravity;
     }
     let gpu_exec = if opts.cpu_only {
         Ok((Executor::Cpu, None))
@@ -544,6 +558,7 @@ impl BenchRun {
             "newton": o.newton.name(),
             "strategy": o.strategy.name(),
             "scheme": bench_scheme().name(),
+            "gravity": bench_gravity().z,
             "cpu_strategy": self.cpu.as_ref().map(|_| o.strategy.resolve(false).name()),
             "gpu_strategy": (self.gpu.is_some() || self.device.is_some() || self.resident.is_some())
                 .then(|| o.strategy.resolve(true).name()),

@@ -79,13 +79,9 @@ impl Simulation {
             self.resident_scale = scale;
             if self.device_steps {
                 // What the device's nodal terms now hold: the loads of this step.
-                match &mut self.device_loads {
-                    Some((f, m)) => {
-                        f.clone_from(&self.force);
-                        m.clone_from(&self.moment);
-                    }
-                    None => self.device_loads = Some((self.force.clone(), self.moment.clone())),
-                }
+                let t_mid = self.state.t + 0.5 * self.params.dt;
+                let factors = self.model.loads.iter().map(|l| l.table.eval(t_mid));
+                self.device_loads = Some(factors.collect());
             }
         }
         if external {

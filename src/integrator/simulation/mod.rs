@@ -238,9 +238,10 @@ pub struct Simulation {
     /// The row scales of the nodal terms sent with the current resident solve's first
     /// request (the later requests reuse them).
     resident_scale: [f64; 3],
-    /// The nodal forces and moments of the loads whose nodal terms went up last with a
-    /// device solve's request (`--solve whole`: a step on the device uses them).
-    device_loads: Option<(Vec<Vec3>, Vec<Vec3>)>,
+    /// The factors of the nodal loads' time tables (in [`Model::loads`] order) whose nodal
+    /// terms went up last with a device solve's request (`--solve whole`: a step on the
+    /// device uses those terms; gravity is constant).
+    device_loads: Option<Vec<f64>>,
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
