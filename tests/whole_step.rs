@@ -17,7 +17,11 @@
 //! or are solved on the host, through 5 slots, and the paper's frame: every member ends
 //! as on the CPU path (status, reason, steps, Newton iterations, fallback steps; states
 //! and energy histories within `STATE_RTOL`), as with `--solve resident`, with one host
-//! sync per step and no state uploads for the steps the device advanced.
+//! sync per step and no state uploads for the steps the device advanced. Device steps
+//! (the whole step on the device, the host reading records only): unloaded batches, the
+//! frame kicked hard (steps handed back), and cantilevers under gravity with constant or
+//! ramped tip loads (device steps where the loads hold still; their work against the CPU
+//! path's and EM's balance H − H₀ = W).
 //!
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case it fails.
