@@ -1,5 +1,5 @@
 //! The graphics driver's share of the host thread: every submission and every wait of the
-//! GPU path goes through [`submit`] and [`wait`], which add the calling thread's CPU time
+//! GPU path goes through `submit` and `wait`, which add the calling thread's CPU time
 //! inside them to a per-thread account ([`driver_thread_s`]).
 //!
 //! On a real GPU these calls hand work to the device and sleep while it runs; on a
@@ -35,7 +35,7 @@ pub fn thread_cpu_s() -> f64 {
     START.get_or_init(Instant::now).elapsed().as_secs_f64()
 }
 
-/// The calling thread's CPU seconds spent inside [`submit`] and [`wait`] so far.
+/// The calling thread's CPU seconds spent inside `submit` and `wait` so far.
 pub fn driver_thread_s() -> f64 {
     DRIVER_S.with(Cell::get)
 }
