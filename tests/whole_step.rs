@@ -481,3 +481,42 @@ fn whole_device_steps_with_dead_loads_end_as_on_the_cpu_path() {
         st.device_steps
     );
 }
+
+/// `bench --solve whole` times that mode alone: EM cantilevers (`COSSERAT_BENCH_SCHEME=em`)
+/// under gravity (`COSSERAT_BENCH_GRAVITY=1`) take every step after their first on the
+/// device, and the JSON `whole` object reports the figures of docs/gpu.md.
+#[test]
+fn bench_solve_whole_reports_device_steps() {
+    if gpu().is_none() {
+        return;
+    }
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+        .args(["bench", "--rods", "3", "--elements", "6", "--steps", "4"])
+        .args(["--solve", "whole", "--gpu-only", "--json"])
+        .env("COSSERAT_BENCH_SCHEME", "em")
+        .env("COSSERAT_BENCH_GRAVITY", "1")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8(o.stdout).unwrap();
+    let json: serde_json::Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+    assert_eq!(json["scheme"], "em");
+    assert_eq!(json["gravity"], -9.81);
+    assert!(
+        json["resident"].is_null() && json["device"].is_null(),
+        "{json}"
+    );
+    let w = &json["whole"];
+    assert_eq!(w["device_steps"], 9, "{w}");
+    assert_eq!(w["host_syncs_per_step"], 1.0, "{w}");
+    for key in [
+        "host_own_us_per_member_step",
+        "member_cpu_us_per_member_step",
+        "serve_own_us_per_member_step",
+        "driver_thread_us_per_member_step",
+        "device_step_bytes_up_per_step",
+        "gpu_wall_over_device_pass",
+    ] {
+        assert!(w[key].as_f64().is_some_and(f64::is_finite), "{key}: {w}");
+    }
+}
