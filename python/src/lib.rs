@@ -1293,9 +1293,10 @@ fn _bench(
             "device" => BenchSolve::Device,
             "both" => BenchSolve::Both,
             "resident" => BenchSolve::Resident,
+            "whole" => BenchSolve::Whole,
             other => {
                 return Err(PyValueError::new_err(format!(
-                    "solve: unknown mode `{other}` (expected host, device, both or resident)"
+                    "solve: unknown mode `{other}` (expected host, device, both, resident or whole)"
                 )))
             }
         },

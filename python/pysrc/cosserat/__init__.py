@@ -265,7 +265,7 @@ def bench(
     members of `elements` elements over `steps` EDMC-2 steps, on the CPU path and (unless
     `cpu_only`, where a GPU exists) the GPU path. The options are the command's
     (`newton`: full, fresh, modified; `strategy`: auto, staggered, monolithic, inexact;
-    `solve`: host, device, both). Returns the dict `cosserat bench --json` prints
+    `solve`: host, device, both, resident, whole). Returns the dict `cosserat bench --json` prints
     (`cpu_element_steps_per_s`, `gpu_element_steps_per_s`, `ratio`, `adapter`, the stage
     timers, ...). The GIL is released while it runs."""
     return json.loads(
