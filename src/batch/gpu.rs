@@ -179,6 +179,9 @@ pub struct GpuEvaluator {
     /// sets them again there ([`crate::gpu::blocktri::OP_REACTIVATE`]), any other
     /// evaluation sends the host's rows first.
     device_stopped: Vec<bool>,
+    /// The most Newton iterations a member's device step recorded in the last dispatch
+    /// with device steps ([`DEVICE_STEP_MARGIN`]).
+    fast_need: usize,
     /// The node increments as they were at the start of the last dispatch with device
     /// steps (a failed device step's predictor, for the host's step).
     saved_increments: Option<wgpu::Buffer>,
@@ -197,6 +200,15 @@ pub fn set_device_steps(on: bool) {
 /// Newton iterations a whole step on the device runs at most in its submission (a step
 /// that needs more goes to the host's step).
 pub const DEVICE_STEP_K: usize = 8;
+
+/// Device steps record the iterations the batch's device steps needed last (at most, per
+/// member) plus this margin, at least [`DEVICE_STEP_MIN_K`] and at most [`DEVICE_STEP_K`]:
+/// each recorded iteration costs the host its encoding (16 dispatches) whether or not a
+/// member still iterates.
+const DEVICE_STEP_MARGIN: usize = 2;
+
+/// See [`DEVICE_STEP_MARGIN`].
+const DEVICE_STEP_MIN_K: usize = 4;
 
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
@@ -325,6 +337,7 @@ impl GpuEvaluator {
             to_advance: Vec::new(),
             fast: vec![false; slots],
             device_stopped: vec![false; slots],
+            fast_need: DEVICE_STEP_K,
             saved_increments: None,
         })
     }
@@ -731,9 +744,13 @@ impl GpuEvaluator {
         let mut multi: Vec<usize> = Vec::new();
         // `--solve whole`: whole steps on the device.
         let mut fast: Vec<usize> = Vec::new();
-        let fast_k = self
-            .multi_k
-            .clamp(DEVICE_STEP_K, crate::gpu::blocktri::RESIDENT_MAX_K);
+        // Device steps record as many iterations as the members needed last time, with a
+        // margin (a step that needs more goes to the host's step; the next record more).
+        let fast_k = (self.fast_need + DEVICE_STEP_MARGIN).clamp(
+            DEVICE_STEP_MIN_K,
+            self.multi_k
+                .clamp(DEVICE_STEP_K, crate::gpu::blocktri::RESIDENT_MAX_K),
+        );
         // Their Newton tests (tolerance, quadratic convergence).
         let mut multi_test: Vec<(f64, bool)> = vec![(0.0, false); self.sizes.len()];
         let multi_k = self.multi_k;
@@ -874,7 +891,9 @@ impl GpuEvaluator {
         for &m in multi.iter().chain(&fast) {
             multi_slot[m] = true;
         }
-        let repeats = if !fast.is_empty() {
+        let repeats = if !fast.is_empty() && multi.is_empty() {
+            fast_k
+        } else if !fast.is_empty() {
             multi_k.max(fast_k)
         } else if multi.is_empty() {
             1
@@ -1187,6 +1206,14 @@ impl GpuEvaluator {
                 .filter_map(|&m| hist_at[m])
                 .map(|h| h.0.len() as u64)
                 .sum::<u64>();
+            if let Some(need) = fast
+                .iter()
+                .filter_map(|&m| hist_at[m])
+                .map(|h| h.0.len())
+                .max()
+            {
+                self.fast_need = need;
+            }
         }
         let runs: Vec<(usize, Result<MultiRun, String>)> = multi
             .par_iter()
