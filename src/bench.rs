@@ -332,6 +332,20 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
             } else {
                 None
             };
+            // `--solve whole`, with steps on the device or (`device_steps` false) on the host.
+            let whole = |device_steps: bool, what: &'static str| {
+                crate::batch::gpu::set_device_steps(device_steps);
+                let t = timed(
+                    &members,
+                    exec,
+                    opts.newton,
+                    opts.slots,
+                    SolveMode::Whole,
+                    false,
+                );
+                crate::batch::gpu::set_device_steps(true);
+                t.map_err(batch(what))
+            };
             let r = if resident_solve {
                 let resident = timed(
                     &members,
@@ -342,38 +356,11 @@ pub fn run(opts: &BenchOptions) -> Result<BenchRun, BenchError> {
                     false,
                 )
                 .map_err(batch("GPU batch, resident"))?;
-                crate::batch::gpu::set_device_steps(false);
-                let before = timed(
-                    &members,
-                    exec,
-                    opts.newton,
-                    opts.slots,
-                    SolveMode::Whole,
-                    false,
-                );
-                crate::batch::gpu::set_device_steps(true);
-                let before = before.map_err(batch("GPU batch, whole (host steps)"))?;
-                let whole = timed(
-                    &members,
-                    exec,
-                    opts.newton,
-                    opts.slots,
-                    SolveMode::Whole,
-                    false,
-                )
-                .map_err(batch("GPU batch, whole"))?;
-                (Some(resident), Some(whole), Some(before))
+                let before = whole(false, "GPU batch, whole (host steps)")?;
+                let after = whole(true, "GPU batch, whole")?;
+                (Some(resident), Some(after), Some(before))
             } else if opts.solve == BenchSolve::Whole {
-                let whole = timed(
-                    &members,
-                    exec,
-                    opts.newton,
-                    opts.slots,
-                    SolveMode::Whole,
-                    false,
-                )
-                .map_err(batch("GPU batch, whole"))?;
-                (None, Some(whole), None)
+                (None, Some(whole(true, "GPU batch, whole")?), None)
             } else {
                 (None, None, None)
             };
@@ -473,10 +460,9 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, o: &BenchOptions) {
     obj["host_syncs_per_step"] = (sv.dispatches as f64 / o.steps.max(1) as f64).into();
     obj["host_thread_us_per_member_step"] =
         (1e6 * (w.host_s * threads + w.serve_thread_s) / member_steps).into();
-    // The same without the graphics driver's CPU time inside submissions and waits (on a
-    // software adapter the device's work itself, run on the submitting thread).
-    // Per member-step: the member polls' own CPU time (not the pool's idle time) and the
-    // driver thread's CPU time outside the graphics driver.
+    // The host's own share per member-step: the member polls' CPU time (not the pool's
+    // idle time) and the driver thread's CPU time outside the graphics driver's
+    // submissions and waits (on a software adapter those run the device's work itself).
     obj["host_own_us_per_member_step"] =
         (1e6 * (w.member_cpu_s + w.serve_thread_s - w.serve_driver_s) / member_steps).into();
     obj["member_cpu_us_per_member_step"] = (1e6 * w.member_cpu_s / member_steps).into();

@@ -1150,13 +1150,12 @@ impl GpuEvaluator {
         }
         // Multi-iteration runs: each member's first iteration is answered now, the
         // others as its Newton loop asks for them.
-        let hist_of: &[(usize, Vec<Report>)] = solved.as_ref().map_or(&[], |s| &s.hist);
-        let load_work: &[f64] = solved.as_ref().map_or(&[], |s| &s.load_work);
+        let hist_of: &[(usize, Vec<Report>, f64)] = solved.as_ref().map_or(&[], |s| &s.hist);
         // Each slot's history and load work, by slot (a search per member would be
         // quadratic in them).
         let mut hist_at: Vec<Option<(&Vec<Report>, f64)>> = vec![None; sizes.len()];
-        for (i, (m, reports)) in hist_of.iter().enumerate() {
-            hist_at[*m] = Some((reports, load_work.get(i).copied().unwrap_or(f64::NAN)));
+        for (m, reports, load_work) in hist_of {
+            hist_at[*m] = Some((reports, *load_work));
         }
         let hist_at = &hist_at;
         if !fast.is_empty() {

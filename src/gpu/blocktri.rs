@@ -122,11 +122,9 @@ pub struct Solved {
     /// `Σ |R_i q_i|` of that iterate. See [`Self::iterates`].
     pub iterates: Vec<f64>,
     /// Per member slot asked for ([`Readback::hist`]): the [`Report`]s of the iterations
-    /// of its multi-iteration submission, in order.
-    pub hist: Vec<(usize, Vec<Report>)>,
-    /// Per member slot of [`Self::hist`], in its order: the work of the dead loads over the
-    /// step at the iterate evaluated last (`−Σ extra · q` over the u and θ rows).
-    pub load_work: Vec<f64>,
+    /// of its multi-iteration submission, in order, and the work of the dead loads over
+    /// the step at the iterate evaluated last (`−Σ extra · q` over the u and θ rows).
+    pub hist: Vec<(usize, Vec<Report>, f64)>,
     /// Per member slot asked for ([`Readback::rwork`]): `Σ |R_i q_i|` of its last
     /// evaluated iterate.
     pub rwork: Vec<(usize, f64)>,
@@ -161,8 +159,8 @@ pub struct Readback {
     pub report: Vec<usize>,
     /// Accepted iterates of these slots ([`Solved::iterates`]).
     pub fetch: Vec<usize>,
-    /// Iteration histories of these slots ([`Solved::hist`], [`Solved::load_work`]; 16 +
-    /// 16 [`RESIDENT_MAX_K`] bytes each).
+    /// Iteration histories of these slots ([`Solved::hist`]; 16 + 16 [`RESIDENT_MAX_K`]
+    /// bytes each).
     pub hist: Vec<usize>,
     /// Residual work of the last evaluated iterate of these slots ([`Solved::rwork`]; 8
     /// bytes each).
@@ -864,8 +862,6 @@ impl BlockTriSolver {
             }
             for &(lo, hi) in &h_runs {
                 let h: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * HSTRIDE * (hi - lo)));
-                out.load_work
-                    .extend(h.chunks_exact(HSTRIDE).map(|h| h[HSTRIDE - 1]));
                 out.hist
                     .extend((lo..hi).zip(h.chunks_exact(HSTRIDE)).map(|(m, h)| {
                         let c = (h[0] as usize).min(RESIDENT_MAX_K);
@@ -873,7 +869,7 @@ impl BlockTriSolver {
                             .chunks_exact(2)
                             .map(|r| Report::decode(r[0], r[1]))
                             .collect();
-                        (m, reports)
+                        (m, reports, h[HSTRIDE - 1])
                     }));
             }
             for &(lo, hi) in &w_runs {

@@ -79,9 +79,7 @@ impl Simulation {
             self.resident_scale = scale;
             if self.device_steps {
                 // What the device's nodal terms now hold: the loads of this step.
-                let t_mid = self.state.t + 0.5 * self.params.dt;
-                let factors = self.model.loads.iter().map(|l| l.table.eval(t_mid));
-                self.device_loads = Some(factors.collect());
+                self.device_loads = Some(self.load_factors().collect());
             }
         }
         if external {

@@ -29,6 +29,13 @@ impl Simulation {
         self.device_steps = on;
     }
 
+    /// The factors of the nodal loads' time tables at the middle of the coming step (in
+    /// [`crate::model::Model::loads`] order; gravity is constant).
+    pub(super) fn load_factors(&self) -> impl Iterator<Item = f64> + '_ {
+        let t_mid = self.state.t + 0.5 * self.params.dt;
+        self.model.loads.iter().map(move |l| l.table.eval(t_mid))
+    }
+
     /// Whether commands move driven supports (the device step covers none).
     pub fn has_commands(&self) -> bool {
         !self.commands.is_empty()
@@ -52,11 +59,10 @@ impl Simulation {
         // The device forms the step's nodal terms from the loads it holds: this step's
         // loads must be those (gravity; a load whose table gives the same factor at this
         // step's middle), else the host steps and sends them.
-        let t_mid = self.state.t + 0.5 * self.params.dt;
-        let loads = &self.model.loads;
-        let same_loads = self.device_loads.as_ref().is_some_and(|f| {
-            f.len() == loads.len() && loads.iter().zip(f).all(|(l, &s)| l.table.eval(t_mid) == s)
-        });
+        let same_loads = self
+            .device_loads
+            .as_ref()
+            .is_some_and(|f| self.load_factors().eq(f.iter().copied()));
         if !same_loads {
             // The host steps: from the device's state, where steps ran there.
             return match self.sync_device_state().await {
