@@ -24,7 +24,10 @@
 // backward error ascending), so that one invocation never runs more than a few ten
 // thousand loop iterations: Mesa's llvmpipe/lavapipe stops any invocation after 65 535
 // loop iterations (its infinite-loop guard), which cut the factorization of rods longer
-// than ≈ 44 nodes when one invocation did the whole member.
+// than ≈ 44 nodes when one invocation did the whole member. The factorization (≈ 2 200
+// iterations per node) goes in chunks of 16 nodes, the sweeps and the backward error
+// (≤ 300 per node) in chunks of 128 (`CHUNK_NODES`, `SWEEP_CHUNK_NODES` in
+// `src/gpu/blocktri.rs`).
 
 alias Real = f64;
 
@@ -353,13 +356,26 @@ fn job(gid: u32, bit: u32) -> Job {
     return j;
 }
 
-@compute @workgroup_size(64)
-fn factor_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let j = job(gid.x, 1u);
+fn factor_job(gid: u32) {
+    let j = job(gid, 1u);
     if j.n == 0u { return; }
     if j.lo == 0u { status[j.m] = OK; }
     if status[j.m] != OK { return; }
     status[j.m] = factor(j.m, j.n, j.lo, j.hi);
+}
+
+@compute @workgroup_size(64)
+fn factor_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    factor_job(gid.x);
+}
+
+// An iteration of a multi-iteration submission: `spec_check_main`'s check, then the first
+// chunk's factorization, in one pass (per member: neither reads another member's data).
+@compute @workgroup_size(64)
+fn check_factor_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n_member { return; }
+    if prm.lo == 0u { spec_check(gid.x); }
+    factor_job(gid.x);
 }
 
 @compute @workgroup_size(64)
@@ -460,8 +476,20 @@ fn row_residual(m: u32, i: u32, r: u32) -> Real {
 
 @compute @workgroup_size(64)
 fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let m = gid.x;
-    if m >= prm.n_member { return; }
+    if gid.x >= prm.n_member { return; }
+    update(gid.x);
+}
+
+// An iteration of a multi-iteration submission: the update, then `spec_gate_main`'s gate,
+// in one pass (per member).
+@compute @workgroup_size(64)
+fn update_gate_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= prm.n_member { return; }
+    update(gid.x);
+    gate(gid.x);
+}
+
+fn update(m: u32) {
     let n = member_n[m];
     if n == 0u || (ops[m] & 4u) == 0u { return; }
     let s = member_scales(m);
@@ -513,7 +541,8 @@ fn update_main(@builtin(global_invocation_id) gid: vec3<u32>) {
             q_prev[p] = q;
             if apply { node_x[at] = q + xs[x + 9u * i + r]; }
         }
-    }    if (ops[m] & 16u) != 0u {
+    }
+    if (ops[m] & 16u) != 0u {
         // (Without a solve: `spec_check_main` found the iterate accepted.)
         spec_record(m, worst, report[2u * m + 1u], finite && (apply || !solved));
     }
@@ -596,8 +625,11 @@ fn spec_record(m: u32, res: Real, code: Real, ok: bool) {
 // iterate the host predicts to accept.
 @compute @workgroup_size(64)
 fn spec_check_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let m = gid.x;
-    if m >= prm.n_member { return; }
+    if gid.x >= prm.n_member { return; }
+    spec_check(gid.x);
+}
+
+fn spec_check(m: u32) {
     let n = member_n[m];
     if n == 0u || (ops[m] & 16u) == 0u { return; }
     let s = member_scales(m);
@@ -636,8 +668,11 @@ fn spec_reset_main(@builtin(global_invocation_id) gid: vec3<u32>) {
 // After each iteration: device-solved members without SPEC (one iteration asked) stop.
 @compute @workgroup_size(64)
 fn spec_gate_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let m = gid.x;
-    if m >= prm.n_member { return; }
+    if gid.x >= prm.n_member { return; }
+    gate(gid.x);
+}
+
+fn gate(m: u32) {
     if ops[m] != 0u && (ops[m] & 16u) == 0u {
         ops[m] = 0u;
         deactivate(m);

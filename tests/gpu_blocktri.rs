@@ -12,9 +12,13 @@
 //! solutions ≤ 1e-12, measured against an independently built dense matrix; GPU and twin solutions agree to round-off
 //! (relative to the conditioning); fixed unknowns come out 0; the well-conditioned
 //! solutions match faer's dense LU; a second, solve-only dispatch with a new right-hand
-//! side reuses the factors kept on the device (modified Newton).
+//! side reuses the factors kept on the device (modified Newton). Members longer than a
+//! sweep chunk (several dispatches of the factorization, the sweeps and the backward
+//! error each) match the twin as well.
 
-use cosserat::gpu::blocktri::{BlockTriSolver, OP_FACTOR, OP_SOLVE};
+use cosserat::gpu::blocktri::{
+    BlockTriSolver, CHUNK_NODES, OP_FACTOR, OP_SOLVE, SWEEP_CHUNK_NODES,
+};
 use cosserat::gpu::layout::AsmLayout;
 use cosserat::gpu::{gpu_required, GpuContext};
 use cosserat::linsolve::batched::{self, BatchLayout, OK};
@@ -77,12 +81,19 @@ struct Batch {
     masks: Vec<u32>,
     nodes: Vec<usize>,
     kinds: Vec<Kind>,
+    npn: usize,
 }
 
 const NPN: usize = 60;
 const ALL: u32 = 0x1ff;
 
 fn build(seed: u64) -> Batch {
+    build_sized(seed, NPN, 24, |m| 2 + (m * 5) % (NPN - 1))
+}
+
+/// `members` members in slots of `npn` nodes, member `m` of `len(m)` nodes (at least 5
+/// for a singular one).
+fn build_sized(seed: u64, npn: usize, members: usize, len: impl Fn(usize) -> usize) -> Batch {
     let kinds = [
         Kind::Well,
         Kind::Ill,
@@ -93,14 +104,13 @@ fn build(seed: u64) -> Batch {
         Kind::Masked,
         Kind::Ill,
     ];
-    let members = 24;
     let asm = AsmLayout {
         members,
-        nodes_per_slot: NPN,
-        per_slot: NPN - 1,
+        nodes_per_slot: npn,
+        per_slot: npn - 1,
     };
     let l = BatchLayout {
-        npn: NPN,
+        npn: npn,
         k_start: asm.tangent_start(),
         kpm: asm.tangent_per_member(),
         rpm: asm.residual_per_member(),
@@ -108,19 +118,19 @@ fn build(seed: u64) -> Batch {
     };
     let mut rng = Rng(seed);
     let mut sys = vec![0.0; asm.len()];
-    let mut masks = vec![0u32; members * NPN];
+    let mut masks = vec![0u32; members * npn];
     let mut nodes = Vec::new();
     let mut kk = Vec::new();
     for m in 0..members {
         let kind = kinds[m % kinds.len()];
-        let mut n = 2 + (m * 5) % (NPN - 1);
+        let mut n = len(m);
         if kind == Kind::Singular {
             n = n.max(5);
         }
         nodes.push(n);
         kk.push(kind);
         for j in 0..n {
-            masks[m * NPN + j] = match kind {
+            masks[m * npn + j] = match kind {
                 // A clamped first node (rotations and positions fixed) and a pinned last.
                 Kind::Masked if j == 0 => 0b111_000_000,
                 Kind::Masked if j + 1 == n => 0b111_111_000,
@@ -178,7 +188,7 @@ fn build(seed: u64) -> Batch {
         if kind == Kind::Masked {
             // Garbage in fixed rows and columns must never be read as values.
             for j in [0, n - 1] {
-                let mj = masks[m * NPN + j];
+                let mj = masks[m * npn + j];
                 let at = asm.node_block(m, j);
                 for r in 0..9 {
                     for c in 0..9 {
@@ -208,6 +218,7 @@ fn build(seed: u64) -> Batch {
         masks,
         nodes,
         kinds: kk,
+        npn,
     }
 }
 
@@ -217,7 +228,7 @@ fn dense(b: &Batch, m: usize) -> (Vec<f64>, Vec<f64>, usize) {
     let dim = 9 * n;
     let mut a = vec![0.0; dim * dim];
     let mut rhs = vec![0.0; dim];
-    let on = |j: usize, k: usize| (b.masks[m * NPN + j] >> k) & 1 != 0;
+    let on = |j: usize, k: usize| (b.masks[m * b.npn + j] >> k) & 1 != 0;
     let put = |a: &mut Vec<f64>, bi: usize, bj: usize, at: usize| {
         for r in 0..9 {
             for c in 0..9 {
@@ -303,7 +314,7 @@ fn solver(ctx: &GpuContext, b: &Batch) -> (BlockTriSolver, wgpu::Buffer) {
     let buf = BlockTriSolver::system_buffer(ctx, &b.sys);
     let mut s = BlockTriSolver::new(ctx, b.nodes.len(), b.l, &buf, None, None).unwrap();
     for m in 0..b.nodes.len() {
-        s.set_member(m, &b.masks[m * NPN..m * NPN + b.nodes[m]]);
+        s.set_member(m, &b.masks[m * b.npn..m * b.npn + b.nodes[m]]);
     }
     (s, buf)
 }
@@ -321,7 +332,7 @@ fn twin_solves_and_flags_singular_members() {
         }
         assert_eq!(status[m], OK, "member {m} ({:?})", b.kinds[m]);
         let (a, rhs, dim) = dense(&b, m);
-        let x = &xs[m * 9 * NPN..m * 9 * NPN + dim];
+        let x = &xs[m * 9 * b.npn..m * 9 * b.npn + dim];
         let rr = rel_residual(&a, &rhs, x, dim);
         let k = b.kinds[m] as usize % 3;
         worst[k] = worst[k].max(rr);
@@ -337,7 +348,7 @@ fn twin_solves_and_flags_singular_members() {
         );
         for j in 0..b.nodes[m] {
             for r in 0..9 {
-                if (b.masks[m * NPN + j] >> r) & 1 == 0 {
+                if (b.masks[m * b.npn + j] >> r) & 1 == 0 {
                     assert_eq!(x[9 * j + r], 0.0, "fixed unknown must stay 0");
                 }
             }
@@ -378,8 +389,8 @@ fn device_solver_matches_twin() {
             continue;
         }
         let (a, rhs, dim) = dense(&b, m);
-        let x = &gx[m * 9 * NPN..m * 9 * NPN + dim];
-        let t = &xs[m * 9 * NPN..m * 9 * NPN + dim];
+        let x = &gx[m * 9 * b.npn..m * 9 * b.npn + dim];
+        let t = &xs[m * 9 * b.npn..m * 9 * b.npn + dim];
         let rr = rel_residual(&a, &rhs, x, dim);
         worst_res = worst_res.max(rr);
         assert!(
@@ -448,13 +459,13 @@ fn device_solver_matches_twin() {
         let (st, _) = batched::solve(&io, m, b2.nodes[m], &mut xs2);
         assert_eq!(again.status[m], st);
         let (a, rhs, dim) = dense(&b2, m);
-        let x = &ax[m * 9 * NPN..m * 9 * NPN + dim];
+        let x = &ax[m * 9 * b.npn..m * 9 * b.npn + dim];
         let rr = rel_residual(&a, &rhs, x, dim);
         assert!(
             rr <= residual_bound(b2.kinds[m]),
             "member {m}: reused factors, residual {rr:e}"
         );
-        let t = &xs2[m * 9 * NPN..m * 9 * NPN + dim];
+        let t = &xs2[m * 9 * b.npn..m * 9 * b.npn + dim];
         let diff = x
             .iter()
             .zip(t)
@@ -486,4 +497,61 @@ fn device_solver_matches_twin() {
         good.status[m], OK,
         "member {m}: a non-finite solve stuck to its factors"
     );
+}
+
+/// Members longer than a chunk of the sweeps ([`SWEEP_CHUNK_NODES`]): the factorization
+/// runs in nine dispatches and the sweeps and the backward error in two each; the statuses,
+/// backward errors and solutions still match the twin.
+#[test]
+fn device_solver_matches_twin_on_members_longer_than_a_sweep_chunk() {
+    let Some(ctx) = context() else { return };
+    let npn = SWEEP_CHUNK_NODES + 12;
+    assert!(npn.div_ceil(CHUNK_NODES) > 2 && npn.div_ceil(SWEEP_CHUNK_NODES) == 2);
+    let b = build_sized(0x10_9e57, npn, 8, |m| npn - 3 * (m % 4));
+    let (status, berr, xs, _, _) = twin(&b);
+    let (mut s, _buf) = solver(&ctx, &b);
+    let ops: Vec<(usize, u32)> = (0..b.nodes.len())
+        .map(|m| (m, OP_FACTOR | OP_SOLVE))
+        .collect();
+    let got = s.run(&ops, true).unwrap();
+    let gx = got.x.as_ref().unwrap();
+    let mut solved = 0;
+    for m in 0..b.nodes.len() {
+        assert_eq!(
+            got.status[m], status[m],
+            "member {m} ({:?}): status",
+            b.kinds[m]
+        );
+        if status[m] != OK {
+            continue;
+        }
+        solved += 1;
+        let (a, rhs, dim) = dense(&b, m);
+        let x = &gx[m * 9 * npn..m * 9 * npn + dim];
+        let t = &xs[m * 9 * npn..m * 9 * npn + dim];
+        let rr = rel_residual(&a, &rhs, x, dim);
+        assert!(
+            rr <= residual_bound(b.kinds[m]),
+            "member {m} ({:?}): residual {rr:e}",
+            b.kinds[m]
+        );
+        assert!(
+            (got.berr[m] - berr[m]).abs() <= 1e-14,
+            "member {m}: backward error {:e} (twin {:e})",
+            got.berr[m],
+            berr[m]
+        );
+        let diff = x
+            .iter()
+            .zip(t)
+            .fold(0.0f64, |d, (p, q)| d.max((p - q).abs()))
+            / inf(t);
+        let bound = if b.kinds[m] == Kind::Ill { 1e-7 } else { 1e-13 };
+        assert!(
+            diff <= bound,
+            "member {m} ({:?}): GPU vs twin {diff:e}",
+            b.kinds[m]
+        );
+    }
+    assert!(solved >= 6, "{solved} of 8 members solved");
 }

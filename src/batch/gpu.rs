@@ -15,9 +15,9 @@ use crate::gpu::blocktri::{
     Readback, Report, SpecParams, OP_FACTOR, OP_REACTIVATE, OP_RESTORE, OP_SOLVE, OP_SPEC,
     OP_UPDATE,
 };
-use crate::gpu::kernel::{KernelTimers, MemberPack, SCATTER_GAP};
+use crate::gpu::kernel::{KernelMode, KernelTimers, MemberPack, SCATTER_GAP};
 use crate::gpu::layout::{AsmLayout, A_NODE};
-use crate::gpu::{Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
+use crate::gpu::{Around, Assembler, BlockTriSolver, ElementKernel, GpuContext, GpuError};
 use crate::integrator::evaluate::{
     AssembledSystem, DeviceSolution, DeviceStepAnswer, ElementBackend, EvalPort, EvalRequest, Pull,
     Pulled, ResidentAnswer,
@@ -866,17 +866,27 @@ impl GpuEvaluator {
         rayon::spawn(move || drop(reqs));
         // `--solve whole`: the advance of the members whose last step accepted the
         // device's iterate, ahead of this dispatch (whose gather overwrites the iterate).
-        if !self.to_advance.is_empty() {
-            let per = self.per_slot;
-            let list: Vec<u32> = self
-                .to_advance
-                .iter()
-                .flat_map(|&m| (0..self.sizes[m].0).map(move |e| (m * per + e) as u32))
-                .collect();
+        // (Recorded at the head of this dispatch's submission, or submitted on its own
+        // when the dispatch solves nothing on the device.)
+        let per = self.per_slot;
+        let sizes = &self.sizes;
+        let slots_of = |ms: &[usize]| -> Vec<u32> {
+            ms.iter()
+                .flat_map(|&m| (0..sizes[m].0).map(move |e| (m * per + e) as u32))
+                .collect()
+        };
+        let mut advance = (!self.to_advance.is_empty()).then(|| slots_of(&self.to_advance));
+        // The records of this dispatch's device steps, after its last iteration.
+        let records = (!fast.is_empty()).then(|| slots_of(&fast));
+        if advance.is_some() {
             self.serve_timers.device_advances += self.to_advance.len() as u64;
             self.serve_timers.advance_submits += 1;
             self.to_advance.clear();
-            self.kernel.submit_advance(&list);
+        }
+        let in_dispatch = !pending.is_empty() && self.solver.is_some() && !ops.is_empty();
+        if let Some(list) = advance.as_ref().filter(|_| !in_dispatch) {
+            self.kernel.submit_advance(list);
+            advance = None;
         }
         self.serve_timers.pack_s += t0.elapsed().as_secs_f64();
         if pending.is_empty() && fetching.is_empty() {
@@ -936,8 +946,8 @@ impl GpuEvaluator {
             crate::gpu::driver::thread_cpu_s() - crate::gpu::driver::driver_thread_s(),
             self.kernel.timers.kernel_s,
         );
-        let mut res = if pending.is_empty() {
-            Ok(())
+        let res = if pending.is_empty() {
+            Ok(None)
         } else {
             match &mut self.solver {
                 Some(solver) if !ops.is_empty() => {
@@ -949,44 +959,70 @@ impl GpuEvaluator {
                         &pending,
                         &|m| !device[m],
                         &|m| !is_resident(m),
-                        &mut |enc| {
-                            if let Some((src, dst)) = &save {
-                                enc.copy_buffer_to_buffer(src, 0, dst, 0, src.size());
-                            }
-                            let mut s = solver.borrow_mut();
-                            s.encode_restore(enc, &ops);
-                            if repeats > 1 {
-                                s.encode_spec_reset(enc, &ops);
-                            }
-                        },
-                        &mut |enc| {
-                            let mut s = solver.borrow_mut();
-                            if repeats > 1 {
-                                s.encode_spec_check(enc);
-                            }
-                            s.encode(enc, &ops);
-                            if repeats > 1 {
-                                s.encode_spec_gate(enc);
-                            }
+                        Around {
+                            head: &mut |k, enc| {
+                                if let Some(list) = advance.take() {
+                                    k.encode_advance(
+                                        enc,
+                                        KernelMode::Frozen,
+                                        &list,
+                                        0,
+                                        false,
+                                        false,
+                                    );
+                                }
+                            },
+                            before: &mut |enc| {
+                                if let Some((src, dst)) = &save {
+                                    enc.copy_buffer_to_buffer(src, 0, dst, 0, src.size());
+                                }
+                                let mut s = solver.borrow_mut();
+                                s.encode_restore(enc, &ops);
+                                if repeats > 1 {
+                                    s.encode_spec_reset(enc, &ops);
+                                }
+                            },
+                            more: &mut |enc| {
+                                let mut s = solver.borrow_mut();
+                                if repeats > 1 {
+                                    s.encode_iteration(enc, &ops);
+                                } else {
+                                    s.encode(enc, &ops);
+                                }
+                            },
+                            tail: &mut |k, enc| {
+                                if let Some(list) = &records {
+                                    k.encode_advance(
+                                        enc,
+                                        KernelMode::Frozen,
+                                        list,
+                                        per,
+                                        false,
+                                        true,
+                                    );
+                                }
+                            },
+                            keep: true,
                         },
                         repeats,
                     )
                 }
-                _ => self.assembler.run(&mut self.kernel, &pending),
+                _ => self
+                    .assembler
+                    .run(&mut self.kernel, &pending)
+                    .map(|()| None),
             }
         };
+        // The dispatch's command buffer when nothing was read back yet: the solver's
+        // read-back goes at its end (one submission).
+        let mut kept = None;
+        let mut res = res.map(|k| kept = k);
         // Device solves: statuses and corrections of the per-iteration members, reports of
         // the resident ones, iterates of the fetching ones.
         // `--solve whole`: the records of the device steps' last iterates (states kept).
         let fast_runs = crate::gpu::kernel::index_runs(fast.iter().copied());
         let mut extra = Vec::new();
         if res.is_ok() && !fast.is_empty() {
-            let per = self.per_slot;
-            let list: Vec<u32> = fast
-                .iter()
-                .flat_map(|&m| (0..self.sizes[m].0).map(move |e| (m * per + e) as u32))
-                .collect();
-            self.kernel.submit_records(&list, per);
             let cap = self.kernel.capacity() as u64;
             let tmid = self.kernel.tmid_buffer().clone();
             for &(lo, hi) in &fast_runs {
@@ -1033,7 +1069,7 @@ impl GpuEvaluator {
             st.device_step_bytes_down +=
                 (8 + 16 * fast_k as u64 + 8 + 8 + 8 * crate::gpu::layout::N_ADV as u64)
                     * fast.len() as u64;
-            match solver.read_back(&what) {
+            match solver.read_back(&what, kept.take()) {
                 Ok(s) => solved = Some(s),
                 Err(e) => res = Err(e),
             }
@@ -1053,6 +1089,9 @@ impl GpuEvaluator {
             } else {
                 self.kernel.timers.readback_s += waited;
             }
+        }
+        if let Some(enc) = kept {
+            crate::gpu::driver::submit(self.kernel.queue(), enc.finish());
         }
         let t0 = Instant::now();
         // Unpacking is per member and independent: in parallel.

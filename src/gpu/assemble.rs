@@ -52,6 +52,22 @@ const ELEM_NODES: usize = 4;
 /// Per member slot: 1 when the dispatch assembles its tangent.
 const MEMBER_TAN: usize = 5;
 
+/// What [`Assembler::run_with`] records around its own passes, in command order.
+pub struct Around<'a> {
+    /// First, ahead of the uploads (the advance of the members whose last step the device
+    /// solved).
+    pub head: &'a mut dyn FnMut(&mut ElementKernel, &mut wgpu::CommandEncoder),
+    /// After the uploads, ahead of the first gather pass.
+    pub before: &'a mut dyn FnMut(&mut wgpu::CommandEncoder),
+    /// After each assembly pass (the device solve).
+    pub more: &'a mut dyn FnMut(&mut wgpu::CommandEncoder),
+    /// After the last iteration, ahead of the read-back copies (the step's records).
+    pub tail: &'a mut dyn FnMut(&mut ElementKernel, &mut wgpu::CommandEncoder),
+    /// Hand the command buffer back unsubmitted when nothing is read back: the caller
+    /// adds its own read-back and submits it (one submission per dispatch).
+    pub keep: bool,
+}
+
 /// Assembly of `members` member slots of at most `per_slot` elements and `nodes_per_slot`
 /// nodes each, over the element slots of one [`ElementKernel`] (member `m`'s element `e`
 /// in kernel slot `m * per_slot + e`).
@@ -86,6 +102,9 @@ pub struct Assembler {
     asm: wgpu::Buffer,
     staging: wgpu::Buffer,
     params: wgpu::Buffer,
+    /// What [`Self::params`] was last written with (written again only when it changes:
+    /// the iterations of a submission share it).
+    params_host: Option<Params>,
     /// Host copy of the assembled buffer; the last run filled the waiting members'
     /// ranges.
     out: Vec<f64>,
@@ -263,6 +282,7 @@ impl Assembler {
             asm,
             staging,
             params,
+            params_host: None,
             out: vec![0.0; layout.len()],
         })
     }
@@ -389,10 +409,16 @@ impl Assembler {
             pending,
             &|_| true,
             &|_| true,
-            &mut |_| {},
-            &mut |_| {},
+            Around {
+                head: &mut |_, _| {},
+                before: &mut |_| {},
+                more: &mut |_| {},
+                tail: &mut |_, _| {},
+                keep: false,
+            },
             1,
         )
+        .map(|_| ())
     }
 
     /// The node increments on the device (9 per node slot, field-major: component `k` of
@@ -422,27 +448,27 @@ impl Assembler {
         self.node_x_owned[m * npn..(m + 1) * npn].fill(owned);
     }
 
-    /// [`Self::run`] with `before` encoded ahead of the gather pass and `more` after the
-    /// assembly pass (and before the readback: the device block solver of
-    /// [`crate::gpu::blocktri`]); the tangent blocks of member slot `m` are read back only
-    /// when `blocks_back(m)`, its residual region only when `residual_back(m)`. The
-    /// gather, element, assembly and `more` passes are recorded `repeats` times (several
-    /// device-resident Newton iterations in one submission).
-    #[allow(clippy::too_many_arguments)]
+    /// [`Self::run`] with the passes of `around` recorded in the same command buffer (the
+    /// device block solver of [`crate::gpu::blocktri`], the advance and records of
+    /// `--solve whole`); the tangent blocks of member slot `m` are read back only when
+    /// `blocks_back(m)`, its residual region only when `residual_back(m)`. The gather,
+    /// element, assembly and `around.more` passes are recorded `repeats` times (several
+    /// device-resident Newton iterations in one submission). Returns the command buffer
+    /// unsubmitted when `around.keep` and nothing is read back.
     pub fn run_with(
         &mut self,
         kernel: &mut ElementKernel,
         pending: &[(usize, bool)],
         blocks_back: &dyn Fn(usize) -> bool,
         residual_back: &dyn Fn(usize) -> bool,
-        before: &mut dyn FnMut(&mut wgpu::CommandEncoder),
-        more: &mut dyn FnMut(&mut wgpu::CommandEncoder),
+        around: Around<'_>,
         repeats: usize,
-    ) -> Result<(), GpuError> {
+    ) -> Result<Option<wgpu::CommandEncoder>, GpuError> {
         let want_tangent = pending.iter().any(|p| p.1);
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        (around.head)(kernel, &mut enc);
         let l = self.layout;
         let t0 = std::time::Instant::now();
         let nn = self.n_nodes;
@@ -509,7 +535,7 @@ impl Assembler {
             kernel.timers.bytes_up += 4 * (hi - lo) as u64;
         }
         kernel.timers.upload_s += t0.elapsed().as_secs_f64();
-        before(&mut enc);
+        (around.before)(&mut enc);
         // `repeats` Newton iterations in one submission (`--solve resident`: `more` records
         // the device solve and update after each assembly).
         for _ in 0..repeats.max(1) {
@@ -538,8 +564,14 @@ impl Assembler {
                 k_start: l.tangent_start() as u32,
                 pad: 0,
             };
-            self.queue
-                .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+            if self
+                .params_host
+                .is_none_or(|p| bytemuck::bytes_of(&p) != bytemuck::bytes_of(&prm))
+            {
+                self.queue
+                    .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+                self.params_host = Some(prm);
+            }
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("assemble"),
@@ -550,8 +582,9 @@ impl Assembler {
                 let threads = self.n_nodes.max(self.n_elems).max(l.members);
                 pass.dispatch_workgroups(threads.div_ceil(64) as u32, 1, 1);
             }
-            more(&mut enc);
+            (around.more)(&mut enc);
         }
+        (around.tail)(kernel, &mut enc);
         // The waiting members' residual regions, and the tangent regions of those that
         // asked for it: one range per run of adjacent such members.
         let w = ElementKernel::width(self.precision) as u64;
@@ -571,6 +604,10 @@ impl Assembler {
             (at as u64 * w, ((hi - lo) * k) as u64 * w)
         });
         let ranges: Vec<(u64, u64)> = residual.chain(tangent).collect();
+        if around.keep && ranges.is_empty() {
+            kernel.timers.dispatches += 1;
+            return Ok(Some(enc));
+        }
         let rb = Readback {
             device: &self.device,
             queue: &self.queue,
@@ -579,7 +616,7 @@ impl Assembler {
             precision: self.precision,
         };
         let timers: &mut KernelTimers = &mut kernel.timers;
-        rb.run(enc, &ranges, &mut self.out, timers)
+        rb.run(enc, &ranges, &mut self.out, timers).map(|()| None)
     }
 
     /// Member `m`'s assembled system from the last [`Self::run`] (`n_nodes` nodes,

@@ -14,10 +14,14 @@ use crate::linsolve::batched::BatchLayout;
 
 pub use super::shaders::BLOCKTRI_WGSL;
 
-/// Nodes per dispatch: an invocation runs ≈ 2 200 loop iterations per node of a
-/// factorization, and lavapipe ends an invocation after 65 535 (shaders/blocktri.wgsl,
+/// Nodes per factorization dispatch: an invocation runs ≈ 2 200 loop iterations per node
+/// of a factorization, and lavapipe ends an invocation after 65 535 (shaders/blocktri.wgsl,
 /// "Chunks").
 pub const CHUNK_NODES: usize = 16;
+
+/// Nodes per dispatch of the sweeps and the backward error (≤ 300 loop iterations per
+/// node): one dispatch each for members of up to this many nodes.
+pub const SWEEP_CHUNK_NODES: usize = 128;
 
 /// Per-member operation bit: factorize.
 pub const OP_FACTOR: u32 = 1;
@@ -33,7 +37,7 @@ pub const OP_UPDATE: u32 = 4;
 pub const OP_RESTORE: u32 = 8;
 /// Per-member operation bit (`--solve resident`): this member iterates in every Newton
 /// iteration of a multi-iteration submission ([`BlockTriSolver::encode_spec_reset`],
-/// [`BlockTriSolver::encode_spec_gate`]), records each iteration's [`Report`] in its history
+/// [`BlockTriSolver::encode_iteration`]), records each iteration's [`Report`] in its history
 /// and stops where the host's Newton loop would stop (`spec_record` in
 /// `shaders/blocktri.wgsl`).
 pub const OP_SPEC: u32 = 16;
@@ -177,10 +181,14 @@ pub struct BlockTriSolver {
     device: wgpu::Device,
     queue: wgpu::Queue,
     /// `factor_main`, `forward_main`, `backward_main`, `berr_main`, `restore_main`,
-    /// `update_main`, `spec_reset_main`, `spec_gate_main`, `spec_check_main`.
-    pipelines: [wgpu::ComputePipeline; 9],
-    /// One bind group per node chunk (each with its own `lo`, `hi`).
+    /// `update_main`, `spec_reset_main`, `spec_gate_main`, `spec_check_main`,
+    /// `check_factor_main`, `update_gate_main`.
+    pipelines: [wgpu::ComputePipeline; 11],
+    /// One bind group per node chunk of the factorization ([`CHUNK_NODES`], each with its
+    /// own `lo`, `hi`), then one per chunk of the sweeps ([`SWEEP_CHUNK_NODES`]).
     bind_groups: Vec<wgpu::BindGroup>,
+    /// How many of [`Self::bind_groups`] are the factorization's.
+    factor_chunks: usize,
     /// `[xs, mask, member_n, ops, status, berr]` (factors and pivots are never read back).
     xs: wgpu::Buffer,
     mask: wgpu::Buffer,
@@ -209,6 +217,10 @@ pub struct BlockTriSolver {
     n_host: Vec<u32>,
     topo_dirty: bool,
     ops_host: Vec<u32>,
+    /// The multi-iteration submission encoded last zeroes every operation word on the
+    /// device ([`Self::encode_iteration`]; the next submission's [`Self::begin`] clears the
+    /// host's copy: within a submission the words go up once).
+    ops_zeroed: bool,
     /// Bytes read back by the last [`Self::run`].
     pub last_bytes_down: u64,
     /// Bytes uploaded since this was last reset (topology, extras, host scales,
@@ -363,6 +375,8 @@ impl BlockTriSolver {
             pipe("spec_reset_main"),
             pipe("spec_gate_main"),
             pipe("spec_check_main"),
+            pipe("check_factor_main"),
+            pipe("update_gate_main"),
         ];
         ctx.save_pipeline_cache();
         let none = wgpu::BufferUsages::empty();
@@ -424,8 +438,15 @@ impl BlockTriSolver {
         let acc = storage(&device, "backward-error terms", 32 * members as u64, none);
         ctx.queue
             .write_buffer(&status, 0, bytemuck::cast_slice(&vec![0u32; members]));
-        let bind_groups = (0..layout.npn.div_ceil(CHUNK_NODES).max(1))
-            .map(|c| {
+        let factor_chunks = layout.npn.div_ceil(CHUNK_NODES).max(1);
+        let chunks = (0..factor_chunks)
+            .map(|c| (c * CHUNK_NODES, (c + 1) * CHUNK_NODES))
+            .chain(
+                (0..layout.npn.div_ceil(SWEEP_CHUNK_NODES).max(1))
+                    .map(|c| (c * SWEEP_CHUNK_NODES, (c + 1) * SWEEP_CHUNK_NODES)),
+            );
+        let bind_groups = chunks
+            .map(|(lo, hi)| {
                 let params = device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("blocktri params"),
                     size: std::mem::size_of::<Params>() as u64,
@@ -439,8 +460,8 @@ impl BlockTriSolver {
                     kpm: layout.kpm as u32,
                     rpm: layout.rpm as u32,
                     negate: layout.negate as u32,
-                    lo: (c * CHUNK_NODES) as u32,
-                    hi: ((c + 1) * CHUNK_NODES) as u32,
+                    lo: lo as u32,
+                    hi: hi as u32,
                 };
                 ctx.queue.write_buffer(&params, 0, bytemuck::bytes_of(&p));
                 let bufs = [
@@ -488,6 +509,7 @@ impl BlockTriSolver {
             queue: ctx.queue.clone(),
             pipelines,
             bind_groups,
+            factor_chunks,
             xs,
             mask,
             member_n,
@@ -510,6 +532,7 @@ impl BlockTriSolver {
             n_host: vec![0; members],
             topo_dirty: true,
             ops_host: vec![0; members],
+            ops_zeroed: false,
             last_bytes_down: 0,
             bytes_up: 0,
             copies_up: 0,
@@ -571,14 +594,42 @@ impl BlockTriSolver {
     /// (`(slot, OP_FACTOR | OP_SOLVE | OP_UPDATE)`; the others do nothing), then the
     /// device-resident update pass when some member asked for it, uploading what changed.
     pub fn encode(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
+        self.begin();
+        self.encode_passes(enc, ops, false);
+    }
+
+    /// [`Self::encode`] for an iteration of a multi-iteration submission (after
+    /// [`Self::encode_spec_reset`]): with the check ahead of the factorization — an
+    /// [`OP_SPEC`] member whose iterate the host will accept skips its factorization and
+    /// solve — and the gate after the update — members without [`OP_SPEC`] stop — each in
+    /// the pass of its neighbour where that one runs. After the submission every operation
+    /// word on the device is 0 (the [`OP_SPEC`] members stopped by their K at the latest).
+    pub fn encode_iteration(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
+        self.encode_passes(enc, ops, true);
+        self.ops_zeroed = true;
+    }
+
+    /// At the start of a submission's solver work: the host's copy of the operation words
+    /// is 0 where the submission before zeroed them on the device.
+    fn begin(&mut self) {
+        if std::mem::take(&mut self.ops_zeroed) {
+            self.ops_host.fill(0);
+        }
+    }
+
+    fn encode_passes(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)], multi: bool) {
         self.prepare(ops);
         let groups = self.members.div_ceil(64) as u32;
         let any = |bit: u32| ops.iter().any(|o| o.1 & bit != 0);
+        let (factor, update) = (any(OP_FACTOR), any(OP_UPDATE));
+        if multi && !factor {
+            self.single_pass(enc, 8);
+        }
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("blocktri"),
             timestamp_writes: None,
         });
-        let chunks = self.bind_groups.len();
+        let (fc, all) = (self.factor_chunks, self.bind_groups.len());
         let run =
             |pass: &mut wgpu::ComputePass, p: usize, order: &mut dyn Iterator<Item = usize>| {
                 pass.set_pipeline(&self.pipelines[p]);
@@ -587,16 +638,22 @@ impl BlockTriSolver {
                     pass.dispatch_workgroups(groups, 1, 1);
                 }
             };
-        if any(OP_FACTOR) {
-            run(&mut pass, 0, &mut (0..chunks));
+        if factor && multi {
+            run(&mut pass, 9, &mut (0..1));
+            run(&mut pass, 0, &mut (1..fc));
+        } else if factor {
+            run(&mut pass, 0, &mut (0..fc));
         }
         if any(OP_SOLVE) {
-            run(&mut pass, 1, &mut (0..chunks));
-            run(&mut pass, 2, &mut (0..chunks).rev());
-            run(&mut pass, 3, &mut (0..chunks));
+            run(&mut pass, 1, &mut (fc..all));
+            run(&mut pass, 2, &mut (fc..all).rev());
+            run(&mut pass, 3, &mut (fc..all));
         }
-        if any(OP_UPDATE) {
-            run(&mut pass, 5, &mut (0..1));
+        match (update, multi) {
+            (true, true) => run(&mut pass, 10, &mut (0..1)),
+            (true, false) => run(&mut pass, 5, &mut (0..1)),
+            (false, true) => run(&mut pass, 7, &mut (0..1)),
+            (false, false) => {}
         }
     }
 
@@ -606,6 +663,7 @@ impl BlockTriSolver {
         if !ops.iter().any(|o| o.1 & OP_RESTORE != 0) {
             return;
         }
+        self.begin();
         self.prepare(ops);
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("blocktri restore"),
@@ -635,22 +693,9 @@ impl BlockTriSolver {
     /// Encodes the reset of the [`OP_SPEC`] members' iteration counts (before the first
     /// iteration of a multi-iteration submission); uploads what changed first.
     pub fn encode_spec_reset(&mut self, enc: &mut wgpu::CommandEncoder, ops: &[(usize, u32)]) {
+        self.begin();
         self.prepare(ops);
         self.single_pass(enc, 6);
-    }
-
-    /// Encodes the gate after an iteration of a multi-iteration submission: members
-    /// without [`OP_SPEC`] stop. After the submission every operation word on the device
-    /// is 0 (the [`OP_SPEC`] members stopped by their K at the latest).
-    pub fn encode_spec_gate(&mut self, enc: &mut wgpu::CommandEncoder) {
-        self.single_pass(enc, 7);
-        self.ops_host.fill(0);
-    }
-
-    /// Encodes the check after an assembly of a multi-iteration submission: an [`OP_SPEC`]
-    /// member whose iterate the host will accept skips its factorization and solve.
-    pub fn encode_spec_check(&mut self, enc: &mut wgpu::CommandEncoder) {
-        self.single_pass(enc, 8);
     }
 
     fn single_pass(&self, enc: &mut wgpu::CommandEncoder, p: usize) {
@@ -753,21 +798,32 @@ impl BlockTriSolver {
     /// member slots `x_of` (72 bytes per node slot); `Solved::x` is `None` when `x_of` is
     /// empty, else holds the whole solution buffer with the other slots left zero.
     pub fn read(&mut self, x_of: &[usize]) -> Result<Solved, GpuError> {
-        self.read_back(&Readback {
-            status: true,
-            x: x_of.to_vec(),
-            ..Readback::default()
-        })
+        self.read_back(
+            &Readback {
+                status: true,
+                x: x_of.to_vec(),
+                ..Readback::default()
+            },
+            None,
+        )
     }
 
     /// Reads back what `what` asks for, in one copy and map: statuses and backward errors
     /// of every slot, solutions, device-resident [`Report`]s (16 bytes per slot) and
     /// accepted iterates ([`Solved::iterates`]: 72 bytes per node slot and 8 for the
-    /// residual work).
-    pub fn read_back(&mut self, what: &Readback) -> Result<Solved, GpuError> {
-        let mut enc = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+    /// residual work). The copies go at the end of `enc` when given (work encoded but not
+    /// yet submitted, which then goes with them in one submission), else in a command
+    /// buffer of their own.
+    pub fn read_back(
+        &mut self,
+        what: &Readback,
+        enc: Option<wgpu::CommandEncoder>,
+    ) -> Result<Solved, GpuError> {
+        let given = enc.is_some();
+        let mut enc = enc.unwrap_or_else(|| {
+            self.device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None })
+        });
         let mb = self.members as u64;
         let per = 8 * self.layout.x_per_member() as u64;
         // (source, source offset, length) in staging order.
@@ -804,6 +860,9 @@ impl BlockTriSolver {
         self.last_bytes_down = down;
         self.last_copies_down = copies.len() as u64;
         if down == 0 {
+            if given {
+                crate::gpu::driver::submit(&self.queue, enc.finish());
+            }
             return Ok(out);
         }
         let mut at = 0u64;

@@ -79,6 +79,21 @@ struct Params {
     pad: [u32; 2],
 }
 
+/// The uses of the element kernel's parameters and slot list within one submission
+/// (each has its own sources: [`ElementKernel::stage`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Use {
+    /// The residual and tangent passes.
+    Main = 0,
+    /// The advance pass.
+    Advance = 1,
+    /// The record pass (a dry advance).
+    Records = 2,
+}
+
+/// Number of [`Use`]s.
+const USES: usize = 3;
+
 /// Which element slots the tangent pass evaluates.
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum TangentSlots<'a> {
@@ -108,9 +123,15 @@ pub struct ElementKernel {
     bind_group: wgpu::BindGroup,
     bufs: [wgpu::Buffer; 4],
     params: wgpu::Buffer,
-    /// Element slots of the tangent pass (u32 each) and the list last uploaded.
+    /// Element slots of the tangent, advance or record pass (u32 each).
     tan_list: wgpu::Buffer,
-    tan_uploaded: Vec<u32>,
+    /// Each [`Use`]'s parameters and slot list, at its own place in these sources, with
+    /// the host's copy of what was written there: a pass copies its use's into
+    /// [`Self::params`] and [`Self::tan_list`] in command order, so the advance, the
+    /// iterations and the records of a dispatch share one submission.
+    param_src: wgpu::Buffer,
+    list_src: wgpu::Buffer,
+    staged: [(Option<Params>, Vec<u32>); 3],
     /// Mappable twin of the output buffer and host copy of the output, created by the
     /// first [`Self::run`] (the batch path reads assembled systems instead and never
     /// allocates them).
@@ -122,6 +143,10 @@ pub struct ElementKernel {
     /// Per buffer and slot: the slot's fields changed since the last upload (only the
     /// changed slots' ranges are uploaded).
     dirty: [Vec<bool>; 3],
+    /// Per slot: the device advanced its state, so the host mirror is stale and the next
+    /// state written there goes up whatever it is (a flag, not a mark in the mirror: the
+    /// mirror's rows are far apart, the flags are not).
+    state_stale: Vec<bool>,
     /// Whether any [`Self::dirty`] flag may be set (a dispatch of device steps and every
     /// iteration after a submission's first skip scanning them).
     maybe_dirty: bool,
@@ -281,6 +306,19 @@ impl ElementKernel {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let src_usage = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let param_src = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("params by use"),
+            size: USES as u64 * std::mem::size_of::<Params>() as u64,
+            usage: src_usage,
+            mapped_at_creation: false,
+        });
+        let list_src = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("slot lists by use"),
+            size: USES as u64 * 4 * cap as u64,
+            usage: src_usage,
+            mapped_at_creation: false,
+        });
         let entries: Vec<wgpu::BindGroupEntry> = bufs
             .iter()
             .chain([&params, &tmid, &tan_list])
@@ -311,7 +349,9 @@ impl ElementKernel {
             bufs,
             params,
             tan_list,
-            tan_uploaded: Vec::new(),
+            param_src,
+            list_src,
+            staged: Default::default(),
             staging: None,
             host: [
                 vec![0.0; NE * cap],
@@ -319,6 +359,7 @@ impl ElementKernel {
                 vec![0.0; NI * cap],
             ],
             dirty: [vec![true; cap], vec![true; cap], vec![true; cap]],
+            state_stale: vec![false; cap],
             maybe_dirty: true,
             iter_from: I_X,
             state_gap: SCATTER_GAP,
@@ -411,7 +452,8 @@ impl ElementKernel {
     /// Writes the state at `n` of slot `i` (and its cached strains). The slot is uploaded
     /// again only when its state changed (once per step, not per Newton iteration).
     pub fn set_state(&mut self, i: usize, st: &ElementState, eps_n: &Vector6<f64>) {
-        self.dirty[1][i] |= state_row(&mut self.host[1][i * NS..(i + 1) * NS], st, eps_n);
+        let changed = state_row(&mut self.host[1][i * NS..(i + 1) * NS], st, eps_n);
+        self.dirty[1][i] |= changed | std::mem::take(&mut self.state_stale[i]);
         self.maybe_dirty |= self.dirty[1][i];
     }
 
@@ -449,14 +491,16 @@ impl ElementKernel {
         states
             .par_chunks_mut(per_slot * NS)
             .zip(d_states.par_chunks_mut(per_slot))
+            .zip(self.state_stale.par_chunks_mut(per_slot))
             .zip(iters.par_chunks_mut(per_slot * NI))
             .zip(d_iters.par_chunks_mut(per_slot))
             .zip(members.par_iter())
-            .for_each(|((((st, d_st), it), d_it), member)| {
+            .for_each(|(((((st, d_st), stale), it), d_it), member)| {
                 let Some(m) = member else { return };
                 if let Some(states) = m.states {
-                    for ((row, d), (s, eps)) in st.chunks_mut(NS).zip(d_st).zip(states) {
-                        *d |= state_row(row, s, eps);
+                    let rows = st.chunks_mut(NS).zip(d_st).zip(stale.iter_mut());
+                    for (((row, d), stale), (s, eps)) in rows.zip(states) {
+                        *d |= state_row(row, s, eps) | std::mem::take(stale);
                     }
                 }
                 for ((row, d), s) in it.chunks_mut(NI).zip(d_it).zip(m.scalars) {
@@ -556,18 +600,12 @@ impl ElementKernel {
         };
         let list: Option<Vec<u32>> = match tangent {
             TangentSlots::None => None,
-            TangentSlots::All if self.tan_uploaded.len() == self.cap => None,
+            TangentSlots::All if self.staged[Use::Main as usize].1.len() == self.cap => None,
             TangentSlots::All => Some((0..self.cap as u32).collect()),
             // (Compared before copying: the iterations of a submission list the same.)
-            TangentSlots::List(l) if l == self.tan_uploaded.as_slice() => None,
+            TangentSlots::List(l) if l == self.staged[Use::Main as usize].1.as_slice() => None,
             TangentSlots::List(l) => Some(l.to_vec()),
         };
-        if let Some(list) = list.filter(|l| !l.is_empty() && *l != self.tan_uploaded) {
-            self.queue
-                .write_buffer(&self.tan_list, 0, bytemuck::cast_slice(&list));
-            self.timers.bytes_up += 4 * list.len() as u64;
-            self.tan_uploaded = list;
-        }
         let prm = Params {
             n: self.cap as u32,
             want_tangent: (n_tan > 0) as u32,
@@ -581,8 +619,7 @@ impl ElementKernel {
             pad: [0; 2],
         };
         self.timers.tangent_elements += n_tan as u64;
-        self.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+        self.stage(enc, Use::Main, prm, list, n_tan);
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("element"),
             timestamp_writes: None,
@@ -603,6 +640,49 @@ impl ElementKernel {
         self.timers.upload_s += t0.elapsed().as_secs_f64();
     }
 
+    /// Writes `use_`'s parameters and (when given) slot list to its sources where they
+    /// changed, and records their copies into the bound parameters and the first `n`
+    /// entries of the bound slot list.
+    fn stage(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        use_: Use,
+        prm: Params,
+        list: Option<Vec<u32>>,
+        n: usize,
+    ) {
+        let k = use_ as usize;
+        let psize = std::mem::size_of::<Params>() as u64;
+        let lbytes = 4 * self.cap as u64;
+        let same = self.staged[k]
+            .0
+            .is_some_and(|p| bytemuck::bytes_of(&p) == bytemuck::bytes_of(&prm));
+        if !same {
+            self.queue
+                .write_buffer(&self.param_src, k as u64 * psize, bytemuck::bytes_of(&prm));
+            self.staged[k].0 = Some(prm);
+        }
+        if let Some(list) = list.filter(|l| !l.is_empty()) {
+            self.queue.write_buffer(
+                &self.list_src,
+                k as u64 * lbytes,
+                bytemuck::cast_slice(&list),
+            );
+            self.timers.bytes_up += 4 * list.len() as u64;
+            self.staged[k].1 = list;
+        }
+        enc.copy_buffer_to_buffer(&self.param_src, k as u64 * psize, &self.params, 0, psize);
+        if n > 0 {
+            enc.copy_buffer_to_buffer(
+                &self.list_src,
+                k as u64 * lbytes,
+                &self.tan_list,
+                0,
+                4 * n as u64,
+            );
+        }
+    }
+
     /// Records the step's advance into `enc`: for every element slot of `slots` the state
     /// at `n+1` that its increment (iteration buffer) produces with the scalars of `mode`
     /// — the kinematics of the residual pass, as [`crate::integrator::Simulation`]'s
@@ -612,9 +692,10 @@ impl ElementKernel {
     /// active slots: [`MemberRecord`]). The host mirror of the advanced slots' states is
     /// marked stale, so that the next state the host writes there goes up whatever it is.
     ///
-    /// In a command buffer of its own, submitted ahead of the next dispatch's (the passes'
-    /// parameters and slot list are written at submission); `flush`: with the uploads
-    /// queued so far (else they go with the next dispatch, after this advance). `dry`: the
+    /// The advance and record passes take their parameters and slot lists from sources
+    /// of their own ([`Self::stage`]), so they may share a command buffer with the element
+    /// passes. `flush`: with the uploads queued so far (else they go with the next
+    /// dispatch's, after this advance). `dry`: the
     /// records only, the state at `n` stays (the record pass then sums every element slot
     /// of a member: the fields of the unlisted ones are cleared first).
     pub(crate) fn encode_advance(
@@ -639,12 +720,8 @@ impl ElementKernel {
                 Some(N_ADV as u64 * cap * w),
             );
         }
-        if !slots.is_empty() && slots != self.tan_uploaded {
-            self.queue
-                .write_buffer(&self.tan_list, 0, bytemuck::cast_slice(slots));
-            self.timers.bytes_up += 4 * slots.len() as u64;
-            self.tan_uploaded = slots.to_vec();
-        }
+        let use_ = if dry { Use::Records } else { Use::Advance };
+        let list = (slots != self.staged[use_ as usize].1.as_slice()).then(|| slots.to_vec());
         let prm = Params {
             n: self.cap as u32,
             want_tangent: 0,
@@ -657,8 +734,7 @@ impl ElementKernel {
             dry: u32::from(dry),
             pad: [0; 2],
         };
-        self.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(&prm));
+        self.stage(enc, use_, prm, list, slots.len());
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("advance"),
             timestamp_writes: None,
@@ -675,7 +751,7 @@ impl ElementKernel {
         drop(pass);
         if !dry {
             for &i in slots {
-                self.host[1][i as usize * NS] = f64::NAN;
+                self.state_stale[i as usize] = true;
             }
         }
         self.timers.upload_s += t0.elapsed().as_secs_f64();
@@ -694,18 +770,6 @@ impl ElementKernel {
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         self.encode_advance(&mut enc, KernelMode::Frozen, slots, 0, false, false);
-        crate::gpu::driver::submit(&self.queue, enc.finish());
-    }
-
-    /// The records of a step whose increments the element slots `slots` hold (frozen
-    /// scalars), summed per member slot of `per_member` element slots, in a submission of
-    /// its own (after the dispatch that solved the step, before its read-back); the states
-    /// stay at `n` ([`Self::encode_advance`] `dry`).
-    pub(crate) fn submit_records(&mut self, slots: &[u32], per_member: usize) {
-        let mut enc = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        self.encode_advance(&mut enc, KernelMode::Frozen, slots, per_member, false, true);
         crate::gpu::driver::submit(&self.queue, enc.finish());
     }
 
@@ -786,6 +850,11 @@ impl ElementKernel {
     /// The device the kernel runs on.
     pub(crate) fn device(&self) -> &wgpu::Device {
         &self.device
+    }
+
+    /// The queue the kernel submits to.
+    pub(crate) fn queue(&self) -> &wgpu::Queue {
+        &self.queue
     }
 
     /// `encode_advance` of every active slot, submitted, with the new states and

@@ -43,7 +43,7 @@ pub mod reach;
 pub mod shaders;
 pub(crate) mod upload;
 
-pub use assemble::Assembler;
+pub use assemble::{Around, Assembler};
 pub use blocktri::BlockTriSolver;
 pub use context::{GpuContext, Precision};
 pub use kernel::ElementKernel;
