@@ -110,7 +110,7 @@ fn build_sized(seed: u64, npn: usize, members: usize, len: impl Fn(usize) -> usi
         per_slot: npn - 1,
     };
     let l = BatchLayout {
-        npn: npn,
+        npn,
         k_start: asm.tangent_start(),
         kpm: asm.tangent_per_member(),
         rpm: asm.residual_per_member(),
