@@ -1065,10 +1065,11 @@ impl GpuEvaluator {
             st.fetches += fetching.len() as u64;
             st.iterates_sent += with_iterate.len() as u64;
             st.fetch_bytes_down += (72 * npn + 8) * (what.fetch.len() - multi.len()) as u64;
-            st.multi_bytes_down += (72 * npn + 8 + 8 + 16 * multi_k as u64) * multi.len() as u64;
+            // (Each history goes whole: `HSTRIDE` values, whatever its count.)
+            let hist = 8 * crate::gpu::blocktri::HSTRIDE as u64;
+            st.multi_bytes_down += (72 * npn + 8 + hist) * multi.len() as u64;
             st.device_step_bytes_down +=
-                (8 + 16 * fast_k as u64 + 8 + 8 + 8 * crate::gpu::layout::N_ADV as u64)
-                    * fast.len() as u64;
+                (hist + 8 + 8 * crate::gpu::layout::N_ADV as u64) * fast.len() as u64;
             match solver.read_back(&what, kept.take()) {
                 Ok(s) => solved = Some(s),
                 Err(e) => res = Err(e),

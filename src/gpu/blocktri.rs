@@ -51,7 +51,7 @@ pub const OP_REACTIVATE: u32 = 32;
 pub const RESIDENT_MAX_K: usize = 16;
 /// Scalars per member of the iteration history: the count, two per iteration, and the work
 /// of the dead loads at the iterate evaluated last (`HSTRIDE` in `shaders/blocktri.wgsl`).
-const HSTRIDE: usize = 2 + 2 * RESIDENT_MAX_K;
+pub const HSTRIDE: usize = 2 + 2 * RESIDENT_MAX_K;
 
 /// What the host's Newton loop accepts, per member, for [`OP_SPEC`]'s stopping test.
 #[derive(Clone, Copy, Debug, PartialEq)]
