@@ -47,6 +47,7 @@ const E_TRANS: u32 = 27u; // 1 = translational dissipation rows on
 const E_SCHEME: u32 = 28u; // 0 EM, 1 EDMC-1, 2 EDMC-2
 const E_SP: u32 = 29u;    // 4 scheme constants (χ_Γ χ_Ω χ_v χ_ν | α_Γv α_Γν α_Ωv α_Ων)
 const E_DIRDISS: u32 = 33u; // 1 = director dissipation on
+const E_DAMP: u32 = 34u;    // Kelvin–Voigt retardation time η
 // ---- state at n (binding 1), NS fields ----
 const S_R: u32 = 0u;      // 6: r_0, r_1
 const S_D: u32 = 6u;      // 18: d[l] column i component c at 9l + 3i + c
@@ -233,6 +234,17 @@ fn fade(speed: Real, forcing: Real) -> Real {
     }
     let rho = speed / forcing;
     return rho * rho * (3.0 - 2.0 * rho);
+}
+
+// The scheme's local law plus Kelvin–Voigt material damping, whose viscous stresses
+// η C Δε/Δt = ½ (2η/Δt) C Δε add 2η/Δt to both β (twin of the addition in
+// element::consistent_scalars_near).
+fn local_law(inp: Inputs, a_rho: Real, dt_h: Real, dt: Real) -> Local {
+    var loc = local_scalars(inp, a_rho, dt_h);
+    let kv = 2.0 * ld_e(E_DAMP) / dt;
+    loc.beta_g += kv;
+    loc.beta_o += kv;
+    return loc;
 }
 
 fn local_scalars(inp: Inputs, a_rho: Real, dt_h: Real) -> Local {
@@ -515,7 +527,7 @@ fn consistent_scalars(st: St, x: array<Real, 18>, dt: Real, c_ref: Real) -> Cons
         c_nu = solve_cnu_near(st, x, dt, c_ref);
     }
     let kin = kinematics(st, x, c_nu, dt);
-    let loc = local_scalars(kin.inputs, a_rho, dt_h);
+    let loc = local_law(kin.inputs, a_rho, dt_h, dt);
     let c_v = ratio(0.5 * loc.dv, kin.inputs.v_n + kin.inputs.v_n1);
     return Consistent(array<Real, 4>(loc.beta_g, loc.beta_o, c_v, c_nu), kin);
 }
@@ -1007,7 +1019,7 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // kinematics differ from the consistent ones only through c_ν.
     let c_frozen = ld_i(I_S + 3u);
     let c = consistent_scalars(st, x, dt, c_frozen);
-    let loc = local_scalars(c.kin.inputs, a_rho, dt / h);
+    let loc = local_law(c.kin.inputs, a_rho, dt / h, dt);
     let inp = c.kin.inputs;
     let diss = h * (0.5 * a_rho * loc.dv * (inp.v_n1 - inp.v_n)
         + 0.5 * a_rho * loc.dnu * (inp.nu_n1 - inp.nu_n)

@@ -1,7 +1,8 @@
 //! GPU element kernel ≡ CPU element kernel.
 //!
 //! On seeded random elements (random sections, distorted triads, velocities, increments,
-//! every scheme, clamped/free ends, with and without translational dissipation), the WGSL
+//! every scheme, clamped/free ends, with and without translational dissipation and
+//! Kelvin–Voigt damping), the WGSL
 //! kernel (`shaders/element.wgsl`: residual pass, then the tangent pass by 9×9 node
 //! blocks) returns the residual, row scales, tangent and — in consistent mode — the EDMC
 //! local scalars of [`cosserat::element`] to `KERNEL_PARITY_RTOL` (f64; the scalars, which
@@ -86,7 +87,7 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
         2 => [true, false],
         _ => [true, true],
     };
-    let data = ElementData {
+    let mut data = ElementData {
         eps0: strains6(&ref_cfg, h),
         props,
         rot_free,
@@ -116,6 +117,11 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
     };
     let eps_n = strains6(&cfg, h);
     let dt = 0.01 + 0.2 * rng.next();
+    // Every fifth case with Kelvin–Voigt damping (its 2η/Δt adds to both β: in the
+    // consistent scalars, the residual and the dissipation).
+    if idx % 5 == 3 {
+        data.props.damping = 0.3 * dt;
+    }
     let scheme = match idx % 3 {
         0 => Scheme::Em,
         1 => Scheme::Edmc1 {

@@ -156,6 +156,41 @@ fn gpu_runs_reference_shapes_damping_and_line_loads_like_the_cpu() {
     assert!(worst < STATE_RTOL, "positions differ by {worst:e}");
 }
 
+/// The inexact strategy (the residual pass evaluates the consistent scalars) with
+/// Kelvin–Voigt damping: the device's consistent scalars carry the damping's 2η/Δt as the
+/// CPU's do, so every step goes as on the CPU path: the same Newton iterations, no
+/// fallback (without it the device's steps missed the dissipation identity and fell back
+/// to the monolithic Newton).
+#[test]
+fn gpu_inexact_strategy_with_damping_runs_like_the_cpu() {
+    let Some(exec) = gpu() else { return };
+    let ms: Vec<Member> = members("")
+        .into_iter()
+        .filter(|m| m.params.scheme.is_dissipative())
+        .map(|mut m| {
+            m.params.strategy = Strategy::Inexact;
+            m
+        })
+        .collect();
+    assert_eq!(ms.len(), 2);
+    let cpu = run(&ms, &Executor::Cpu).unwrap();
+    let gpu = run(&ms, &exec).unwrap();
+    let mut worst = 0.0f64;
+    for (c, g) in cpu.iter().zip(&gpu) {
+        worst = worst.max(same_run(c, g));
+        assert_eq!(
+            c.outcome.newton_iters_total, g.outcome.newton_iters_total,
+            "Newton iterations"
+        );
+        assert_eq!(
+            g.outcome.fallback_steps, 0,
+            "fallback steps on the GPU path"
+        );
+    }
+    println!("GPU vs CPU positions, inexact with damping: {worst:e}");
+    assert!(worst < STATE_RTOL, "positions differ by {worst:e}");
+}
+
 #[test]
 fn gpu_runs_driven_supports_like_the_cpu() {
     let Some(exec) = gpu() else { return };

@@ -482,6 +482,80 @@ fn whole_device_steps_with_dead_loads_end_as_on_the_cpu_path() {
     );
 }
 
+/// [`loaded_mix`] with Kelvin–Voigt damping (relaxation time 2Δt) in every element.
+fn damped_mix() -> Vec<Member> {
+    let mut ms = loaded_mix();
+    for m in &mut ms {
+        let dt = m.params.dt;
+        for e in &mut m.model.elements {
+            e.props.damping = 2.0 * dt;
+        }
+    }
+    ms
+}
+
+/// Kelvin–Voigt damping on device steps: the element passes dissipate, the records pass
+/// sums D, and the host replays the dissipation identity H_n − H_n+1 + W = D on the
+/// device's numbers. The members end as on the CPU path, dissipate on every step, and
+/// H − H₀ = W − D holds along the run.
+#[test]
+fn whole_device_steps_with_kelvin_voigt_damping_end_as_on_the_cpu_path() {
+    let ms = damped_mix();
+    let Some(exec) = gpu() else { return };
+    let (cpu, _) = run_batch(
+        &ms,
+        &Executor::Cpu,
+        NewtonVariant::Fresh,
+        SolveMode::Host,
+        0,
+    );
+    let (whole, ws) = run_batch(&ms, &exec, NewtonVariant::Full, SolveMode::Whole, 5);
+    let (mut worst, mut worst_d, mut worst_balance) = (0.0f64, 0.0f64, 0.0f64);
+    for (c, w) in cpu.iter().zip(&whole) {
+        let i = c.index;
+        assert_eq!(w.outcome.status, RunStatus::Completed, "member {i}");
+        worst = worst.max(compare_results(&format!("damped, member {i}"), c, w));
+        // The dissipation, step by step, against the CPU path's; positive on every step.
+        worst_d = worst_d.max(rel(
+            c.history.iter().map(|h| h.dissipation),
+            w.history.iter().map(|h| h.dissipation),
+        ));
+        assert!(
+            w.history[1..].iter().all(|h| h.dissipation > 0.0),
+            "member {i}: a step without dissipation"
+        );
+        let h0 = w.history[0].total;
+        let scale = w
+            .history
+            .iter()
+            .map(|h| h.total.abs().max(h.work_total.abs()))
+            .fold(h0.abs(), f64::max);
+        for h in &w.history {
+            let gap = (h.total - h0 - (h.work_total - h.dissipation_total)).abs() / scale;
+            worst_balance = worst_balance.max(gap);
+        }
+    }
+    let st = &ws.serve;
+    println!(
+        "damped: vs CPU {worst:.3e}, D {worst_d:.3e}, balance {worst_balance:.3e}; device steps {} ({} handed back)",
+        st.device_steps, st.device_step_handoffs
+    );
+    assert!(worst <= STATE_RTOL, "{worst:.3e} from the CPU path");
+    assert!(
+        worst_d <= STATE_RTOL,
+        "dissipation {worst_d:.3e} from the CPU path"
+    );
+    assert!(worst_balance <= 1e-12, "energy balance {worst_balance:.3e}");
+    // As the undamped loaded batch: the constant loads' members from their second step, the
+    // ramped ones once the ramp is over; the host's checks accept them (measured: all).
+    assert!(
+        st.device_steps - st.device_step_handoffs >= 5 * 7 + 4 * 4,
+        "{} device steps, {} handed back",
+        st.device_steps,
+        st.device_step_handoffs
+    );
+}
+
 /// `bench --solve whole` times that mode alone: EM cantilevers (`COSSERAT_BENCH_SCHEME=em`)
 /// under gravity (`COSSERAT_BENCH_GRAVITY=1`) take every step after their first on the
 /// device, and the JSON `whole` object reports the figures of docs/gpu.md.

@@ -212,9 +212,10 @@ const DEVICE_STEP_MIN_K: usize = 4;
 
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
-/// rounds); dead nodal loads and gravity only (no line loads); no moving or sliding
-/// supports, links, contact, damping or control commands. (A step whose loads differ from
-/// those the device holds runs on the host: `Simulation::device_step`.)
+/// rounds; Kelvin–Voigt damping is the element passes' own); dead nodal loads and gravity
+/// only (no line loads); no moving or sliding supports, links, contact, drag or control
+/// commands. (A step whose loads differ from those the device holds runs on the host:
+/// `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
     if sim.params().scheme != crate::integrator::Scheme::Em {
@@ -229,8 +230,8 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     if !m.links.is_empty() || !m.obstacles.is_empty() || !m.rod_contacts.is_empty() {
         return Some("links or contact");
     }
-    if m.has_material_damping() || m.has_drag() || m.planar.is_some() {
-        return Some("damping or a planar model");
+    if m.has_drag() || m.planar.is_some() {
+        return Some("drag or a planar model");
     }
     None
 }
@@ -1351,9 +1352,10 @@ impl GpuEvaluator {
     /// without a dispatch; while there are such, the others wait (so that the members'
     /// next Newton solves start in one dispatch: one sync per step for the batch).
     pub fn serve(&mut self) -> usize {
+        // Taking the requests and answering them is per member: in parallel.
         let reqs: Vec<(usize, EvalRequest)> = self
             .ports
-            .iter()
+            .par_iter()
             .enumerate()
             .filter_map(|(slot, p)| Some((slot, p.as_ref()?.take_request()?)))
             .collect();
@@ -1384,11 +1386,13 @@ impl GpuEvaluator {
         if answered == 0 && !self.deferred.is_empty() {
             let reqs = std::mem::take(&mut self.deferred);
             n += reqs.len();
-            for (slot, answer) in self.evaluate(reqs) {
-                if let Some(p) = &self.ports[slot] {
+            let answers = self.evaluate(reqs);
+            let ports = &self.ports;
+            answers.into_par_iter().for_each(|(slot, answer)| {
+                if let Some(p) = &ports[slot] {
                     p.respond(answer);
                 }
-            }
+            });
         }
         n
     }

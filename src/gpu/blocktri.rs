@@ -819,6 +819,7 @@ impl BlockTriSolver {
         what: &Readback,
         enc: Option<wgpu::CommandEncoder>,
     ) -> Result<Solved, GpuError> {
+        use rayon::prelude::*;
         let given = enc.is_some();
         let mut enc = enc.unwrap_or_else(|| {
             self.device
@@ -920,16 +921,21 @@ impl BlockTriSolver {
                 out.iterates = bytemuck::pod_collect_to_vec(take(packed as usize - 16 * nr));
             }
             for &(lo, hi) in &h_runs {
+                // (Per member, in parallel: each history is decoded into its own list.)
                 let h: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * HSTRIDE * (hi - lo)));
-                out.hist
-                    .extend((lo..hi).zip(h.chunks_exact(HSTRIDE)).map(|(m, h)| {
-                        let c = (h[0] as usize).min(RESIDENT_MAX_K);
-                        let reports = h[1..1 + 2 * c]
-                            .chunks_exact(2)
-                            .map(|r| Report::decode(r[0], r[1]))
-                            .collect();
-                        (m, reports, h[HSTRIDE - 1])
-                    }));
+                out.hist.par_extend(
+                    (lo..hi)
+                        .into_par_iter()
+                        .zip(h.par_chunks_exact(HSTRIDE))
+                        .map(|(m, h)| {
+                            let c = (h[0] as usize).min(RESIDENT_MAX_K);
+                            let reports = h[1..1 + 2 * c]
+                                .chunks_exact(2)
+                                .map(|r| Report::decode(r[0], r[1]))
+                                .collect();
+                            (m, reports, h[HSTRIDE - 1])
+                        }),
+                );
             }
             for &(lo, hi) in &w_runs {
                 let v: Vec<f64> = bytemuck::pod_collect_to_vec(take(8 * (hi - lo)));

@@ -415,6 +415,7 @@ impl ElementKernel {
             self.put(0, E_ROTFREE + l, i, if d.rot_free[l] { 1.0 } else { 0.0 });
         }
         self.put(0, E_DT, i, k.dt);
+        self.put(0, E_DAMP, i, p.damping);
         self.put(0, E_TRANS, i, if trans_diss { 1.0 } else { 0.0 });
         let (kind, sp) = match k.scheme {
             Scheme::Em => (0.0, [0.0; 4]),

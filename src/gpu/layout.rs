@@ -27,8 +27,10 @@ pub const E_SCHEME: usize = 28;
 pub const E_SP: usize = 29;
 /// Director dissipation on (1) or off (0).
 pub const E_DIRDISS: usize = 33;
+/// Kelvin–Voigt retardation time η (material damping: `2η/Δt` adds to both β).
+pub const E_DAMP: usize = 34;
 /// Number of element-constant fields.
-pub const NE: usize = 34;
+pub const NE: usize = 35;
 
 /// State: end positions (6).
 pub const S_R: usize = 0;

@@ -101,7 +101,6 @@ impl Simulation {
         let inv = invariants(&self.model, &self.data, next);
         let w = self.external_work(q, mode);
         let (h0, h1) = (self.inv.total(), inv.total());
-        let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
         // The discrete energy identity holds exactly for an exact solution; a converged
         // increment q with residual R misses it by R·q. Allow that much on top of the
         // relative tolerances: it matters only when H is tiny against the forces (a stiff
@@ -114,6 +113,25 @@ impl Simulation {
                 .map(|(r, x)| (r * x).abs())
                 .sum::<f64>()
         });
+        self.check_energy(h0, h1, w, diss, residual_work)?;
+        Ok((inv, w))
+    }
+
+    /// The step's energy checks from `H_n` = `h0`, `H_n+1` = `h1`, the external work `w`,
+    /// the dissipation `diss` and the residual work Σ|R·q| of the accepted iterate: the
+    /// residual resolved against the energy, no energy growth beyond the work (schemes
+    /// that control the energy), and the dissipation identity `H_n − H_n+1 + W = D` where
+    /// the scheme or a damping mechanism dissipates. (The host's step and a step the
+    /// device ran, from its record, go through these same checks.)
+    pub(super) fn check_energy(
+        &self,
+        h0: f64,
+        h1: f64,
+        w: f64,
+        diss: f64,
+        residual_work: f64,
+    ) -> Result<(), String> {
+        let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
         let growth = h1 - h0 - w;
         crate::integrator::scaling::check_resolved(residual_work, href)?;
         if self.params.scheme.controls_energy()
@@ -138,7 +156,7 @@ impl Simulation {
                 ));
             }
         }
-        Ok((inv, w))
+        Ok(())
     }
 }
 

@@ -152,8 +152,9 @@ impl Simulation {
         {
             return None;
         }
-        // The EM energy check (`accept.rs`, `check_advanced`), W the dead loads' work the
-        // device summed at the iterate.
+        // The host's energy checks (`accept.rs`, `check_energy`) on the device's numbers: W
+        // the dead loads' work and D the dissipation (Kelvin–Voigt) it summed at the
+        // iterate.
         let inv = Invariants {
             kinetic: r.kinetic,
             potential: r.potential,
@@ -161,16 +162,14 @@ impl Simulation {
             j: r.j,
         };
         let w = a.external_work;
-        let (h0, h1) = (self.inv.total(), inv.total());
-        let href = h0.abs().max(h1.abs()).max(w.abs()).max(1e-300);
-        let residual_work = a.residual_work;
-        scaling::check_resolved(residual_work, href).ok()?;
-        let growth = h1 - h0 - w;
-        if self.params.scheme.controls_energy()
-            && growth > self.params.energy_tol * href + residual_work
-        {
-            return None;
-        }
+        self.check_energy(
+            self.inv.total(),
+            inv.total(),
+            w,
+            r.dissipation,
+            a.residual_work,
+        )
+        .ok()?;
         self.state.t += self.params.dt;
         self.state_version += 1;
         self.advanced_version = Some(self.state_version);
