@@ -212,17 +212,17 @@ const DEVICE_STEP_MIN_K: usize = 4;
 
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
-/// rounds; Kelvin–Voigt damping is the element passes' own); dead nodal loads and gravity
-/// only (no line loads); no moving or sliding supports, links, contact, drag or control
-/// commands. (A step whose loads differ from those the device holds runs on the host:
-/// `Simulation::device_step`.)
+/// rounds; Kelvin–Voigt damping is the element passes' own); dead loads only (nodal, line
+/// and gravity: no follower line loads); no moving or sliding supports, links, contact,
+/// drag or control commands. (A step whose loads differ from those the device holds runs
+/// on the host: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
     if sim.params().scheme != crate::integrator::Scheme::Em {
         return Some("scheme other than EM");
     }
-    if !m.line_loads.is_empty() {
-        return Some("line loads");
+    if m.has_follower_loads() {
+        return Some("follower line loads");
     }
     if !m.drives.is_empty() || !m.slides.is_empty() || sim.has_commands() {
         return Some("moving supports");
@@ -238,7 +238,8 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
 
 /// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
 /// rod numbered node by node (element `e` joins nodes `e` and `e + 1`), no point masses,
-/// rigid links, line loads or drag (whose tangent terms the host adds).
+/// rigid links, follower line loads or drag (whose tangent terms the host adds; a dead
+/// line load is a nodal term like a nodal load).
 pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     let model = sim.model();
     if model.n_nodes() < 2
@@ -257,8 +258,8 @@ pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
         return Some("point masses");
     }
     // Their tangent terms are added on the host, after the element blocks.
-    if !model.line_loads.is_empty() {
-        return Some("line loads");
+    if model.has_follower_loads() {
+        return Some("follower line loads");
     }
     if model.elements.iter().any(|e| e.props.drag != 0.0) {
         return Some("drag");

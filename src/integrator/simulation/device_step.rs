@@ -29,11 +29,19 @@ impl Simulation {
         self.device_steps = on;
     }
 
-    /// The factors of the nodal loads' time tables at the middle of the coming step (in
-    /// [`crate::model::Model::loads`] order; gravity is constant).
+    /// The factors of the dead loads' time tables at the middle of the coming step: the
+    /// nodal loads (in [`crate::model::Model::loads`] order), then the dead line loads
+    /// (gravity is constant; follower line loads are not dead).
     pub(super) fn load_factors(&self) -> impl Iterator<Item = f64> + '_ {
         let t_mid = self.state.t + 0.5 * self.params.dt;
-        self.model.loads.iter().map(move |l| l.table.eval(t_mid))
+        let nodal = self.model.loads.iter().map(|l| &l.table);
+        let line = self
+            .model
+            .line_loads
+            .iter()
+            .filter(|l| !l.follower)
+            .map(|l| &l.table);
+        nodal.chain(line).map(move |t| t.eval(t_mid))
     }
 
     /// Whether commands move driven supports (the device step covers none).
