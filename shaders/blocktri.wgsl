@@ -24,10 +24,10 @@
 // backward error ascending), so that one invocation never runs more than a few ten
 // thousand loop iterations: Mesa's llvmpipe/lavapipe stops any invocation after 65 535
 // loop iterations (its infinite-loop guard), which cut the factorization of rods longer
-// than ≈ 44 nodes when one invocation did the whole member. The factorization (≈ 2 200
-// iterations per node) goes in chunks of 16 nodes, the sweeps and the backward error
-// (≤ 300 per node) in chunks of 128 (`CHUNK_NODES`, `SWEEP_CHUNK_NODES` in
-// `src/gpu/blocktri.rs`).
+// than ≈ 44 nodes when one invocation did the whole member. The factorization goes in
+// chunks of 32 nodes (measured: 32 pass on ill-conditioned members, 64 are cut short),
+// the sweeps and the backward error (≤ 300 iterations per node) in chunks of 128
+// (`CHUNK_NODES`, `SWEEP_CHUNK_NODES` in `src/gpu/blocktri.rs`).
 
 alias Real = f64;
 

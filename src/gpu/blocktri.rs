@@ -14,10 +14,12 @@ use crate::linsolve::batched::BatchLayout;
 
 pub use super::shaders::BLOCKTRI_WGSL;
 
-/// Nodes per factorization dispatch: an invocation runs ≈ 2 200 loop iterations per node
-/// of a factorization, and lavapipe ends an invocation after 65 535 (shaders/blocktri.wgsl,
-/// "Chunks").
-pub const CHUNK_NODES: usize = 16;
+/// Nodes per factorization dispatch: lavapipe ends an invocation after 65 535 loop
+/// iterations (shaders/blocktri.wgsl, "Chunks"); measured with ill-conditioned members
+/// (row interchanges everywhere, `tests/gpu_blocktri.rs`), 32-node chunks factorize
+/// exactly as the CPU twin and 64-node chunks are cut short (one invocation per member
+/// failed from ≈ 44 nodes).
+pub const CHUNK_NODES: usize = 32;
 
 /// Nodes per dispatch of the sweeps and the backward error (≤ 300 loop iterations per
 /// node): one dispatch each for members of up to this many nodes.
