@@ -131,7 +131,7 @@ pub struct ElementKernel {
     /// iterations and the records of a dispatch share one submission.
     param_src: wgpu::Buffer,
     list_src: wgpu::Buffer,
-    staged: [(Option<Params>, Vec<u32>); 3],
+    staged: [(Option<Params>, Vec<u32>); USES],
     /// Mappable twin of the output buffer and host copy of the output, created by the
     /// first [`Self::run`] (the batch path reads assembled systems instead and never
     /// allocates them).
