@@ -238,7 +238,7 @@ fn fade(speed: Real, forcing: Real) -> Real {
 
 // The scheme's local law plus Kelvin–Voigt material damping, whose viscous stresses
 // η C Δε/Δt = ½ (2η/Δt) C Δε add 2η/Δt to both β (twin of the addition in
-// element::consistent_scalars_near).
+// element::consistent_scalars_at).
 fn local_law(inp: Inputs, a_rho: Real, dt_h: Real, dt: Real) -> Local {
     var loc = local_scalars(inp, a_rho, dt_h);
     let kv = 2.0 * ld_e(E_DAMP) / dt;

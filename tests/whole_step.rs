@@ -522,6 +522,18 @@ fn check_loaded(label: &str, ms: &[Member]) -> Option<Loaded> {
     Some(out)
 }
 
+/// Asserts that at least `least` device steps were accepted (run on the device and not
+/// handed back to the host).
+fn assert_accepted_device_steps(l: &Loaded, least: u64) {
+    let st = &l.stats.serve;
+    assert!(
+        st.device_steps - st.device_step_handoffs >= least,
+        "{} device steps, {} handed back",
+        st.device_steps,
+        st.device_step_handoffs
+    );
+}
+
 #[test]
 fn whole_device_steps_with_dead_loads_end_as_on_the_cpu_path() {
     let Some(l) = check_loaded("loaded", &loaded_mix()) else {
@@ -562,13 +574,7 @@ fn whole_device_steps_with_kelvin_voigt_damping_end_as_on_the_cpu_path() {
     assert!(l.least_d > 0.0, "a step without dissipation");
     // As the undamped loaded batch: the constant loads' members from their second step, the
     // ramped ones once the ramp is over; the host's checks accept them (measured: all).
-    let st = &l.stats.serve;
-    assert!(
-        st.device_steps - st.device_step_handoffs >= 5 * 7 + 4 * 4,
-        "{} device steps, {} handed back",
-        st.device_steps,
-        st.device_step_handoffs
-    );
+    assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
 }
 
 /// [`loaded_mix`] with a dead line load on every element besides (a distributed force
@@ -598,13 +604,7 @@ fn whole_device_steps_with_dead_line_loads_end_as_on_the_cpu_path() {
     let Some(l) = check_loaded("line-loaded", &line_loaded_mix()) else {
         return;
     };
-    let st = &l.stats.serve;
-    assert!(
-        st.device_steps - st.device_step_handoffs >= 5 * 7 + 4 * 4,
-        "{} device steps, {} handed back",
-        st.device_steps,
-        st.device_step_handoffs
-    );
+    assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
 }
 
 /// `bench --solve whole` times that mode alone: EM cantilevers (`COSSERAT_BENCH_SCHEME=em`)

@@ -203,8 +203,8 @@ pub const DEVICE_STEP_K: usize = 8;
 
 /// Device steps record the iterations the batch's device steps needed last (at most, per
 /// member) plus this margin, at least [`DEVICE_STEP_MIN_K`] and at most [`DEVICE_STEP_K`]:
-/// each recorded iteration costs the host its encoding (16 dispatches) whether or not a
-/// member still iterates.
+/// each recorded iteration costs the host its encoding (11 dispatches at 31 nodes) whether
+/// or not a member still iterates.
 const DEVICE_STEP_MARGIN: usize = 2;
 
 /// See [`DEVICE_STEP_MARGIN`].

@@ -100,7 +100,7 @@ pub struct DeviceStepAnswer {
     pub iterations: Vec<(f64, bool)>,
     /// `Σ |R_i q_i|` at the last evaluated iterate (the energy check's residual work).
     pub residual_work: f64,
-    /// The work of the dead loads (nodal loads, gravity) over the step at that iterate:
+    /// The work of the dead loads (nodal loads, dead line loads, gravity) over the step at that iterate:
     /// `Σ F·u + M·θ` with the loads the device holds (the host's at the middle of the
     /// step where they have not changed since they went up).
     pub external_work: f64,

@@ -238,9 +238,9 @@ pub struct Simulation {
     /// The row scales of the nodal terms sent with the current resident solve's first
     /// request (the later requests reuse them).
     resident_scale: [f64; 3],
-    /// The factors of the nodal loads' time tables (in [`Model::loads`] order) whose nodal
-    /// terms went up last with a device solve's request (`--solve whole`: a step on the
-    /// device uses those terms; gravity is constant).
+    /// The dead loads' time-table factors (`load_factors`: nodal loads, then dead line
+    /// loads) whose nodal terms went up last with a device solve's request (`--solve
+    /// whole`: a step on the device uses those terms; gravity is constant).
     device_loads: Option<Vec<f64>>,
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
