@@ -26,14 +26,14 @@
 //! rows here are `f64` only and EM only; the rest of the element (the sine kernel with
 //! `C_Ω = 0`) runs in the four-element lanes like any element's.
 
-use nalgebra::{Matrix3, Vector6};
+use nalgebra::{Matrix3, Vector3, Vector6};
 
-use super::strain::{raw_strains, strain_gradient, stress_hessian, Config, A0, B0};
+use super::strain::{raw_strains, stress_hessian, Config, A0, B0};
 use super::{
     amax3, th_idx, ElementData, ElementEval, ElementState, FrozenScalars, Kinematics, StepConsts,
     GROSS_WEIGHT,
 };
-use crate::math::lane::Lane;
+use crate::math::lane::{zeros, Lane};
 use crate::math::{hat, hat_mul, mul_hat};
 use crate::model::{Mat3, Vec3};
 
@@ -57,25 +57,41 @@ pub fn rational_strains<T: Lane>(c: &Config<T>, h: T) -> Vector6<T> {
 
 /// `∂n/∂d` on the six director fields (`a_1..a_3, b_1..b_3`): `∂n/∂a_i = b_i/6`,
 /// `∂n/∂b_i = a_i/6`.
-fn denominator_gradient(c: &Config) -> [Vec3; 6] {
-    let s = 1.0 / 6.0;
-    std::array::from_fn(|p| {
-        if p < 3 {
-            c.d[1].column(p) * s
-        } else {
-            c.d[0].column(p - 3) * s
-        }
-    })
+#[inline]
+fn denominator_gradient<T: Lane>(c: &Config<T>) -> [Vector3<T>; 6] {
+    let s = T::splat(1.0 / 6.0);
+    // (Loops into zeroed arrays, not `from_fn`: that moves each lane value through a
+    // buffer.)
+    let mut g = [zeros(); 6];
+    for p in 0..3 {
+        g[p] = c.d[1].column(p) * s;
+        g[3 + p] = c.d[0].column(p) * s;
+    }
+    g
 }
 
-/// `∂q_k/∂d` of the sine moment strains on the six director fields.
-fn sine_gradient(c: &Config, h: f64) -> [[Vec3; 6]; 3] {
-    let b = strain_gradient(c, h);
-    std::array::from_fn(|k| std::array::from_fn(|p| b[3 + k][A0 + p]))
+/// `∂q_k/∂d` of the sine moment strains on the six director fields: for the even
+/// permutation `(k, i, j)`, `q_k = (a_j·b_i − a_i·b_j)/(2h)`, so `∂q_k/∂a_j = b_i/(2h)`,
+/// `∂q_k/∂a_i = −b_j/(2h)`, `∂q_k/∂b_i = a_j/(2h)`, `∂q_k/∂b_j = −a_i/(2h)`, and zero on
+/// `a_k`, `b_k` (the moment rows of [`super::strain::strain_gradient`]).
+#[inline]
+fn sine_gradient<T: Lane>(c: &Config<T>, h: T) -> [[Vector3<T>; 6]; 3] {
+    let s = T::splat(0.5) / h;
+    let (a, b) = (&c.d[0], &c.d[1]);
+    let mut g = [[zeros(); 6]; 3];
+    for (k, row) in g.iter_mut().enumerate() {
+        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+        row[j] = b.column(i) * s;
+        row[i] = -(b.column(j) * s);
+        row[3 + i] = a.column(j) * s;
+        row[3 + j] = -(a.column(i) * s);
+    }
+    g
 }
 
 /// `q` (the sine moment strains) of a configuration.
-fn sine_omega(c: &Config, h: f64) -> Vec3 {
+#[inline]
+fn sine_omega<T: Lane>(c: &Config<T>, h: T) -> Vector3<T> {
     raw_strains(c, h).1
 }
 
@@ -116,61 +132,75 @@ pub fn residual_tangent_into(
     let mut base = data.clone();
     base.props.c_omega = Mat3::zeros();
     super::residual_tangent_into(&base, st, kin, s, k, trans_diss, want_tangent, out);
-    add_moment_terms(data, st, kin, s, want_tangent, out);
+    add_moment_terms(&data.props.c_omega, data, st, kin, s, want_tangent, out);
 }
 
 /// Adds the rational measure's moment rows to `out`, an evaluation of the sine kernel
-/// with the moment stiffness removed (`c_Ω = 0`; one element, or a lane of four): the
-/// moment rows `h B̄ᵀ M*` projected onto the rotations with the mid-point directors, and
-/// (with `want_tangent`) their exact linearization. `M* = C_Ω(½(Ω̃_n + Ω̃_{n+1}) − Ω̃° +
+/// with the moment stiffness removed (`c_Ω = 0`; one element, or a lane of four, whose
+/// `data` carry `C_Ω = 0`, so the moment stiffness `c_omega` comes apart): the moment rows
+/// `h B̄ᵀ M*` projected onto the rotations with the mid-point directors, and (with
+/// `want_tangent`) their exact linearization. `M* = C_Ω(½(Ω̃_n + Ω̃_{n+1}) − Ω̃° +
 /// ½ β_Ω ΔΩ̃)` (EM with Kelvin–Voigt damping, the mean of the strains).
-pub fn add_moment_terms(
-    data: &ElementData,
-    st: &ElementState,
-    kin: &Kinematics,
-    s: &FrozenScalars,
+///
+/// Generic over the kernel's [`Lane`]: a lane of four gives each element the numbers of
+/// the one-element evaluation, bit for bit (the same operations in the same order).
+pub fn add_moment_terms<T: Lane>(
+    c_omega: &Matrix3<T>,
+    data: &ElementData<T>,
+    st: &ElementState<T>,
+    kin: &Kinematics<T>,
+    s: &FrozenScalars<T>,
     want_tangent: bool,
-    out: &mut ElementEval,
+    out: &mut ElementEval<T>,
 ) {
-    let p = &data.props;
-    let h = p.h;
+    let h = data.props.h;
+    let half = T::splat(0.5);
     let (c0, c1, mid) = (&st.cfg, &kin.cfg1, &kin.mid);
     let (q0, q1) = (sine_omega(c0, h), sine_omega(c1, h));
     let (n0, n1) = (denominator(c0), denominator(c1));
-    let (nbar, qbar) = (0.5 * (n0 + n1), 0.5 * (q0 + q1));
+    let (nbar, qbar) = (half * (n0 + n1), (q0 + q1) * half);
     let (dq_mid, dn_mid) = (sine_gradient(mid, h), denominator_gradient(mid));
-    let inv = 1.0 / (n0 * n1);
-    let bbar: [[Vec3; 6]; 3] = std::array::from_fn(|kk| {
-        std::array::from_fn(|f| (dq_mid[kk][f] * nbar - dn_mid[f] * qbar[kk]) * inv)
-    });
+    let inv = T::one() / (n0 * n1);
+    let mut bbar = [[zeros::<T, 3, 1>(); 6]; 3];
+    for kk in 0..3 {
+        for f in 0..6 {
+            bbar[kk][f] = (dq_mid[kk][f] * nbar - dn_mid[f] * qbar[kk]) * inv;
+        }
+    }
     // Stresses from the mean of the strains the kinematics carries (the rational ones).
-    let om_n: Vec3 = kin.eps_n.fixed_rows::<3>(3).into_owned();
-    let om_1: Vec3 = kin.eps1.fixed_rows::<3>(3).into_owned();
-    let om0_ref: Vec3 = data.eps0.fixed_rows::<3>(3).into_owned();
-    let mean = 0.5 * (om_n + om_1);
-    let mstar = p.c_omega * (mean - om0_ref + (om_1 - om_n) * (0.5 * s.beta_omega));
+    let om_n: Vector3<T> = kin.eps_n.fixed_rows::<3>(3).into_owned();
+    let om_1: Vector3<T> = kin.eps1.fixed_rows::<3>(3).into_owned();
+    let om0_ref: Vector3<T> = data.eps0.fixed_rows::<3>(3).into_owned();
+    let mean = (om_n + om_1) * half;
+    let mstar = c_omega * (mean - om0_ref + (om_1 - om_n) * (half * s.beta_omega));
     // Forces on the six director fields.
-    let f: [Vec3; 6] =
-        std::array::from_fn(|ff| (0..3).map(|kk| bbar[kk][ff] * (h * mstar[kk])).sum());
+    let mut f = [zeros::<T, 3, 1>(); 6];
+    for (ff, x) in f.iter_mut().enumerate() {
+        *x = bbar[0][ff] * (h * mstar[0]);
+        *x += bbar[1][ff] * (h * mstar[1]);
+        *x += bbar[2][ff] * (h * mstar[2]);
+    }
     // Round-off floor, as the sine kernel's (GROSS_WEIGHT · h |B̄|ᵀ |C| (|Ω̃| + |Ω̃°|)).
-    let gross = p.c_omega.map(f64::abs) * (mean.map(f64::abs) + om0_ref.map(f64::abs));
-    let floor: [f64; 6] = std::array::from_fn(|ff| {
-        (0..3)
-            .map(|kk| GROSS_WEIGHT * amax3(&bbar[kk][ff]) * h * gross[kk])
-            .sum()
-    });
-    let dcol = |l: usize, i: usize| -> Vec3 { mid.d[l].column(i).into_owned() };
+    let gross = c_omega.map(T::abs) * (mean.map(T::abs) + om0_ref.map(T::abs));
+    let gw = T::splat(GROSS_WEIGHT);
+    let mut floor = [T::zero(); 6];
+    for (ff, x) in floor.iter_mut().enumerate() {
+        *x = gw * amax3(&bbar[0][ff]) * h * gross[0];
+        *x += gw * amax3(&bbar[1][ff]) * h * gross[1];
+        *x += gw * amax3(&bbar[2][ff]) * h * gross[2];
+    }
+    let dcol = |l: usize, i: usize| -> Vector3<T> { mid.d[l].column(i).into_owned() };
     for l in 0..2 {
-        let mut rt = Vec3::zeros();
-        let mut fmax: f64 = 0.0;
+        let mut rt = zeros::<T, 3, 1>();
+        let mut fmax = T::zero();
+        let mut dmax = T::zero();
         for i in 0..3 {
             rt += dcol(l, i).cross(&f[3 * l + i]);
             fmax = fmax.max(amax3(&f[3 * l + i])).max(floor[3 * l + i]);
+            let d = dcol(l, i);
+            dmax = dmax.max(d.dot(&d));
         }
-        let dnorm = (0..3)
-            .map(|i| mid.d[l].column(i).norm_squared())
-            .fold(0.0f64, f64::max)
-            .sqrt();
+        let dnorm = dmax.sqrt();
         for cc in 0..3 {
             out.r[th_idx(l) + cc] += rt[cc];
             out.scale[th_idx(l) + cc] = out.scale[th_idx(l) + cc].max(fmax * dnorm);
@@ -184,11 +214,14 @@ pub fn add_moment_terms(
     let at = [amat[0].transpose(), amat[1].transpose()];
     // Material part: h B̄ᵀ (½(1 + β_Ω) C_Ω) DΩ̃(Φ_{n+1}), reduced to (θ_0, θ_1): the
     // gradient at the end of the step ([`gradient`], from the pieces at hand).
-    let d1: [[Vec3; 6]; 3] = std::array::from_fn(|kk| {
-        std::array::from_fn(|f| (dq_1[kk][f] - dn_1[f] * (q1[kk] / n1)) / n1)
-    });
-    let mut tb = [[Vec3::zeros(); 2]; 3];
-    let mut jb = [[Vec3::zeros(); 2]; 3];
+    let mut d1 = [[zeros::<T, 3, 1>(); 6]; 3];
+    for kk in 0..3 {
+        for f in 0..6 {
+            d1[kk][f] = (dq_1[kk][f] - dn_1[f] * (q1[kk] / n1)) / n1;
+        }
+    }
+    let mut tb = [[zeros::<T, 3, 1>(); 2]; 3];
+    let mut jb = [[zeros::<T, 3, 1>(); 2]; 3];
     for kk in 0..3 {
         for l in 0..2 {
             for i in 0..3 {
@@ -197,13 +230,13 @@ pub fn add_moment_terms(
             }
         }
     }
-    let cm = p.c_omega * (0.5 * h * (1.0 + s.beta_omega));
+    let cm = c_omega * (half * h * (T::one() + s.beta_omega));
     for l in 0..2 {
         for m in 0..2 {
-            let mut blk = Matrix3::zeros();
+            let mut blk = zeros::<T, 3, 3>();
             for k1 in 0..3 {
                 for k2 in 0..3 {
-                    if cm[(k1, k2)] != 0.0 {
+                    if cm[(k1, k2)].any_nonzero() {
                         blk += tb[k1][l] * jb[k2][m].transpose() * cm[(k1, k2)];
                     }
                 }
@@ -214,57 +247,60 @@ pub fn add_moment_terms(
     }
     // Geometric part in field space: G_pq = ∂f_p/∂d_{q,n+1} (3×3 per pair of director
     // fields), then K_{θl θm} += −Σ_{p∈l, q∈m} \hat{d_p} G_pq A_m \hat{d_q}.
-    let qm: [Vec3; 6] = std::array::from_fn(|ff| (0..3).map(|kk| dq_mid[kk][ff] * mstar[kk]).sum());
-    let q1m: [Vec3; 6] = std::array::from_fn(|ff| (0..3).map(|kk| dq_1[kk][ff] * mstar[kk]).sum());
-    let c_half = 0.5 * h * inv;
-    let hq = stress_hessian(
-        &Vector6::new(0.0, 0.0, 0.0, mstar[0], mstar[1], mstar[2]),
-        h,
-    );
+    let mut qm = [zeros::<T, 3, 1>(); 6];
+    let mut q1m = [zeros::<T, 3, 1>(); 6];
+    for ff in 0..6 {
+        qm[ff] = dq_mid[0][ff] * mstar[0];
+        qm[ff] += dq_mid[1][ff] * mstar[1];
+        qm[ff] += dq_mid[2][ff] * mstar[2];
+        q1m[ff] = dq_1[0][ff] * mstar[0];
+        q1m[ff] += dq_1[1][ff] * mstar[1];
+        q1m[ff] += dq_1[2][ff] * mstar[2];
+    }
+    let c_half = half * h * inv;
+    let z = T::zero();
+    let hq = stress_hessian(&Vector6::new(z, z, z, mstar[0], mstar[1], mstar[2]), h);
     let mq = mstar.dot(&qbar);
+    let sixth = T::splat(1.0 / 6.0);
     // G_pq = a_p ⊗ ∂n/∂d_q(Φ_{n+1}) + b_p ⊗ (∂q/∂d_q(Φ_{n+1}))ᵀM* + s_pq I with
     // a_p = ½h/(n₀n₁) q_p·M* (mid) − f_p/n₁ and b_p = −½h/(n₀n₁) ∂n/∂d_p (mid), so each
     // block is two outer products, \hat{d}(a ⊗ w) Y = (d × a) ⊗ (Yᵀw), plus the scalar
     // part Σ_ij s_pq \hat{d_p} Y_q = Σ_j \hat{v_q} Y_q, v_q = Σ_i s_pq d_p (â is linear
     // in a). The scalar s_pq: the stress Hessian of q and, between a_i and b_i, that of n.
-    let sc = |pf: usize, qf: usize| -> f64 {
+    let sc = |pf: usize, qf: usize| -> T {
         let mut x = c_half * nbar * hq[(A0 + pf, A0 + qf)];
         if pf % 3 == qf % 3 && pf / 3 != qf / 3 {
-            x -= c_half * mq / 6.0;
+            x -= c_half * mq * sixth;
         }
         x
     };
     debug_assert_eq!(A0 + 3, B0);
     // Y_q = A_m \hat{d_q}, once per director field.
-    let ad: [Mat3; 6] = std::array::from_fn(|qf| mul_hat(&amat[qf / 3], &dcol(qf / 3, qf % 3)));
-    let u: [[Vec3; 2]; 2] = std::array::from_fn(|l| {
-        let mut ua = Vec3::zeros();
-        let mut ub = Vec3::zeros();
+    let mut ad = [zeros::<T, 3, 3>(); 6];
+    for (qf, y) in ad.iter_mut().enumerate() {
+        *y = mul_hat(&amat[qf / 3], &dcol(qf / 3, qf % 3));
+    }
+    let mut u = [[zeros::<T, 3, 1>(); 2]; 2];
+    let mut w = [[zeros::<T, 3, 1>(); 2]; 2];
+    for l in 0..2 {
         for i in 0..3 {
             let pf = 3 * l + i;
             let a = qm[pf] * c_half - f[pf] / n1;
             let b = dn_mid[pf] * (-c_half);
-            ua += dcol(l, i).cross(&a);
-            ub += dcol(l, i).cross(&b);
+            u[l][0] += dcol(l, i).cross(&a);
+            u[l][1] += dcol(l, i).cross(&b);
+            w[l][0] += ad[pf].tr_mul(&dn_1[pf]);
+            w[l][1] += ad[pf].tr_mul(&q1m[pf]);
         }
-        [ua, ub]
-    });
-    let w: [[Vec3; 2]; 2] = std::array::from_fn(|m| {
-        let mut wa = Vec3::zeros();
-        let mut wb = Vec3::zeros();
-        for j in 0..3 {
-            let qf = 3 * m + j;
-            wa += ad[qf].tr_mul(&dn_1[qf]);
-            wb += ad[qf].tr_mul(&q1m[qf]);
-        }
-        [wa, wb]
-    });
+    }
     for l in 0..2 {
         for m in 0..2 {
             let mut blk = u[l][0] * w[m][0].transpose() + u[l][1] * w[m][1].transpose();
             for j in 0..3 {
                 let qf = 3 * m + j;
-                let v: Vec3 = (0..3).map(|i| dcol(l, i) * sc(3 * l + i, qf)).sum();
+                let mut v = dcol(l, 0) * sc(3 * l, qf);
+                v += dcol(l, 1) * sc(3 * l + 1, qf);
+                v += dcol(l, 2) * sc(3 * l + 2, qf);
                 blk += hat_mul(&v, &ad[qf]);
             }
             let mut kv = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(m));
@@ -273,12 +309,12 @@ pub fn add_moment_terms(
     }
     // Projection: d/dθ of Σ_i d_{i,½} × f_i at fixed f: ½ Σ_i \hat{f_i} A_l \hat{d_i}.
     for l in 0..2 {
-        let mut blk = Matrix3::zeros();
+        let mut blk = zeros::<T, 3, 3>();
         for i in 0..3 {
             blk += hat(&f[3 * l + i]) * mul_hat(&amat[l], &dcol(l, i));
         }
         let mut v = out.k.fixed_view_mut::<3, 3>(th_idx(l), th_idx(l));
-        v += blk * 0.5;
+        v += blk * half;
     }
 }
 

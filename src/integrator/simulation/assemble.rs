@@ -4,6 +4,7 @@
 //! (point masses, external loads) and the rigid links' bar forces; the relative residual
 //! is measured against per-kind (u, θ, g) force scales.
 
+use nalgebra::Matrix3;
 use std::time::Instant;
 
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
@@ -281,7 +282,6 @@ impl Simulation {
         if rational && consistent {
             return 0;
         }
-        let mut one = ElementEval::zeros();
         let correct = tangent && consistent && k.scheme.is_dissipative() && !self.inexact_tangent;
         let mut ev = ElementEval::<F64x4>::zeros();
         let mut corr = Vec::with_capacity(if correct { LANES } else { 0 });
@@ -310,23 +310,16 @@ impl Simulation {
                 let s = FrozenScalars::pack(self.frozen[e0..e0 + LANES].try_into().unwrap());
                 let kin = kinematics_core(data, &st, &eps_n, &inc, s.c_nu, k.dt);
                 residual_tangent_into(data, &st, &kin, &s, &k, self.trans_diss, tangent, &mut ev);
+                if rational {
+                    let c_omega = Matrix3::from_fn(|a, b| {
+                        F64x4::new(std::array::from_fn(|i| {
+                            self.data[e0 + i].props.c_omega[(a, b)]
+                        }))
+                    });
+                    add_moment_terms(&c_omega, data, &st, &kin, &s, tangent, &mut ev);
+                }
                 for i in 0..LANES {
-                    if rational {
-                        let e = e0 + i;
-                        ev.lane_into(i, tangent, &mut one);
-                        let kin_i = kin.lane(i);
-                        add_moment_terms(
-                            &self.data[e],
-                            &sts[i],
-                            &kin_i,
-                            &self.frozen[e],
-                            tangent,
-                            &mut one,
-                        );
-                        self.scatter(e, &one, tangent, r, scale);
-                    } else {
-                        self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
-                    }
+                    self.scatter_lane(e0 + i, &ev, i, tangent, r, scale);
                 }
                 continue;
             }
