@@ -1,4 +1,4 @@
-// ELEMENT KERNEL, WGSL twin of `src/element/{mod,strain,dissipation}.rs` (and of the
+// ELEMENT KERNEL, WGSL twin of `src/element/{mod,strain,dissipation,drag}.rs` (and of the
 // Cayley helpers of `src/math/mod.rs`). Same arithmetic, term by term: kinematics, strains,
 // mid-point strain gradient, stresses, EDMC local scalars (incl. the 4×4 EDMC-2 solve),
 // element residual (18), row scales (18) and tangent (18×18). Rational operations and sqrt
@@ -48,6 +48,7 @@ const E_SCHEME: u32 = 28u; // 0 EM, 1 EDMC-1, 2 EDMC-2
 const E_SP: u32 = 29u;    // 4 scheme constants (χ_Γ χ_Ω χ_v χ_ν | α_Γv α_Γν α_Ωv α_Ων)
 const E_DIRDISS: u32 = 33u; // 1 = director dissipation on
 const E_DAMP: u32 = 34u;    // Kelvin–Voigt retardation time η
+const E_DRAG: u32 = 35u;    // drag per unit length c (twin of element::drag)
 // ---- state at n (binding 1), NS fields ----
 const S_R: u32 = 0u;      // 6: r_0, r_1
 const S_D: u32 = 6u;      // 18: d[l] column i component c at 9l + 3i + c
@@ -633,6 +634,18 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
             inertia_r[l] += c * (kin_v1(kin, m) - st_v(st, m));
         }
     }
+    // Drag (twin of element::drag::add_drag_rows): F_l = −(c h/Δt) Σ_m M2[l][m] u_m, its
+    // rows −F_l; kept apart from inertia for the row scales, as the host's own term.
+    var drag_r: array<V3, 2>;
+    let drag = ld_e(E_DRAG);
+    if drag != 0.0 {
+        let k = drag * h / dt;
+        let u0 = ld_i3(I_X);
+        let u1 = ld_i3(I_X + 6u);
+        for (var l = 0u; l < 2u; l++) {
+            drag_r[l] = (u0 * m2(l, 0u) + u1 * m2(l, 1u)) * k;
+        }
+    }
     var fd_scale = array<Real, 2>(0.0, 0.0);
     let ira = irho_amax();
     for (var l = 0u; l < 2u; l++) {
@@ -651,13 +664,13 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
         fd_scale[l] = max(max(fd_scale[l], amax(f[base + 2u])), GROSS_WEIGHT * f_gross[base + 2u]);
     }
     for (var l = 0u; l < 2u; l++) {
-        let fr = f[l] + inertia_r[l];
+        let fr = f[l] + inertia_r[l] + drag_r[l];
         let base = 2u + 3u * l;
         let dm = cfg_d(kin.mid, l);
         var rt = V3(0.0, 0.0, 0.0);
         for (var i = 0u; i < 3u; i++) { rt += cross(dm[i], f[base + i]); }
         let momentum_rate = a_rho * h * (amax(st_v(st, l)) + amax(kin_v1(kin, l))) / dt;
-        let su = max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate);
+        let su = max(max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate), amax(drag_r[l]));
         let dnorm = max(max(norm(dm[0]), norm(dm[1])), norm(dm[2]));
         for (var c = 0u; c < 3u; c++) {
             st_o(O_R + u_idx(l) + c, fr[c]);
@@ -902,7 +915,7 @@ fn tangent_block(l: u32, m: u32) {
     // Each block: material, then G_s terms over its field pairs in the CPU kernel's order
     // (pairs with G_s = 0 add exact zeros; products with an identity T or J are exact).
     // u_l × u_m: translational mass.
-    let guu = 2.0 / (dt * dt) * a_rho * h * m2(l, m);
+    let guu = 2.0 / (dt * dt) * a_rho * h * m2(l, m) + ld_e(E_DRAG) * h / dt * m2(l, m);
     st_blk(r0, c0, madd(mat_blk(bu, du, h), mscale(eye(), guu)));
     // u_l × θ_m: stress forces (+ at end 1, − at end 0).
     var sl: Real = -1.0;
@@ -1021,10 +1034,19 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let c = consistent_scalars(st, x, dt, c_frozen);
     let loc = local_law(c.kin.inputs, a_rho, dt / h, dt);
     let inp = c.kin.inputs;
-    let diss = h * (0.5 * a_rho * loc.dv * (inp.v_n1 - inp.v_n)
+    var diss = h * (0.5 * a_rho * loc.dv * (inp.v_n1 - inp.v_n)
         + 0.5 * a_rho * loc.dnu * (inp.nu_n1 - inp.nu_n)
         + 0.5 * loc.beta_g * inp.x_g
         + 0.5 * loc.beta_o * inp.x_o);
+    // Drag's share of D (twin of element::drag::drag_dissipation).
+    let drag = ld_e(E_DRAG);
+    if drag != 0.0 {
+        let u0 = V3(x[0], x[1], x[2]);
+        let u1 = V3(x[6], x[7], x[8]);
+        let f0 = (u0 * m2(0u, 0u) + u1 * m2(0u, 1u)) * (drag * h / dt);
+        let f1 = (u0 * m2(1u, 0u) + u1 * m2(1u, 1u)) * (drag * h / dt);
+        diss += dot(f0, u0) + dot(f1, u1);
+    }
     var kin = c.kin;
     if prm.mode == 0u && ld_i(I_ACTIVE) != 2.0 && c_frozen != c.s[3] {
         kin = kinematics(st, x, c_frozen, dt);

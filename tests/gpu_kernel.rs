@@ -2,7 +2,7 @@
 //!
 //! On seeded random elements (random sections, distorted triads, velocities, increments,
 //! every scheme, clamped/free ends, with and without translational dissipation and
-//! Kelvin–Voigt damping), the WGSL
+//! Kelvin–Voigt damping or drag), the WGSL
 //! kernel (`shaders/element.wgsl`: residual pass, then the tangent pass by 9×9 node
 //! blocks) returns the residual, row scales, tangent and — in consistent mode — the EDMC
 //! local scalars of [`cosserat::element`] to `KERNEL_PARITY_RTOL` (f64; the scalars, which
@@ -16,6 +16,7 @@
 
 mod common;
 
+use cosserat::element::drag::add_drag_rows;
 use cosserat::element::scalar_gradient::{residual_scalar_derivatives, scalar_gradient};
 use cosserat::element::strain::Config;
 use cosserat::element::{
@@ -121,6 +122,10 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
     // consistent scalars, the residual and the dissipation).
     if idx % 5 == 3 {
         data.props.damping = 0.3 * dt;
+    }
+    // Every seventh case with drag (rows, tangent and row scales of the translations).
+    if idx % 7 == 2 {
+        data.props.drag = 10.0 * a * rho * rng.next();
     }
     let scheme = match idx % 3 {
         0 => Scheme::Em,
@@ -234,7 +239,8 @@ fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
                 (s, kin)
             }
         };
-        let cpu: ElementEval = residual_tangent(&c.data, &c.st, &kin, &s, &c.k, c.trans, true);
+        let mut cpu: ElementEval = residual_tangent(&c.data, &c.st, &kin, &s, &c.k, c.trans, true);
+        add_drag_rows(&c.data.props, &c.inc.u, c.k.dt, true, &mut cpu);
         let gpu = kern.eval(i, true);
         let gs = kern.scalars(i);
         let errs = [
@@ -375,6 +381,8 @@ fn shader_layout_matches_rust_layout() {
         ("E_SCHEME", layout::E_SCHEME),
         ("E_SP", layout::E_SP),
         ("E_DIRDISS", layout::E_DIRDISS),
+        ("E_DAMP", layout::E_DAMP),
+        ("E_DRAG", layout::E_DRAG),
         ("S_R", layout::S_R),
         ("S_D", layout::S_D),
         ("S_V", layout::S_V),

@@ -577,6 +577,33 @@ fn whole_device_steps_with_kelvin_voigt_damping_end_as_on_the_cpu_path() {
     assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
 }
 
+/// [`loaded_mix`] with drag on every element: `c = ρA/(4Δt)`, so that the drag's
+/// `c h/Δt` is an eighth of the translational mass term `2ρAh/Δt²`.
+fn dragged_mix() -> Vec<Member> {
+    let mut ms = loaded_mix();
+    for m in &mut ms {
+        let dt = m.params.dt;
+        for e in &mut m.model.elements {
+            e.props.drag = e.props.a_rho / (4.0 * dt);
+        }
+    }
+    ms
+}
+
+/// Drag on device steps: the element passes add its rows, tangent and dissipation (it
+/// depends on the iterate, so the device solve needs it there) and the records pass sums
+/// D with the rest. The members end as on the CPU path, where the host adds the drag after
+/// the element kernel, dissipate on every step, and H − H₀ = W − D holds along the run.
+#[test]
+fn whole_device_steps_with_drag_end_as_on_the_cpu_path() {
+    let ms = dragged_mix();
+    let Some(l) = check_loaded("dragged", &ms) else {
+        return;
+    };
+    assert!(l.least_d > 0.0, "a step without dissipation");
+    assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
+}
+
 /// [`loaded_mix`] with a dead line load on every element besides (a distributed force
 /// across the rod and a distributed moment, on the nodal loads' time table): its nodal
 /// terms go up with the others and the device sums their work with them.

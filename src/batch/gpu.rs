@@ -212,9 +212,9 @@ const DEVICE_STEP_MIN_K: usize = 4;
 
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
-/// rounds; Kelvin–Voigt damping is the element passes' own); dead loads only (nodal, line
-/// and gravity: no follower line loads); no moving or sliding supports, links, contact,
-/// drag or control commands. (A step whose loads differ from those the device holds runs
+/// rounds; Kelvin–Voigt damping and drag are the element passes' own); dead loads only
+/// (nodal, line and gravity: no follower line loads); no moving or sliding supports, links,
+/// contact, control commands or planar models. (A step whose loads differ from those the device holds runs
 /// on the host: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
@@ -230,16 +230,16 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     if !m.links.is_empty() || !m.obstacles.is_empty() || !m.rod_contacts.is_empty() {
         return Some("links or contact");
     }
-    if m.has_drag() || m.planar.is_some() {
-        return Some("drag or a planar model");
+    if m.planar.is_some() {
+        return Some("a planar model");
     }
     None
 }
 
 /// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
 /// rod numbered node by node (element `e` joins nodes `e` and `e + 1`), no point masses,
-/// rigid links, follower line loads or drag (whose tangent terms the host adds; a dead
-/// line load is a nodal term like a nodal load).
+/// rigid links or follower line loads (whose tangent terms the host adds; a dead line load
+/// is a nodal term like a nodal load; drag is the element kernel's).
 pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     let model = sim.model();
     if model.n_nodes() < 2
@@ -260,9 +260,6 @@ pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     // Their tangent terms are added on the host, after the element blocks.
     if model.has_follower_loads() {
         return Some("follower line loads");
-    }
-    if model.elements.iter().any(|e| e.props.drag != 0.0) {
-        return Some("drag");
     }
     if model.slides.iter().any(|s| s.coordinate_axis().is_none()) {
         return Some("a sliding clamp along an oblique axis");

@@ -25,6 +25,7 @@
 
 pub mod director_factor;
 pub mod dissipation;
+pub mod drag;
 pub mod lanes;
 pub mod planar;
 pub mod rational;

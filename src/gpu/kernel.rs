@@ -416,6 +416,7 @@ impl ElementKernel {
         }
         self.put(0, E_DT, i, k.dt);
         self.put(0, E_DAMP, i, p.damping);
+        self.put(0, E_DRAG, i, p.drag);
         self.put(0, E_TRANS, i, if trans_diss { 1.0 } else { 0.0 });
         let (kind, sp) = match k.scheme {
             Scheme::Em => (0.0, [0.0; 4]),

@@ -29,8 +29,11 @@ pub const E_SP: usize = 29;
 pub const E_DIRDISS: usize = 33;
 /// Kelvin–Voigt retardation time η (material damping: `2η/Δt` adds to both β).
 pub const E_DAMP: usize = 34;
+/// Drag per unit length `c` (the force `−c (r_{n+1} − r_n)/Δt` per length; twin of
+/// `element::drag`).
+pub const E_DRAG: usize = 35;
 /// Number of element-constant fields.
-pub const NE: usize = 35;
+pub const NE: usize = 36;
 
 /// State: end positions (6).
 pub const S_R: usize = 0;

@@ -69,14 +69,15 @@ impl Simulation {
         let resident = device && self.resident_now;
         // Inside a device-resident Newton solve the nodal terms cannot change: the device
         // solve covers no nodal term that depends on the iterate (`device_solve_refusal`:
-        // no point masses, links, line loads, drag; no contact on the GPU), and loads
+        // no point masses, links, follower line loads; no contact on the GPU; drag is the
+        // element kernel's), and loads
         // change per step. They go up with the solve's first request; the later ones send
         // none (the device keeps them) and reuse their row scales.
         let keep_nodal = resident && !self.resident_next.upload;
         if keep_nodal {
             scale = self.resident_scale;
         } else if device {
-            self.nodal_terms(q, false, r, &mut scale);
+            self.nodal_terms(q, false, false, r, &mut scale);
             self.resident_scale = scale;
             if self.device_steps {
                 // What the device's nodal terms now hold: the loads of this step.
@@ -133,7 +134,7 @@ impl Simulation {
                 Ok(mut sys) => {
                     if keep_nodal {
                         // (Not expected: a resident request answered as a host one.)
-                        self.nodal_terms(q, false, r, &mut scale);
+                        self.nodal_terms(q, false, false, r, &mut scale);
                     }
                     if device {
                         self.device_x = Some(sys.solution.take().unwrap_or_else(|| {
@@ -207,7 +208,9 @@ impl Simulation {
             self.scatter(e, &ev, tangent, r, &mut scale);
         }
         if !device {
-            self.nodal_terms(q, tangent, r, &mut scale);
+            // The GPU element kernel adds the drag itself (a device solve needs it there:
+            // it depends on the iterate).
+            self.nodal_terms(q, tangent, !external, r, &mut scale);
         }
         self.constrain_slides(q, tangent && !device, r);
         // max_i |R_i| / s_kind(i), as the largest |R_i| of each kind over its scale: the
@@ -420,7 +423,16 @@ impl Simulation {
 
     /// Adds the nodal terms (point masses, external loads and moments) and the rigid
     /// links' bar forces to `r`, the scales and (if `tangent`) the matrix values.
-    fn nodal_terms(&mut self, q: &[f64], tangent: bool, r: &mut [f64], scale: &mut [f64; 3]) {
+    /// `drag`: whether the drag rows go in here (not when the GPU element kernel
+    /// evaluated the elements: it adds them with the element's own rows).
+    fn nodal_terms(
+        &mut self,
+        q: &[f64],
+        tangent: bool,
+        drag: bool,
+        r: &mut [f64],
+        scale: &mut [f64; 3],
+    ) {
         let dt = self.consts().dt;
         // Nodal terms: point masses and external loads (their scales kept in registers
         // and merged once: max is order-free).
@@ -463,7 +475,9 @@ impl Simulation {
             *s = s.max(o);
         }
         self.add_follower_terms(q, tangent, r, scale);
-        self.add_drag_terms(q, tangent, r, scale);
+        if drag {
+            self.add_drag_terms(q, tangent, r, scale);
+        }
         self.add_contact_terms(q, tangent, r, scale);
         self.add_rod_contact_terms(q, tangent, r, scale);
         self.add_rod_friction_terms(q, tangent, r, scale);

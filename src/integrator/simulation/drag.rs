@@ -4,8 +4,13 @@
 //! increments, and its work over a step, `−(c h/Δt) Σ_lm M2[l][m] u_l·u_m ≤ 0`, is counted
 //! in the dissipation D (so `ΔH = W − D` still closes exactly); for the momenta it is an
 //! external impulse.
+//!
+//! On the GPU path the element kernel adds the same rows, tangent and dissipation with the
+//! element's own (`shaders/element.wgsl`, `E_DRAG`: a device solve needs them there, since
+//! they depend on the iterate); the host then adds none (`Simulation::assemble`).
 
 use super::Simulation;
+use crate::element::drag as element_drag;
 use crate::element::{u_idx, M2, NDOF};
 use crate::integrator::dofs::NONE;
 use crate::model::Vec3;
@@ -13,10 +18,8 @@ use crate::model::Vec3;
 impl Simulation {
     /// Drag forces `F_l` on the two ends of element `e` at increment `q`.
     fn drag_forces(&self, e: usize, q: &[f64]) -> [Vec3; 2] {
-        let p = &self.model.elements[e].props;
         let u = self.gather(e, q).u;
-        let k = p.drag * p.h / self.params.dt;
-        std::array::from_fn(|l| -(u[0] * M2[l][0] + u[1] * M2[l][1]) * k)
+        element_drag::drag_forces(&self.model.elements[e].props, &u, self.params.dt)
     }
 
     /// Adds the drag rows (`−F`), row scales and, with `tangent`, the `(u, u)` blocks.
@@ -70,8 +73,7 @@ impl Simulation {
             .filter(|&e| self.model.elements[e].props.drag != 0.0)
             .map(|e| {
                 let u = self.gather(e, q).u;
-                let f = self.drag_forces(e, q);
-                -(f[0].dot(&u[0]) + f[1].dot(&u[1]))
+                element_drag::drag_dissipation(&self.model.elements[e].props, &u, self.params.dt)
             })
             .sum()
     }
