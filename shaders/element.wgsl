@@ -1,4 +1,4 @@
-// ELEMENT KERNEL, WGSL twin of `src/element/{mod,strain,dissipation,drag}.rs` (and of the
+// ELEMENT KERNEL, WGSL twin of `src/element/{mod,strain,dissipation,drag,point_mass}.rs` (and of the
 // Cayley helpers of `src/math/mod.rs`). Same arithmetic, term by term: kinematics, strains,
 // mid-point strain gradient, stresses, EDMC local scalars (incl. the 4×4 EDMC-2 solve),
 // element residual (18), row scales (18) and tangent (18×18). Rational operations and sqrt
@@ -49,6 +49,7 @@ const E_SP: u32 = 29u;    // 4 scheme constants (χ_Γ χ_Ω χ_v χ_ν | α_Γv
 const E_DIRDISS: u32 = 33u; // 1 = director dissipation on
 const E_DAMP: u32 = 34u;    // Kelvin–Voigt retardation time η
 const E_DRAG: u32 = 35u;    // drag per unit length c (twin of element::drag)
+const E_PMASS: u32 = 36u;   // 2: point masses carried by the ends (twin of element::point_mass)
 // ---- state at n (binding 1), NS fields ----
 const S_R: u32 = 0u;      // 6: r_0, r_1
 const S_D: u32 = 6u;      // 18: d[l] column i component c at 9l + 3i + c
@@ -646,6 +647,17 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
             drag_r[l] = (u0 * m2(l, 0u) + u1 * m2(l, 1u)) * k;
         }
     }
+    // Point masses carried by the ends (twin of element::point_mass::add_point_mass_rows):
+    // m (2u/Δt − 2v − 2g)/Δt on the translations, kept apart for the row scales.
+    var pm_r: array<V3, 2>;
+    for (var l = 0u; l < 2u; l++) {
+        let mp = ld_e(E_PMASS + l);
+        if mp != 0.0 {
+            var g = V3(0.0, 0.0, 0.0);
+            if trans { g = ld_i3(I_X + g_idx(l)); }
+            pm_r[l] = mp * (2.0 * ld_i3(I_X + u_idx(l)) / dt - 2.0 * st_v(st, l) - 2.0 * g) / dt;
+        }
+    }
     var fd_scale = array<Real, 2>(0.0, 0.0);
     let ira = irho_amax();
     for (var l = 0u; l < 2u; l++) {
@@ -664,13 +676,13 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
         fd_scale[l] = max(max(fd_scale[l], amax(f[base + 2u])), GROSS_WEIGHT * f_gross[base + 2u]);
     }
     for (var l = 0u; l < 2u; l++) {
-        let fr = f[l] + inertia_r[l] + drag_r[l];
+        let fr = f[l] + inertia_r[l] + drag_r[l] + pm_r[l];
         let base = 2u + 3u * l;
         let dm = cfg_d(kin.mid, l);
         var rt = V3(0.0, 0.0, 0.0);
         for (var i = 0u; i < 3u; i++) { rt += cross(dm[i], f[base + i]); }
         let momentum_rate = a_rho * h * (amax(st_v(st, l)) + amax(kin_v1(kin, l))) / dt;
-        let su = max(max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate), amax(drag_r[l]));
+        let su = max(max(max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate), amax(drag_r[l])), amax(pm_r[l]));
         let dnorm = max(max(norm(dm[0]), norm(dm[1])), norm(dm[2]));
         for (var c = 0u; c < 3u; c++) {
             st_o(O_R + u_idx(l) + c, fr[c]);
@@ -696,6 +708,12 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
             let pieces = 0.5 * h * a_rho * abs(c_v) * psum;
             momentum = max(momentum, pieces);
             sg = max(max(amax(mg), amax(bb)), momentum);
+            let mp = ld_e(E_PMASS + l);
+            if mp != 0.0 {
+                let pg = mp * ld_i3(I_X + g_idx(l));
+                rg += pg;
+                sg = max(sg, amax(pg));
+            }
         }
         for (var c = 0u; c < 3u; c++) {
             st_o(O_R + g_idx(l) + c, rg[c]);
@@ -915,7 +933,11 @@ fn tangent_block(l: u32, m: u32) {
     // Each block: material, then G_s terms over its field pairs in the CPU kernel's order
     // (pairs with G_s = 0 add exact zeros; products with an identity T or J are exact).
     // u_l × u_m: translational mass.
-    let guu = 2.0 / (dt * dt) * a_rho * h * m2(l, m) + ld_e(E_DRAG) * h / dt * m2(l, m);
+    var guu = 2.0 / (dt * dt) * a_rho * h * m2(l, m) + ld_e(E_DRAG) * h / dt * m2(l, m);
+    // A point mass carried by end l (twin of element::point_mass::add_point_mass_rows).
+    var mp: Real = 0.0;
+    if l == m { mp = ld_e(E_PMASS + l); }
+    guu += 2.0 * mp / (dt * dt);
     st_blk(r0, c0, madd(mat_blk(bu, du, h), mscale(eye(), guu)));
     // u_l × θ_m: stress forces (+ at end 1, − at end 0).
     var sl: Real = -1.0;
@@ -975,9 +997,9 @@ fn tangent_block(l: u32, m: u32) {
     var gu: Real = 0.0;
     var gg: Real = 0.0;
     if trans {
-        ug = -2.0 * mmass / dt;
+        ug = -2.0 * mmass / dt - 2.0 * mp / dt;
         gu = -cv / dt;
-        gg = mmass + cv;
+        gg = mmass + cv + mp;
     }
     for (var c = 0u; c < 3u; c++) {
         kset(u_idx(l) + c, g_idx(m) + c, ug);
@@ -1081,6 +1103,17 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let dom = kin.eps1.o - V3(ld_e(E_EPS0 + 3u), ld_e(E_EPS0 + 4u), ld_e(E_EPS0 + 5u));
     let cg = V3(ld_e(E_CG), ld_e(E_CG + 1u), ld_e(E_CG + 2u));
     let stored = 0.5 * h * (dot(dg, cg * dg) + dot(dom, c_omega_mv(dom)));
+    // Point masses carried by the ends (twin of integrator::invariants): ½ m |v|², m v,
+    // r × m v at n+1.
+    for (var l = 0u; l < 2u; l++) {
+        let mp = ld_e(E_PMASS + l);
+        if mp != 0.0 {
+            let vl = kin_v1(kin, l);
+            kinetic += 0.5 * mp * dot(vl, vl);
+            lm += mp * vl;
+            jm += mp * cross(cfg_r(kin.cfg1, l), vl);
+        }
+    }
     st_t(T_ADV, kinetic);
     st_t(T_ADV + 1u, stored);
     st_t3(T_ADV + 2u, lm);

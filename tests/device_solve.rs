@@ -6,9 +6,10 @@
 //! runs a batch of cantilevers with seeded random kicks, stiffnesses and time steps,
 //! mixed with members that end early, members that fail (a staggered cap too low for
 //! their kick, no fallback; one whose Newton iteration cap is too low), a
-//! generalized-α member (no GPU kernel: CPU kernel inside the batch) and a member with a
-//! tip point mass (a feature the device solver does not cover: host solve inside the same
-//! batch, counted as such), streaming through fewer slots than members. For full and
+//! generalized-α member (no GPU kernel: CPU kernel inside the batch), a member with a tip
+//! point mass (the element kernel's, on the device) and one with a follower line load (a
+//! feature the device solver does not cover: host solve inside the same batch, counted as
+//! such), streaming through fewer slots than members. For full and
 //! modified Newton every member ends as on the CPU path — status, failure reason, steps,
 //! Newton iterations (full: equal; modified: as `tests/gpu_lockstep.rs`) — with its
 //! final positions, directors, velocities and energy history within `STATE_RTOL`.
@@ -43,7 +44,8 @@ const STATE_RTOL: f64 = 6e-11;
 const MEMBER_RTOL: f64 = 1e-11;
 
 /// 14 members of 10 elements: 0..9 random, 9 ends after 3 steps, 10 fails on its
-/// staggered cap, 11 fails on its Newton cap, 12 is generalized-α, 13 has a point mass.
+/// staggered cap, 11 fails on its Newton cap, 12 is generalized-α, 13 has a follower line
+/// load (host solve), 5 a tip point mass.
 /// Members 0..9 carry a random tip force and moment ramping up over the run (nodal terms
 /// that change every step: on the device they join the right-hand side as extras sent
 /// with a Newton solve's first request and kept for its later ones).
@@ -106,7 +108,7 @@ fn device_solve_matches_cpu_member_by_member() {
         };
         let (cpu, _) = run(&ms, &Executor::Cpu, host_newton, SolveMode::Host);
         let (dev, stats) = run(&ms, &exec, newton, SolveMode::Device);
-        // 12 members on the device solver, the point-mass member on the host (the
+        // 12 members on the device solver, the follower-load member on the host (the
         // generalized-α member never reaches the GPU).
         assert_eq!(stats.device_members, (12, 1), "{}", newton.name());
         // The mix exercises what it claims to.
@@ -241,7 +243,7 @@ fn device_solve_with_drag_matches_cpu() {
 #[test]
 fn device_resident_newton_matches_host_update_with_16_bytes_per_iteration() {
     let Some(exec) = gpu() else { return };
-    // The members the device covers (no generalized-α, no point mass), without loads:
+    // The members the device covers (no generalized-α, no follower line load), without loads:
     // the batch-iteration bound below was measured on them.
     let ms: Vec<Member> = members_with(false).into_iter().take(12).collect();
     let mut worst = 0.0f64;

@@ -2,7 +2,7 @@
 //!
 //! On seeded random elements (random sections, distorted triads, velocities, increments,
 //! every scheme, clamped/free ends, with and without translational dissipation and
-//! Kelvin–Voigt damping or drag), the WGSL
+//! Kelvin–Voigt damping, drag or point masses), the WGSL
 //! kernel (`shaders/element.wgsl`: residual pass, then the tangent pass by 9×9 node
 //! blocks) returns the residual, row scales, tangent and — in consistent mode — the EDMC
 //! local scalars of [`cosserat::element`] to `KERNEL_PARITY_RTOL` (f64; the scalars, which
@@ -17,6 +17,7 @@
 mod common;
 
 use cosserat::element::drag::add_drag_rows;
+use cosserat::element::point_mass::add_point_mass_rows;
 use cosserat::element::scalar_gradient::{residual_scalar_derivatives, scalar_gradient};
 use cosserat::element::strain::Config;
 use cosserat::element::{
@@ -65,6 +66,8 @@ struct Case {
     s: FrozenScalars,
     k: StepConsts,
     trans: bool,
+    /// Point masses carried by the two ends.
+    pm: [f64; 2],
 }
 
 fn case(rng: &mut Rng, idx: usize) -> Case {
@@ -175,6 +178,14 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
     } else {
         FrozenScalars::default()
     };
+    // Every sixth case with point masses on one end or both (inertia rows, tangent, and
+    // the translational dissipation rows where the scheme has them).
+    let mass = a * rho * h;
+    let pm = match idx % 6 {
+        4 => [mass * rng.next(), 0.0],
+        5 if idx % 12 == 11 => [mass * rng.next(), 2.0 * mass * rng.next()],
+        _ => [0.0; 2],
+    };
     Case {
         data,
         st,
@@ -183,6 +194,7 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
         s,
         k: StepConsts { dt, scheme },
         trans,
+        pm,
     }
 }
 
@@ -210,6 +222,7 @@ fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
     let mut kern = ElementKernel::new(ctx, cases.len()).unwrap();
     for (i, c) in cases.iter().enumerate() {
         kern.set_element(i, &c.data, &c.k, c.trans);
+        kern.set_point_masses(i, c.pm);
         kern.set_state(i, &c.st, &c.eps_n);
         kern.set_iter(i, &c.inc, &c.s);
     }
@@ -241,6 +254,7 @@ fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
         };
         let mut cpu: ElementEval = residual_tangent(&c.data, &c.st, &kin, &s, &c.k, c.trans, true);
         add_drag_rows(&c.data.props, &c.inc.u, c.k.dt, true, &mut cpu);
+        add_point_mass_rows(c.pm, &c.st, &c.inc, c.k.dt, c.trans, true, &mut cpu);
         let gpu = kern.eval(i, true);
         let gs = kern.scalars(i);
         let errs = [
@@ -383,6 +397,7 @@ fn shader_layout_matches_rust_layout() {
         ("E_DIRDISS", layout::E_DIRDISS),
         ("E_DAMP", layout::E_DAMP),
         ("E_DRAG", layout::E_DRAG),
+        ("E_PMASS", layout::E_PMASS),
         ("S_R", layout::S_R),
         ("S_D", layout::S_D),
         ("S_V", layout::S_V),

@@ -6,8 +6,8 @@
 //! both mechanisms (rigid links, point masses) in EM; a cantilever with Kelvin–Voigt
 //! damping whose clamp is carried and turned by a smooth table (a moving support), EM and
 //! EDMC-2; a member whose Newton cap is too low for its steps (it fails in the batch as on
-//! the CPU path). The device solve does not cover rigid links, point masses or prescribed
-//! support motion: those members' Newton systems are solved on the host within the batch
+//! the CPU path). The device solve does not cover rigid links or prescribed support
+//! motion: those members' Newton systems are solved on the host within the batch
 //! (their element passes still run on the device), as docs/gpu.md says. Without an adapter the test prints `skipped: no
 //! adapter` unless `COSSERAT_REQUIRE_GPU` is set, in which case it fails.
 

@@ -278,7 +278,7 @@ fn whole_frame_matches_cpu() {
 /// host reads their records only), loaded ones that run as before, a member that ends
 /// early, one whose Newton cap the device's iterations pass (handed back to the host's
 /// step, which fails it as the CPU path does), one kicked hard, one on the CPU kernel
-/// (gen-α) and one host-solved (point mass), through `workers` slots: every member ends as
+/// (gen-α) and one host-solved (follower line load), through `workers` slots: every member ends as
 /// on the CPU path.
 fn device_step_mix() -> Vec<Member> {
     let mut ms = batch_mix(Some(Scheme::Em), Strategy::Staggered);
@@ -601,6 +601,35 @@ fn whole_device_steps_with_drag_end_as_on_the_cpu_path() {
         return;
     };
     assert!(l.least_d > 0.0, "a step without dissipation");
+    assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
+}
+
+/// [`loaded_mix`] with a point mass at the tip of each member, of a fifth of its rod's mass
+/// (the element kernel carries it on the last element's free end).
+fn tip_mass_mix() -> Vec<Member> {
+    let mut ms = loaded_mix();
+    for m in &mut ms {
+        let rod: f64 = m
+            .model
+            .elements
+            .iter()
+            .map(|e| e.props.a_rho * e.props.h)
+            .sum();
+        let tip = m.model.n_nodes() - 1;
+        m.model.point_mass[tip] = 0.2 * rod;
+    }
+    ms
+}
+
+/// Point masses on device steps: the element passes add their inertia rows and tangent,
+/// and the advance pass their kinetic energy and momenta to the records, so the host's
+/// energy check sees the whole H. The members end as on the CPU path, where the host adds
+/// the point masses at their nodes, with H − H₀ = W along the run.
+#[test]
+fn whole_device_steps_with_point_masses_end_as_on_the_cpu_path() {
+    let Some(l) = check_loaded("tip masses", &tip_mass_mix()) else {
+        return;
+    };
     assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
 }
 

@@ -212,7 +212,7 @@ const DEVICE_STEP_MIN_K: usize = 4;
 
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
-/// rounds; Kelvin–Voigt damping and drag are the element passes' own); dead loads only
+/// rounds; Kelvin–Voigt damping, drag and point masses are the element passes' own); dead loads only
 /// (nodal, line and gravity: no follower line loads); no moving or sliding supports, links,
 /// contact, control commands or planar models. (A step whose loads differ from those the device holds runs
 /// on the host: `Simulation::device_step`.)
@@ -237,9 +237,9 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
 }
 
 /// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
-/// rod numbered node by node (element `e` joins nodes `e` and `e + 1`), no point masses,
-/// rigid links or follower line loads (whose tangent terms the host adds; a dead line load
-/// is a nodal term like a nodal load; drag is the element kernel's).
+/// rod numbered node by node (element `e` joins nodes `e` and `e + 1`), no rigid links or
+/// follower line loads (whose tangent terms the host adds; a dead line load is a nodal term
+/// like a nodal load; drag and point masses are the element kernel's).
 pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     let model = sim.model();
     if model.n_nodes() < 2
@@ -253,9 +253,6 @@ pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     }
     if !model.links.is_empty() {
         return Some("rigid links");
-    }
-    if model.point_mass.iter().any(|&m| m != 0.0) {
-        return Some("point masses");
     }
     // Their tangent terms are added on the host, after the element blocks.
     if model.has_follower_loads() {
@@ -437,6 +434,30 @@ impl GpuEvaluator {
         for (e, d) in sim.element_data().iter().enumerate() {
             self.kernel
                 .set_element(slot * self.per_slot + e, d, &k, trans);
+        }
+        // Each point mass rides on the first end incident to its node (element order).
+        let mut carried = vec![[0.0; 2]; ends.len()];
+        for (a, &m) in sim.model().point_mass.iter().enumerate() {
+            if m == 0.0 {
+                continue;
+            }
+            let first = ends
+                .iter()
+                .enumerate()
+                .find_map(|(e, nodes)| nodes.iter().position(|&n| n == a).map(|l| (e, l)));
+            match first {
+                Some((e, l)) => carried[e][l] = m,
+                None => {
+                    return Err(GpuError::Unsupported {
+                        feature: format!("a point mass on node {a}, which no element joins"),
+                    })
+                }
+            }
+        }
+        for (e, m) in carried.into_iter().enumerate() {
+            if m != [0.0; 2] {
+                self.kernel.set_point_masses(slot * self.per_slot + e, m);
+            }
         }
         self.sizes[slot] = (ends.len(), n_nodes);
         Ok(())

@@ -28,6 +28,7 @@ pub mod dissipation;
 pub mod drag;
 pub mod lanes;
 pub mod planar;
+pub mod point_mass;
 pub mod rational;
 pub mod scalar_gradient;
 pub mod strain;

@@ -391,6 +391,14 @@ impl ElementKernel {
         }
     }
 
+    /// Sets the point masses carried by element slot `i`'s two ends (after
+    /// [`Self::set_element`], which clears them): a node's point mass on one end of one of
+    /// its elements ([`crate::element::point_mass`]).
+    pub fn set_point_masses(&mut self, i: usize, m: [f64; 2]) {
+        self.put(0, E_PMASS, i, m[0]);
+        self.put(0, E_PMASS + 1, i, m[1]);
+    }
+
     /// Writes the constants of slot `i`: element data, step constants and whether the
     /// translational-dissipation rows exist.
     pub fn set_element(&mut self, i: usize, d: &ElementData, k: &StepConsts, trans_diss: bool) {
@@ -417,6 +425,10 @@ impl ElementKernel {
         self.put(0, E_DT, i, k.dt);
         self.put(0, E_DAMP, i, p.damping);
         self.put(0, E_DRAG, i, p.drag);
+        // No point mass unless `set_point_masses` says so (a slot's previous element may
+        // have carried one).
+        self.put(0, E_PMASS, i, 0.0);
+        self.put(0, E_PMASS + 1, i, 0.0);
         self.put(0, E_TRANS, i, if trans_diss { 1.0 } else { 0.0 });
         let (kind, sp) = match k.scheme {
             Scheme::Em => (0.0, [0.0; 4]),

@@ -32,8 +32,11 @@ pub const E_DAMP: usize = 34;
 /// Drag per unit length `c` (the force `−c (r_{n+1} − r_n)/Δt` per length; twin of
 /// `element::drag`).
 pub const E_DRAG: usize = 35;
+/// Point masses carried by the two ends (2; a node's point mass on one end of one of its
+/// elements: twin of `element::point_mass`).
+pub const E_PMASS: usize = 36;
 /// Number of element-constant fields.
-pub const NE: usize = 36;
+pub const NE: usize = 38;
 
 /// State: end positions (6).
 pub const S_R: usize = 0;

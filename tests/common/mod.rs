@@ -425,7 +425,8 @@ pub struct Mix {
 /// 14 cantilevers of 10 elements with random kicks, stiffnesses, time steps and, with
 /// [`Mix::loads`], ramped tip loads on 0..9; 9 ends after 3 steps, 10's staggered cap is
 /// too low for its kick (it needs the monolithic fallback), 11 fails on its Newton cap, 12
-/// is generalized-α (CPU kernel), 13 has a point mass (host solve).
+/// is generalized-α (CPU kernel), 13 carries a follower line load (host solve: its tangent
+/// terms are the host's); 5 has a tip point mass (on the device, the element kernel's).
 pub fn mix(o: Mix) -> Vec<Member> {
     let mut ms = cosserat::batch::bench_members(14, 10, 6).unwrap();
     let mut rng = Rng(o.seed);
@@ -468,11 +469,21 @@ pub fn mix(o: Mix) -> Vec<Member> {
                 m.params.max_iter = 2;
                 m.params.fallback = false;
             }
-            12 => m.params.scheme = Scheme::GenAlpha { rho_inf: 0.8 },
-            13 => {
+            5 => {
                 let tip = m.model.point_mass.len() - 1;
                 m.model.point_mass[tip] = 0.05;
             }
+            12 => m.params.scheme = Scheme::GenAlpha { rho_inf: 0.8 },
+            13 => m.model.line_loads.push(cosserat::model::LineLoad {
+                elements: (0..m.model.elements.len()).collect(),
+                force: Vec3::new(0.0, 0.2, 0.1),
+                moment: Vec3::zeros(),
+                follower: true,
+                table: TimeTable {
+                    times: vec![0.0],
+                    values: vec![1.0],
+                },
+            }),
             _ => {}
         }
     }

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use super::{gather3, kind_of_local, node_local, Backend, Mode, Simulation};
 use crate::element::lanes::pack6;
+use crate::element::point_mass;
 use crate::element::rational::add_moment_terms;
 use crate::element::{
     consistent_director_factor, consistent_scalars_at, consistent_scalars_near, kinematics_core,
@@ -208,8 +209,8 @@ impl Simulation {
             self.scatter(e, &ev, tangent, r, &mut scale);
         }
         if !device {
-            // The GPU element kernel adds the drag itself (a device solve needs it there:
-            // it depends on the iterate).
+            // The GPU element kernel adds the drag and the point masses itself (a device
+            // solve needs them there: they depend on the iterate).
             self.nodal_terms(q, tangent, !external, r, &mut scale);
         }
         self.constrain_slides(q, tangent && !device, r);
@@ -423,13 +424,13 @@ impl Simulation {
 
     /// Adds the nodal terms (point masses, external loads and moments) and the rigid
     /// links' bar forces to `r`, the scales and (if `tangent`) the matrix values.
-    /// `drag`: whether the drag rows go in here (not when the GPU element kernel
-    /// evaluated the elements: it adds them with the element's own rows).
+    /// `on_host`: whether the drag and the point masses go in here (not when the GPU
+    /// element kernel evaluated the elements: it adds them with the element's own rows).
     fn nodal_terms(
         &mut self,
         q: &[f64],
         tangent: bool,
-        drag: bool,
+        on_host: bool,
         r: &mut [f64],
         scale: &mut [f64; 3],
     ) {
@@ -438,12 +439,16 @@ impl Simulation {
         // and merged once: max is order-free).
         let mut own = [0.0f64; 3];
         for (a, nd) in self.dofs.nodes.iter().enumerate() {
-            let m = self.model.point_mass[a];
+            let m = if on_host {
+                self.model.point_mass[a]
+            } else {
+                0.0
+            };
             let g = gather3(q, &nd.g);
             // (Most nodes carry no point mass: no inertia to evaluate, divisions saved.)
             let inertia = if m != 0.0 {
                 let u = gather3(q, &nd.u);
-                m * (2.0 * u / dt - 2.0 * self.state.v[a] - 2.0 * g) / dt
+                point_mass::inertia_force(m, &u, &self.state.v[a], &g, dt)
             } else {
                 Vec3::zeros()
             };
@@ -475,7 +480,7 @@ impl Simulation {
             *s = s.max(o);
         }
         self.add_follower_terms(q, tangent, r, scale);
-        if drag {
+        if on_host {
             self.add_drag_terms(q, tangent, r, scale);
         }
         self.add_contact_terms(q, tangent, r, scale);
