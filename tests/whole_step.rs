@@ -633,6 +633,36 @@ fn whole_device_steps_with_point_masses_end_as_on_the_cpu_path() {
     assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
 }
 
+/// [`loaded_mix`] with each member's tip guided by a sliding clamp along e3 (spinning
+/// about it on every other member): the held components are removed unknowns, as a
+/// clamp's, and the support does no work.
+fn guided_mix() -> Vec<Member> {
+    let mut ms = loaded_mix();
+    for (i, m) in ms.iter_mut().enumerate() {
+        let tip = m.model.n_nodes() - 1;
+        m.model.supports[tip] = cosserat::model::Support {
+            translation: true,
+            rotation: true,
+        };
+        m.model.slides.push(cosserat::model::Slide {
+            node: tip,
+            axis: cosserat::model::Vec3::new(0.0, 0.0, 1.0),
+            spin: i % 2 == 1,
+        });
+    }
+    ms
+}
+
+/// Sliding clamps along a coordinate axis on device steps: the members end as on the CPU
+/// path with H − H₀ = W (the loads' work along the slide) along the run.
+#[test]
+fn whole_device_steps_with_sliding_clamps_end_as_on_the_cpu_path() {
+    let Some(l) = check_loaded("guided", &guided_mix()) else {
+        return;
+    };
+    assert_accepted_device_steps(&l, 5 * 7 + 4 * 4);
+}
+
 /// [`loaded_mix`] with a dead line load on every element besides (a distributed force
 /// across the rod and a distributed moment, on the nodal loads' time table): its nodal
 /// terms go up with the others and the device sums their work with them.

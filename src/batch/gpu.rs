@@ -213,8 +213,9 @@ const DEVICE_STEP_MIN_K: usize = 4;
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
 /// rounds; Kelvin–Voigt damping, drag and point masses are the element passes' own); dead loads only
-/// (nodal, line and gravity: no follower line loads); no moving or sliding supports, links,
-/// contact, control commands or planar models. (A step whose loads differ from those the device holds runs
+/// (nodal, line and gravity: no follower line loads); no moving supports, sliding clamps
+/// along an oblique axis (one along a coordinate axis removes unknowns, like a clamp),
+/// links, contact, control commands or planar models. (A step whose loads differ from those the device holds runs
 /// on the host: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
@@ -224,8 +225,11 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     if m.has_follower_loads() {
         return Some("follower line loads");
     }
-    if !m.drives.is_empty() || !m.slides.is_empty() || sim.has_commands() {
+    if !m.drives.is_empty() || sim.has_commands() {
         return Some("moving supports");
+    }
+    if m.slides.iter().any(|s| s.coordinate_axis().is_none()) {
+        return Some("a sliding clamp along an oblique axis");
     }
     if !m.links.is_empty() || !m.obstacles.is_empty() || !m.rod_contacts.is_empty() {
         return Some("links or contact");
