@@ -142,10 +142,7 @@ impl Simulation {
                 growth / href
             ));
         }
-        let damped = self.params.scheme.controls_energy()
-            && (self.model.has_material_damping()
-                || self.model.has_drag()
-                || self.model.has_friction());
+        let damped = self.params.scheme.controls_energy() && self.damped_model;
         if self.params.scheme.is_dissipative() || damped {
             let miss = (h0 - h1 + w - diss).abs();
             if miss > self.params.outer_tol * href + residual_work {

@@ -190,6 +190,10 @@ pub struct Simulation {
     /// Set when the current step's strategy failed and the fallback strategy solved it
     /// (reset at the start of every step).
     fell_back: bool,
+    /// Whether the model dissipates by itself (material damping, drag or friction): the
+    /// energy check then also holds the dissipation identity. Fixed with the model (its
+    /// scans read every element: once here, not at every step).
+    damped_model: bool,
     /// The step is on its last predictor: the monolithic strategy falls back to the
     /// staggered loop only then (its other predictors come first).
     last_predictor: bool,
@@ -264,6 +268,7 @@ impl Simulation {
         let state = State::initial(&model, &data);
         let inv = invariants(&model, &data, &state);
         let nn = model.n_nodes();
+        let model_damped = model.has_material_damping() || model.has_drag() || model.has_friction();
         let gen_alpha = match params.scheme {
             Scheme::GenAlpha { rho_inf } => {
                 let (mut f, mut m) = (vec![Vec3::zeros(); nn], vec![Vec3::zeros(); nn]);
@@ -315,6 +320,7 @@ impl Simulation {
             timers: SolveTimers::default(),
             factored: None,
             fell_back: false,
+            damped_model: model_damped,
             last_predictor: true,
             fallback_pending: false,
             solved_consistent: false,
