@@ -613,6 +613,8 @@ impl GpuEvaluator {
                     if req.advance {
                         self.to_advance.push(*slot);
                     }
+                    // New loads for this step (a tabled load whose factor changed).
+                    extras[*slot] = req.device_extra.as_deref();
                     return Ok(());
                 }
                 self.fits(*slot, req)?;

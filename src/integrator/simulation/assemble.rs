@@ -426,7 +426,7 @@ impl Simulation {
     /// links' bar forces to `r`, the scales and (if `tangent`) the matrix values.
     /// `on_host`: whether the drag and the point masses go in here (not when the GPU
     /// element kernel evaluated the elements: it adds them with the element's own rows).
-    fn nodal_terms(
+    pub(super) fn nodal_terms(
         &mut self,
         q: &[f64],
         tangent: bool,

@@ -64,29 +64,22 @@ impl Simulation {
             return None;
         };
         let port = port.clone();
-        // The device forms the step's nodal terms from the loads it holds: this step's
-        // loads must be those (gravity; a load whose table gives the same factor at this
-        // step's middle), else the host steps and sends them.
+        // The device forms the step's nodal terms from the loads it holds. Where this
+        // step's loads differ (a tabled load whose factor changed), the request carries the
+        // step's nodal terms: dead loads only, which depend on time alone (the device step
+        // covers no follower load; drag and point masses are the element kernel's).
         let same_loads = self
             .device_loads
             .as_ref()
             .is_some_and(|f| self.load_factors().eq(f.iter().copied()));
-        if !same_loads {
-            // The host steps: from the device's state, where steps ran there.
-            return match self.sync_device_state().await {
-                Ok(()) => None,
-                Err(e) => Some(Err(StepFailure {
-                    reason: format!("the device did not hand the state back: {e}"),
-                    residuals: vec![],
-                })),
-            };
-        }
+        let extra = (!same_loads).then(|| self.step_nodal_terms());
         self.sent_version = Some(self.state_version);
         let req = EvalRequest {
             advance: true,
             device_step: Some(DeviceStep {
                 scale: self.resident_scale,
             }),
+            device_extra: extra,
             ..EvalRequest::default()
         };
         let answer = port.evaluate(req).await;
@@ -113,6 +106,24 @@ impl Simulation {
                 }))
             }
         }
+    }
+
+    /// This step's nodal terms (the dead loads at its middle) per node in node-local order,
+    /// for the device; their row scales become the device step's, and the loads the ones
+    /// the device holds.
+    fn step_nodal_terms(&mut self) -> Vec<[f64; 9]> {
+        self.mid_step_loads();
+        let q = vec![0.0; self.prev.len()];
+        let mut r = vec![0.0; self.prev.len()];
+        let mut scale = [0.0f64; 3];
+        self.nodal_terms(&q, false, false, &mut r, &mut scale);
+        self.resident_scale = scale;
+        self.device_loads = Some(self.load_factors().collect());
+        self.dofs
+            .nodes
+            .iter()
+            .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { r[i] }))
+            .collect()
     }
 
     /// The step from the device's answer, if every test of the host's step accepts it at
