@@ -30,7 +30,7 @@ mod common;
 use common::gpu;
 use common::{frame_member, mix, rel, run_batch_with, Mix};
 use cosserat::batch::{BatchOptions, BatchStats, Executor, Member, MemberResult, SolveMode};
-use cosserat::integrator::{NewtonVariant, Strategy};
+use cosserat::integrator::{NewtonVariant, Scheme, Strategy};
 use cosserat::observe::record::RunStatus;
 
 /// Whole-run parity, device solve against the CPU path (the issue asks 1e-10; measured
@@ -204,14 +204,18 @@ fn assert_same_states(c: &MemberResult, g: &MemberResult, tag: &str) -> f64 {
 
 /// Drag on the device solve: the element kernel adds its rows and tangent (they depend on
 /// the iterate, so they cannot join the right-hand side as the loads do), and the host adds
-/// none. The members with drag (every one but the point-mass member, solved on the host)
-/// end as on the CPU path, where the host adds the drag after the element kernel, with the
-/// same Newton iterations.
+/// none. The members with drag (all but the generalized-α one, which does not take drag;
+/// the follower-load member is solved on the host, member 5 carries a tip point mass on the
+/// device) end as on the CPU path, where the host adds the drag after the element kernel,
+/// with the same Newton iterations.
 #[test]
 fn device_solve_with_drag_matches_cpu() {
     let Some(exec) = gpu() else { return };
     let mut ms = members();
     for m in &mut ms {
+        if matches!(m.params.scheme, Scheme::GenAlpha { .. }) {
+            continue;
+        }
         let dt = m.params.dt;
         for e in &mut m.model.elements {
             e.props.drag = e.props.a_rho / (4.0 * dt);

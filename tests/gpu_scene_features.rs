@@ -1,7 +1,7 @@
 //! The GPU batch path runs the scene features that enter the element kernel through data
 //! it already receives — an initial configuration apart from the reference, intrinsic
 //! curvature (the reference strains), Kelvin–Voigt damping (the frozen scalars), line
-//! loads and drag (nodal terms on the CPU), sliding clamps, spinning or not (the unknown numbering), and
+//! loads (nodal terms on the CPU), drag (the element kernel's on the GPU), sliding clamps, spinning or not (the unknown numbering), and
 //! driven supports (their prescribed increments travel with the Newton increments) — with
 //! CPU parity.
 //!

@@ -100,7 +100,7 @@ fn em_tangent_matches_finite_differences() {
             }
         }
         // One element at a time, and four per kernel call (the sine kernel without C_Ω
-        // in lanes, the rational moment rows added lane by lane).
+        // in lanes, the rational moment rows added on the same lanes).
         for lanes in [false, true] {
             let e = tangent_error(m.clone(), 0.05, lanes);
             eprintln!("case {case}, lanes {lanes}: tangent vs central differences {e:.1e}");

@@ -20,8 +20,9 @@
 //! sync per step and no state uploads for the steps the device advanced. Device steps
 //! (the whole step on the device, the host reading records only): unloaded batches, the
 //! frame kicked hard (steps handed back), and cantilevers under gravity with constant or
-//! ramped tip loads (device steps where the loads hold still; their work against the CPU
-//! path's and EM's balance H − H₀ = W).
+//! ramped tip loads (a step whose loads changed sends its nodal terms up with its request;
+//! their work against the CPU path's and EM's balance H − H₀ = W), with drag, Kelvin–Voigt
+//! damping, point masses, dead line loads or a sliding clamp besides.
 //!
 //! Without an adapter the test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU`
 //! is set, in which case it fails.
@@ -216,7 +217,9 @@ fn check_whole(
     // (State hand-backs of members whose steps ran on the device are syncs of their own,
     // and so is the attempt of a device step handed back to the host.)
     assert!(
-        ws.serve.dispatches - ws.serve.state_pulls - ws.serve.device_step_handoffs
+        ws.serve
+            .dispatches
+            .saturating_sub(ws.serve.state_pulls + ws.serve.device_step_handoffs)
             <= rs.serve.dispatches,
         "{label}: syncs"
     );
@@ -283,7 +286,8 @@ fn whole_frame_matches_cpu() {
 
 /// `--solve whole` with whole steps on the device: an EM cantilever batch (seeded random
 /// kicks, stiffnesses and time steps) whose unloaded members the device step covers (the
-/// host reads their records only), loaded ones that run as before, a member that ends
+/// host reads their records only), loaded ones (their tip loads ramp over the whole run:
+/// each device step sends the step's nodal terms up), a member that ends
 /// early, one whose Newton cap the device's iterations pass (handed back to the host's
 /// step, which fails it as the CPU path does), one kicked hard, one on the CPU kernel
 /// (gen-α) and one host-solved (follower line load), through `workers` slots: every member ends as
@@ -614,7 +618,8 @@ fn whole_device_steps_with_drag_end_as_on_the_cpu_path() {
 }
 
 /// [`loaded_mix`] with a point mass at the tip of each member, of a fifth of its rod's mass
-/// (the element kernel carries it on the last element's free end).
+/// (the element kernel carries it on the last element's free end), and one of a tenth at
+/// its middle node.
 fn tip_mass_mix() -> Vec<Member> {
     let mut ms = loaded_mix();
     for m in &mut ms {
@@ -626,6 +631,8 @@ fn tip_mass_mix() -> Vec<Member> {
             .sum();
         let tip = m.model.n_nodes() - 1;
         m.model.point_mass[tip] = 0.2 * rod;
+        // And one on an interior node, which two elements join (the first carries it).
+        m.model.point_mass[tip / 2] = 0.1 * rod;
     }
     ms
 }

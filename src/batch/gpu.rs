@@ -215,8 +215,8 @@ const DEVICE_STEP_MIN_K: usize = 4;
 /// rounds; Kelvin–Voigt damping, drag and point masses are the element passes' own); dead loads only
 /// (nodal, line and gravity: no follower line loads); no moving supports, sliding clamps
 /// along an oblique axis (one along a coordinate axis removes unknowns, like a clamp),
-/// links, contact, control commands or planar models. (A step whose loads differ from those the device holds runs
-/// on the host: `Simulation::device_step`.)
+/// links, contact, control commands or planar models. (A step whose loads differ from those
+/// the device holds sends the step's nodal terms with its request: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
     if sim.params().scheme != crate::integrator::Scheme::Em {
@@ -428,17 +428,7 @@ impl GpuEvaluator {
             dt: sim.params().dt,
             scheme: sim.params().scheme,
         };
-        let trans = sim.params().scheme.translational_dissipation();
-        // The slot's previous member may have had more elements: none stays active.
-        self.deactivate(slot);
         let ends: Vec<[usize; 2]> = sim.model().elements.iter().map(|e| e.nodes).collect();
-        let masks = sim.dof_map().element_row_masks();
-        let n_nodes = sim.model().n_nodes();
-        self.assembler.set_member(slot, n_nodes, &ends, &masks)?;
-        for (e, d) in sim.element_data().iter().enumerate() {
-            self.kernel
-                .set_element(slot * self.per_slot + e, d, &k, trans);
-        }
         // Each point mass rides on the first end incident to its node (element order).
         let mut carried = vec![[0.0; 2]; ends.len()];
         for (a, &m) in sim.model().point_mass.iter().enumerate() {
@@ -457,6 +447,16 @@ impl GpuEvaluator {
                     })
                 }
             }
+        }
+        let trans = sim.params().scheme.translational_dissipation();
+        // The slot's previous member may have had more elements: none stays active.
+        self.deactivate(slot);
+        let masks = sim.dof_map().element_row_masks();
+        let n_nodes = sim.model().n_nodes();
+        self.assembler.set_member(slot, n_nodes, &ends, &masks)?;
+        for (e, d) in sim.element_data().iter().enumerate() {
+            self.kernel
+                .set_element(slot * self.per_slot + e, d, &k, trans);
         }
         for (e, m) in carried.into_iter().enumerate() {
             if m != [0.0; 2] {

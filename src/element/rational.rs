@@ -23,8 +23,8 @@
 //! `n ≥ ⅓` for any pair of rotations (the measure is defined for every turn).
 //!
 //! Only the moment rows change; the force strains Γ are the sine element's. The moment
-//! rows here are `f64` only and EM only; the rest of the element (the sine kernel with
-//! `C_Ω = 0`) runs in the four-element lanes like any element's.
+//! rows here are EM only; they run in the four-element lanes after the rest of the element
+//! (the sine kernel with `C_Ω = 0`), or one element at a time.
 
 use nalgebra::{Matrix3, Vector3, Vector6};
 

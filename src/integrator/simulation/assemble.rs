@@ -70,8 +70,8 @@ impl Simulation {
         let resident = device && self.resident_now;
         // Inside a device-resident Newton solve the nodal terms cannot change: the device
         // solve covers no nodal term that depends on the iterate (`device_solve_refusal`:
-        // no point masses, links, follower line loads; no contact on the GPU; drag is the
-        // element kernel's), and loads
+        // no links or follower line loads; no contact on the GPU; drag and point masses are
+        // the element kernel's), and loads
         // change per step. They go up with the solve's first request; the later ones send
         // none (the device keeps them) and reuse their row scales.
         let keep_nodal = resident && !self.resident_next.upload;
@@ -251,7 +251,7 @@ impl Simulation {
 
     /// Whether the elements can go through the lanes: all of one curvature measure (the
     /// rational measure's elements run the sine kernel with `C_Ω = 0` in lanes and add
-    /// their moment rows one by one; a model mixing measures goes one by one).
+    /// their moment rows in the same lanes; a model mixing measures goes one by one).
     pub(super) fn lanes_fit(data: &[ElementData]) -> bool {
         data.windows(2).all(|w| w[0].measure == w[1].measure)
     }

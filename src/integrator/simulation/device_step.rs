@@ -1,6 +1,6 @@
 //! `--solve whole`: a step run entirely on the device (docs/gpu.md, "Whole step on the
-//! device"). Where the step's dead loads are those whose nodal terms the device holds, the
-//! member posts one request per step; the device advances its state by the
+//! device"). The member posts one request per step (with the step's nodal terms where its
+//! dead loads differ from those the device holds); the device advances its state by the
 //! step accepted last, runs Newton from its own iterate (the last increment: the CPU's
 //! first predictor), and sends back the iterations' residuals, the residual work and the
 //! records at the iterate it stopped at, keeping the state at `n`. The host replays its
@@ -172,8 +172,8 @@ impl Simulation {
             return None;
         }
         // The host's energy checks (`accept.rs`, `check_energy`) on the device's numbers: W
-        // the dead loads' work and D the dissipation (Kelvin–Voigt) it summed at the
-        // iterate.
+        // the dead loads' work and D the dissipation (Kelvin–Voigt damping, drag) it summed
+        // at the iterate.
         let inv = Invariants {
             kinetic: r.kinetic,
             potential: r.potential,

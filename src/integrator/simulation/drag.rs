@@ -43,13 +43,16 @@ impl Simulation {
             let f = self.drag_forces(e, q);
             let map = self.dofs.elements[e];
             for l in 0..2 {
+                // The row scale of an end's translations: its force's largest component, as
+                // the GPU element kernel takes it (`element::drag::add_drag_rows`).
+                let fmax = f[l].amax();
                 for c in 0..3 {
                     let i = u_idx(l) + c;
                     if map[i] == NONE {
                         continue;
                     }
                     r[map[i]] -= f[l][c];
-                    scale[0] = scale[0].max(f[l][c].abs());
+                    scale[0] = scale[0].max(fmax);
                     if tangent {
                         for m in 0..2 {
                             let j = u_idx(m) + c;
