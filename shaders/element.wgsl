@@ -149,6 +149,9 @@ fn m2(l: u32, m: u32) -> Real {
     return 1.0 / 6.0;
 }
 fn irho(a: u32, b: u32) -> Real { return ld_e(E_IRHO + 2u * a + b); }
+// Drag row of end l, −F_l = (c h/Δt) Σ_m M2[l][m] u_m, for k = c h/Δt (twin of
+// element::drag::drag_forces).
+fn drag_row(l: u32, u0: V3, u1: V3, k: Real) -> V3 { return (u0 * m2(l, 0u) + u1 * m2(l, 1u)) * k; }
 fn irho_amax() -> Real {
     return max(max(abs(irho(0u, 0u)), abs(irho(0u, 1u))), max(abs(irho(1u, 0u)), abs(irho(1u, 1u))));
 }
@@ -643,9 +646,7 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
         let k = drag * h / dt;
         let u0 = ld_i3(I_X);
         let u1 = ld_i3(I_X + 6u);
-        for (var l = 0u; l < 2u; l++) {
-            drag_r[l] = (u0 * m2(l, 0u) + u1 * m2(l, 1u)) * k;
-        }
+        for (var l = 0u; l < 2u; l++) { drag_r[l] = drag_row(l, u0, u1, k); }
     }
     // Point masses carried by the ends (twin of element::point_mass::add_point_mass_rows):
     // m (2u/Δt − 2v − 2g)/Δt on the translations, kept apart for the row scales.
@@ -1065,9 +1066,8 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if drag != 0.0 {
         let u0 = V3(x[0], x[1], x[2]);
         let u1 = V3(x[6], x[7], x[8]);
-        let f0 = (u0 * m2(0u, 0u) + u1 * m2(0u, 1u)) * (drag * h / dt);
-        let f1 = (u0 * m2(1u, 0u) + u1 * m2(1u, 1u)) * (drag * h / dt);
-        diss += dot(f0, u0) + dot(f1, u1);
+        let k = drag * h / dt;
+        diss += dot(drag_row(0u, u0, u1, k), u0) + dot(drag_row(1u, u0, u1, k), u1);
     }
     var kin = c.kin;
     if prm.mode == 0u && ld_i(I_ACTIVE) != 2.0 && c_frozen != c.s[3] {

@@ -99,11 +99,7 @@ impl Simulation {
                 req.device_extra = Some(if keep_nodal {
                     Vec::new()
                 } else {
-                    self.dofs
-                        .nodes
-                        .iter()
-                        .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { r[i] }))
-                        .collect()
+                    self.node_rows(r)
                 });
             }
             let t0 = Instant::now();
@@ -419,6 +415,16 @@ impl Simulation {
                     ElementData::pack([&c[0], &c[1], &c[2], &c[3]])
                 }
             })
+            .collect()
+    }
+
+    /// The rows of `r` per node in node-local order (u, θ, g; 0 where a component is not an
+    /// unknown): the nodal terms as the device takes them.
+    pub(super) fn node_rows(&self, r: &[f64]) -> Vec<[f64; 9]> {
+        self.dofs
+            .nodes
+            .iter()
+            .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { r[i] }))
             .collect()
     }
 

@@ -119,11 +119,7 @@ impl Simulation {
         self.nodal_terms(&q, false, false, &mut r, &mut scale);
         self.resident_scale = scale;
         self.device_loads = Some(self.load_factors().collect());
-        self.dofs
-            .nodes
-            .iter()
-            .map(|nd| node_local(nd).map(|i| if i == NONE { 0.0 } else { r[i] }))
-            .collect()
+        self.node_rows(&r)
     }
 
     /// The step from the device's answer, if every test of the host's step accepts it at
