@@ -564,13 +564,20 @@ fn update(m: u32) {
 // The stopping iteration still applies its correction (as every resident iteration does),
 // so `q_prev` holds the iterate the host accepts, and a host that goes on finds the next
 // iterate in `node_x`.
+// A POLISH member (ops bit 128: a step on the device of the inexact strategy) whose
+// consistent-scalar iterations accept an iterate with res ≤ tol goes on instead, as the
+// host's step does, with a polish round: its element slots get I_ACTIVE = 3 (the next
+// residual pass freezes the scalars consistent with this iterate), its count so far is
+// kept as the round's start (the tests above then read the round's own iterations, with
+// quadratic convergence), and its factorization and solve are on again.
 
 // Iterations a submission holds at most (`RESIDENT_MAX_K` in `src/gpu/blocktri.rs`).
 const KMAX: u32 = 16u;
-const HSTRIDE: u32 = 34u; // 1 + 2 KMAX + 1
+const HSTRIDE: u32 = 35u; // 1 + 2 KMAX + 2
 
-// Per member HSTRIDE: the count c, then (residual, outcome) per iteration, then (last)
-// the work of the dead loads over the step at the iterate evaluated last.
+// Per member HSTRIDE: the count c, then (residual, outcome) per iteration, then the
+// polish round's first iteration (0: none), then (last) the work of the dead loads over
+// the step at the iterate evaluated last.
 @group(0) @binding(18) var<storage, read_write> hist: array<Real>;
 // Per member 4: Newton tolerance, 1 for quadratic convergence (full Newton), the
 // corrections before a residual may be accepted, this submission's K; then the element
@@ -591,14 +598,28 @@ fn deactivate(m: u32) {
     }
 }
 
-fn spec_accepts(m: u32, hb: u32, c: u32, res: Real) -> bool {
+// The element slots of member m's elements (one per node after the first) get flag v.
+fn set_active(m: u32, v: Real) {
+    let n = member_n[m];
+    if n < 2u { return; }
+    let cap = u32(spec[4u * prm.n_member]);
+    let per = u32(spec[4u * prm.n_member + 1u]);
+    for (var e = 0u; e < min(n - 1u, per); e++) {
+        kiter[I_ACTIVE * cap + m * per + e] = v;
+    }
+}
+
+fn spec_accepts(m: u32, hb: u32, c_all: u32, res: Real) -> bool {
     let tol = spec[4u * m];
+    // Within the polish round: its own iterations, frozen scalars (quadratic).
+    let p = u32(hist[hb + HSTRIDE - 2u]);
+    let c = c_all - p;
     if res <= tol && Real(c) >= spec[4u * m + 2u] { return true; }
     if c < 2u { return false; }
-    let r2 = hist[hb + 1u + 2u * (c - 2u)];
-    let r1 = hist[hb + 1u + 2u * (c - 1u)];
+    let r2 = hist[hb + 1u + 2u * (c_all - 2u)];
+    let r1 = hist[hb + 1u + 2u * (c_all - 1u)];
     if res <= 1e5 * tol && res >= 0.5 * r1 { return true; }
-    if spec[4u * m + 1u] != 0.0 && res <= 10.0 * tol && r1 < r2 {
+    if (spec[4u * m + 1u] != 0.0 || p != 0u) && res <= 10.0 * tol && r1 < r2 {
         let q = r1 * (r1 / r2) * (r1 / r2);
         if res >= 1e3 * q { return true; }
     }
@@ -612,7 +633,15 @@ fn spec_record(m: u32, res: Real, code: Real, ok: bool) {
     hist[hb + 2u + 2u * c] = code;
     hist[hb] = Real(c + 1u);
     var stop = !ok || Real(c + 1u) >= spec[4u * m + 3u] || c + 1u >= KMAX;
-    if !stop { stop = spec_accepts(m, hb, c, res); }
+    if !stop {
+        stop = spec_accepts(m, hb, c, res);
+        if stop && (ops[m] & 128u) != 0u && hist[hb + HSTRIDE - 2u] == 0.0 && res <= spec[4u * m] {
+            hist[hb + HSTRIDE - 2u] = Real(c + 1u);
+            ops[m] = ops[m] | 3u;
+            set_active(m, 3.0);
+            return;
+        }
+    }
     if stop {
         ops[m] = 0u;
         deactivate(m);
@@ -649,19 +678,21 @@ fn spec_check(m: u32) {
 }
 
 // Before the first iteration: the count of every SPEC member goes to 0; a REACTIVATE
-// member's element slots (one per node after the first) evaluate again (frozen scalars).
+// member's element slots (one per node after the first) evaluate again (frozen scalars,
+// or with ops bit 64 the consistent ones).
 @compute @workgroup_size(64)
 fn spec_reset_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let m = gid.x;
     if m >= prm.n_member { return; }
-    if (ops[m] & 16u) != 0u { hist[m * HSTRIDE] = 0.0; }
-    let n = member_n[m];
-    if (ops[m] & 32u) != 0u && n > 1u {
-        let cap = u32(spec[4u * prm.n_member]);
-        let per = u32(spec[4u * prm.n_member + 1u]);
-        for (var e = 0u; e < min(n - 1u, per); e++) {
-            kiter[I_ACTIVE * cap + m * per + e] = 1.0;
-        }
+    if (ops[m] & 16u) != 0u {
+        hist[m * HSTRIDE] = 0.0;
+        hist[m * HSTRIDE + HSTRIDE - 2u] = 0.0;
+    }
+    if (ops[m] & 32u) != 0u {
+        // (ops bit 64: the inexact strategy's consistent scalars.)
+        var v: Real = 1.0;
+        if (ops[m] & 64u) != 0u { v = 2.0; }
+        set_active(m, v);
     }
 }
 

@@ -59,7 +59,8 @@ const S_EPS: u32 = 42u;   // 6
 // ---- per Newton iteration (binding 2), NI fields ----
 const I_X: u32 = 0u;      // 18: element-local increment (u0 θ0 u1 θ1 g0 g1)
 const I_S: u32 = 18u;     // 4: frozen β_Γ β_Ω c_v c_ν
-const I_ACTIVE: u32 = 22u; // 1 = evaluate this element; 2 = evaluate it with consistent scalars
+const I_ACTIVE: u32 = 22u; // 1 = evaluate this element; 2 = evaluate it with consistent scalars;
+                           // 3 = freeze the consistent scalars at this iterate, then as 1
 // ---- output (binding 3), NO fields ----
 const O_R: u32 = 0u;      // 18
 const O_SC: u32 = 18u;    // 18
@@ -78,6 +79,8 @@ const T_ADV: u32 = 48u;   // 12: per element: kinetic, stored energy, L (3), J (
                           // the two acceleration-norm sums, the turn beyond MAX_TURN_COS
 const T_REC: u32 = 60u;   // 12: per member slot (index = member slot): the sums of T_ADV
 const N_ADV: u32 = 12u;
+// ---- advance pass → state hand-back (binding 5), dissipative schemes ----
+const T_FS: u32 = 210u;   // 4: the frozen scalars a step on the device started from
 // cos of the largest turn between an element's end triads a step may produce (twin of
 // `MAX_ELEMENT_TURN` in src/integrator/simulation/accept.rs: cos 2).
 const MAX_TURN_COS: Real = -0.4161468365471424;
@@ -103,7 +106,9 @@ struct Params {
 @group(0) @binding(0) var<storage, read> elem: array<Real>;
 // Written by the advance pass only.
 @group(0) @binding(1) var<storage, read_write> state: array<Real>;
-@group(0) @binding(2) var<storage, read> iter: array<Real>;
+// Written by the residual pass (I_ACTIVE 3: the polish round's frozen scalars) and the
+// advance pass (a dissipative scheme's frozen scalars for the next step).
+@group(0) @binding(2) var<storage, read_write> iter: array<Real>;
 @group(0) @binding(3) var<storage, read_write> outp: array<Real>;
 @group(0) @binding(4) var<uniform> prm: Params;
 @group(0) @binding(5) var<storage, read_write> tmid: array<Real>;
@@ -114,6 +119,7 @@ var<private> gi: u32;
 fn ld_e(f: u32) -> Real { return elem[f * prm.n + gi]; }
 fn ld_s(f: u32) -> Real { return state[f * prm.n + gi]; }
 fn ld_i(f: u32) -> Real { return iter[f * prm.n + gi]; }
+fn st_i(f: u32, x: Real) { iter[f * prm.n + gi] = x; }
 fn st_o(f: u32, x: Real) { outp[f * prm.n + gi] = x; }
 fn ld_t(f: u32) -> Real { return tmid[f * prm.n + gi]; }
 fn st_t(f: u32, x: Real) { tmid[f * prm.n + gi] = x; }
@@ -746,7 +752,18 @@ fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var x: array<Real, 18>;
     for (var i = 0u; i < 18u; i++) { x[i] = ld_i(I_X + i); }
     let keep = prm.want_tangent != 0u;
-    if prm.mode == 1u || ld_i(I_ACTIVE) == 2.0 {
+    var act = ld_i(I_ACTIVE);
+    if act == 3.0 {
+        // A step on the device (the inexact strategy, `spec_record` in blocktri.wgsl): its
+        // polish round freezes the scalars consistent with this iterate (the host's
+        // `advance(q, Consistent)`, on the branch of the step's frozen c_ν) and evaluates
+        // with them frozen from here on.
+        let c = consistent_scalars(st, x, dt, ld_i(I_S + 3u));
+        for (var i = 0u; i < 4u; i++) { st_i(I_S + i, c.s[i]); }
+        st_i(I_ACTIVE, 1.0);
+        act = 1.0;
+    }
+    if prm.mode == 1u || act == 2.0 {
         let c = consistent_scalars(st, x, dt, ld_i(I_S + 3u));
         residual(st, c.kin, c.s, dt, keep);
     } else {
@@ -1074,7 +1091,18 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         kin = kinematics(st, x, c_frozen, dt);
     }
     // (Everything below reads `kin` and `st`, not the state: in place is safe.)
-    if prm.dry == 0u { st_next(kin); }
+    if prm.dry == 0u {
+        st_next(kin);
+        // A dissipative scheme's next step starts from the scalars consistent with the
+        // accepted increment (the host's step: `frozen = consistent`); T_FS keeps them
+        // for a hand-back of that step to the host.
+        if ld_e(E_SCHEME) != 0.0 {
+            for (var i = 0u; i < 4u; i++) {
+                st_i(I_S + i, c.s[i]);
+                st_t(T_FS + i, c.s[i]);
+            }
+        }
+    }
     // Invariants' element terms at n+1 (two-point rule for K, L, J; one-point for V).
     var kinetic: Real = 0.0;
     var lm = V3(0.0, 0.0, 0.0);

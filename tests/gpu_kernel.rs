@@ -421,6 +421,7 @@ fn shader_layout_matches_rust_layout() {
         ("T_DB", layout::T_DB),
         ("T_ADV", layout::T_ADV),
         ("T_REC", layout::T_REC),
+        ("T_FS", layout::T_FS),
     ];
     for (name, val) in consts {
         let needle = format!("const {name}: u32 = {val}u;");

@@ -12,8 +12,8 @@ use rayon::prelude::*;
 use crate::element::StepConsts;
 use crate::gpu::assemble::MemberIncrements;
 use crate::gpu::blocktri::{
-    Readback, Report, SpecParams, OP_FACTOR, OP_REACTIVATE, OP_RESTORE, OP_SOLVE, OP_SPEC,
-    OP_UPDATE,
+    Readback, Report, SpecParams, OP_CONSISTENT, OP_FACTOR, OP_POLISH, OP_REACTIVATE, OP_RESTORE,
+    OP_SOLVE, OP_SPEC, OP_UPDATE,
 };
 use crate::gpu::kernel::{KernelMode, KernelTimers, MemberPack, SCATTER_GAP};
 use crate::gpu::layout::{AsmLayout, A_NODE};
@@ -174,6 +174,9 @@ pub struct GpuEvaluator {
     /// Per slot: its member's steps run entirely on the device
     /// ([`crate::integrator::evaluate::DeviceStep`]).
     fast: Vec<bool>,
+    /// Per slot: its device steps run the inexact strategy with its polish round (a
+    /// dissipative scheme: [`crate::gpu::blocktri::OP_POLISH`]).
+    polish: Vec<bool>,
     /// Per slot: the device stopped its element slots (`I_ACTIVE` 0) in a step on the
     /// device and the host did not send its rows again: the slot's next step on the device
     /// sets them again there ([`crate::gpu::blocktri::OP_REACTIVATE`]), any other
@@ -201,6 +204,12 @@ pub fn set_device_steps(on: bool) {
 /// that needs more goes to the host's step).
 pub const DEVICE_STEP_K: usize = 8;
 
+/// As [`DEVICE_STEP_K`] for a dispatch with device steps of the inexact strategy: its
+/// linearly contracting iterations and the polish round (2) in one submission (measured
+/// on the test batches of EDMC-1 and EDMC-2 cantilevers under gravity and tip loads: 5–12
+/// and 2; at a cap of 12, 31 of 63 steps went back to the host).
+pub const DEVICE_STEP_K_POLISH: usize = crate::gpu::blocktri::RESIDENT_MAX_K;
+
 /// Device steps record the iterations the batch's device steps needed last (at most, per
 /// member) plus this margin, at least [`DEVICE_STEP_MIN_K`] and at most [`DEVICE_STEP_K`]:
 /// each recorded iteration costs the host its encoding (11 dispatches at 31 nodes) whether
@@ -212,15 +221,23 @@ const DEVICE_STEP_MIN_K: usize = 4;
 
 /// Why a whole step on the device does not cover `sim` (`None`: it does, given a device
 /// solve with several iterations per submission): EM (no dissipation to evaluate between
-/// rounds; Kelvin–Voigt damping, drag and point masses are the element passes' own); dead loads only
+/// rounds; Kelvin–Voigt damping, drag and point masses are the element passes' own), or
+/// EDMC-1 and EDMC-2 with the inexact strategy (its consistent-scalar iterations and its
+/// polish round, whose scalars the element passes evaluate); dead loads only
 /// (nodal, line and gravity: no follower line loads); no moving supports, sliding clamps
 /// along an oblique axis (one along a coordinate axis removes unknowns, like a clamp),
 /// links, contact, control commands or planar models. (A step whose loads differ from those
 /// the device holds sends the step's nodal terms with its request: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
-    if sim.params().scheme != crate::integrator::Scheme::Em {
-        return Some("scheme other than EM");
+    let scheme = sim.params().scheme;
+    if scheme != crate::integrator::Scheme::Em {
+        if !scheme.is_dissipative() {
+            return Some("a scheme other than EM, EDMC-1 and EDMC-2");
+        }
+        if sim.strategy() != crate::integrator::params::Strategy::Inexact {
+            return Some("EDMC with a strategy other than inexact");
+        }
     }
     if m.has_follower_loads() {
         return Some("follower line loads");
@@ -336,6 +353,7 @@ impl GpuEvaluator {
             advance_ok: vec![false; slots],
             to_advance: Vec::new(),
             fast: vec![false; slots],
+            polish: vec![false; slots],
             device_stopped: vec![false; slots],
             fast_need: DEVICE_STEP_K,
             saved_increments: None,
@@ -522,13 +540,18 @@ impl GpuEvaluator {
         sim.set_device_solve(on);
         sim.set_device_resident(on && self.resident);
         sim.set_multi_iteration(self.multi_tol[slot].is_some());
-        self.advance_ok[slot] = self.whole
+        // EM members keep their state on the device whether or not their steps run there;
+        // a dissipative scheme's members where their steps run there (whose advance
+        // pass also freezes the next step's scalars).
+        let em = sim.params().scheme == crate::integrator::Scheme::Em;
+        let steps = self.whole
             && self.multi_tol[slot].is_some()
-            && sim.params().scheme == crate::integrator::Scheme::Em;
-        sim.set_device_advance(self.advance_ok[slot]);
-        self.fast[slot] = self.advance_ok[slot]
             && DEVICE_STEPS.load(std::sync::atomic::Ordering::Relaxed)
             && device_step_refusal(sim).is_none();
+        self.advance_ok[slot] = self.whole && self.multi_tol[slot].is_some() && (em || steps);
+        sim.set_device_advance(self.advance_ok[slot]);
+        self.fast[slot] = steps;
+        self.polish[slot] = steps && !em;
         sim.set_device_steps(self.fast[slot]);
         self.assembler.set_device_owned(slot, on && self.resident);
         on
@@ -552,6 +575,7 @@ impl GpuEvaluator {
         self.multi_tol[slot] = None;
         self.advance_ok[slot] = false;
         self.fast[slot] = false;
+        self.polish[slot] = false;
         self.deactivate(slot);
         if self.device[slot] {
             // The device changed the slot's increments: the next member uploads all.
@@ -615,6 +639,22 @@ impl GpuEvaluator {
                     }
                     // New loads for this step (a tabled load whose factor changed).
                     extras[*slot] = req.device_extra.as_deref();
+                    // The inexact strategy after a step the host ran: its scalars (those
+                    // the advance pass forms too, sent up after it) and the consistent flag.
+                    if !req.scalars.is_empty() {
+                        if req.scalars.len() != self.sizes[*slot].0 {
+                            return Err(format!(
+                                "GPU slot {slot}: {} frozen scalars for {} elements",
+                                req.scalars.len(),
+                                self.sizes[*slot].0
+                            ));
+                        }
+                        members[*slot] = Some(MemberPack {
+                            states: None,
+                            scalars: &req.scalars,
+                            consistent: req.consistent,
+                        });
+                    }
                     return Ok(());
                 }
                 self.fits(*slot, req)?;
@@ -772,10 +812,18 @@ impl GpuEvaluator {
         let mut fast: Vec<usize> = Vec::new();
         // Device steps record as many iterations as the members needed last time, with a
         // margin (a step that needs more goes to the host's step; the next record more).
+        let cap = if reqs
+            .iter()
+            .any(|(slot, req)| req.device_step.is_some() && self.polish[*slot])
+        {
+            DEVICE_STEP_K_POLISH
+        } else {
+            DEVICE_STEP_K
+        };
         let fast_k = (self.fast_need + DEVICE_STEP_MARGIN).clamp(
             DEVICE_STEP_MIN_K,
             self.multi_k
-                .clamp(DEVICE_STEP_K, crate::gpu::blocktri::RESIDENT_MAX_K),
+                .clamp(cap, crate::gpu::blocktri::RESIDENT_MAX_K),
         );
         // Their Newton tests (tolerance, quadratic convergence).
         let mut multi_test: Vec<(f64, bool)> = vec![(0.0, false); self.sizes.len()];
@@ -807,17 +855,24 @@ impl GpuEvaluator {
                         continue;
                     };
                     solver.set_host_scale(slot, ds.scale);
+                    // The inexact strategy's iterations contract linearly; its polish
+                    // round (quadratic) is the device's own switch.
+                    let polish = self.polish[slot];
                     solver.set_spec(
                         slot,
                         SpecParams {
                             tol: self.multi_tol[slot].unwrap_or(0.0),
-                            quadratic: true,
+                            quadratic: !polish,
                             min_corrections: crate::integrator::scaling::MIN_CORRECTIONS,
                             k: fast_k,
                         },
                     );
                     let react = if reactivate[slot] { OP_REACTIVATE } else { 0 };
-                    ops.push((slot, OP_FACTOR | OP_SOLVE | OP_UPDATE | OP_SPEC | react));
+                    let inexact = if polish { OP_CONSISTENT | OP_POLISH } else { 0 };
+                    ops.push((
+                        slot,
+                        OP_FACTOR | OP_SOLVE | OP_UPDATE | OP_SPEC | react | inexact,
+                    ));
                     fast.push(slot);
                     let n = self.sizes[slot].0 as u64;
                     let st = &mut self.serve_timers;
@@ -1348,6 +1403,12 @@ impl GpuEvaluator {
             _ => self.assembler.increments_buffer().clone(),
         };
         let mut copies = self.kernel.state_copies(lo, lo + n_elems);
+        // A dissipative scheme's frozen scalars: those its last device step started from
+        // (a hand-back), or those it ended with.
+        let scalars = self.polish[slot];
+        if scalars {
+            copies.extend(self.kernel.scalar_copies(lo, lo + n_elems, pull.saved));
+        }
         for k in 0..9u64 {
             copies.push((
                 inc.clone(),
@@ -1361,9 +1422,18 @@ impl GpuEvaluator {
         self.serve_timers.device_step_handoffs += u64::from(pull.saved);
         self.serve_timers.pull_bytes_down += bytes;
         self.serve_timers.dispatches += 1;
-        let (sv, iv) = v.split_at(crate::gpu::layout::NS * n_elems);
+        let (sv, rest) = v.split_at(crate::gpu::layout::NS * n_elems);
+        let (fv, iv) = rest.split_at(if scalars { 4 * n_elems } else { 0 });
         Ok(Pulled {
             states: ElementKernel::states_from(sv, n_elems),
+            scalars: (0..fv.len() / 4)
+                .map(|e| crate::element::FrozenScalars {
+                    beta_gamma: fv[e],
+                    beta_omega: fv[n_elems + e],
+                    c_v: fv[2 * n_elems + e],
+                    c_nu: fv[3 * n_elems + e],
+                })
+                .collect(),
             increments: (0..n_nodes)
                 .map(|j| std::array::from_fn(|k| iv[k * n_nodes + j]))
                 .collect(),

@@ -48,12 +48,23 @@ pub const OP_SPEC: u32 = 16;
 /// (`spec_reset_main` sets their `I_ACTIVE` to 1: frozen scalars), where the last
 /// multi-iteration submission stopped them; the host then sends no iteration rows.
 pub const OP_REACTIVATE: u32 = 32;
+/// Per-member operation bit (with [`OP_REACTIVATE`]): the element slots evaluate with the
+/// consistent scalars (`I_ACTIVE` 2: the inexact strategy's iterations).
+pub const OP_CONSISTENT: u32 = 64;
+/// Per-member operation bit (with [`OP_SPEC`], a step on the device of the inexact
+/// strategy): where the consistent-scalar iterations accept an iterate within the
+/// tolerance, the member goes on with the polish round, as the host's step does: the
+/// element slots freeze the scalars consistent with that iterate (`I_ACTIVE` 3) and the
+/// Newton test restarts there with quadratic convergence (`spec_record` in
+/// `shaders/blocktri.wgsl`).
+pub const OP_POLISH: u32 = 128;
 
 /// Newton iterations one submission holds at most (`KMAX` in `shaders/blocktri.wgsl`).
 pub const RESIDENT_MAX_K: usize = 16;
-/// Scalars per member of the iteration history: the count, two per iteration, and the work
-/// of the dead loads at the iterate evaluated last (`HSTRIDE` in `shaders/blocktri.wgsl`).
-pub const HSTRIDE: usize = 2 + 2 * RESIDENT_MAX_K;
+/// Scalars per member of the iteration history: the count, two per iteration, the polish
+/// round's first iteration ([`OP_POLISH`]; 0: none) and the work of the dead loads at the
+/// iterate evaluated last (`HSTRIDE` in `shaders/blocktri.wgsl`).
+pub const HSTRIDE: usize = 3 + 2 * RESIDENT_MAX_K;
 
 /// What the host's Newton loop accepts, per member, for [`OP_SPEC`]'s stopping test.
 #[derive(Clone, Copy, Debug, PartialEq)]

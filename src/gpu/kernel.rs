@@ -215,7 +215,9 @@ impl ElementKernel {
                 storage(0, true),
                 // The advance pass writes the states.
                 storage(1, false),
-                storage(2, true),
+                // The residual pass freezes the polish round's scalars, the advance pass
+                // a dissipative scheme's next ones.
+                storage(2, false),
                 storage(3, false),
                 wgpu::BindGroupLayoutEntry {
                     binding: 4,
@@ -264,7 +266,7 @@ impl ElementKernel {
         let bufs = [
             mk("elem", NE, input),
             mk("state", NS, input | wgpu::BufferUsages::COPY_SRC),
-            mk("iter", NI, input),
+            mk("iter", NI, input | wgpu::BufferUsages::COPY_SRC),
             mk(
                 "out",
                 NO,
@@ -858,6 +860,26 @@ impl ElementKernel {
                     8 * (hi - lo) as u64,
                 )
             })
+            .collect()
+    }
+
+    /// Copies of the frozen scalars (4 per element slot, field after field) of slots
+    /// `lo..hi`: those the iteration buffer holds now, or (`saved`) those the advance pass
+    /// kept at the start of the last step on the device ([`T_FS`]).
+    pub(crate) fn scalar_copies(
+        &self,
+        lo: usize,
+        hi: usize,
+        saved: bool,
+    ) -> Vec<(wgpu::Buffer, u64, u64)> {
+        let cap = self.cap as u64;
+        let (buf, first) = if saved {
+            (&self.tmid, T_FS)
+        } else {
+            (&self.bufs[2], I_S)
+        };
+        (first as u64..first as u64 + 4)
+            .map(|f| (buf.clone(), 8 * (f * cap + lo as u64), 8 * (hi - lo) as u64))
             .collect()
     }
 

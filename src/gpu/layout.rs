@@ -55,7 +55,9 @@ pub const NS: usize = 48;
 pub const I_X: usize = 0;
 /// Frozen scalars `β_Γ, β_Ω, c_v, c_ν` (4).
 pub const I_S: usize = 18;
-/// Active flag (1 = evaluate).
+/// Active flag (0 = skip, 1 = evaluate with the frozen scalars, 2 = with the consistent
+/// ones, 3 = freeze the consistent ones at this iterate, then as 1: the polish round of a
+/// step on the device).
 pub const I_ACTIVE: usize = 22;
 /// Number of iteration fields.
 pub const NI: usize = 23;
@@ -96,8 +98,13 @@ pub const N_ADV: usize = 12;
 /// Record pass: per member slot (index = member slot) the sums of [`T_ADV`] over its
 /// element slots ([`N_ADV`], same order).
 pub const T_REC: usize = 60;
+/// Advance pass → state hand-back: per element slot of a dissipative scheme's member, the
+/// frozen scalars its next step starts from (4; the consistent scalars of the accepted
+/// increment), kept for a hand-back of that step to the host (a step on the device
+/// overwrites [`I_S`] with its polish round's).
+pub const T_FS: usize = 210;
 /// Number of intermediate fields.
-pub const NT: usize = 210;
+pub const NT: usize = 214;
 
 /// Node-local unknowns (`u0..2 θ0..2 g0..2`) of the assembled system.
 pub const A_NODE: usize = 9;

@@ -115,6 +115,9 @@ pub struct Pulled {
     pub states: Vec<(ElementState, Vector6<f64>)>,
     /// Per node: the increments ([`Pull::saved`]), node-local order.
     pub increments: Vec<[f64; 9]>,
+    /// Per element, for a dissipative scheme (empty otherwise): the frozen scalars its
+    /// last device step started from ([`Pull::saved`]), or those it ended with.
+    pub scalars: Vec<FrozenScalars>,
 }
 
 /// A device-resident Newton request ([`EvalRequest::resident`]).

@@ -74,8 +74,19 @@ impl Simulation {
             .is_some_and(|f| self.load_factors().eq(f.iter().copied()));
         let extra = (!same_loads).then(|| self.step_nodal_terms());
         self.sent_version = Some(self.state_version);
+        // A dissipative scheme (the inexact strategy) after a step the host ran: the
+        // scalars it starts from (those the device's advance forms too) go up once, with
+        // the consistent flag; after a device step the device holds them.
+        let inexact = self.params.scheme.is_dissipative();
+        let scalars = if inexact && !self.host_stale {
+            self.frozen.clone()
+        } else {
+            Vec::new()
+        };
         let req = EvalRequest {
             advance: true,
+            scalars,
+            consistent: inexact,
             device_step: Some(DeviceStep {
                 scale: self.resident_scale,
             }),
@@ -123,33 +134,30 @@ impl Simulation {
     }
 
     /// The step from the device's answer, if every test of the host's step accepts it at
-    /// the device's last iterate (`None`: the host runs the step).
+    /// the device's last iterate (`None`: the host runs the step). A dissipative scheme's
+    /// device step is the inexact strategy's (`strategy.rs`, `solve_first`): its
+    /// consistent-scalar iterations (linear contraction), accepted within the tolerance,
+    /// then the polish round's frozen-scalar iterations from that iterate.
     fn take_device_step(&mut self, a: &DeviceStepAnswer) -> Option<StepReport> {
         let tol = self.params.newton_tol;
-        let mut history: Vec<f64> = Vec::with_capacity(a.iterations.len());
-        let mut accepted_at = None;
-        for (it, &(res, solved)) in a.iterations.iter().enumerate() {
-            let accepted =
-                (res <= tol && scaling::may_accept(it)) || at_floor(&history, res, tol, true);
-            history.push(res);
-            if !res.is_finite() {
+        let polish = self.params.scheme.is_dissipative();
+        let (it0, res0) = replay_newton(&a.iterations, tol, !polish, self.params.max_iter)?;
+        let (it, res) = if polish {
+            // Accepted on its round-off floor above the tolerance: the host checks that
+            // iterate with the consistent scalars, which the device step does not.
+            if res0 > tol {
                 return None;
             }
-            if accepted {
-                accepted_at = Some(it);
-                break;
-            }
-            // The host's early stops (which depend on the predictor it is on) and its
-            // cap: the host decides.
-            if rose_from_start(&history)
-                || stagnated(&history, STAGNATION_ITERS)
-                || it == self.params.max_iter
-                || !solved
-            {
-                return None;
-            }
+            let (it1, res1) =
+                replay_newton(&a.iterations[it0 + 1..], tol, true, self.params.max_iter)?;
+            (it0 + it1, res1)
+        } else {
+            (it0, res0)
+        };
+        // The device stopped where the host's test accepts.
+        if it + 1 + usize::from(polish) != a.iterations.len() {
+            return None;
         }
-        let it = accepted_at.filter(|&it| it + 1 == a.iterations.len())?;
         let r = &a.record;
         let fields = [
             r.kinetic,
@@ -194,7 +202,7 @@ impl Simulation {
         Some(StepReport {
             newton_iters: it,
             outer_iters: 1,
-            residual: history[it],
+            residual: res,
             dissipation: r.dissipation,
             external_work: w,
             support_work: 0.0,
@@ -257,6 +265,9 @@ impl Simulation {
             state.eps.push(*eps);
         }
         self.state = state;
+        if !p.scalars.is_empty() {
+            self.frozen.clone_from(&p.scalars);
+        }
         self.prev.iter_mut().for_each(|x| *x = 0.0);
         for (nd, x) in self.dofs.nodes.iter().zip(&p.increments) {
             for (&i, &v) in node_local(nd).iter().zip(x) {
@@ -283,9 +294,47 @@ impl Simulation {
         let t = self.state.t;
         self.set_pulled(&p);
         let q = self.prev.clone();
-        let (mut next, _, _) = self.advance(&q, Mode::Frozen);
+        let (mut next, _, consistent) = self.advance(&q, Mode::Frozen);
         next.t = t;
         self.state = next;
+        // (As the host's step leaves them: the next step's scalars.)
+        if self.params.scheme.is_dissipative() {
+            self.frozen = consistent;
+        }
         Ok(())
     }
+}
+
+/// The host's Newton loop (`newton.rs`) replayed on a device step's iterations `reports`
+/// (relative residual, solve succeeded): the index of the iteration its test accepts and
+/// that residual, with `quadratic` convergence or linear contraction (the inexact
+/// strategy's). `None` where the host would decide otherwise than "accepted there": a
+/// non-finite residual, one of its early stops (which depend on the predictor it is on),
+/// its cap, a failed solve, or no accepted iteration among those recorded.
+fn replay_newton(
+    reports: &[(f64, bool)],
+    tol: f64,
+    quadratic: bool,
+    max_iter: usize,
+) -> Option<(usize, f64)> {
+    let mut history: Vec<f64> = Vec::with_capacity(reports.len());
+    for (it, &(res, solved)) in reports.iter().enumerate() {
+        let accepted =
+            (res <= tol && scaling::may_accept(it)) || at_floor(&history, res, tol, quadratic);
+        history.push(res);
+        if !res.is_finite() {
+            return None;
+        }
+        if accepted {
+            return Some((it, res));
+        }
+        if rose_from_start(&history)
+            || stagnated(&history, STAGNATION_ITERS)
+            || it == max_iter
+            || !solved
+        {
+            return None;
+        }
+    }
+    None
 }

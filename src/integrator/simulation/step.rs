@@ -222,9 +222,12 @@ impl Simulation {
                     // `--solve whole`: the device's last evaluated iterate is `q` (it ran
                     // this step's Newton solve and the step needed no fallback), so its
                     // state advances by it as this one does.
+                    // (Not where a dissipative scheme accepted it with the consistent
+                    // scalars: the advance pass forms the frozen-scalar kinematics.)
                     self.advanced_version = (self.device_advance
                         && self.device_resident()
                         && !self.fell_back
+                        && !(self.params.scheme.is_dissipative() && self.solved_consistent)
                         && self.sent_version == Some(self.state_version))
                     .then_some(self.state_version + 1);
                     self.state = next;
