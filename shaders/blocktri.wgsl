@@ -569,7 +569,10 @@ fn update(m: u32) {
 // host's step does, with a polish round: its element slots get I_ACTIVE = 3 (the next
 // residual pass freezes the scalars consistent with this iterate), its count so far is
 // kept as the round's start (the tests above then read the round's own iterations, with
-// quadratic convergence), and its factorization and solve are on again.
+// quadratic convergence), and its factorization and solve are on again. One that accepts
+// an iterate on its round-off floor above the tolerance stops there as the host's step
+// does (checked with the consistent scalars): its element slots get I_ACTIVE = −2, which
+// the records and the next step's advance read as "consistent kinematics".
 
 // Iterations a submission holds at most (`RESIDENT_MAX_K` in `src/gpu/blocktri.rs`).
 const KMAX: u32 = 16u;
@@ -635,10 +638,15 @@ fn spec_record(m: u32, res: Real, code: Real, ok: bool) {
     var stop = !ok || Real(c + 1u) >= spec[4u * m + 3u] || c + 1u >= KMAX;
     if !stop {
         stop = spec_accepts(m, hb, c, res);
-        if stop && (ops[m] & 128u) != 0u && hist[hb + HSTRIDE - 2u] == 0.0 && res <= spec[4u * m] {
-            hist[hb + HSTRIDE - 2u] = Real(c + 1u);
-            ops[m] = ops[m] | 3u;
-            set_active(m, 3.0);
+        if stop && (ops[m] & 128u) != 0u && hist[hb + HSTRIDE - 2u] == 0.0 {
+            if res <= spec[4u * m] {
+                hist[hb + HSTRIDE - 2u] = Real(c + 1u);
+                ops[m] = ops[m] | 3u;
+                set_active(m, 3.0);
+            } else {
+                ops[m] = 0u;
+                set_active(m, -2.0);
+            }
             return;
         }
     }

@@ -60,7 +60,9 @@ const S_EPS: u32 = 42u;   // 6
 const I_X: u32 = 0u;      // 18: element-local increment (u0 θ0 u1 θ1 g0 g1)
 const I_S: u32 = 18u;     // 4: frozen β_Γ β_Ω c_v c_ν
 const I_ACTIVE: u32 = 22u; // 1 = evaluate this element; 2 = evaluate it with consistent scalars;
-                           // 3 = freeze the consistent scalars at this iterate, then as 1
+                           // 3 = freeze the consistent scalars at this iterate, then as 1;
+                           // 0 = skip it; −2 = skip it, its iterate accepted with consistent
+                           // scalars (the advance's and records' kinematics)
 // ---- output (binding 3), NO fields ----
 const O_R: u32 = 0u;      // 18
 const O_SC: u32 = 18u;    // 18
@@ -746,7 +748,7 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
 fn residual_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= prm.n { return; }
     gi = gid.x;
-    if ld_i(I_ACTIVE) == 0.0 { return; }
+    if ld_i(I_ACTIVE) <= 0.0 { return; }
     let dt = ld_e(E_DT);
     let st = load_state();
     var x: array<Real, 18>;
@@ -866,7 +868,7 @@ fn tangent_prep(n: u32) {
 fn tangent_prep_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= prm.n_tan { return; }
     gi = tan_list[gid.x];
-    if ld_i(I_ACTIVE) == 0.0 { return; }
+    if ld_i(I_ACTIVE) <= 0.0 { return; }
     tangent_prep(gid.y);
 }
 
@@ -1030,7 +1032,7 @@ fn tangent_block(l: u32, m: u32) {
 fn tangent_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= prm.n_tan { return; }
     gi = tan_list[gid.x];
-    if ld_i(I_ACTIVE) == 0.0 { return; }
+    if ld_i(I_ACTIVE) <= 0.0 { return; }
     tangent_block(gid.y / 2u, gid.y % 2u);
 }
 
@@ -1087,7 +1089,7 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         diss += dot(drag_row(0u, u0, u1, k), u0) + dot(drag_row(1u, u0, u1, k), u1);
     }
     var kin = c.kin;
-    if prm.mode == 0u && ld_i(I_ACTIVE) != 2.0 && c_frozen != c.s[3] {
+    if prm.mode == 0u && abs(ld_i(I_ACTIVE)) != 2.0 && c_frozen != c.s[3] {
         kin = kinematics(st, x, c_frozen, dt);
     }
     // (Everything below reads `kin` and `st`, not the state: in place is safe.)
@@ -1185,7 +1187,7 @@ fn record_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var sum: Real = 0.0;
         for (var e = 0u; e < per; e++) {
             let i = m * per + e;
-            if prm.dry != 0u || iter[I_ACTIVE * prm.n + i] != 0.0 { sum += tmid[(T_ADV + k) * prm.n + i]; }
+            if prm.dry != 0u || iter[I_ACTIVE * prm.n + i] > 0.0 { sum += tmid[(T_ADV + k) * prm.n + i]; }
         }
         tmid[(T_REC + k) * prm.n + m] = sum;
     }

@@ -788,10 +788,9 @@ fn whole_device_steps_of_edmc_with_the_inexact_strategy_end_as_on_the_cpu_path()
     assert!(l.least_d > 0.0, "a step without dissipation");
     let st = &l.stats.serve;
     assert_eq!(st.device_steps, 9 * 7, "device steps");
-    // Measured: 61 of 63 accepted. One step's inexact iterations wander from the
-    // predictor (the host's step then moves on to its next predictor), and one needs 11
-    // iterations where the batch's first dispatch recorded 10 (K then follows the need).
-    assert_accepted_device_steps(&l, ACCEPTED - 1);
+    // Measured: 62 of 63 accepted; one step's inexact iterations wander from the
+    // predictor (the host's step then moves on to its next predictor).
+    assert_accepted_device_steps(&l, ACCEPTED);
 }
 
 /// The 14-member mix in EDMC-2 with the inexact strategy: members that end early, one that
@@ -803,4 +802,79 @@ fn whole_device_steps_of_edmc_with_the_inexact_strategy_end_as_on_the_cpu_path()
 fn whole_device_steps_of_edmc_with_failures_end_as_on_the_cpu_path() {
     let ms = batch_mix(None, Strategy::Inexact);
     check_device_steps("inexact EDMC mix", &ms, 5);
+}
+
+/// The bench's EDMC-2 cantilevers (30 elements, gravity) with the inexact strategy: their
+/// round-off floor lies at the Newton tolerance, so many steps accept their
+/// consistent-scalar iterate on the floor above the tolerance, where the host's step
+/// checks it with the consistent scalars and polishes nothing; the device step stops there
+/// too (its element slots keep "consistent" for the records and the next advance). Which
+/// iterate a step accepts on its floor is decided by round-off (the CPU path and `--solve
+/// resident` differ by a Newton iteration on 4 of these 6 members as well), so the members
+/// are compared by status, steps, final states and energy histories (within
+/// `STATE_RTOL`), not by Newton iterations. No device step goes back to the host.
+#[test]
+fn whole_device_steps_of_edmc_accepted_on_the_floor_end_as_on_the_cpu_path() {
+    let Some(exec) = gpu() else {
+        return;
+    };
+    // All four α (c_ν ≠ 0: the consistent kinematics differ from the frozen ones).
+    let mut ms = bench_members(6, 30, 8).unwrap();
+    for m in &mut ms {
+        m.params.strategy = Strategy::Inexact;
+        m.params.scheme = Scheme::Edmc2 {
+            alpha_gv: 0.5,
+            alpha_gn: 0.5,
+            alpha_ov: 0.5,
+            alpha_on: 0.5,
+        };
+    }
+    let tol = ms[0].params.newton_tol;
+    let (cpu, _) = run_batch(
+        &ms,
+        &Executor::Cpu,
+        NewtonVariant::Fresh,
+        SolveMode::Host,
+        0,
+    );
+    let (whole, ws) = run_batch(&ms, &exec, NewtonVariant::Full, SolveMode::Whole, 6);
+    let mut worst = 0.0f64;
+    let mut on_floor = 0;
+    for (c, w) in cpu.iter().zip(&whole) {
+        let i = c.index;
+        assert_eq!(w.outcome.status, RunStatus::Completed, "member {i}");
+        assert_eq!(c.outcome.steps, w.outcome.steps, "member {i}");
+        let (sc, sw) = (c.state.as_ref().unwrap(), w.state.as_ref().unwrap());
+        let flat = |s: &State| -> Vec<f64> {
+            s.r.iter()
+                .chain(&s.v)
+                .flat_map(|x| x.iter().copied())
+                .chain(
+                    s.d.iter()
+                        .flat_map(|d| d.iter().flat_map(|x| x.iter().copied())),
+                )
+                .collect()
+        };
+        worst = worst.max(rel(flat(sc).into_iter(), flat(sw).into_iter()));
+        let energy = |r: &cosserat::batch::MemberResult| -> Vec<f64> {
+            r.history
+                .iter()
+                .flat_map(|h| [h.total, h.dissipation_total])
+                .collect()
+        };
+        worst = worst.max(rel(energy(c).into_iter(), energy(w).into_iter()));
+        on_floor += w.history.iter().filter(|h| h.residual > tol).count();
+    }
+    let st = &ws.serve;
+    println!(
+        "EDMC on the floor: vs CPU {worst:.3e}; steps accepted above the tolerance {on_floor}; device steps {} ({} handed back)",
+        st.device_steps, st.device_step_handoffs
+    );
+    assert!(worst <= STATE_RTOL, "{worst:.3e} from the CPU path");
+    assert!(
+        on_floor > 0,
+        "no step accepted on the floor: the test misses its case"
+    );
+    assert_eq!(st.device_steps, 6 * 7, "device steps");
+    assert_eq!(st.device_step_handoffs, 0, "steps handed back");
 }
