@@ -242,7 +242,7 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
             return Some("a scheme other than EM, EDMC-1 and EDMC-2");
         }
         if sim.strategy() != crate::integrator::params::Strategy::Inexact {
-            return Some("EDMC with a strategy other than inexact");
+            return Some("EDMC with a strategy other than inexact: use --strategy inexact");
         }
     }
     if m.has_follower_loads() {
