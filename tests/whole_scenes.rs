@@ -156,14 +156,21 @@ fn whole_runs_the_paper_scenes_and_moving_supports_as_the_cpu_path() {
             w.outcome.status, w.outcome.steps, w.outcome.newton_iters_total
         );
         worst_cpu = worst_cpu.max(d);
-        worst_res = worst_res.max(e);
+        // The arch (EM, planar, a dead load) takes its steps on the device: round-off
+        // from `resident` (measured 2.9e-16); the others' steps run on the host (links,
+        // moving supports, the staggered strategy), bit for bit as with `resident`.
+        if name == "arch" {
+            assert!(e <= 1e-14, "arch: whole vs resident {e:.3e}");
+        } else {
+            worst_res = worst_res.max(e);
+        }
     }
     println!(
         "device members {:?}; {} member-steps advanced on the device",
         ws.device_members, ws.serve.device_advances
     );
     // Measured 2.6e-11 (the arch's energy history: H grows from 0 under the ramp), the
-    // others ≤ 1.5e-14; whole equals resident bit for bit.
+    // others ≤ 1.5e-14.
     assert!(worst_cpu <= STATE_RTOL, "whole vs CPU {worst_cpu:.3e}");
     assert_eq!(worst_res, 0.0, "whole vs resident");
     assert!(whole[..5]
@@ -231,12 +238,12 @@ fn run_whole_says_why_steps_stay_on_the_host() {
     }
 }
 
-/// The paper's frame and arch in EDMC-2 (α = 0.5) with the inexact strategy under
-/// `--solve whole`: the frame's steps run on the device (the polish round, or the stop on
-/// the round-off floor, there too; the arch is planar, its steps stay on the host) and
-/// both end as on the CPU path with the same strategy: status and steps equal, states and
-/// energy histories within `STATE_RTOL` (compared by [`difference`], not by Newton
-/// iterations: which iterate a step accepts on its floor is decided by round-off).
+/// The paper's frame and arch (planar) in EDMC-2 (α = 0.5) with the inexact strategy
+/// under `--solve whole`: their steps run on the device (the polish round, or the stop on
+/// the round-off floor, there too) and both end as on the CPU path with the same
+/// strategy: status and steps equal, states and energy histories within `STATE_RTOL`
+/// (compared by [`difference`], not by Newton iterations: which iterate a step accepts on
+/// its floor is decided by round-off, and the arch's floor lies at the tolerance).
 #[test]
 fn whole_runs_the_paper_scenes_in_edmc_on_device_steps_as_the_cpu_path() {
     let Some(exec) = gpu() else { return };
@@ -277,11 +284,12 @@ fn whole_runs_the_paper_scenes_in_edmc_on_device_steps_as_the_cpu_path() {
         st.device_steps, st.device_step_handoffs
     );
     assert!(worst <= STATE_RTOL, "whole vs CPU {worst:.3e}");
-    // Every step of the frame after its first is offered to the device (measured: 3 of
-    // the 14 handed back: two needed more iterations than their dispatch recorded, one's
-    // residual rose on its first two corrections, where the host's step moves on to its
-    // next predictor).
-    assert_eq!(st.device_steps, 14, "device steps");
+    // The frame's 14 steps after its first and 38 of the arch's 39 are offered to the
+    // device (a step after one the host accepted with the consistent scalars starts from
+    // the host's state). Measured: 3 handed back, all the frame's: one whose residual rose
+    // on its first two corrections (the host's step moves on to its next predictor), two
+    // that needed more iterations than their dispatch recorded.
+    assert_eq!(st.device_steps, 14 + 38, "device steps");
     assert!(
         st.device_step_handoffs <= 3,
         "{} handed back",

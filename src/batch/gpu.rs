@@ -182,9 +182,9 @@ pub struct GpuEvaluator {
     /// sets them again there ([`crate::gpu::blocktri::OP_REACTIVATE`]), any other
     /// evaluation sends the host's rows first.
     device_stopped: Vec<bool>,
-    /// The most Newton iterations a member's device step recorded in the last dispatch
-    /// with device steps ([`DEVICE_STEP_MARGIN`]).
-    fast_need: usize,
+    /// Per slot: the Newton iterations its member's last device step recorded
+    /// ([`DEVICE_STEP_MARGIN`]; [`DEVICE_STEP_K`] before its first).
+    fast_need: Vec<usize>,
     /// The node increments as they were at the start of the last dispatch with device
     /// steps (a failed device step's predictor, for the host's step).
     saved_increments: Option<wgpu::Buffer>,
@@ -210,8 +210,8 @@ pub const DEVICE_STEP_K: usize = 8;
 /// and 2; at a cap of 12, 31 of 63 steps went back to the host).
 pub const DEVICE_STEP_K_POLISH: usize = crate::gpu::blocktri::RESIDENT_MAX_K;
 
-/// Device steps record the iterations the batch's device steps needed last (at most, per
-/// member) plus this margin, at least [`DEVICE_STEP_MIN_K`] and at most [`DEVICE_STEP_K`]:
+/// Device steps record the most iterations their members' last device steps recorded (each
+/// member's own) plus this margin, at least [`DEVICE_STEP_MIN_K`] and at most [`DEVICE_STEP_K`]:
 /// each recorded iteration costs the host its encoding (11 dispatches at 31 nodes) whether
 /// or not a member still iterates.
 const DEVICE_STEP_MARGIN: usize = 2;
@@ -232,7 +232,8 @@ const DEVICE_STEP_MIN_K: usize = 4;
 /// polish round, whose scalars the element passes evaluate); dead loads only
 /// (nodal, line and gravity: no follower line loads); no moving supports, sliding clamps
 /// along an oblique axis (one along a coordinate axis removes unknowns, like a clamp),
-/// links, contact, control commands or planar models. (A step whose loads differ from those
+/// links, contact or control commands; planar models are covered (the 3D kernel with the
+/// planar unknowns, as in every GPU evaluation). (A step whose loads differ from those
 /// the device holds sends the step's nodal terms with its request: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
@@ -256,9 +257,6 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     }
     if !m.links.is_empty() || !m.obstacles.is_empty() || !m.rod_contacts.is_empty() {
         return Some("links or contact");
-    }
-    if m.planar.is_some() {
-        return Some("a planar model");
     }
     None
 }
@@ -361,7 +359,7 @@ impl GpuEvaluator {
             fast: vec![false; slots],
             polish: vec![false; slots],
             device_stopped: vec![false; slots],
-            fast_need: DEVICE_STEP_K,
+            fast_need: vec![DEVICE_STEP_K; slots],
             saved_increments: None,
         })
     }
@@ -558,6 +556,7 @@ impl GpuEvaluator {
         sim.set_device_advance(self.advance_ok[slot]);
         self.fast[slot] = steps;
         self.polish[slot] = steps && !em;
+        self.fast_need[slot] = DEVICE_STEP_K;
         sim.set_device_steps(self.fast[slot]);
         self.assembler.set_device_owned(slot, on && self.resident);
         on
@@ -816,17 +815,24 @@ impl GpuEvaluator {
         let mut multi: Vec<usize> = Vec::new();
         // `--solve whole`: whole steps on the device.
         let mut fast: Vec<usize> = Vec::new();
-        // Device steps record as many iterations as the members needed last time, with a
-        // margin (a step that needs more goes to the host's step; the next record more).
+        // Device steps record as many iterations as their members needed last time (the
+        // most of them), with a margin (a step that needs more goes to the host's step;
+        // the next records more).
         let polishing = reqs
             .iter()
             .any(|(slot, req)| req.device_step.is_some() && self.polish[*slot]);
+        let need = reqs
+            .iter()
+            .filter(|(_, req)| req.device_step.is_some())
+            .map(|(slot, _)| self.fast_need[*slot])
+            .max()
+            .unwrap_or(DEVICE_STEP_K);
         let (cap, margin) = if polishing {
             (DEVICE_STEP_K_POLISH, DEVICE_STEP_MARGIN_POLISH)
         } else {
             (DEVICE_STEP_K, DEVICE_STEP_MARGIN)
         };
-        let fast_k = (self.fast_need + margin).clamp(
+        let fast_k = (need + margin).clamp(
             DEVICE_STEP_MIN_K,
             self.multi_k
                 .clamp(cap, crate::gpu::blocktri::RESIDENT_MAX_K),
@@ -1332,13 +1338,10 @@ impl GpuEvaluator {
                 .filter_map(|&m| hist_at[m])
                 .map(|h| h.0.len() as u64)
                 .sum::<u64>();
-            if let Some(need) = fast
-                .iter()
-                .filter_map(|&m| hist_at[m])
-                .map(|h| h.0.len())
-                .max()
-            {
-                self.fast_need = need;
+            for &m in &fast {
+                if let Some(h) = hist_at[m] {
+                    self.fast_need[m] = h.0.len();
+                }
             }
         }
         let runs: Vec<(usize, Result<MultiRun, String>)> = multi
