@@ -296,3 +296,65 @@ fn whole_runs_the_paper_scenes_in_edmc_on_device_steps_as_the_cpu_path() {
         st.device_step_handoffs
     );
 }
+
+/// `sweep --solve whole` records which members' steps ran on the host and why
+/// (`sweep.json` `host_steps`, and a note on stderr): the frame with the GPU path's default
+/// strategy (staggered) names the strategy for every member; with `integrator.strategy =
+/// "inexact"` the steps run on the device and nothing is recorded.
+#[test]
+fn sweep_whole_records_why_steps_ran_on_the_host() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let frame = cosserat::scene::builtin_scenes()
+        .iter()
+        .find(|b| b.name == "frame")
+        .expect("the built-in frame scene exists")
+        .toml;
+    for (strategy, host) in [("auto", true), ("inexact", false)] {
+        // The frame with the strategy set in its [integrator] table.
+        let scene = frame.replacen(
+            "[integrator]\n",
+            &format!("[integrator]\nstrategy = \"{strategy}\"\n"),
+            1,
+        );
+        assert_ne!(scene, frame, "the frame scene has an [integrator] table");
+        std::fs::write(dir.path().join("frame.toml"), scene).unwrap();
+        let spec = dir.path().join("spec.toml");
+        std::fs::write(
+            &spec,
+            "base = \"frame.toml\"\nmode = \"grid\"\n\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [0.25, 0.5]\n\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [1.0]\n",
+        )
+        .unwrap();
+        let out = dir.path().join(if host { "host" } else { "device" });
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
+            .args(["sweep"])
+            .arg(&spec)
+            .args(["--backend", "gpu", "--solve", "whole", "--out"])
+            .arg(&out)
+            .env("NODEVICE_SELECT", "1")
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("sweep.json")).unwrap())
+                .unwrap();
+        assert_eq!(s["completed"], 2, "{s}");
+        let steps = &s["host_steps"];
+        if host {
+            assert_eq!(
+                steps["EDMC with a strategy other than inexact: use --strategy inexact"], 2,
+                "{s}"
+            );
+            assert!(
+                err.contains("note: --solve whole: the steps of some members ran on the host"),
+                "{err}"
+            );
+        } else {
+            assert_eq!(steps, &serde_json::json!({}), "{s}");
+            assert!(!err.contains("ran on the host"), "{err}");
+        }
+    }
+}

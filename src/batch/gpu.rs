@@ -155,6 +155,9 @@ pub struct GpuEvaluator {
     /// Members attached with a device solve, and with a host solve although device
     /// solves were asked for (a feature the device solver does not cover).
     pub device_members: (u64, u64),
+    /// `--solve whole`: members the device solve covers whose steps run on the host, by
+    /// the reason ([`device_step_refusal`], or the Newton variant).
+    pub host_step_reasons: std::collections::BTreeMap<&'static str, u64>,
     /// `--solve resident`: Newton iterations per submission (0: one per dispatch).
     multi_k: usize,
     /// Per slot: the Newton tolerance of its member when it runs several iterations per
@@ -349,6 +352,7 @@ impl GpuEvaluator {
             active: vec![false; slots],
             resident: true,
             device_members: (0, 0),
+            host_step_reasons: Default::default(),
             multi_k: 0,
             multi_tol: vec![None; slots],
             multi: vec![None; slots],
@@ -556,6 +560,10 @@ impl GpuEvaluator {
         sim.set_device_advance(self.advance_ok[slot]);
         self.fast[slot] = steps;
         self.polish[slot] = steps && !em;
+        if self.whole && on && !steps && DEVICE_STEPS.load(std::sync::atomic::Ordering::Relaxed) {
+            let why = device_step_refusal(sim).unwrap_or("modified Newton");
+            *self.host_step_reasons.entry(why).or_default() += 1;
+        }
         self.fast_need[slot] = DEVICE_STEP_K;
         sim.set_device_steps(self.fast[slot]);
         self.assembler.set_device_owned(slot, on && self.resident);

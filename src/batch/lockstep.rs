@@ -187,5 +187,10 @@ pub(super) fn run(
     stats.gpu = gpu.timers();
     stats.serve = gpu.serve_timers;
     stats.device_members = gpu.device_members;
+    stats.host_step_reasons = gpu
+        .host_step_reasons
+        .iter()
+        .map(|(k, v)| (k.to_string(), *v))
+        .collect();
     Ok(stats)
 }

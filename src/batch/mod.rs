@@ -223,7 +223,7 @@ pub fn resident_k() -> usize {
 pub const DEFAULT_GPU_SLOTS: usize = 4096;
 
 /// What the batch as a whole measured.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct BatchStats {
     /// Wall time of the batch.
     pub wall_s: f64,
@@ -260,6 +260,9 @@ pub struct BatchStats {
     /// `--solve device`: members solved on the device, and members solved on the host
     /// because the device solver does not cover them.
     pub device_members: (u64, u64),
+    /// `--solve whole`: members whose steps ran on the host (each Newton solve on the
+    /// device), by the reason the device step does not cover them.
+    pub host_step_reasons: std::collections::BTreeMap<String, u64>,
 }
 
 fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {

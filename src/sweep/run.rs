@@ -141,6 +141,9 @@ pub struct SweepSummary {
     /// The sweep was stopped ([`run_sweep_until`]) before every member ran; the members
     /// recorded so far are kept and `resume` runs the others.
     pub stopped: bool,
+    /// `--solve whole`: members whose steps ran on the host, by the reason (recorded in
+    /// `sweep.json` as `host_steps`).
+    pub host_steps: std::collections::BTreeMap<String, u64>,
 }
 
 /// Shortest round-trip text of a number, in exponent form outside [1e-3, 1e6); a
@@ -847,6 +850,9 @@ pub fn run_sweep_until(
             stats = part;
         } else {
             add_kernel_timers(&mut stats.gpu, &part.gpu);
+            for (why, n) in part.host_step_reasons {
+                *stats.host_step_reasons.entry(why).or_default() += n;
+            }
         }
         if let Some(e) = write_err {
             return Err(e);
@@ -859,6 +865,7 @@ pub fn run_sweep_until(
     rows.begin(&mut on_row)?;
     let mut summary = rows.summary;
     summary.gpu = stats.gpu;
+    summary.host_steps = stats.host_step_reasons;
     summary.wall_s = start.elapsed().as_secs_f64();
     let info = serde_json::json!({
         "sweep": spec.source,
@@ -882,6 +889,8 @@ pub fn run_sweep_until(
         // conserving schemes.
         "strategy": members.iter().find_map(|m| member_strategy(m, exec)),
         "solve": opts.solve.name(),
+        // `--solve whole`: members whose steps ran on the host, by the reason.
+        "host_steps": summary.host_steps,
         "wall_s": summary.wall_s,
     });
     write_atomic(&json_path, &format!("{info:#}\n"))

@@ -498,6 +498,17 @@ pub fn sweep_command(a: SweepArgs) -> Result<ExitCode> {
             summary.repaired_bytes
         );
     }
+    if !summary.host_steps.is_empty() {
+        let why: Vec<String> = summary
+            .host_steps
+            .iter()
+            .map(|(k, n)| format!("{n} × {k}"))
+            .collect();
+        eprintln!(
+            "note: --solve whole: the steps of some members ran on the host, each Newton solve on the GPU ({}; docs/gpu.md, \"Whole step on the device\")",
+            why.join("; ")
+        );
+    }
     if summary.stale_histories > 0 {
         eprintln!(
             "note: {}: removed {} member history file(s) of the previous sweep in this folder",
