@@ -50,6 +50,7 @@ const E_DIRDISS: u32 = 33u; // 1 = director dissipation on
 const E_DAMP: u32 = 34u;    // Kelvin–Voigt retardation time η
 const E_DRAG: u32 = 35u;    // drag per unit length c (twin of element::drag)
 const E_PMASS: u32 = 36u;   // 2: point masses carried by the ends (twin of element::point_mass)
+const E_FOLLOW: u32 = 38u;  // 6: follower line load f, m per length in the director frame (twin of element::follower)
 // ---- state at n (binding 1), NS fields ----
 const S_R: u32 = 0u;      // 6: r_0, r_1
 const S_D: u32 = 6u;      // 18: d[l] column i component c at 9l + 3i + c
@@ -77,10 +78,11 @@ const T_F: u32 = 48u;     // 18: director forces f[2..8] (stress + inertia)
 const T_BT: u32 = 66u;    // 72: B̃_½ columns of nodes 0, 1 (36 n + 6 k + 3 g + c)
 const T_DB: u32 = 138u;   // 72: D B̃_{n+1} columns of nodes 0, 1 (same order)
 // ---- advance pass → record pass (binding 5) ----
-const T_ADV: u32 = 48u;   // 12: per element: kinetic, stored energy, L (3), J (3), dissipation,
-                          // the two acceleration-norm sums, the turn beyond MAX_TURN_COS
-const T_REC: u32 = 60u;   // 12: per member slot (index = member slot): the sums of T_ADV
-const N_ADV: u32 = 12u;
+const T_ADV: u32 = 48u;   // 13: per element: kinetic, stored energy, L (3), J (3), dissipation,
+                          // the two acceleration-norm sums, the turn beyond MAX_TURN_COS,
+                          // the follower loads' work
+const T_REC: u32 = 61u;   // 13: per member slot (index = member slot): the sums of T_ADV
+const N_ADV: u32 = 13u;
 // ---- advance pass → state hand-back (binding 5), dissipative schemes ----
 const T_FS: u32 = 210u;   // 4: the frozen scalars a step on the device started from
 // cos of the largest turn between an element's end triads a step may produce (twin of
@@ -160,6 +162,18 @@ fn irho(a: u32, b: u32) -> Real { return ld_e(E_IRHO + 2u * a + b); }
 // Drag row of end l, −F_l = (c h/Δt) Σ_m M2[l][m] u_m, for k = c h/Δt (twin of
 // element::drag::drag_forces).
 fn drag_row(l: u32, u0: V3, u1: V3, k: Real) -> V3 { return (u0 * m2(l, 0u) + u1 * m2(l, 1u)) * k; }
+// A follower line load on an end (twin of element::follower::end_load): w Σ_i v_i d_i over
+// the end's mid-step directors d (columns), v the load per length in the director frame.
+fn follower_row(d: Tri, v: V3, w: Real) -> V3 { return (d[0] * v.x + d[1] * v.y + d[2] * v.z) * w; }
+fn ld_e3(f: u32) -> V3 { return V3(ld_e(f), ld_e(f + 1u), ld_e(f + 2u)); }
+// Its derivative with respect to the end's rotation increment, negated (the residual
+// row is −F): ½w Σ_i v_i A hat(d_i), A = (I − ½θ̂)⁻¹.
+fn follower_block(a: Tri, d: Tri, v: V3, w: Real) -> Tri {
+    var b = mscale(mm(a, hat(d[0])), v.x);
+    b = madd(b, mscale(mm(a, hat(d[1])), v.y));
+    b = madd(b, mscale(mm(a, hat(d[2])), v.z));
+    return mscale(b, 0.5 * w);
+}
 fn irho_amax() -> Real {
     return max(max(abs(irho(0u, 0u)), abs(irho(0u, 1u))), max(abs(irho(1u, 0u)), abs(irho(1u, 1u))));
 }
@@ -667,6 +681,18 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
             pm_r[l] = mp * (2.0 * ld_i3(I_X + u_idx(l)) / dt - 2.0 * st_v(st, l) - 2.0 * g) / dt;
         }
     }
+    // Follower line loads (twin of element::follower::end_load): F_l and M_l over the
+    // end's mid-step directors, their rows −F_l and −M_l; kept apart for the row scales.
+    var fol_f: array<V3, 2>;
+    var fol_m: array<V3, 2>;
+    let ff = ld_e3(E_FOLLOW);
+    let fm = ld_e3(E_FOLLOW + 3u);
+    if any(ff != V3(0.0, 0.0, 0.0)) || any(fm != V3(0.0, 0.0, 0.0)) {
+        for (var l = 0u; l < 2u; l++) {
+            fol_f[l] = follower_row(cfg_d(kin.mid, l), ff, 0.5 * h);
+            fol_m[l] = follower_row(cfg_d(kin.mid, l), fm, 0.5 * h);
+        }
+    }
     var fd_scale = array<Real, 2>(0.0, 0.0);
     let ira = irho_amax();
     for (var l = 0u; l < 2u; l++) {
@@ -685,19 +711,20 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
         fd_scale[l] = max(max(fd_scale[l], amax(f[base + 2u])), GROSS_WEIGHT * f_gross[base + 2u]);
     }
     for (var l = 0u; l < 2u; l++) {
-        let fr = f[l] + inertia_r[l] + drag_r[l] + pm_r[l];
+        let fr = f[l] + inertia_r[l] + drag_r[l] + pm_r[l] - fol_f[l];
         let base = 2u + 3u * l;
         let dm = cfg_d(kin.mid, l);
         var rt = V3(0.0, 0.0, 0.0);
         for (var i = 0u; i < 3u; i++) { rt += cross(dm[i], f[base + i]); }
+        rt -= fol_m[l];
         let momentum_rate = a_rho * h * (amax(st_v(st, l)) + amax(kin_v1(kin, l))) / dt;
-        let su = max(max(max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate), amax(drag_r[l])), amax(pm_r[l]));
+        let su = max(max(max(max(max(stress_scale[l], amax(inertia_r[l])), momentum_rate), amax(drag_r[l])), amax(pm_r[l])), amax(fol_f[l]));
         let dnorm = max(max(norm(dm[0]), norm(dm[1])), norm(dm[2]));
         for (var c = 0u; c < 3u; c++) {
             st_o(O_R + u_idx(l) + c, fr[c]);
             st_o(O_R + th_idx(l) + c, rt[c]);
             st_o(O_SC + u_idx(l) + c, su);
-            st_o(O_SC + th_idx(l) + c, fd_scale[l] * dnorm);
+            st_o(O_SC + th_idx(l) + c, max(fd_scale[l] * dnorm, amax(fol_m[l])));
         }
     }
     let vsum = 0.5 * (st.v0 + st.v1) + 0.5 * (kin.v10 + kin.v11);
@@ -968,6 +995,11 @@ fn tangent_block(l: u32, m: u32) {
     b = madd(b, mscale(j0, (sl * n.x) * hh));
     b = madd(b, mscale(j1, (sl * n.y) * hh));
     b = madd(b, mscale(j2, (sl * n.z) * hh));
+    // Follower line loads (twin of element::follower::end_load): −∂F_l/∂θ_l.
+    let ff = ld_e3(E_FOLLOW);
+    let fm = ld_e3(E_FOLLOW + 3u);
+    let follow = l == m && (any(ff != V3(0.0, 0.0, 0.0)) || any(fm != V3(0.0, 0.0, 0.0)));
+    if follow { b = madd(b, follower_block(amat_l, dl, ff, hh)); }
     st_blk(r0, c0 + 3u, b);
     // θ_l × u_m.
     b = mat_blk(bt, du, h);
@@ -1006,6 +1038,7 @@ fn tangent_block(l: u32, m: u32) {
         th = madd(th, mm(mm(hat(ld_t3(f + 6u)), amat_l), hat(dl[2])));
         b = madd(b, mscale(th, 0.5));
     }
+    if follow { b = madd(b, follower_block(amat_l, dl, fm, hh)); }
     st_blk(r0 + 3u, c0 + 3u, b);
     // g rows and columns: translational dissipation terms on the diagonals (the other
     // entries of these rows and columns, and θ_l × g_m, g_l × θ_m, are structurally zero:
@@ -1176,6 +1209,18 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let d1 = kin.cfg1.d1;
     let cos_turn = (dot(d0[0], d1[0]) + dot(d0[1], d1[1]) + dot(d0[2], d1[2]) - 1.0) / 2.0;
     st_t(T_ADV + 11u, max(MAX_TURN_COS - cos_turn, 0.0));
+    // The follower loads' work F·u + M·θ over the step (twin of the host's follower_work).
+    var fwork: Real = 0.0;
+    let ff = ld_e3(E_FOLLOW);
+    let fm = ld_e3(E_FOLLOW + 3u);
+    if any(ff != V3(0.0, 0.0, 0.0)) || any(fm != V3(0.0, 0.0, 0.0)) {
+        for (var l = 0u; l < 2u; l++) {
+            let d = cfg_d(kin.mid, l);
+            fwork += dot(follower_row(d, ff, 0.5 * h), V3(x[u_idx(l)], x[u_idx(l) + 1u], x[u_idx(l) + 2u]));
+            fwork += dot(follower_row(d, fm, 0.5 * h), V3(x[th_idx(l)], x[th_idx(l) + 1u], x[th_idx(l) + 2u]));
+        }
+    }
+    st_t(T_ADV + 12u, fwork);
 }
 
 @compute @workgroup_size(64)

@@ -7,9 +7,10 @@
 //! mixed with members that end early, members that fail (a staggered cap too low for
 //! their kick, no fallback; one whose Newton iteration cap is too low), a
 //! generalized-α member (no GPU kernel: CPU kernel inside the batch), a member with a tip
-//! point mass (the element kernel's, on the device) and one with a follower line load (a
-//! feature the device solver does not cover: host solve inside the same batch, counted as
-//! such), streaming through fewer slots than members. For full and
+//! point mass (the element kernel's, on the device) and one with a follower line load (the
+//! element kernel's) whose clamp is carried and turned (a moving support, which the device
+//! solver does not cover: host solve inside the same batch, counted as such), streaming
+//! through fewer slots than members. For full and
 //! modified Newton every member ends as on the CPU path — status, failure reason, steps,
 //! Newton iterations (full: equal; modified: as `tests/gpu_lockstep.rs`) — with its
 //! final positions, directors, velocities and energy history within `STATE_RTOL`.
@@ -45,7 +46,7 @@ const MEMBER_RTOL: f64 = 1e-11;
 
 /// 14 members of 10 elements: 0..9 random, 9 ends after 3 steps, 10 fails on its
 /// staggered cap, 11 fails on its Newton cap, 12 is generalized-α, 13 has a follower line
-/// load (host solve), 5 a tip point mass.
+/// load and a carried clamp (host solve), 5 a tip point mass.
 /// Members 0..9 carry a random tip force and moment ramping up over the run (nodal terms
 /// that change every step: on the device they join the right-hand side as extras sent
 /// with a Newton solve's first request and kept for its later ones).
@@ -108,8 +109,8 @@ fn device_solve_matches_cpu_member_by_member() {
         };
         let (cpu, _) = run(&ms, &Executor::Cpu, host_newton, SolveMode::Host);
         let (dev, stats) = run(&ms, &exec, newton, SolveMode::Device);
-        // 12 members on the device solver, the follower-load member on the host (the
-        // generalized-α member never reaches the GPU).
+        // 12 members on the device solver, the member with the carried clamp on the host
+        // (the generalized-α member never reaches the GPU).
         assert_eq!(stats.device_members, (12, 1), "{}", newton.name());
         // The mix exercises what it claims to.
         for i in [10, 11] {
@@ -205,8 +206,8 @@ fn assert_same_states(c: &MemberResult, g: &MemberResult, tag: &str) -> f64 {
 /// Drag on the device solve: the element kernel adds its rows and tangent (they depend on
 /// the iterate, so they cannot join the right-hand side as the loads do), and the host adds
 /// none. The members with drag (all but the generalized-α one, which does not take drag;
-/// the follower-load member is solved on the host, member 5 carries a tip point mass on the
-/// device) end as on the CPU path, where the host adds the drag after the element kernel,
+/// the member with the carried clamp is solved on the host, member 5 carries a tip point
+/// mass on the device) end as on the CPU path, where the host adds the drag after the element kernel,
 /// with the same Newton iterations.
 #[test]
 fn device_solve_with_drag_matches_cpu() {
@@ -247,7 +248,7 @@ fn device_solve_with_drag_matches_cpu() {
 #[test]
 fn device_resident_newton_matches_host_update_with_16_bytes_per_iteration() {
     let Some(exec) = gpu() else { return };
-    // The members the device covers (no generalized-α, no follower line load), without loads:
+    // The members the device covers (no generalized-α, no carried clamp), without loads:
     // the batch-iteration bound below was measured on them.
     let ms: Vec<Member> = members_with(false).into_iter().take(12).collect();
     let mut worst = 0.0f64;

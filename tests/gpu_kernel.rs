@@ -17,6 +17,7 @@
 mod common;
 
 use cosserat::element::drag::add_drag_rows;
+use cosserat::element::follower::add_follower_rows;
 use cosserat::element::point_mass::add_point_mass_rows;
 use cosserat::element::scalar_gradient::{residual_scalar_derivatives, scalar_gradient};
 use cosserat::element::strain::Config;
@@ -68,6 +69,8 @@ struct Case {
     trans: bool,
     /// Point masses carried by the two ends.
     pm: [f64; 2],
+    /// Follower line loads: force and moment per unit length in the director frame.
+    fol: [f64; 6],
 }
 
 fn case(rng: &mut Rng, idx: usize) -> Case {
@@ -189,6 +192,14 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
         5 if idx % 12 == 11 => [mass * rng.next(), 2.0 * mass * rng.next()],
         _ => [0.0; 2],
     };
+    // Every fifth case with a follower line load (rows over the ends' mid-step directors,
+    // their θ-tangent); derived from the case's own numbers (no further draw).
+    let fol = if idx % 5 == 2 {
+        let w = a * rho * 9.81 * (1.0 + (idx % 7) as f64);
+        [w, -0.5 * w, 0.3 * w, 0.1 * w * h, 0.0, -0.2 * w * h]
+    } else {
+        [0.0; 6]
+    };
     Case {
         data,
         st,
@@ -198,6 +209,7 @@ fn case(rng: &mut Rng, idx: usize) -> Case {
         k: StepConsts { dt, scheme },
         trans,
         pm,
+        fol,
     }
 }
 
@@ -226,6 +238,7 @@ fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
     for (i, c) in cases.iter().enumerate() {
         kern.set_element(i, &c.data, &c.k, c.trans);
         kern.set_point_masses(i, c.pm);
+        kern.set_follower(i, &c.fol);
         kern.set_state(i, &c.st, &c.eps_n);
         kern.set_iter(i, &c.inc, &c.s);
     }
@@ -258,6 +271,7 @@ fn worst_error(ctx: &GpuContext, cases: &[Case], mode: KernelMode) -> [f64; 4] {
         let mut cpu: ElementEval = residual_tangent(&c.data, &c.st, &kin, &s, &c.k, c.trans, true);
         add_drag_rows(&c.data.props, &c.inc.u, c.k.dt, true, &mut cpu);
         add_point_mass_rows(c.pm, &c.st, &c.inc, c.k.dt, c.trans, true, &mut cpu);
+        add_follower_rows(&c.fol, &c.st, &c.inc, c.data.props.h, true, &mut cpu);
         let gpu = kern.eval(i, true);
         let gs = kern.scalars(i);
         let errs = [
@@ -401,6 +415,7 @@ fn shader_layout_matches_rust_layout() {
         ("E_DAMP", layout::E_DAMP),
         ("E_DRAG", layout::E_DRAG),
         ("E_PMASS", layout::E_PMASS),
+        ("E_FOLLOW", layout::E_FOLLOW),
         ("S_R", layout::S_R),
         ("S_D", layout::S_D),
         ("S_V", layout::S_V),

@@ -8,7 +8,7 @@
 //! * a cantilever batch with seeded random kicks, stiffnesses, time steps and tip loads,
 //!   members that end early, fail (staggered cap, Newton cap), fall back to the monolithic
 //!   strategy on the CPU kernel for a step and finish, run on the CPU kernel (generalized-α)
-//!   or are solved on the host (follower line load): every member ends as on the CPU path (status,
+//!   or are solved on the host (a carried clamp; its follower line load the kernel's): every member ends as on the CPU path (status,
 //!   reason, steps, Newton iterations, states within `STATE_RTOL`) and exactly as with
 //!   `--solve device`; no iteration the host asked for was missing on the device;
 //! * EM (no dissipation scalars: one Newton solve per step): one host sync per step for the

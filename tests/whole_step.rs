@@ -299,7 +299,7 @@ fn whole_frame_matches_cpu() {
 /// each device step sends the step's nodal terms up), a member that ends
 /// early, one whose Newton cap the device's iterations pass (handed back to the host's
 /// step, which fails it as the CPU path does), one kicked hard, one on the CPU kernel
-/// (gen-α) and one host-solved (follower line load), through `workers` slots: every member ends as
+/// (gen-α) and one host-solved (a carried clamp), through `workers` slots: every member ends as
 /// on the CPU path.
 fn device_step_mix() -> Vec<Member> {
     let mut ms = batch_mix(Some(Scheme::Em), Strategy::Staggered);
@@ -718,6 +718,40 @@ fn whole_device_steps_with_dead_line_loads_end_as_on_the_cpu_path() {
     assert_accepted_device_steps(&l, ACCEPTED);
 }
 
+/// [`loaded_mix`] with a follower line load on every element besides: a force across the
+/// rod and a moment about it in the director frame, turning with the rod (on the nodal
+/// loads' time table: constant on the even members, ramped on the odd ones, whose factors
+/// then go up with each step's request while they move).
+fn follower_mix() -> Vec<Member> {
+    let mut ms = loaded_mix();
+    for m in &mut ms {
+        let arho = m.model.elements[0].props.a_rho;
+        let table = m.model.loads[0].table.clone();
+        m.model.line_loads.push(cosserat::model::LineLoad {
+            elements: (0..m.model.elements.len()).collect(),
+            force: cosserat::model::Vec3::new(2.0, 1.0, 0.0) * arho,
+            moment: cosserat::model::Vec3::new(0.0, 0.0, 0.02) * arho,
+            follower: true,
+            table,
+        });
+    }
+    ms
+}
+
+/// Follower line loads on device steps: the element passes add their rows and tangent
+/// (over the ends' mid-step directors) and the records pass their work; the members end as
+/// on the CPU path, with the loads' work per step as the CPU's (nodal loads, gravity and
+/// the followers) and H − H₀ = W.
+#[test]
+fn whole_device_steps_with_follower_line_loads_end_as_on_the_cpu_path() {
+    let Some(l) = check_loaded("follower", &follower_mix()) else {
+        return;
+    };
+    let st = &l.stats.serve;
+    assert_eq!(st.device_steps, 9 * 7, "device steps");
+    assert_accepted_device_steps(&l, ACCEPTED);
+}
+
 /// `bench --solve whole` times that mode alone: EM cantilevers (`COSSERAT_BENCH_SCHEME=em`)
 /// under gravity (`COSSERAT_BENCH_GRAVITY=1`) take every step after their first on the
 /// device, and the JSON `whole` object reports the figures of docs/gpu.md.
@@ -804,7 +838,7 @@ fn whole_device_steps_of_edmc_with_the_inexact_strategy_end_as_on_the_cpu_path()
 
 /// The 14-member mix in EDMC-2 with the inexact strategy: members that end early, one that
 /// falls back to the monolithic strategy on the CPU and finishes, one that fails on its
-/// Newton cap, a generalized-α member (CPU kernel) and one with a follower line load (host
+/// Newton cap, a generalized-α member (CPU kernel) and one with a carried clamp (host
 /// solve), through 5 slots: every member ends as on the CPU path, and the steps the device
 /// cannot finish are handed back.
 #[test]

@@ -233,7 +233,8 @@ const DEVICE_STEP_MIN_K: usize = 4;
 /// rounds; Kelvin–Voigt damping, drag and point masses are the element passes' own), or
 /// EDMC-1 and EDMC-2 with the inexact strategy (its consistent-scalar iterations and its
 /// polish round, whose scalars the element passes evaluate); dead loads only
-/// (nodal, line and gravity: no follower line loads); no moving supports, sliding clamps
+/// (nodal, line and gravity) or follower line loads (the element passes' own, their
+/// factors sent with the request where their tables move); no moving supports, sliding clamps
 /// along an oblique axis (one along a coordinate axis removes unknowns, like a clamp),
 /// links, contact or control commands; planar models are covered (the 3D kernel with the
 /// planar unknowns, as in every GPU evaluation). (A step whose loads differ from those
@@ -249,9 +250,6 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
             return Some("EDMC with a strategy other than inexact: use --strategy inexact");
         }
     }
-    if m.has_follower_loads() {
-        return Some("follower line loads");
-    }
     if !m.drives.is_empty() || sim.has_commands() {
         return Some("moving supports");
     }
@@ -265,9 +263,9 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
 }
 
 /// Why the device block solver does not cover `sim` (`None`: it does): it needs a single
-/// rod numbered node by node (element `e` joins nodes `e` and `e + 1`), no rigid links or
-/// follower line loads (whose tangent terms the host adds; a dead line load is a nodal term
-/// like a nodal load; drag and point masses are the element kernel's).
+/// rod numbered node by node (element `e` joins nodes `e` and `e + 1`) and no rigid links (a
+/// dead line load is a nodal term like a nodal load; drag, point masses and follower line
+/// loads are the element kernel's).
 pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     let model = sim.model();
     if model.n_nodes() < 2
@@ -281,10 +279,6 @@ pub fn device_solve_refusal(sim: &Simulation) -> Option<&'static str> {
     }
     if !model.links.is_empty() {
         return Some("rigid links");
-    }
-    // Their tangent terms are added on the host, after the element blocks.
-    if model.has_follower_loads() {
-        return Some("follower line loads");
     }
     if model.slides.iter().any(|s| s.coordinate_axis().is_none()) {
         return Some("a sliding clamp along an oblique axis");
@@ -640,6 +634,19 @@ impl GpuEvaluator {
                 let resident = req.resident.filter(|_| self.device[*slot]);
                 if resident.is_some_and(|r| r.fetch) {
                     return Ok(());
+                }
+                // Follower line loads whose factors moved: the element constants go up.
+                if let Some(f) = &req.follower {
+                    if f.len() != self.sizes[*slot].0 {
+                        return Err(format!(
+                            "GPU slot {slot}: follower loads for {} elements, the member has {}",
+                            f.len(),
+                            self.sizes[*slot].0
+                        ));
+                    }
+                    for (e, fm) in f.iter().enumerate() {
+                        self.kernel.set_follower(*slot * self.per_slot + e, fm);
+                    }
                 }
                 if req.device_step.is_some() {
                     if !self.fast[*slot] {

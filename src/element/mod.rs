@@ -26,6 +26,7 @@
 pub mod director_factor;
 pub mod dissipation;
 pub mod drag;
+pub mod follower;
 pub mod lanes;
 pub mod planar;
 pub mod point_mass;

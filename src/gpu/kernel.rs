@@ -401,6 +401,17 @@ impl ElementKernel {
         self.put(0, E_PMASS + 1, i, m[1]);
     }
 
+    /// Sets the follower line loads of element slot `i` (after [`Self::set_element`], which
+    /// clears them): force and moment per unit length in the element's director frame,
+    /// their time tables' factors included ([`crate::element::follower`]).
+    pub fn set_follower(&mut self, i: usize, fm: &[f64; 6]) {
+        for (c, &x) in fm.iter().enumerate() {
+            self.put(0, E_FOLLOW + c, i, x);
+        }
+        self.dirty[0][i] = true;
+        self.maybe_dirty = true;
+    }
+
     /// Writes the constants of slot `i`: element data, step constants and whether the
     /// translational-dissipation rows exist.
     pub fn set_element(&mut self, i: usize, d: &ElementData, k: &StepConsts, trans_diss: bool) {
@@ -431,6 +442,9 @@ impl ElementKernel {
         // have carried one).
         self.put(0, E_PMASS, i, 0.0);
         self.put(0, E_PMASS + 1, i, 0.0);
+        for c in 0..6 {
+            self.put(0, E_FOLLOW + c, i, 0.0);
+        }
         self.put(0, E_TRANS, i, if trans_diss { 1.0 } else { 0.0 });
         let (kind, sp) = match k.scheme {
             Scheme::Em => (0.0, [0.0; 4]),

@@ -35,8 +35,12 @@ pub const E_DRAG: usize = 35;
 /// Point masses carried by the two ends (2; a node's point mass on one end of one of its
 /// elements: twin of `element::point_mass`).
 pub const E_PMASS: usize = 36;
+/// Follower line loads on the element (6): force and moment per unit length in its
+/// director frame, their time tables' factors at the step's middle included (twin of
+/// `element::follower`).
+pub const E_FOLLOW: usize = 38;
 /// Number of element-constant fields.
-pub const NE: usize = 38;
+pub const NE: usize = 44;
 
 /// State: end positions (6).
 pub const S_R: usize = 0;
@@ -89,15 +93,15 @@ pub const T_BT: usize = 66;
 pub const T_DB: usize = 138;
 /// Advance pass → record pass: per element slot its terms of the invariants at `n+1` and
 /// its dissipation ([`N_ADV`]: kinetic, stored energy, `L` (3), `J` (3), dissipation, the
-/// sums of the translational and rotational acceleration norms' squares, and how far the
-/// cosine of its end triads' turn lies below the limit's; the first [`NS`] fields hold its
+/// sums of the translational and rotational acceleration norms' squares, how far the
+/// cosine of its end triads' turn lies below the limit's, and its follower loads' work; the first [`NS`] fields hold its
 /// state at `n+1`, in the state buffer's layout).
 pub const T_ADV: usize = 48;
 /// Fields of [`T_ADV`] and [`T_REC`].
-pub const N_ADV: usize = 12;
+pub const N_ADV: usize = 13;
 /// Record pass: per member slot (index = member slot) the sums of [`T_ADV`] over its
 /// element slots ([`N_ADV`], same order).
-pub const T_REC: usize = 60;
+pub const T_REC: usize = 61;
 /// Advance pass → state hand-back: per element slot of a dissipative scheme's member, the
 /// frozen scalars its next step starts from (4; the consistent scalars of the accepted
 /// increment), kept for a hand-back of that step to the host (a step on the device

@@ -61,6 +61,10 @@ pub struct EvalRequest {
     /// order. `None`: the host solves. Empty: as in this member's previous request (the
     /// later requests of a device-resident Newton solve, whose nodal terms are constant).
     pub device_extra: Option<Vec<[f64; 9]>>,
+    /// Per element, the follower line loads the kernel adds (force and moment per unit
+    /// length in the element's director frame, their tables' factors at the step's middle
+    /// included), where they changed since this member's last request; `None`: unchanged.
+    pub follower: Option<Vec<[f64; 6]>>,
     /// Device-resident Newton (with `device_extra`): the device keeps the increment, adds
     /// its own correction after the solve and answers the relative residual only
     /// ([`ResidentAnswer`]). `None`: the host keeps the increment.
@@ -322,6 +326,8 @@ pub struct MemberRecord {
     /// Sum over the elements of how far the cosine of the turn between their end triads
     /// lies below the limit's (positive: some element turned too far).
     pub turn: f64,
+    /// Work of the follower line loads over the step (`Σ F·u + M·θ`).
+    pub follower_work: f64,
 }
 
 impl MemberRecord {
@@ -335,6 +341,7 @@ impl MemberRecord {
             dissipation: r[8],
             acc_sums: [r[9], r[10]],
             turn: r[11],
+            follower_work: r[12],
         }
     }
 }

@@ -425,8 +425,9 @@ pub struct Mix {
 /// 14 cantilevers of 10 elements with random kicks, stiffnesses, time steps and, with
 /// [`Mix::loads`], ramped tip loads on 0..9; 9 ends after 3 steps, 10's staggered cap is
 /// too low for its kick (it needs the monolithic fallback), 11 fails on its Newton cap, 12
-/// is generalized-α (CPU kernel), 13 carries a follower line load (host solve: its tangent
-/// terms are the host's); 5 has a tip point mass (on the device, the element kernel's).
+/// is generalized-α (CPU kernel), 13 carries a follower line load (the element kernel's)
+/// and its clamp is carried and turned (host solve: the device solve does not move
+/// supports); 5 has a tip point mass (on the device, the element kernel's).
 pub fn mix(o: Mix) -> Vec<Member> {
     let mut ms = cosserat::batch::bench_members(14, 10, 6).unwrap();
     let mut rng = Rng(o.seed);
@@ -473,17 +474,32 @@ pub fn mix(o: Mix) -> Vec<Member> {
                 let tip = m.model.point_mass.len() - 1;
                 m.model.point_mass[tip] = 0.05;
             }
+
             12 => m.params.scheme = Scheme::GenAlpha { rho_inf: 0.8 },
-            13 => m.model.line_loads.push(cosserat::model::LineLoad {
-                elements: (0..m.model.elements.len()).collect(),
-                force: Vec3::new(0.0, 0.2, 0.1),
-                moment: Vec3::zeros(),
-                follower: true,
-                table: TimeTable {
-                    times: vec![0.0],
-                    values: vec![1.0],
-                },
-            }),
+            13 => {
+                m.model.line_loads.push(cosserat::model::LineLoad {
+                    elements: (0..m.model.elements.len()).collect(),
+                    force: Vec3::new(0.0, 0.2, 0.1),
+                    moment: Vec3::zeros(),
+                    follower: true,
+                    table: TimeTable {
+                        times: vec![0.0],
+                        values: vec![1.0],
+                    },
+                });
+                // The clamp carried sideways and turned (smoothly, from rest).
+                let t1 = m.params.t_end;
+                m.model.drives.push(cosserat::model::SupportDrive {
+                    node: 0,
+                    displacement: Vec3::new(0.0, 0.02, 0.0),
+                    rotation: Vec3::new(0.0, 0.0, 0.05),
+                    table: TimeTable {
+                        times: vec![0.0, t1],
+                        values: vec![0.0, 1.0],
+                    },
+                    ramp: cosserat::table::Ramp::Smooth,
+                });
+            }
             _ => {}
         }
     }

@@ -144,6 +144,7 @@ impl Simulation {
                     // The evaluator may not hold this state any more.
                     self.sent_version = None;
                     self.advanced_version = None;
+                    self.follower_sent = None;
                     return (f64::NAN, scale);
                 }
             }
@@ -430,8 +431,9 @@ impl Simulation {
 
     /// Adds the nodal terms (point masses, external loads and moments) and the rigid
     /// links' bar forces to `r`, the scales and (if `tangent`) the matrix values.
-    /// `on_host`: whether the drag and the point masses go in here (not when the GPU
-    /// element kernel evaluated the elements: it adds them with the element's own rows).
+    /// `on_host`: whether the drag, the point masses and the follower line loads go in here
+    /// (not when the GPU element kernel evaluated the elements: it adds them with the
+    /// element's own rows).
     pub(super) fn nodal_terms(
         &mut self,
         q: &[f64],
@@ -485,8 +487,8 @@ impl Simulation {
         for (s, o) in scale.iter_mut().zip(own) {
             *s = s.max(o);
         }
-        self.add_follower_terms(q, tangent, r, scale);
         if on_host {
+            self.add_follower_terms(q, tangent, r, scale);
             self.add_drag_terms(q, tangent, r, scale);
         }
         self.add_contact_terms(q, tangent, r, scale);
@@ -619,6 +621,7 @@ impl Simulation {
             }),
             tangent,
             consistent: self.inexact_tangent,
+            follower: self.follower_update(),
             device_extra: None,
             resident: None,
             device_step: None,

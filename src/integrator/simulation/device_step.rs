@@ -90,6 +90,7 @@ impl Simulation {
             device_step: Some(DeviceStep {
                 scale: self.resident_scale,
             }),
+            follower: self.follower_update(),
             device_extra: extra,
             ..EvalRequest::default()
         };
@@ -111,6 +112,7 @@ impl Simulation {
             Err(e) => {
                 self.sent_version = None;
                 self.advanced_version = None;
+                self.follower_sent = None;
                 Some(Err(StepFailure {
                     reason: format!("the device did not hand the state back: {e}"),
                     residuals: vec![],
@@ -165,6 +167,7 @@ impl Simulation {
             r.acc_sums[0],
             r.acc_sums[1],
             r.turn,
+            r.follower_work,
             a.residual_work,
             a.external_work,
         ];
@@ -183,7 +186,8 @@ impl Simulation {
             l: r.l,
             j: r.j,
         };
-        let w = a.external_work;
+        // (The follower loads' work from the records, summed per element.)
+        let w = a.external_work + r.follower_work;
         self.check_energy(
             self.inv.total(),
             inv.total(),

@@ -6,39 +6,54 @@
 //! the energy balance of a converged step closes with that work.
 
 use super::Simulation;
+use crate::element::follower::{mid_directors, EndLoad};
 use crate::integrator::dofs::NONE;
-use crate::math::{cay, hat, inv_i_minus_half_hat};
 use crate::model::{Mat3, Vec3};
 
-/// Nodal force and moment of one follower load on one element end, and their
-/// derivatives with respect to the node's rotation increment `θ`.
-struct EndLoad {
-    force: Vec3,
-    moment: Vec3,
-    d_force: Mat3,
-    d_moment: Mat3,
-}
-
+/// The load of a follower line load on one element end from the end's directors at `n`
+/// and its node's rotation increment `θ` ([`crate::element::follower::end_load`]).
 fn end_load(d_n: &Mat3, theta: &Vec3, f: &Vec3, m: &Vec3, w: f64, tangent: bool) -> EndLoad {
-    let half = 0.5 * (d_n + cay(theta) * d_n);
-    let (mut d_force, mut d_moment) = (Mat3::zeros(), Mat3::zeros());
-    if tangent {
-        let a = inv_i_minus_half_hat(theta);
-        for i in 0..3 {
-            let k = a * hat(&half.column(i).into_owned()) * (-0.5 * w);
-            d_force += k * f[i];
-            d_moment += k * m[i];
-        }
-    }
-    EndLoad {
-        force: half * f * w,
-        moment: half * m * w,
-        d_force,
-        d_moment,
-    }
+    let (half, a) = mid_directors(d_n, theta);
+    crate::element::follower::end_load(&half, &a, f, m, w, tangent)
 }
 
 impl Simulation {
+    /// Per element, the follower line loads it carries at the middle of the coming step:
+    /// force and moment per unit length in its director frame, their time tables' factors
+    /// included (what the GPU element kernel adds itself: `E_FOLLOW`). Empty without
+    /// follower loads.
+    pub(super) fn follower_constants(&self) -> Vec<[f64; 6]> {
+        if !self.model.has_follower_loads() {
+            return Vec::new();
+        }
+        let t = self.state.t + 0.5 * self.params.dt;
+        let mut out = vec![[0.0; 6]; self.model.elements.len()];
+        for ll in self.model.line_loads.iter().filter(|l| l.follower) {
+            let s = ll.table.eval(t);
+            for &e in &ll.elements {
+                for c in 0..3 {
+                    out[e][c] += s * ll.force[c];
+                    out[e][3 + c] += s * ll.moment[c];
+                }
+            }
+        }
+        out
+    }
+
+    /// The follower line loads per element for a request to an attached evaluator, where
+    /// they differ from those it holds (a time table moved, or none went up yet).
+    pub(super) fn follower_update(&mut self) -> Option<Vec<[f64; 6]>> {
+        if !self.model.has_follower_loads() {
+            return None;
+        }
+        let now = self.follower_constants();
+        if self.follower_sent.as_ref() == Some(&now) {
+            return None;
+        }
+        self.follower_sent = Some(now.clone());
+        Some(now)
+    }
+
     /// Adds the follower line loads' residual rows (`−F`, `−M`), row scales and, with
     /// `tangent`, their tangent blocks at increment `q`.
     pub(super) fn add_follower_terms(

@@ -246,6 +246,9 @@ pub struct Simulation {
     /// loads) whose nodal terms went up last with a device solve's request (`--solve
     /// whole`: a step on the device uses those terms; gravity is constant).
     device_loads: Option<Vec<f64>>,
+    /// The follower line loads per element (`follower_constants`) that went up last with
+    /// a request to an attached evaluator (`None`: not since it was attached).
+    follower_sent: Option<Vec<[f64; 6]>>,
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
@@ -338,6 +341,7 @@ impl Simulation {
             resident_next: Default::default(),
             resident_scale: [0.0; 3],
             device_loads: None,
+            follower_sent: None,
             resident_iterate: None,
             residual_work: None,
         })
@@ -570,6 +574,7 @@ impl Simulation {
             return false;
         }
         self.backend = backend;
+        self.follower_sent = None;
         self.sent_version = None;
         self.advanced_version = None;
         true
