@@ -635,22 +635,24 @@ fn spec_record(m: u32, res: Real, code: Real, ok: bool) {
     hist[hb + 1u + 2u * c] = res;
     hist[hb + 2u + 2u * c] = code;
     hist[hb] = Real(c + 1u);
-    var stop = !ok || Real(c + 1u) >= spec[4u * m + 3u] || c + 1u >= KMAX;
-    if !stop {
-        stop = spec_accepts(m, hb, c, res);
-        if stop && (ops[m] & 128u) != 0u && hist[hb + HSTRIDE - 2u] == 0.0 {
-            if res <= spec[4u * m] {
-                hist[hb + HSTRIDE - 2u] = Real(c + 1u);
-                ops[m] = ops[m] | 3u;
-                set_active(m, 3.0);
-            } else {
-                ops[m] = 0u;
-                set_active(m, -2.0);
-            }
+    let last = Real(c + 1u) >= spec[4u * m + 3u] || c + 1u >= KMAX;
+    let accept = ok && spec_accepts(m, hb, c, res);
+    if accept && (ops[m] & 128u) != 0u && hist[hb + HSTRIDE - 2u] == 0.0 {
+        if res > spec[4u * m] {
+            // Accepted on the floor above the tolerance (on the last recorded iteration
+            // too): stopped with consistent kinematics.
+            ops[m] = 0u;
+            set_active(m, -2.0);
+            return;
+        }
+        if !last {
+            hist[hb + HSTRIDE - 2u] = Real(c + 1u);
+            ops[m] = ops[m] | 3u;
+            set_active(m, 3.0);
             return;
         }
     }
-    if stop {
+    if !ok || last || accept {
         ops[m] = 0u;
         deactivate(m);
     }

@@ -555,7 +555,13 @@ impl GpuEvaluator {
         self.fast[slot] = steps;
         self.polish[slot] = steps && !em;
         if self.whole && on && !steps && DEVICE_STEPS.load(std::sync::atomic::Ordering::Relaxed) {
-            let why = device_step_refusal(sim).unwrap_or("modified Newton");
+            let why = device_step_refusal(sim).unwrap_or(
+                if sim.params().newton == crate::integrator::NewtonVariant::Modified {
+                    "modified Newton"
+                } else {
+                    "one Newton iteration per submission"
+                },
+            );
             *self.host_step_reasons.entry(why).or_default() += 1;
         }
         self.fast_need[slot] = DEVICE_STEP_K;

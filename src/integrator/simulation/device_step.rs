@@ -148,6 +148,7 @@ impl Simulation {
         // round-off floor above it, the step is checked there with the consistent scalars
         // (the device's records too).
         let rounds = usize::from(polish && res0 <= tol);
+        let on_floor = polish && rounds == 0;
         let (it, res) = if rounds == 1 {
             let (it1, res1) =
                 replay_newton(&a.iterations[it0 + 1..], tol, true, self.params.max_iter)?;
@@ -200,6 +201,7 @@ impl Simulation {
         self.state_version += 1;
         self.advanced_version = Some(self.state_version);
         self.host_stale = true;
+        self.device_step_consistent = on_floor;
         self.inv = inv;
         self.fell_back = false;
         Some(StepReport {
@@ -297,7 +299,14 @@ impl Simulation {
         let t = self.state.t;
         self.set_pulled(&p);
         let q = self.prev.clone();
-        let (mut next, _, consistent) = self.advance(&q, Mode::Frozen);
+        // (With the consistent scalars where the step was accepted on its round-off floor,
+        // as the host's step and the device's advance take it.)
+        let mode = if self.device_step_consistent {
+            Mode::Consistent
+        } else {
+            Mode::Frozen
+        };
+        let (mut next, _, consistent) = self.advance(&q, mode);
         next.t = t;
         self.state = next;
         // (As the host's step leaves them: the next step's scalars.)

@@ -249,6 +249,9 @@ pub struct Simulation {
     /// The follower line loads per element (`follower_constants`) that went up last with
     /// a request to an attached evaluator (`None`: not since it was attached).
     follower_sent: Option<Vec<[f64; 6]>>,
+    /// The last step the device ran was accepted with the consistent scalars (the inexact
+    /// strategy on its round-off floor): the host's copy of its state forms that way.
+    device_step_consistent: bool,
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
@@ -342,6 +345,7 @@ impl Simulation {
             resident_scale: [0.0; 3],
             device_loads: None,
             follower_sent: None,
+            device_step_consistent: false,
             resident_iterate: None,
             residual_work: None,
         })
