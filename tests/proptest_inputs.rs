@@ -500,6 +500,42 @@ fn one_line_or_ok(code: Option<i32>, err: &str, what: &str) -> Result<bool, Test
     }
 }
 
+/// The fields of one CSV line as written (quoted fields keep their quotes; a comma inside
+/// quotes does not split).
+fn csv_fields(line: &str) -> Vec<String> {
+    let mut fields = vec![String::new()];
+    let mut quoted = false;
+    for c in line.chars() {
+        match c {
+            '"' => {
+                quoted = !quoted;
+                fields.last_mut().unwrap().push(c);
+            }
+            ',' if !quoted => fields.push(String::new()),
+            _ => fields.last_mut().unwrap().push(c),
+        }
+    }
+    fields
+}
+
+/// A shard's rows with their varied value (the column before `reason`; a reason may hold
+/// commas inside its quotes) replaced by another.
+fn edit_values(text: &str) -> String {
+    text.lines()
+        .map(|l| {
+            if !l.starts_with(|c: char| c.is_ascii_digit()) {
+                return l.to_string();
+            }
+            let mut fields = csv_fields(l);
+            let k = fields.len() - 2;
+            fields[k] = "0.123456".into();
+            fields.join(",")
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+        + "\n"
+}
+
 fn shard_sweep(dir: &Path, name: &str, key: &str, values: &str) {
     let base = featured_scene(
         CONTACTS[1],
@@ -571,18 +607,7 @@ proptest! {
                     let text = std::fs::read_to_string(&f).unwrap();
                     let damaged = match tamper {
                         Tamper::Torn => text[..text.len() - 7.min(text.len())].to_string(),
-                        // The varied value is the column before `reason`.
-                        _ => text
-                            .lines()
-                            .map(|l| match l.rsplit_once(',') {
-                                Some((head, reason)) if l.starts_with(|c: char| c.is_ascii_digit()) => {
-                                    let (pre, _) = head.rsplit_once(',').unwrap();
-                                    format!("{pre},0.123456,{reason}")
-                                }
-                                _ => l.to_string(),
-                            })
-                            .collect::<Vec<_>>()
-                            .join("\n") + "\n",
+                        _ => edit_values(&text),
                     };
                     std::fs::write(&f, damaged).unwrap();
                 }
@@ -620,4 +645,48 @@ proptest! {
             );
         }
     }
+}
+
+/// The shard tamper edits the varied value even where the member's reason holds commas
+/// (a rejected member's reason quoting coordinates): the merge then refuses.
+#[test]
+fn an_edited_value_before_a_reason_with_commas_is_refused() {
+    let fields = csv_fields("0,rejected,,,,,,,0.5,\"apart: (0, 0, 0) and (1, 2, 3)\"");
+    assert_eq!(fields.len(), 10);
+    assert_eq!(fields[8], "0.5");
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    shard_sweep(
+        d,
+        "s.toml",
+        "contact[0].contact_radius",
+        "[0.5, 5e-324, -1]",
+    );
+    for i in 0..3 {
+        let (code, err) = cosserat_in(
+            d,
+            &[
+                "sweep",
+                "s.toml",
+                "--out",
+                "o",
+                "--shard",
+                &format!("{i}/3"),
+            ],
+        );
+        assert_eq!(code, Some(0), "{err}");
+    }
+    let f = d.join("o/shards/0-of-3.csv");
+    let text = std::fs::read_to_string(&f).unwrap();
+    assert!(
+        text.contains("(0, 0, 0)"),
+        "the case's reason holds commas: {text}"
+    );
+    assert!(
+        edit_values(&text).contains(",0.123456,\"scene rejects"),
+        "the value edited"
+    );
+    std::fs::write(&f, edit_values(&text)).unwrap();
+    let (code, err) = cosserat_in(d, &["sweep", "merge", "o"]);
+    assert_eq!(code, Some(2), "an edited value merged: {err}");
 }
