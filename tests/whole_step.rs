@@ -688,23 +688,38 @@ fn whole_device_steps_with_sliding_clamps_end_as_on_the_cpu_path() {
     assert_accepted_device_steps(&l, ACCEPTED);
 }
 
-/// [`loaded_mix`] with a dead line load on every element besides (a distributed force
-/// across the rod and a distributed moment, on the nodal loads' time table): its nodal
-/// terms go up with the others and the device sums their work with them.
-fn line_loaded_mix() -> Vec<Member> {
+/// [`loaded_mix`] with a line load on every element besides (a distributed force `force`
+/// and moment `moment` per unit mass, on the nodal loads' time table: constant on the even
+/// members, ramped on the odd ones), dead or `follower`.
+fn with_line_load(
+    follower: bool,
+    force: cosserat::model::Vec3,
+    moment: cosserat::model::Vec3,
+) -> Vec<Member> {
     let mut ms = loaded_mix();
     for m in &mut ms {
         let arho = m.model.elements[0].props.a_rho;
         let table = m.model.loads[0].table.clone();
         m.model.line_loads.push(cosserat::model::LineLoad {
             elements: (0..m.model.elements.len()).collect(),
-            force: cosserat::model::Vec3::new(0.0, 3.0, 1.0) * arho,
-            moment: cosserat::model::Vec3::new(0.0, 0.0, 0.02) * arho,
-            follower: false,
+            force: force * arho,
+            moment: moment * arho,
+            follower,
             table,
         });
     }
     ms
+}
+
+/// [`loaded_mix`] with a dead line load on every element besides (a distributed force
+/// across the rod and a distributed moment): its nodal terms go up with the others and the
+/// device sums their work with them.
+fn line_loaded_mix() -> Vec<Member> {
+    with_line_load(
+        false,
+        cosserat::model::Vec3::new(0.0, 3.0, 1.0),
+        cosserat::model::Vec3::new(0.0, 0.0, 0.02),
+    )
 }
 
 /// Dead line loads on device steps: their nodal terms are dead nodal terms (no tangent),
@@ -719,23 +734,14 @@ fn whole_device_steps_with_dead_line_loads_end_as_on_the_cpu_path() {
 }
 
 /// [`loaded_mix`] with a follower line load on every element besides: a force across the
-/// rod and a moment about it in the director frame, turning with the rod (on the nodal
-/// loads' time table: constant on the even members, ramped on the odd ones, whose factors
-/// then go up with each step's request while they move).
+/// rod and a moment about it in the director frame, turning with the rod (its factors go
+/// up with each step's request while the odd members' tables ramp).
 fn follower_mix() -> Vec<Member> {
-    let mut ms = loaded_mix();
-    for m in &mut ms {
-        let arho = m.model.elements[0].props.a_rho;
-        let table = m.model.loads[0].table.clone();
-        m.model.line_loads.push(cosserat::model::LineLoad {
-            elements: (0..m.model.elements.len()).collect(),
-            force: cosserat::model::Vec3::new(2.0, 1.0, 0.0) * arho,
-            moment: cosserat::model::Vec3::new(0.0, 0.0, 0.02) * arho,
-            follower: true,
-            table,
-        });
-    }
-    ms
+    with_line_load(
+        true,
+        cosserat::model::Vec3::new(2.0, 1.0, 0.0),
+        cosserat::model::Vec3::new(0.0, 0.0, 0.02),
+    )
 }
 
 /// Follower line loads on device steps: the element passes add their rows and tangent
