@@ -616,6 +616,8 @@ impl BenchRun {
             let rate = self.work() / d.stats.wall_s;
             let mut v = serde_json::json!({
                 "solve": "whole",
+                // (`auto` is the inexact strategy under `--solve whole`.)
+                "strategy": o.strategy.resolve_for(true, true).name(),
                 "iterations_per_submission": crate::batch::resident_k(),
                 "element_steps_per_s": rate,
                 "rod_steps_per_s": rod_steps / d.stats.wall_s,

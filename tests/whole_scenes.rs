@@ -190,17 +190,17 @@ fn whole_runs_the_paper_scenes_and_moving_supports_as_the_cpu_path() {
 }
 
 /// `run --solve whole` says why a scene's steps stay on the host: the built-in frame
-/// (EDMC-2) with the GPU path's default strategy (staggered) gets the note naming the
-/// strategy and the fix, and records `resident` (its state is not kept on the device);
-/// with `--strategy inexact` its steps run on the device, no note is printed and it
-/// records `whole`.
+/// (EDMC-2) with the staggered strategy gets the note naming the strategy and the fix, and
+/// records `resident` (its state is not kept on the device); with `--strategy inexact`, or
+/// the default `auto` (the inexact strategy under `--solve whole`), its steps run on the
+/// device, no note is printed and it records `whole` and `inexact`.
 #[test]
 fn run_whole_says_why_steps_stay_on_the_host() {
     if gpu().is_none() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    for (strategy, note) in [("auto", true), ("inexact", false)] {
+    for (strategy, note) in [("staggered", true), ("inexact", false), ("auto", false)] {
         let out = dir.path().join(strategy);
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
             .args([
@@ -234,6 +234,7 @@ fn run_whole_says_why_steps_stay_on_the_host() {
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
                 .unwrap();
         assert_eq!(s["solve"], if note { "resident" } else { "whole" });
+        assert_eq!(s["strategy"], if note { "staggered" } else { "inexact" });
         assert_eq!(s["status"], "completed", "{strategy}");
     }
 }
@@ -298,9 +299,9 @@ fn whole_runs_the_paper_scenes_in_edmc_on_device_steps_as_the_cpu_path() {
 }
 
 /// `sweep --solve whole` records which members' steps ran on the host and why
-/// (`sweep.json` `host_steps`, and a note on stderr): the frame with the GPU path's default
-/// strategy (staggered) names the strategy for every member; with `integrator.strategy =
-/// "inexact"` the steps run on the device and nothing is recorded.
+/// (`sweep.json` `host_steps`, and a note on stderr): the frame with the staggered strategy
+/// names the strategy for every member; with the inexact strategy, or `auto` (inexact under
+/// `--solve whole`), the steps run on the device and nothing is recorded.
 #[test]
 fn sweep_whole_records_why_steps_ran_on_the_host() {
     if gpu().is_none() {
@@ -312,7 +313,7 @@ fn sweep_whole_records_why_steps_ran_on_the_host() {
         .find(|b| b.name == "frame")
         .expect("the built-in frame scene exists")
         .toml;
-    for (strategy, host) in [("auto", true), ("inexact", false)] {
+    for (strategy, host) in [("staggered", true), ("inexact", false), ("auto", false)] {
         // The frame with the strategy set in its [integrator] table.
         let scene = frame.replacen(
             "[integrator]\n",
@@ -327,7 +328,7 @@ fn sweep_whole_records_why_steps_ran_on_the_host() {
             "base = \"frame.toml\"\nmode = \"grid\"\n\n[[vary]]\nkey = \"integrator.alpha\"\nvalues = [0.25, 0.5]\n\n[[vary]]\nkey = \"integrator.t_end\"\nvalues = [1.0]\n",
         )
         .unwrap();
-        let out = dir.path().join(if host { "host" } else { "device" });
+        let out = dir.path().join(strategy);
         let o = std::process::Command::new(env!("CARGO_BIN_EXE_cosserat"))
             .args(["sweep"])
             .arg(&spec)
@@ -342,6 +343,11 @@ fn sweep_whole_records_why_steps_ran_on_the_host() {
             serde_json::from_str(&std::fs::read_to_string(out.join("sweep.json")).unwrap())
                 .unwrap();
         assert_eq!(s["completed"], 2, "{s}");
+        assert_eq!(
+            s["strategy"],
+            if host { "staggered" } else { "inexact" },
+            "{s}"
+        );
         let steps = &s["host_steps"];
         if host {
             assert_eq!(

@@ -506,6 +506,8 @@ impl GpuEvaluator {
     /// solves when the solver covers it ([`device_solve_refusal`]); returns whether it
     /// does.
     fn connect_device(&mut self, slot: usize, sim: &mut Simulation) -> bool {
+        // (`auto` resolves to the inexact strategy under `--solve whole`.)
+        sim.set_whole_mode(self.whole);
         let on = match &mut self.solver {
             Some(solver) if device_solve_refusal(sim).is_none() => {
                 let masks: Vec<u32> = sim

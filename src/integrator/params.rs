@@ -38,7 +38,14 @@ impl Strategy {
     /// The strategy that runs: `self`, or for [`Strategy::Auto`] the staggered loop where
     /// a GPU evaluator is attached (`gpu_evaluator`) and the monolithic Newton otherwise.
     pub fn resolve(self, gpu_evaluator: bool) -> Strategy {
+        self.resolve_for(gpu_evaluator, false)
+    }
+
+    /// As [`Self::resolve`], and with `--solve whole` (`whole`, a GPU evaluator attached)
+    /// [`Strategy::Auto`] is the inexact strategy, whose steps run on the device.
+    pub fn resolve_for(self, gpu_evaluator: bool, whole: bool) -> Strategy {
         match self {
+            Strategy::Auto if gpu_evaluator && whole => Strategy::Inexact,
             Strategy::Auto if gpu_evaluator => Strategy::Staggered,
             Strategy::Auto => Strategy::Monolithic,
             s => s,

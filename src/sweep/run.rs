@@ -885,9 +885,9 @@ pub fn run_sweep_until(
         "repaired_bytes": summary.repaired_bytes,
         "backend": exec.describe(),
         // The dissipation strategy of the members (`auto` resolved for this backend:
-        // staggered with the GPU evaluator, monolithic on the CPU kernel); `null` for
-        // conserving schemes.
-        "strategy": members.iter().find_map(|m| member_strategy(m, exec)),
+        // staggered with the GPU evaluator, inexact with `--solve whole`, monolithic on the
+        // CPU kernel); `null` for conserving schemes.
+        "strategy": members.iter().find_map(|m| member_strategy(m, exec, opts.solve)),
         "solve": opts.solve.name(),
         // `--solve whole`: members whose steps ran on the host, by the reason.
         "host_steps": summary.host_steps,
@@ -1022,10 +1022,15 @@ fn write_line(csv: &mut std::fs::File, line: &str) -> std::io::Result<()> {
 /// The dissipation strategy `m` runs with on `exec`: its parameters' choice with `auto`
 /// resolved (staggered where the GPU kernel evaluates it, monolithic on the CPU kernel);
 /// `None` for a conserving scheme, which solves no dissipation scalars.
-fn member_strategy(m: &crate::batch::Member, exec: &Executor) -> Option<&'static str> {
+fn member_strategy(
+    m: &crate::batch::Member,
+    exec: &Executor,
+    solve: crate::batch::SolveMode,
+) -> Option<&'static str> {
     let p = &m.params;
     let gpu = matches!(exec, Executor::Gpu(_)) && p.scheme.has_gpu_kernel();
+    let whole = gpu && solve == crate::batch::SolveMode::Whole;
     p.scheme
         .is_dissipative()
-        .then(|| p.strategy.resolve(gpu).name())
+        .then(|| p.strategy.resolve_for(gpu, whole).name())
 }

@@ -252,6 +252,8 @@ pub struct Simulation {
     /// The last step the device ran was accepted with the consistent scalars (the inexact
     /// strategy on its round-off floor): the host's copy of its state forms that way.
     device_step_consistent: bool,
+    /// Registered with a `--solve whole` evaluator ([`Self::set_whole_mode`]).
+    whole_mode: bool,
     /// The iterate (per node) and its residual work sent back with the last report.
     resident_iterate: Option<(Vec<[f64; 9]>, f64)>,
     /// `Σ |R_i q_i|` of the accepted iterate when the device computed it (device-resident
@@ -346,6 +348,7 @@ impl Simulation {
             device_loads: None,
             follower_sent: None,
             device_step_consistent: false,
+            whole_mode: false,
             resident_iterate: None,
             residual_work: None,
         })
@@ -491,11 +494,17 @@ impl Simulation {
 
     /// The dissipation strategy the dissipative steps use: the parameters' choice, with
     /// [`Strategy::Auto`] resolved for this backend (staggered where a GPU evaluator is
-    /// attached, monolithic on the CPU kernel).
+    /// attached, inexact where it is a `--solve whole` one, monolithic on the CPU kernel).
     pub fn strategy(&self) -> Strategy {
         self.params
             .strategy
-            .resolve(!matches!(self.backend, Backend::Cpu))
+            .resolve_for(!matches!(self.backend, Backend::Cpu), self.whole_mode)
+    }
+
+    /// `--solve whole` (set by the batch evaluator it is registered with): the `auto`
+    /// strategy is the inexact one, whose steps run on the device.
+    pub fn set_whole_mode(&mut self, on: bool) {
+        self.whole_mode = on;
     }
 
     /// The linear solver chosen for this model's tangent, and how many factorizations it
