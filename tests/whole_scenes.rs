@@ -156,19 +156,24 @@ fn whole_runs_the_paper_scenes_and_moving_supports_as_the_cpu_path() {
             w.outcome.status, w.outcome.steps, w.outcome.newton_iters_total
         );
         worst_cpu = worst_cpu.max(d);
-        // The arch (EM, planar, a dead load) takes its steps on the device: round-off
-        // from `resident` (measured 2.9e-16); the others' steps run on the host (links,
-        // moving supports, the staggered strategy), bit for bit as with `resident`.
-        if name == "arch" {
-            assert!(e <= 1e-14, "arch: whole vs resident {e:.3e}");
-        } else {
+        // The arch (EM, planar, a dead load) takes its steps on the device, and the EM
+        // members with a moving support have their state advanced there (the device
+        // solves them: the removed unknowns hold the prescribed increment): round-off
+        // from `resident` (measured ≤ 5.4e-16); the mechanisms (links: solved on the host
+        // within the batch) bit for bit as with `resident`.
+        if name == "mechanism" || name == "hexagon" {
             worst_res = worst_res.max(e);
+        } else {
+            assert!(e <= 1e-14, "{name}: whole vs resident {e:.3e}");
         }
     }
     println!(
         "device members {:?}; {} member-steps advanced on the device",
         ws.device_members, ws.serve.device_advances
     );
+    // The arch and the three supported cantilevers on the device solver, the two
+    // mechanisms (rigid links) solved on the host within the same batch.
+    assert_eq!(ws.device_members, (4, 2), "device members");
     // Measured 2.6e-11 (the arch's energy history: H grows from 0 under the ramp), the
     // others ≤ 1.5e-14.
     assert!(worst_cpu <= STATE_RTOL, "whole vs CPU {worst_cpu:.3e}");

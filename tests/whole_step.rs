@@ -246,7 +246,7 @@ fn whole_em_batch_with_failures_and_fallbacks_ends_as_on_the_cpu_path() {
     // 5 slots for 14 members: the queue streams through (a slot's next member uploads
     // its states).
     let (whole, ws) = check_whole("EM", &ms, &exec, 5);
-    assert_eq!(ws.device_members, (12, 1));
+    assert_eq!(ws.device_members, (13, 0));
     assert_eq!(whole[11].outcome.status, RunStatus::Failed);
     assert!(whole[..9]
         .iter()
