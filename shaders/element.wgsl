@@ -166,6 +166,7 @@ fn drag_row(l: u32, u0: V3, u1: V3, k: Real) -> V3 { return (u0 * m2(l, 0u) + u1
 // the end's mid-step directors d (columns), v the load per length in the director frame.
 fn follower_row(d: Tri, v: V3, w: Real) -> V3 { return (d[0] * v.x + d[1] * v.y + d[2] * v.z) * w; }
 fn ld_e3(f: u32) -> V3 { return V3(ld_e(f), ld_e(f + 1u), ld_e(f + 2u)); }
+fn has_follower(f: V3, m: V3) -> bool { return any(f != V3(0.0, 0.0, 0.0)) || any(m != V3(0.0, 0.0, 0.0)); }
 // Its derivative with respect to the end's rotation increment, negated (the residual
 // row is −F): ½w Σ_i v_i A hat(d_i), A = (I − ½θ̂)⁻¹.
 fn follower_block(a: Tri, d: Tri, v: V3, w: Real) -> Tri {
@@ -687,7 +688,7 @@ fn residual(st: St, kin: Kin, s: array<Real, 4>, dt: Real, keep: bool) {
     var fol_m: array<V3, 2>;
     let ff = ld_e3(E_FOLLOW);
     let fm = ld_e3(E_FOLLOW + 3u);
-    if any(ff != V3(0.0, 0.0, 0.0)) || any(fm != V3(0.0, 0.0, 0.0)) {
+    if has_follower(ff, fm) {
         for (var l = 0u; l < 2u; l++) {
             fol_f[l] = follower_row(cfg_d(kin.mid, l), ff, 0.5 * h);
             fol_m[l] = follower_row(cfg_d(kin.mid, l), fm, 0.5 * h);
@@ -998,7 +999,7 @@ fn tangent_block(l: u32, m: u32) {
     // Follower line loads (twin of element::follower::end_load): −∂F_l/∂θ_l.
     let ff = ld_e3(E_FOLLOW);
     let fm = ld_e3(E_FOLLOW + 3u);
-    let follow = l == m && (any(ff != V3(0.0, 0.0, 0.0)) || any(fm != V3(0.0, 0.0, 0.0)));
+    let follow = l == m && (has_follower(ff, fm));
     if follow { b = madd(b, follower_block(amat_l, dl, ff, hh)); }
     st_blk(r0, c0 + 3u, b);
     // θ_l × u_m.
@@ -1213,7 +1214,7 @@ fn advance_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var fwork: Real = 0.0;
     let ff = ld_e3(E_FOLLOW);
     let fm = ld_e3(E_FOLLOW + 3u);
-    if any(ff != V3(0.0, 0.0, 0.0)) || any(fm != V3(0.0, 0.0, 0.0)) {
+    if has_follower(ff, fm) {
         for (var l = 0u; l < 2u; l++) {
             let d = cfg_d(kin.mid, l);
             fwork += dot(follower_row(d, ff, 0.5 * h), V3(x[u_idx(l)], x[u_idx(l) + 1u], x[u_idx(l) + 2u]));

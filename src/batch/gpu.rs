@@ -1580,6 +1580,11 @@ impl GpuBatcher {
         self.lock().set_device_advance(on)
     }
 
+    /// See [`GpuEvaluator::host_step_reasons`].
+    pub fn host_step_reasons(&self) -> std::collections::BTreeMap<&'static str, u64> {
+        self.lock().host_step_reasons.clone()
+    }
+
     /// Layout of the assembled buffer.
     pub fn layout(&self) -> AsmLayout {
         self.lock().layout()

@@ -222,15 +222,11 @@ pub fn attach(
                     let name = solve.name();
                     bail!("--solve {name}: the device solver does not cover this scene ({why}); run it with --solve host");
                 }
-                if solve == SolveMode::Whole {
-                    let modified = sim.params().newton == NewtonVariant::Modified;
-                    let why = cosserat::batch::gpu::device_step_refusal(sim)
-                        .or(modified.then_some("modified Newton"));
-                    if let Some(why) = why {
-                        eprintln!(
-                            "note: --solve whole: this scene's steps run on the host, each Newton solve on the GPU ({why}; docs/gpu.md, \"Whole step on the device\")"
-                        );
-                    }
+                // (`--solve whole`: the evaluator recorded why the steps stay on the host.)
+                if let Some(why) = b.host_step_reasons().keys().next() {
+                    eprintln!(
+                        "note: --solve whole: this scene's steps run on the host, each Newton solve on the GPU ({why}; docs/gpu.md, \"Whole step on the device\")"
+                    );
                 }
             } else {
                 b.register(0, sim)?;

@@ -41,17 +41,24 @@ impl Simulation {
     }
 
     /// The follower line loads per element for a request to an attached evaluator, where
-    /// they differ from those it holds (a time table moved, or none went up yet).
+    /// they differ from those it holds (a time table moved, or none went up yet). Formed
+    /// once per step: the later requests of a step (same middle time) send nothing.
     pub(super) fn follower_update(&mut self) -> Option<Vec<[f64; 6]>> {
         if !self.model.has_follower_loads() {
             return None;
         }
-        let now = self.follower_constants();
-        if self.follower_sent.as_ref() == Some(&now) {
+        let t_mid = self.state.t + 0.5 * self.params.dt;
+        if self
+            .follower_sent
+            .as_ref()
+            .is_some_and(|(t, _)| *t == t_mid)
+        {
             return None;
         }
-        self.follower_sent = Some(now.clone());
-        Some(now)
+        let now = self.follower_constants();
+        let same = self.follower_sent.as_ref().is_some_and(|(_, f)| *f == now);
+        self.follower_sent = Some((t_mid, now.clone()));
+        (!same).then_some(now)
     }
 
     /// Adds the follower line loads' residual rows (`−F`, `−M`), row scales and, with

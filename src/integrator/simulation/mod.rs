@@ -246,9 +246,10 @@ pub struct Simulation {
     /// loads) whose nodal terms went up last with a device solve's request (`--solve
     /// whole`: a step on the device uses those terms; gravity is constant).
     device_loads: Option<Vec<f64>>,
-    /// The follower line loads per element (`follower_constants`) that went up last with
-    /// a request to an attached evaluator (`None`: not since it was attached).
-    follower_sent: Option<Vec<[f64; 6]>>,
+    /// The middle time of the step whose requests went up last to an attached evaluator,
+    /// and the follower line loads per element (`follower_constants`) the evaluator then
+    /// held (`None`: none went up since it was attached).
+    follower_sent: Option<(f64, Vec<[f64; 6]>)>,
     /// The last step the device ran was accepted with the consistent scalars (the inexact
     /// strategy on its round-off floor): the host's copy of its state forms that way.
     device_step_consistent: bool,
