@@ -499,10 +499,17 @@ fn update(m: u32) {
     // Σ extra · q over the u and θ rows: minus the work of the host's dead loads (their
     // nodal terms are −F and −M where no point mass sits: `nodal_terms`).
     var lwork: Real = 0.0;
+    // Σ r · q over the removed u and θ rows (the assembled rows alone): the work of the
+    // driven supports' reactions from the element passes (zero where the removed unknowns
+    // hold no prescribed increment; the host adds its loads at those nodes).
+    var swork: Real = 0.0;
     for (var i = 0u; i < n; i++) {
         let mi = mask[m * prm.npn + i];
         for (var r = 0u; r < 9u; r++) {
-            if ((mi >> r) & 1u) == 0u { continue; }
+            if ((mi >> r) & 1u) == 0u {
+                if r < 6u { swork += sys[m * prm.rpm + 9u * i + r] * node_x[qidx(m, i, r)]; }
+                continue;
+            }
             let v = row_residual(m, i, r);
             let rel = abs(v) / s[r / 3u];
             finite = finite && is_finite(rel);
@@ -515,7 +522,10 @@ fn update(m: u32) {
     if !finite { worst = -1.0; }
     report[2u * m] = worst;
     rwork[m] = work;
-    if (ops[m] & 16u) != 0u { hist[m * HSTRIDE + HSTRIDE - 1u] = -lwork; }
+    if (ops[m] & 16u) != 0u {
+        hist[m * HSTRIDE + HSTRIDE - 1u] = -lwork;
+        hist[m * HSTRIDE + HSTRIDE - 3u] = swork;
+    }
     // Without a solve in the operation word (an iterate the host expects to accept) the
     // iterate stays; a failed solve leaves it too.
     let solved = (ops[m] & 2u) != 0u;
@@ -576,9 +586,10 @@ fn update(m: u32) {
 
 // Iterations a submission holds at most (`RESIDENT_MAX_K` in `src/gpu/blocktri.rs`).
 const KMAX: u32 = 16u;
-const HSTRIDE: u32 = 35u; // 1 + 2 KMAX + 2
+const HSTRIDE: u32 = 36u; // 1 + 2 KMAX + 3
 
 // Per member HSTRIDE: the count c, then (residual, outcome) per iteration, then the
+// driven supports' reaction work (removed rows) at the iterate evaluated last, the
 // polish round's first iteration (0: none), then (last) the work of the dead loads over
 // the step at the iterate evaluated last.
 @group(0) @binding(18) var<storage, read_write> hist: array<Real>;

@@ -6,10 +6,12 @@
 //! both mechanisms (rigid links, point masses) in EM; a cantilever with Kelvin–Voigt
 //! damping whose clamp is carried and turned by a smooth table (a moving support), EM and
 //! EDMC-2; a member whose Newton cap is too low for its steps (it fails in the batch as on
-//! the CPU path). The device solve does not cover rigid links or prescribed support
-//! motion: those members' Newton systems are solved on the host within the batch
-//! (their element passes still run on the device), as docs/gpu.md says. Without an adapter the test prints `skipped: no
-//! adapter` unless `COSSERAT_REQUIRE_GPU` is set, in which case it fails.
+//! the CPU path). The device solve does not cover rigid links: those members' Newton
+//! systems are solved on the host within the batch (their element passes still run on the
+//! device), as docs/gpu.md says; the supported members' steps run on the device (EM; EDMC-2
+//! with the inexact strategy), their supports' work summed there. Without an adapter the
+//! test prints `skipped: no adapter` unless `COSSERAT_REQUIRE_GPU` is set, in which case it
+//! fails.
 
 mod common;
 use common::scene_text::{material, rod_scene, round_section};
@@ -17,7 +19,7 @@ use common::{compare_results, gpu, rel, run_batch, STATE_RTOL};
 use cosserat::batch::{Executor, Member, MemberResult, SolveMode};
 use cosserat::integrator::{NewtonVariant, Strategy};
 use cosserat::model::Vec3;
-use cosserat::observe::record::RunStatus;
+use cosserat::observe::record::{RunStatus, StepRecord};
 use cosserat::scheme::Scheme;
 
 /// The built-in scene `name` in EM, run for `steps` of its Δt.
@@ -166,10 +168,27 @@ fn whole_runs_the_paper_scenes_and_moving_supports_as_the_cpu_path() {
         } else {
             assert!(e <= 1e-14, "{name}: whole vs resident {e:.3e}");
         }
+        // The work records too (the supported members' steps on the device sum their
+        // supports' work there): per step, relative to the largest |W| of the run.
+        for (what, f) in [
+            (
+                "external work",
+                (|h| h.external_work) as fn(&StepRecord) -> f64,
+            ),
+            ("support work", |h| h.support_work),
+            ("work total", |h| h.work_total),
+        ] {
+            let d = rel(c.history.iter().map(f), w.history.iter().map(f));
+            println!("  {what}: whole vs CPU {d:.2e}");
+            assert!(d <= STATE_RTOL, "{name}: {what} whole vs CPU {d:.3e}");
+        }
     }
     println!(
-        "device members {:?}; {} member-steps advanced on the device",
-        ws.device_members, ws.serve.device_advances
+        "device members {:?}; {} member-steps advanced on the device, {} device steps ({} handed back)",
+        ws.device_members,
+        ws.serve.device_advances,
+        ws.serve.device_steps,
+        ws.serve.device_step_handoffs
     );
     // The arch and the three supported cantilevers on the device solver, the two
     // mechanisms (rigid links) solved on the host within the same batch.
@@ -192,6 +211,12 @@ fn whole_runs_the_paper_scenes_and_moving_supports_as_the_cpu_path() {
         ws.serve.device_advances > 0,
         "nothing advanced on the device"
     );
+    // Steps on the device: the arch's 39 after its first, the supported EM member's 29
+    // (its support moved by its table: the step's prescribed increments go up with the
+    // request), and the capped member's second and third, the third handed back (its
+    // Newton cap), where the host's step fails as on the CPU path.
+    assert_eq!(ws.serve.device_steps, 39 + 29 + 2, "device steps");
+    assert_eq!(ws.serve.device_step_handoffs, 1, "handed back");
 }
 
 /// `run --solve whole` says why a scene's steps stay on the host: the built-in frame
@@ -253,7 +278,11 @@ fn run_whole_says_why_steps_stay_on_the_host() {
 #[test]
 fn whole_runs_the_paper_scenes_in_edmc_on_device_steps_as_the_cpu_path() {
     let Some(exec) = gpu() else { return };
-    let mut ms = vec![builtin("frame", 15.0), builtin("arch", 40.0)];
+    let mut ms = vec![
+        builtin("frame", 15.0),
+        builtin("arch", 40.0),
+        supported("scheme = \"edmc2\""),
+    ];
     for m in &mut ms {
         m.params.scheme = Scheme::Edmc2 {
             alpha_gv: 0.5,
@@ -283,19 +312,36 @@ fn whole_runs_the_paper_scenes_in_edmc_on_device_steps_as_the_cpu_path() {
         );
         worst = worst.max(d);
         assert!(w.history.last().unwrap().dissipation_total > 0.0);
+        // The work records (the supported member's support work summed on the device).
+        // (Not D per step: the arch's steps on their round-off floor accept other iterates
+        // than the CPU's, and its quasi-static D is round-off itself.)
+        for (what, f) in [
+            (
+                "external work",
+                (|h| h.external_work) as fn(&StepRecord) -> f64,
+            ),
+            ("support work", |h| h.support_work),
+        ] {
+            let d = rel(c.history.iter().map(f), w.history.iter().map(f));
+            println!("  {what}: whole vs CPU {d:.2e}");
+            assert!(d <= STATE_RTOL, "{what} whole vs CPU {d:.3e}");
+        }
     }
+    let ws_sup: f64 = whole[2].history.iter().map(|h| h.support_work).sum();
+    assert!(ws_sup.abs() > 1e-8, "support work {ws_sup:e}");
     let st = &ws.serve;
     println!(
         "device steps {} ({} handed back)",
         st.device_steps, st.device_step_handoffs
     );
     assert!(worst <= STATE_RTOL, "whole vs CPU {worst:.3e}");
-    // The frame's 14 steps after its first and 38 of the arch's 39 are offered to the
-    // device (a step after one the host accepted with the consistent scalars starts from
-    // the host's state). Measured: 3 handed back, all the frame's: one whose residual rose
-    // on its first two corrections (the host's step moves on to its next predictor), two
-    // that needed more iterations than their dispatch recorded.
-    assert_eq!(st.device_steps, 14 + 38, "device steps");
+    // The frame's 14 steps after its first, 38 of the arch's 39 and the supported
+    // member's 29 are offered to the device (a step after one the host accepted with the
+    // consistent scalars starts from the host's state). Measured: 3 handed back, all the
+    // frame's: one whose residual rose on its first two corrections (the host's step moves
+    // on to its next predictor), two that needed more iterations than their dispatch
+    // recorded.
+    assert_eq!(st.device_steps, 14 + 38 + 29, "device steps");
     assert!(
         st.device_step_handoffs <= 3,
         "{} handed back",

@@ -234,11 +234,14 @@ const DEVICE_STEP_MIN_K: usize = 4;
 /// EDMC-1 and EDMC-2 with the inexact strategy (its consistent-scalar iterations and its
 /// polish round, whose scalars the element passes evaluate); dead loads only
 /// (nodal, line and gravity) or follower line loads (the element passes' own, their
-/// factors sent with the request where their tables move); no moving supports, sliding clamps
-/// along an oblique axis (one along a coordinate axis removes unknowns, like a clamp),
-/// links, contact or control commands; planar models are covered (the 3D kernel with the
-/// planar unknowns, as in every GPU evaluation). (A step whose loads differ from those
-/// the device holds sends the step's nodal terms with its request: `Simulation::device_step`.)
+/// factors sent with the request where their tables move); supports moved by their time
+/// tables (the request carries the step's prescribed increments of the removed unknowns,
+/// and the update pass sums the supports' reaction work); no sliding clamps along an
+/// oblique axis (one along a coordinate axis removes unknowns, like a clamp), links,
+/// contact or control commands (supports moved by a controller that reads the state,
+/// which stays on the device); planar models are covered (the 3D kernel with the planar
+/// unknowns, as in every GPU evaluation). (A step whose loads differ from those the
+/// device holds sends the step's nodal terms with its request: `Simulation::device_step`.)
 pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
     let m = sim.model();
     let scheme = sim.params().scheme;
@@ -250,8 +253,8 @@ pub fn device_step_refusal(sim: &Simulation) -> Option<&'static str> {
             return Some("EDMC with a strategy other than inexact: use --strategy inexact");
         }
     }
-    if !m.drives.is_empty() || sim.has_commands() {
-        return Some("moving supports");
+    if sim.has_commands() {
+        return Some("control commands");
     }
     if m.slides.iter().any(|s| s.coordinate_axis().is_none()) {
         return Some("a sliding clamp along an oblique axis");
@@ -635,6 +638,8 @@ impl GpuEvaluator {
         let mut increments: Vec<Option<MemberIncrements<'_>>> = vec![None; slots];
         // The host's nodal terms of device-solved members (the right-hand side's extra).
         let mut extras: Vec<Option<&[[f64; A_NODE]]>> = vec![None; slots];
+        // The driven supports' prescribed increments of the steps on the device.
+        let mut prescribed: Vec<(usize, &[crate::integrator::evaluate::Prescribed])> = Vec::new();
         let outcomes = reqs
             .iter()
             .map(|(slot, req)| {
@@ -666,6 +671,9 @@ impl GpuEvaluator {
                     }
                     // New loads for this step (a tabled load whose factor changed).
                     extras[*slot] = req.device_extra.as_deref();
+                    if !req.prescribed.is_empty() {
+                        prescribed.push((*slot, &req.prescribed));
+                    }
                     // The inexact strategy after a step the host ran: its scalars (those
                     // the advance pass forms too, sent up after it) and the consistent flag.
                     if !req.scalars.is_empty() {
@@ -714,6 +722,9 @@ impl GpuEvaluator {
             .collect();
         self.kernel.pack_members(self.per_slot, &members);
         self.assembler.pack_increments(&increments);
+        for (slot, rows) in prescribed {
+            self.assembler.set_prescribed(&mut self.kernel, slot, rows);
+        }
         if let Some(solver) = &mut self.solver {
             solver.set_extras(&extras);
         }
@@ -1305,12 +1316,12 @@ impl GpuEvaluator {
         }
         // Multi-iteration runs: each member's first iteration is answered now, the
         // others as its Newton loop asks for them.
-        let hist_of: &[(usize, Vec<Report>, f64)] = solved.as_ref().map_or(&[], |s| &s.hist);
-        // Each slot's history and load work, by slot (a search per member would be
-        // quadratic in them).
-        let mut hist_at: Vec<Option<(&Vec<Report>, f64)>> = vec![None; sizes.len()];
-        for (m, reports, load_work) in hist_of {
-            hist_at[*m] = Some((reports, *load_work));
+        let hist_of: &[(usize, Vec<Report>, f64, f64)] = solved.as_ref().map_or(&[], |s| &s.hist);
+        // Each slot's history, load work and support reaction work, by slot (a search per
+        // member would be quadratic in them).
+        let mut hist_at: Vec<Option<(&Vec<Report>, f64, f64)>> = vec![None; sizes.len()];
+        for (m, reports, load_work, support) in hist_of {
+            hist_at[*m] = Some((reports, *load_work, *support));
         }
         let hist_at = &hist_at;
         if !fast.is_empty() {
@@ -1336,21 +1347,24 @@ impl GpuEvaluator {
             answers.par_extend(fast.par_iter().map(|&slot| {
                 let out = match (&res, hist_at[slot], rec_of[slot]) {
                     (Err(e), _, _) => Err(e.to_string()),
-                    (Ok(()), Some((reports, load_work)), Some(rec)) => Ok(AssembledSystem {
-                        step: Some(DeviceStepAnswer {
-                            iterations: reports
-                                .iter()
-                                .map(|r| {
-                                    let ok = device_outcome(r.status, r.berr, &[], 0).is_ok();
-                                    (r.residual, ok)
-                                })
-                                .collect(),
-                            residual_work: rw_of[slot],
-                            external_work: load_work,
-                            record: crate::gpu::kernel::MemberRecord::from_fields(&rec),
-                        }),
-                        ..AssembledSystem::default()
-                    }),
+                    (Ok(()), Some((reports, load_work, support)), Some(rec)) => {
+                        Ok(AssembledSystem {
+                            step: Some(DeviceStepAnswer {
+                                iterations: reports
+                                    .iter()
+                                    .map(|r| {
+                                        let ok = device_outcome(r.status, r.berr, &[], 0).is_ok();
+                                        (r.residual, ok)
+                                    })
+                                    .collect(),
+                                residual_work: rw_of[slot],
+                                external_work: load_work,
+                                support_reaction_work: support,
+                                record: crate::gpu::kernel::MemberRecord::from_fields(&rec),
+                            }),
+                            ..AssembledSystem::default()
+                        })
+                    }
                     _ => Err("the device did not report the step".into()),
                 };
                 (slot, out)
@@ -1371,7 +1385,7 @@ impl GpuEvaluator {
             .map(|&slot| {
                 let run = match (&res, hist_at[slot]) {
                     (Err(e), _) => Err(e.to_string()),
-                    (Ok(()), Some((reports, _))) if !reports.is_empty() => {
+                    (Ok(()), Some((reports, _, _))) if !reports.is_empty() => {
                         let res: Vec<f64> = reports.iter().map(|r| r.residual).collect();
                         let (last, before) = res.split_last().expect("not empty");
                         let (tol, quadratic) = multi_test[slot];

@@ -433,6 +433,51 @@ impl Assembler {
         self.write_increments(m, nodes, true);
     }
 
+    /// Sets removed unknowns of member slot `m` on the device to their prescribed
+    /// increments (`--solve whole`: a driven support's, before a step on the device),
+    /// uploading only the values that differ from those it holds there (removed unknowns
+    /// change only through the host: the host copy of them is current). Their node slots'
+    /// other unknowns, the device's own iterate, are left alone.
+    pub fn set_prescribed(
+        &mut self,
+        kernel: &mut ElementKernel,
+        m: usize,
+        rows: &[crate::integrator::evaluate::Prescribed],
+    ) {
+        let npn = self.layout.nodes_per_slot;
+        // Changed values of consecutive rows of a node go up as one run.
+        let mut run: Option<(usize, usize, Vec<f64>)> = None;
+        let mut flush = |run: &mut Option<(usize, usize, Vec<f64>)>| {
+            if let Some((s, f0, vals)) = run.take() {
+                let block = Block {
+                    target: NODE_X_TARGET,
+                    cap: self.n_nodes,
+                    f0,
+                    nf: vals.len(),
+                };
+                kernel.scatter_mut().push(block, s, &vals);
+            }
+        };
+        for p in rows.iter().filter(|p| p.node < npn && p.row < A_NODE) {
+            let s = m * npn + p.node;
+            let at = A_NODE * s + p.row;
+            // (NaN, a forgotten copy, never equals: it goes up.)
+            if self.node_x_host[at] == p.value {
+                flush(&mut run);
+                continue;
+            }
+            self.node_x_host[at] = p.value;
+            match &mut run {
+                Some((rs, f0, vals)) if *rs == s && *f0 + vals.len() == p.row => vals.push(p.value),
+                _ => {
+                    flush(&mut run);
+                    run = Some((s, p.row, vec![p.value]));
+                }
+            }
+        }
+        flush(&mut run);
+    }
+
     /// Forgets the host copy of member slot `m`'s increments (the device changed them), so
     /// that the next [`Self::set_increments`] uploads every value.
     pub fn invalidate_increments(&mut self, m: usize) {

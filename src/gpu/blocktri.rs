@@ -61,10 +61,12 @@ pub const OP_POLISH: u32 = 128;
 
 /// Newton iterations one submission holds at most (`KMAX` in `shaders/blocktri.wgsl`).
 pub const RESIDENT_MAX_K: usize = 16;
-/// Scalars per member of the iteration history: the count, two per iteration, the polish
-/// round's first iteration ([`OP_POLISH`]; 0: none) and the work of the dead loads at the
-/// iterate evaluated last (`HSTRIDE` in `shaders/blocktri.wgsl`).
-pub const HSTRIDE: usize = 3 + 2 * RESIDENT_MAX_K;
+/// Scalars per member of the iteration history: the count, two per iteration, the driven
+/// supports' reaction work at the iterate evaluated last (`Σ r · q` over the removed u and
+/// θ rows, assembled rows alone), the polish round's first iteration ([`OP_POLISH`]; 0:
+/// none) and the work of the dead loads at the iterate evaluated last (`HSTRIDE` in
+/// `shaders/blocktri.wgsl`).
+pub const HSTRIDE: usize = 4 + 2 * RESIDENT_MAX_K;
 
 /// What the host's Newton loop accepts, per member, for [`OP_SPEC`]'s stopping test.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -140,8 +142,10 @@ pub struct Solved {
     pub iterates: Vec<f64>,
     /// Per member slot asked for ([`Readback::hist`]): the [`Report`]s of the iterations
     /// of its multi-iteration submission, in order, and the work of the dead loads over
-    /// the step at the iterate evaluated last (`−Σ extra · q` over the u and θ rows).
-    pub hist: Vec<(usize, Vec<Report>, f64)>,
+    /// the step at the iterate evaluated last (`−Σ extra · q` over the u and θ rows), and
+    /// the driven supports' reaction work there (`Σ r · q` over the removed u and θ rows,
+    /// the assembled rows without the host's nodal terms).
+    pub hist: Vec<(usize, Vec<Report>, f64, f64)>,
     /// Per member slot asked for ([`Readback::rwork`]): `Σ |R_i q_i|` of its last
     /// evaluated iterate.
     pub rwork: Vec<(usize, f64)>,
@@ -946,7 +950,7 @@ impl BlockTriSolver {
                                 .chunks_exact(2)
                                 .map(|r| Report::decode(r[0], r[1]))
                                 .collect();
-                            (m, reports, h[HSTRIDE - 1])
+                            (m, reports, h[HSTRIDE - 1], h[HSTRIDE - 3])
                         }),
                 );
             }

@@ -76,6 +76,22 @@ pub struct EvalRequest {
     /// `--solve whole`: no evaluation; hand the member's state on the device back
     /// ([`AssembledSystem::pulled`]).
     pub pull: Option<Pull>,
+    /// With `device_step`: the driven supports' prescribed increments over this step, one
+    /// per removed translation or rotation unknown of a driven node (the device's copy of
+    /// those unknowns is set to them before its first iteration; only changed values
+    /// cross the bus).
+    pub prescribed: Vec<Prescribed>,
+}
+
+/// A removed unknown's prescribed increment over a step ([`EvalRequest::prescribed`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Prescribed {
+    /// The node (in the member's node order).
+    pub node: usize,
+    /// The node-local row: 0..3 translation, 3..6 rotation.
+    pub row: usize,
+    /// The increment.
+    pub value: f64,
 }
 
 /// A whole step on the device ([`EvalRequest::device_step`]): Newton from the device's
@@ -108,6 +124,11 @@ pub struct DeviceStepAnswer {
     /// `Σ F·u + M·θ` with the loads the device holds (the host's at the middle of the
     /// step where they have not changed since they went up).
     pub external_work: f64,
+    /// `Σ R_i q_i` over the removed translation and rotation unknowns at that iterate, with
+    /// `R` the element passes' rows alone (elements, point masses, drag, follower loads):
+    /// the driven supports' work less that of the loads the host applies at their nodes
+    /// (zero without a prescribed increment).
+    pub support_reaction_work: f64,
     /// The records of the step to that iterate (the state at `n+1` is not formed).
     pub record: MemberRecord,
 }

@@ -626,6 +626,7 @@ impl Simulation {
             resident: None,
             device_step: None,
             pull: None,
+            prescribed: Vec::new(),
         }
     }
 

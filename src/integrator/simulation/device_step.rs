@@ -14,7 +14,7 @@ use super::newton::{at_floor, rose_from_start, stagnated, STAGNATION_ITERS};
 use super::{node_local, Backend, Mode, Simulation};
 use crate::integrator::dofs::NONE;
 use crate::integrator::evaluate::{
-    AssembledSystem, DeviceStep, DeviceStepAnswer, EvalRequest, Pull, Pulled,
+    AssembledSystem, DeviceStep, DeviceStepAnswer, EvalRequest, Prescribed, Pull, Pulled,
 };
 use crate::integrator::invariants::Invariants;
 use crate::integrator::report::{StepFailure, StepReport};
@@ -73,6 +73,8 @@ impl Simulation {
             .as_ref()
             .is_some_and(|f| self.load_factors().eq(f.iter().copied()));
         let extra = (!same_loads).then(|| self.step_nodal_terms());
+        // Driven supports: the step's prescribed increments of their removed unknowns.
+        let prescribed = self.step_prescribed();
         self.sent_version = Some(self.state_version);
         // A dissipative scheme (the inexact strategy) after a step the host ran: the
         // scalars it starts from (those the device's advance forms too) go up once, with
@@ -92,6 +94,7 @@ impl Simulation {
             }),
             follower: self.follower_update(),
             device_extra: extra,
+            prescribed,
             ..EvalRequest::default()
         };
         let answer = port.evaluate(req).await;
@@ -119,6 +122,58 @@ impl Simulation {
                 }))
             }
         }
+    }
+
+    /// The driven supports' increments over this step (kept for the step's support work
+    /// and for the advance of a state taken back), one per removed translation or rotation
+    /// unknown of a driven node; empty without drives.
+    fn step_prescribed(&mut self) -> Vec<Prescribed> {
+        if self.model.drives.is_empty() {
+            return Vec::new();
+        }
+        self.support_increments();
+        let mut rows = Vec::with_capacity(6 * self.model.drives.len());
+        // (In node-local row order: consecutive rows go up together.)
+        for d in &self.model.drives {
+            let nd = &self.dofs.nodes[d.node];
+            let [u, th] = self.prescribed[d.node];
+            for (row, (&i, value)) in
+                nd.u.iter()
+                    .chain(&nd.th)
+                    .zip(u.iter().chain(&th))
+                    .enumerate()
+            {
+                if i == NONE {
+                    rows.push(Prescribed {
+                        node: d.node,
+                        row,
+                        value: *value,
+                    });
+                }
+            }
+        }
+        rows
+    }
+
+    /// The driven supports' work over a step on the device (the part of
+    /// [`Self::support_work`]'s sum the host holds): the reactions' work from the element
+    /// passes (`reaction_work`, the device's) less that of the loads at the driven nodes on
+    /// their prescribed motion.
+    fn device_support_work(&self, reaction_work: f64) -> f64 {
+        let mut w = reaction_work;
+        for d in &self.model.drives {
+            let nd = &self.dofs.nodes[d.node];
+            let [u, th] = self.prescribed[d.node];
+            for c in 0..3 {
+                if nd.u[c] == NONE {
+                    w -= self.force[d.node][c] * u[c];
+                }
+                if nd.th[c] == NONE {
+                    w -= self.moment[d.node][c] * th[c];
+                }
+            }
+        }
+        w
     }
 
     /// This step's nodal terms (the dead loads at its middle) per node in node-local order,
@@ -162,6 +217,7 @@ impl Simulation {
         }
         let r = &a.record;
         let fields = [
+            a.support_reaction_work,
             r.kinetic,
             r.potential,
             r.dissipation,
@@ -187,8 +243,11 @@ impl Simulation {
             l: r.l,
             j: r.j,
         };
-        // (The follower loads' work from the records, summed per element.)
-        let w = a.external_work + r.follower_work;
+        // (The follower loads' work from the records, summed per element; the driven
+        // supports' from the device's sum over the removed rows, which holds the loads at
+        // their nodes on their prescribed motion: `accept.rs`, `external_work`.)
+        let support_work = self.device_support_work(a.support_reaction_work);
+        let w = a.external_work + r.follower_work + a.support_reaction_work;
         self.check_energy(
             self.inv.total(),
             inv.total(),
@@ -210,7 +269,7 @@ impl Simulation {
             residual: res,
             dissipation: r.dissipation,
             external_work: w,
-            support_work: 0.0,
+            support_work,
             friction: 0.0,
             acc_trans: r.acc_sums[0].max(0.0).sqrt(),
             acc_rot: r.acc_sums[1].max(0.0).sqrt(),
