@@ -465,6 +465,19 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, o: &BenchOptions) {
     // submissions and waits (on a software adapter those run the device's work itself).
     obj["host_own_us_per_member_step"] =
         (1e6 * (w.member_cpu_s + w.serve_thread_s - w.serve_driver_s) / member_steps).into();
+    // Per device step in the steady state (batch iterations that served device steps
+    // only, after one that did too): the median and the 90th percentile over those
+    // iterations, robust to the preemptions a loaded machine adds to a mean.
+    let quantile = |v: &[f64], q: f64| {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v.get(((v.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+    };
+    obj["device_step_rounds"] = w.device_step_host_us.len().into();
+    obj["host_own_us_per_device_step"] = quantile(&w.device_step_host_us, 0.5).into();
+    obj["host_own_us_per_device_step_p90"] = quantile(&w.device_step_host_us, 0.9).into();
+    obj["serve_own_us_per_device_step"] = quantile(&w.device_step_serve_us, 0.5).into();
     obj["member_cpu_us_per_member_step"] = (1e6 * w.member_cpu_s / member_steps).into();
     obj["serve_own_us_per_member_step"] =
         (1e6 * (w.serve_thread_s - w.serve_driver_s) / member_steps).into();

@@ -158,6 +158,9 @@ pub struct GpuEvaluator {
     /// `--solve whole`: members the device solve covers whose steps run on the host, by
     /// the reason ([`device_step_refusal`], or the Newton variant).
     pub host_step_reasons: std::collections::BTreeMap<&'static str, u64>,
+    /// `--solve whole`: the device steps of the last [`Self::serve`] when it served
+    /// nothing else (no host step's request, no state taken back), else 0.
+    pub steps_only: usize,
     /// `--solve resident`: Newton iterations per submission (0: one per dispatch).
     multi_k: usize,
     /// Per slot: the Newton tolerance of its member when it runs several iterations per
@@ -349,6 +352,7 @@ impl GpuEvaluator {
             resident: true,
             device_members: (0, 0),
             host_step_reasons: Default::default(),
+            steps_only: 0,
             multi_k: 0,
             multi_tol: vec![None; slots],
             multi: vec![None; slots],
@@ -1425,6 +1429,7 @@ impl GpuEvaluator {
             self.active[slot] = true;
         }
         if !fast.is_empty() && fast.len() == pending.len() && fetching.is_empty() {
+            self.steps_only = fast.len();
             let b = &mut self.serve_timers.device_step_bytes_up;
             b.0 += self.kernel.timers.bytes_up - up0;
             b.1 += fast.len() as u64;
@@ -1492,6 +1497,7 @@ impl GpuEvaluator {
     /// without a dispatch; while there are such, the others wait (so that the members'
     /// next Newton solves start in one dispatch: one sync per step for the batch).
     pub fn serve(&mut self) -> usize {
+        self.steps_only = 0;
         // Taking the requests and answering them is per member: in parallel.
         let reqs: Vec<(usize, EvalRequest)> = self
             .ports

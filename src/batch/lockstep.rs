@@ -155,7 +155,8 @@ pub(super) fn run(
             cpu_ns.fetch_add(ns, std::sync::atomic::Ordering::Relaxed);
         });
         stats.host_s += t0.elapsed().as_secs_f64();
-        stats.member_cpu_s += 1e-9 * cpu_ns.into_inner() as f64;
+        let member_cpu_s = 1e-9 * cpu_ns.into_inner() as f64;
+        stats.member_cpu_s += member_cpu_s;
         stats.polls += flight.len() as u64;
         stats.iterations += 1;
 
@@ -176,9 +177,19 @@ pub(super) fn run(
 
         // 4. Serve every posted evaluation in one dispatch.
         let (c0, d0) = (thread_cpu_s(), driver_thread_s());
+        let steady = gpu.steps_only;
         let served = gpu.serve();
-        stats.serve_thread_s += thread_cpu_s() - c0;
-        stats.serve_driver_s += driver_thread_s() - d0;
+        let (serve_s, driver_s) = (thread_cpu_s() - c0, driver_thread_s() - d0);
+        stats.serve_thread_s += serve_s;
+        stats.serve_driver_s += driver_s;
+        if steady > 0 && gpu.steps_only == steady {
+            let own_s = member_cpu_s + serve_s - driver_s;
+            stats.device_step_host_us.push(1e6 * own_s / steady as f64);
+            let serve_own_s = serve_s - driver_s;
+            stats
+                .device_step_serve_us
+                .push(1e6 * serve_own_s / steady as f64);
+        }
         if served == 0 && !flight.is_empty() {
             // Every member in flight is waiting, so each posted a request; none did.
             unreachable!("lockstep batch: members waiting without a posted evaluation");

@@ -263,6 +263,15 @@ pub struct BatchStats {
     /// `--solve whole`: members whose steps ran on the host (each Newton solve on the
     /// device), by the reason the device step does not cover them.
     pub host_step_reasons: std::collections::BTreeMap<String, u64>,
+    /// `--solve whole`: per batch iteration whose dispatch served device steps only and
+    /// followed one that did too (the steady state: each member's poll takes its last
+    /// device step's answer and posts its next one), the host's own CPU time per device
+    /// step in µs: the member polls' and the serving thread's, outside the graphics
+    /// driver's submissions and waits.
+    pub device_step_host_us: Vec<f64>,
+    /// Of [`Self::device_step_host_us`], per the same batch iteration: the serving
+    /// thread's share.
+    pub device_step_serve_us: Vec<f64>,
 }
 
 fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {
