@@ -877,9 +877,20 @@ fn bench_solve_whole_reports_device_steps() {
         "driver_thread_us_per_member_step",
         "device_step_bytes_up_per_step",
         "gpu_wall_over_device_pass",
+        "host_own_us_per_device_step",
+        "host_own_us_per_device_step_p90",
+        "serve_own_us_per_device_step",
     ] {
         assert!(w[key].as_f64().is_some_and(f64::is_finite), "{key}: {w}");
     }
+    // The steady state: the batch iterations of steps 3 and 4 (step 2's followed the
+    // first step's host dispatches); the median lies within the percentile, the driver
+    // thread's share within the whole.
+    assert_eq!(w["device_step_rounds"], 2, "{w}");
+    let f = |k: &str| w[k].as_f64().unwrap();
+    assert!(f("host_own_us_per_device_step") <= f("host_own_us_per_device_step_p90"));
+    assert!(f("serve_own_us_per_device_step") <= f("host_own_us_per_device_step_p90"));
+    assert!(f("host_own_us_per_device_step") > 0.0, "{w}");
 }
 
 /// [`loaded_mix`] in the dissipative schemes with the inexact strategy: EDMC-2 (the
