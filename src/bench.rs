@@ -478,6 +478,9 @@ fn gpu_model_json(obj: &mut serde_json::Value, g: &Timed, o: &BenchOptions) {
     obj["host_own_us_per_device_step"] = quantile(&w.device_step_host_us, 0.5).into();
     obj["host_own_us_per_device_step_p90"] = quantile(&w.device_step_host_us, 0.9).into();
     obj["serve_own_us_per_device_step"] = quantile(&w.device_step_serve_us, 0.5).into();
+    // The host's wall time per steady batch iteration outside the driver: what it adds to
+    // the device's time per step (the model's T_host).
+    obj["host_wall_us_per_dispatch"] = quantile(&w.device_step_critical_us, 0.5).into();
     obj["member_cpu_us_per_member_step"] = (1e6 * w.member_cpu_s / member_steps).into();
     obj["serve_own_us_per_member_step"] =
         (1e6 * (w.serve_thread_s - w.serve_driver_s) / member_steps).into();

@@ -880,6 +880,7 @@ fn bench_solve_whole_reports_device_steps() {
         "host_own_us_per_device_step",
         "host_own_us_per_device_step_p90",
         "serve_own_us_per_device_step",
+        "host_wall_us_per_dispatch",
     ] {
         assert!(w[key].as_f64().is_some_and(f64::is_finite), "{key}: {w}");
     }

@@ -272,6 +272,10 @@ pub struct BatchStats {
     /// Of [`Self::device_step_host_us`], per the same batch iteration: the serving
     /// thread's share.
     pub device_step_serve_us: Vec<f64>,
+    /// Per the same batch iteration: the host's wall time on the step's critical path in
+    /// µs, the member phase plus the dispatch outside the graphics driver's submissions
+    /// and waits (the device idles meanwhile, on any adapter).
+    pub device_step_critical_us: Vec<f64>,
 }
 
 fn setup_failure(e: impl std::fmt::Display) -> RunOutcome {

@@ -13,6 +13,7 @@ use super::GpuError;
 
 thread_local! {
     static DRIVER_S: Cell<f64> = const { Cell::new(0.0) };
+    static DRIVER_WALL_S: Cell<f64> = const { Cell::new(0.0) };
 }
 
 /// CPU time of the calling thread, in seconds (wall time since the first call where the
@@ -40,12 +41,21 @@ pub fn driver_thread_s() -> f64 {
     DRIVER_S.with(Cell::get)
 }
 
-/// Runs `f`, adding the calling thread's CPU time inside it to its driver account.
+/// The calling thread's wall seconds spent inside `submit` and `wait` so far (on a GPU,
+/// mostly the waits for the device).
+pub fn driver_wall_s() -> f64 {
+    DRIVER_WALL_S.with(Cell::get)
+}
+
+/// Runs `f`, adding the calling thread's CPU time and wall time inside it to its driver
+/// accounts.
 fn account<T>(f: impl FnOnce() -> T) -> T {
     let t0 = thread_cpu_s();
+    let w0 = std::time::Instant::now();
     let out = f();
     let dt = thread_cpu_s() - t0;
     DRIVER_S.with(|c| c.set(c.get() + dt));
+    DRIVER_WALL_S.with(|c| c.set(c.get() + w0.elapsed().as_secs_f64()));
     out
 }
 
