@@ -33,6 +33,19 @@ fn model(supported: bool) -> cosserat::model::Model {
         };
         m.velocity0[0] = Vec3::zeros();
         m.point_mass[5] = 2.0;
+        // And one on the clamp, which its table carries and turns: its translations are
+        // held, its dissipation unknowns (with translational dissipation) are not.
+        m.point_mass[0] = 1.5;
+        m.drives.push(cosserat::model::SupportDrive {
+            node: 0,
+            displacement: Vec3::new(0.02, -0.01, 0.03),
+            rotation: Vec3::new(0.0, 0.1, 0.05),
+            table: cosserat::table::TimeTable {
+                times: vec![0.0, 1.0],
+                values: vec![0.0, 1.0],
+            },
+            ramp: cosserat::table::Ramp::Linear,
+        });
     }
     m
 }

@@ -723,6 +723,18 @@ fn driven_mix() -> Vec<Member> {
             },
             ramp,
         });
+        // A force and a moment at the driven node of every third member (from the
+        // second): they work on its prescribed motion, which the host takes out of the
+        // device's reaction work.
+        if i % 3 == 1 {
+            let table = m.model.loads[0].table.clone();
+            m.model.loads.push(cosserat::model::NodalLoad {
+                node: 0,
+                force: cosserat::model::Vec3::new(0.3, -0.2, 0.1),
+                moment: cosserat::model::Vec3::new(0.02, 0.01, -0.03),
+                table,
+            });
+        }
     }
     ms
 }

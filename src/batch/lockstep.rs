@@ -146,6 +146,7 @@ pub(super) fn run(
         // 2. Member phase: every member's CPU work up to its next evaluation.
         let t0 = Instant::now();
         let cpu_ns = std::sync::atomic::AtomicU64::new(0);
+        let polled = flight.len();
         // In chunks of members, a few per pool thread: the thread's CPU clock (a system
         // call, not a vDSO read) is read twice per chunk rather than per member.
         let chunk = flight
@@ -196,7 +197,9 @@ pub(super) fn run(
         let (serve_s, driver_s) = (thread_cpu_s() - c0, driver_thread_s() - d0);
         stats.serve_thread_s += serve_s;
         stats.serve_driver_s += driver_s;
-        if steady > 0 && gpu.steps_only == steady {
+        // (Only where every member polled took a device step and posts the next: no host
+        // step's poll, no member's last, in the figure.)
+        if steady > 0 && gpu.steps_only == steady && polled == steady {
             let own_s = member_cpu_s + serve_s - driver_s;
             stats.device_step_host_us.push(1e6 * own_s / steady as f64);
             let serve_own_s = serve_s - driver_s;

@@ -264,8 +264,8 @@ pub struct BatchStats {
     /// device), by the reason the device step does not cover them.
     pub host_step_reasons: std::collections::BTreeMap<String, u64>,
     /// `--solve whole`: per batch iteration whose dispatch served device steps only and
-    /// followed one that did too (the steady state: each member's poll takes its last
-    /// device step's answer and posts its next one), the host's own CPU time per device
+    /// followed one that did too, every member polled among them (the steady state: each
+    /// member's poll takes its last device step's answer and posts its next one), the host's own CPU time per device
     /// step in µs: the member polls' and the serving thread's, outside the graphics
     /// driver's submissions and waits.
     pub device_step_host_us: Vec<f64>,

@@ -180,8 +180,7 @@ pub struct Readback {
     pub report: Vec<usize>,
     /// Accepted iterates of these slots ([`Solved::iterates`]).
     pub fetch: Vec<usize>,
-    /// Iteration histories of these slots ([`Solved::hist`]; 16 + 16 [`RESIDENT_MAX_K`]
-    /// bytes each).
+    /// Iteration histories of these slots ([`Solved::hist`]; 8 [`HSTRIDE`] bytes each).
     pub hist: Vec<usize>,
     /// Residual work of the last evaluated iterate of these slots ([`Solved::rwork`]; 8
     /// bytes each).

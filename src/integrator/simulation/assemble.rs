@@ -470,13 +470,17 @@ impl Simulation {
                         vals[s[0][c]] += 2.0 * m / (dt * dt);
                         if s[1][c] != NONE {
                             vals[s[1][c]] += -2.0 * m / dt;
-                            vals[s[3][c]] += m;
                         }
                     }
                 }
                 if nd.g[c] != NONE {
                     r[nd.g[c]] += m * g[c];
                     own[2] = own[2].max((m * g[c]).abs());
+                    // (Whether or not the translation is held: a clamped or driven node's
+                    // dissipation unknowns stay.)
+                    if tangent && m != 0.0 {
+                        self.solver.values_mut()[s[3][c]] += m;
+                    }
                 }
                 if nd.th[c] != NONE {
                     r[nd.th[c]] -= self.moment[a][c];

@@ -131,7 +131,8 @@ impl Simulation {
         if self.model.drives.is_empty() {
             return Vec::new();
         }
-        self.support_increments();
+        // (The loads too: the step's support work takes those at the driven nodes.)
+        self.mid_step_loads();
         let mut rows = Vec::with_capacity(6 * self.model.drives.len());
         // (In node-local row order: consecutive rows go up together.)
         for d in &self.model.drives {

@@ -7,7 +7,9 @@
 //! and the free rows vanish, `ΔH = W_loads + W_sup − D` closes exactly.
 
 use super::{Mode, Simulation};
-use crate::element::{consistent_scalars_near, kinematics, residual_tangent, th_idx, u_idx};
+use crate::element::{
+    consistent_scalars_near, kinematics, point_mass, residual_tangent, th_idx, u_idx,
+};
 use crate::integrator::dofs::NONE;
 use crate::integrator::links;
 use crate::model::Vec3;
@@ -64,7 +66,16 @@ impl Simulation {
             let a = d.node;
             let (u, th) = self.node_increment(a, q);
             let m = self.model.point_mass[a];
-            let mut ru = reaction[i][0] + m * (2.0 * u / dt - 2.0 * self.state.v[a]) / dt
+            let g = Vec3::from_fn(|c, _| {
+                let k = self.dofs.nodes[a].g[c];
+                if k == NONE {
+                    0.0
+                } else {
+                    q[k]
+                }
+            });
+            let inertia = point_mass::inertia_force(m, &u, &self.state.v[a], &g, dt);
+            let mut ru = reaction[i][0] + inertia
                 - self.force[a]
                 - fl[a]
                 - drag[a]
