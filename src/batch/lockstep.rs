@@ -200,15 +200,15 @@ pub(super) fn run(
         // (Only where every member polled took a device step and posts the next: no host
         // step's poll, no member's last, in the figure.)
         if steady > 0 && gpu.steps_only == steady && polled == steady {
-            let own_s = member_cpu_s + serve_s - driver_s;
-            stats.device_step_host_us.push(1e6 * own_s / steady as f64);
             let serve_own_s = serve_s - driver_s;
+            let per_step = |s: f64| 1e6 * s / steady as f64;
+            stats
+                .device_step_host_us
+                .push(per_step(member_cpu_s + serve_own_s));
+            stats.device_step_serve_us.push(per_step(serve_own_s));
             stats
                 .device_step_critical_us
                 .push(1e6 * (member_wall_s + serve_wall_s));
-            stats
-                .device_step_serve_us
-                .push(1e6 * serve_own_s / steady as f64);
         }
         if served == 0 && !flight.is_empty() {
             // Every member in flight is waiting, so each posted a request; none did.

@@ -265,9 +265,9 @@ pub struct BatchStats {
     pub host_step_reasons: std::collections::BTreeMap<String, u64>,
     /// `--solve whole`: per batch iteration whose dispatch served device steps only and
     /// followed one that did too, every member polled among them (the steady state: each
-    /// member's poll takes its last device step's answer and posts its next one), the host's own CPU time per device
-    /// step in µs: the member polls' and the serving thread's, outside the graphics
-    /// driver's submissions and waits.
+    /// member's poll takes its last device step's answer and posts its next one), the
+    /// host's own CPU time per device step in µs: the member polls' and the serving
+    /// thread's, outside the graphics driver's submissions and waits.
     pub device_step_host_us: Vec<f64>,
     /// Of [`Self::device_step_host_us`], per the same batch iteration: the serving
     /// thread's share.

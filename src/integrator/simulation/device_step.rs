@@ -66,15 +66,20 @@ impl Simulation {
         let port = port.clone();
         // The device forms the step's nodal terms from the loads it holds. Where this
         // step's loads differ (a tabled load whose factor changed), the request carries the
-        // step's nodal terms: dead loads only, which depend on time alone (the device step
-        // covers no follower load; drag and point masses are the element kernel's).
+        // step's nodal terms: dead loads only, which depend on time alone (follower loads
+        // go up as element constants; drag and point masses are the element kernel's).
         let same_loads = self
             .device_loads
             .as_ref()
             .is_some_and(|f| self.load_factors().eq(f.iter().copied()));
+        // The step's loads and prescribed support motion, where it sends either (the
+        // step's support work takes the loads at the driven nodes).
+        if !same_loads || !self.model.drives.is_empty() {
+            self.mid_step_loads();
+        }
         let extra = (!same_loads).then(|| self.step_nodal_terms());
         // Driven supports: the step's prescribed increments of their removed unknowns.
-        let prescribed = self.step_prescribed();
+        let prescribed: Vec<Prescribed> = self.prescribed_rows().collect();
         self.sent_version = Some(self.state_version);
         // A dissipative scheme (the inexact strategy) after a step the host ran: the
         // scalars it starts from (those the device's advance forms too) go up once, with
@@ -124,36 +129,25 @@ impl Simulation {
         }
     }
 
-    /// The driven supports' increments over this step (kept for the step's support work
-    /// and for the advance of a state taken back), one per removed translation or rotation
-    /// unknown of a driven node; empty without drives.
-    fn step_prescribed(&mut self) -> Vec<Prescribed> {
-        if self.model.drives.is_empty() {
-            return Vec::new();
-        }
-        // (The loads too: the step's support work takes those at the driven nodes.)
-        self.mid_step_loads();
-        let mut rows = Vec::with_capacity(6 * self.model.drives.len());
-        // (In node-local row order: consecutive rows go up together.)
-        for d in &self.model.drives {
+    /// The driven supports' increments over this step (`mid_step_loads`), one per removed
+    /// translation or rotation unknown of a driven node, in node-local row order (so that
+    /// consecutive rows go up together).
+    fn prescribed_rows(&self) -> impl Iterator<Item = Prescribed> + '_ {
+        self.model.drives.iter().flat_map(move |d| {
             let nd = &self.dofs.nodes[d.node];
             let [u, th] = self.prescribed[d.node];
-            for (row, (&i, value)) in
-                nd.u.iter()
-                    .chain(&nd.th)
-                    .zip(u.iter().chain(&th))
-                    .enumerate()
-            {
-                if i == NONE {
-                    rows.push(Prescribed {
-                        node: d.node,
-                        row,
-                        value: *value,
-                    });
-                }
-            }
-        }
-        rows
+            let values: [f64; 6] = std::array::from_fn(|k| if k < 3 { u[k] } else { th[k - 3] });
+            nd.u.into_iter()
+                .chain(nd.th)
+                .zip(values)
+                .enumerate()
+                .filter(|(_, (i, _))| *i == NONE)
+                .map(move |(row, (_, value))| Prescribed {
+                    node: d.node,
+                    row,
+                    value,
+                })
+        })
     }
 
     /// The driven supports' work over a step on the device (the part of
@@ -161,27 +155,20 @@ impl Simulation {
     /// passes (`reaction_work`, the device's) less that of the loads at the driven nodes on
     /// their prescribed motion.
     fn device_support_work(&self, reaction_work: f64) -> f64 {
-        let mut w = reaction_work;
-        for d in &self.model.drives {
-            let nd = &self.dofs.nodes[d.node];
-            let [u, th] = self.prescribed[d.node];
-            for c in 0..3 {
-                if nd.u[c] == NONE {
-                    w -= self.force[d.node][c] * u[c];
-                }
-                if nd.th[c] == NONE {
-                    w -= self.moment[d.node][c] * th[c];
-                }
-            }
-        }
-        w
+        self.prescribed_rows().fold(reaction_work, |w, p| {
+            let load = if p.row < 3 {
+                self.force[p.node][p.row]
+            } else {
+                self.moment[p.node][p.row - 3]
+            };
+            w - load * p.value
+        })
     }
 
-    /// This step's nodal terms (the dead loads at its middle) per node in node-local order,
-    /// for the device; their row scales become the device step's, and the loads the ones
+    /// This step's nodal terms (the dead loads at its middle, `mid_step_loads`) per node in
+    /// node-local order, for the device; their row scales become the device step's, and the loads the ones
     /// the device holds.
     fn step_nodal_terms(&mut self) -> Vec<[f64; 9]> {
-        self.mid_step_loads();
         let q = vec![0.0; self.prev.len()];
         let mut r = vec![0.0; self.prev.len()];
         let mut scale = [0.0f64; 3];

@@ -66,14 +66,7 @@ impl Simulation {
             let a = d.node;
             let (u, th) = self.node_increment(a, q);
             let m = self.model.point_mass[a];
-            let g = Vec3::from_fn(|c, _| {
-                let k = self.dofs.nodes[a].g[c];
-                if k == NONE {
-                    0.0
-                } else {
-                    q[k]
-                }
-            });
+            let g = super::gather3(q, &self.dofs.nodes[a].g);
             let inertia = point_mass::inertia_force(m, &u, &self.state.v[a], &g, dt);
             let mut ru = reaction[i][0] + inertia
                 - self.force[a]

@@ -312,12 +312,6 @@ impl Simulation {
         self.model.external_loads(t_mid, &mut f, &mut m);
         self.force = f;
         self.moment = m;
-        self.support_increments();
-    }
-
-    /// The removed unknowns' increments over the coming step: the driven supports' by
-    /// their tables and those of control commands (zero elsewhere).
-    pub(super) fn support_increments(&mut self) {
         let t = self.state.t;
         for p in &mut self.prescribed {
             *p = [Vec3::zeros(); 2];
